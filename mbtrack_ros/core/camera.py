@@ -1,0 +1,346 @@
+"""Calibrated pinhole cameras with lens distortion, and the room calibration file.
+
+Conventions (documented in README, "Room calibration file"):
+
+* world frame ``room``: metres, floor at z = 0, z up;
+* extrinsics world -> camera: ``x_cam = R @ X_world + t`` (OpenCV optical frame:
+  x right, y down, z forward);
+* intrinsics as in ``sensor_msgs/CameraInfo``: ``K`` (3x3), ``plumb_bob`` distortion
+  ``D = [k1, k2, p1, p2, k3]``, image ``width`` x ``height`` in pixels, pixel centres at
+  integer coordinates (OpenCV).
+
+This is the only place where 3D points are projected into images; every other module
+(renderer, shape model, detection) calls :meth:`Camera.project`.
+"""
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import yaml
+
+__all__ = ['CalibrationError', 'Camera', 'RoomCalibration', 'look_at']
+
+
+class CalibrationError(ValueError):
+    """A calibration file or value that cannot be used."""
+
+
+def _as_matrix(value: Any, shape: tuple[int, ...], what: str) -> np.ndarray:
+    try:
+        array = np.asarray(value, dtype=np.float64).reshape(shape)
+    except (TypeError, ValueError) as err:
+        raise CalibrationError(f'{what}: expected {shape} numbers, got {value!r}') from err
+    if not np.all(np.isfinite(array)):
+        raise CalibrationError(f'{what}: contains non-finite values')
+    return array
+
+
+@dataclass(frozen=True, eq=False)
+class Camera:
+    """One calibrated camera.
+
+    Attributes:
+        name: camera name, unique in a room (``cam0``).
+        width, height: image size in pixels.
+        K: (3, 3) intrinsic matrix.
+        dist: (5,) plumb_bob distortion ``[k1, k2, p1, p2, k3]``.
+        R: (3, 3) rotation world -> camera.
+        t: (3,) translation world -> camera, metres.
+        frame_id: the optical frame id written into image headers.
+    """
+
+    name: str
+    width: int
+    height: int
+    K: np.ndarray
+    dist: np.ndarray
+    R: np.ndarray
+    t: np.ndarray
+    frame_id: str = ''
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, 'K', _as_matrix(self.K, (3, 3), f'{self.name}.K'))
+        dist = np.zeros(5)
+        given = np.asarray(self.dist, dtype=np.float64).ravel()
+        if given.size > 5:
+            raise CalibrationError(f'{self.name}.dist: at most 5 plumb_bob coefficients')
+        dist[: given.size] = given
+        object.__setattr__(self, 'dist', dist)
+        R = _as_matrix(self.R, (3, 3), f'{self.name}.R')
+        if not np.allclose(R @ R.T, np.eye(3), atol=1e-5) or np.linalg.det(R) < 0:
+            raise CalibrationError(f'{self.name}.R is not a rotation matrix')
+        object.__setattr__(self, 'R', R)
+        object.__setattr__(self, 't', _as_matrix(self.t, (3,), f'{self.name}.t'))
+        if int(self.width) <= 0 or int(self.height) <= 0:
+            raise CalibrationError(f'{self.name}: image size must be positive')
+        object.__setattr__(self, 'width', int(self.width))
+        object.__setattr__(self, 'height', int(self.height))
+        if not self.frame_id:
+            object.__setattr__(self, 'frame_id', f'{self.name}_optical_frame')
+        if self.K[0, 0] <= 0 or self.K[1, 1] <= 0:
+            raise CalibrationError(f'{self.name}.K: focal lengths must be positive')
+
+    # -- geometry -------------------------------------------------------------------------
+    @property
+    def center(self) -> np.ndarray:
+        """Camera centre in world coordinates, (3,) metres: ``C = -R^T t``."""
+        return -self.R.T @ self.t
+
+    @property
+    def focal(self) -> float:
+        """Mean focal length in pixels."""
+        return float(0.5 * (self.K[0, 0] + self.K[1, 1]))
+
+    def to_camera(self, points: np.ndarray) -> np.ndarray:
+        """World points (..., 3) -> camera-frame points (..., 3)."""
+        points = np.asarray(points, dtype=np.float64)
+        return points @ self.R.T + self.t
+
+    def depth(self, points: np.ndarray) -> np.ndarray:
+        """Optical-axis depth z_cam of world points (..., 3) -> (...,), metres."""
+        points = np.asarray(points, dtype=np.float64)
+        return points @ self.R[2] + self.t[2]
+
+    def distance(self, points: np.ndarray) -> np.ndarray:
+        """Euclidean distance of world points (..., 3) to the camera centre, metres.
+
+        This is the camera closeness ``<_u`` used for depth ordering (HJS Eq. 20).
+        """
+        return np.linalg.norm(np.asarray(points, dtype=np.float64) - self.center, axis=-1)
+
+    def project(self, points: np.ndarray) -> np.ndarray:
+        """Project world points (..., 3) to distorted pixel coordinates (..., 2).
+
+        Points behind the camera (z_cam <= 0) get NaN coordinates.
+        """
+        points = np.asarray(points, dtype=np.float64)
+        flat = points.reshape(-1, 3)
+        if flat.shape[0] == 0:
+            return np.zeros(points.shape[:-1] + (2,))
+        rvec, _ = cv2.Rodrigues(self.R)
+        pixels, _ = cv2.projectPoints(flat, rvec, self.t, self.K, self.dist)
+        pixels = pixels.reshape(-1, 2)
+        pixels[self.depth(flat) <= 1e-6] = np.nan
+        return pixels.reshape(points.shape[:-1] + (2,))
+
+    def normalized_rays(self, pixels: np.ndarray) -> np.ndarray:
+        """Undistort pixels (..., 2) to camera-frame ray directions (..., 3) with z = 1."""
+        pixels = np.asarray(pixels, dtype=np.float64)
+        flat = pixels.reshape(-1, 1, 2)
+        if flat.shape[0] == 0:
+            return np.zeros(pixels.shape[:-1] + (3,))
+        criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 1e-9)
+        if hasattr(cv2, 'undistortPointsIter'):  # OpenCV 4.x spells the iterative variant so
+            und = cv2.undistortPointsIter(flat, self.K, self.dist, None, None, criteria)
+        else:
+            und = cv2.undistortPoints(flat, self.K, self.dist, criteria=criteria)
+        und = und.reshape(-1, 2)
+        rays = np.concatenate([und, np.ones((und.shape[0], 1))], axis=1)
+        return rays.reshape(pixels.shape[:-1] + (3,))
+
+    def pixel_rays(self, pixels: np.ndarray) -> np.ndarray:
+        """Unit world-frame viewing directions (..., 3) of pixels (..., 2)."""
+        rays = self.normalized_rays(pixels) @ self.R  # R^T applied to row vectors
+        return rays / np.linalg.norm(rays, axis=-1, keepdims=True)
+
+    def floor_point(self, pixels: np.ndarray, height: float = 0.0) -> np.ndarray:
+        """Intersect the rays of pixels (..., 2) with the plane z = height -> (..., 3).
+
+        Rays parallel to the plane or pointing away from it give NaN.
+        """
+        rays = self.pixel_rays(pixels)
+        c = self.center
+        with np.errstate(divide='ignore', invalid='ignore'):
+            s = (height - c[2]) / rays[..., 2]
+        s = np.where(s > 0, s, np.nan)
+        return c + rays * s[..., None]
+
+    def viewing_angle(self, xy: np.ndarray) -> np.ndarray:
+        """Azimuth (..., ) of the direction from floor points (..., 2) towards the camera.
+
+        A person at ``xy`` with body orientation ``o`` (radians, world frame) is seen by this
+        camera under the relative angle ``o - viewing_angle(xy)`` (0 = facing the camera).
+        """
+        xy = np.asarray(xy, dtype=np.float64)
+        c = self.center
+        return np.arctan2(c[1] - xy[..., 1], c[0] - xy[..., 0])
+
+    def in_image(self, pixels: np.ndarray, margin: float = 0.0) -> np.ndarray:
+        """Boolean mask (...,) of pixels (..., 2) inside the image (NaN -> False)."""
+        pixels = np.asarray(pixels, dtype=np.float64)
+        x, y = pixels[..., 0], pixels[..., 1]
+        with np.errstate(invalid='ignore'):
+            return ((x >= -0.5 - margin) & (x < self.width - 0.5 + margin)
+                    & (y >= -0.5 - margin) & (y < self.height - 0.5 + margin))
+
+    def scaled(self, width: int, height: int) -> Camera:
+        """The same camera with its image resized to ``width`` x ``height`` pixels."""
+        sx, sy = width / self.width, height / self.height
+        K = self.K.copy()
+        K[0, 0] *= sx
+        K[0, 2] = (K[0, 2] + 0.5) * sx - 0.5
+        K[1, 1] *= sy
+        K[1, 2] = (K[1, 2] + 0.5) * sy - 0.5
+        return replace(self, width=int(width), height=int(height), K=K)
+
+    @property
+    def projection_matrix(self) -> np.ndarray:
+        """CameraInfo ``P`` (3, 4) of the (unrectified) camera: ``[K | 0]``."""
+        return np.hstack([self.K, np.zeros((3, 1))])
+
+    # -- serialisation --------------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        """The camera as a calibration-file entry (CameraInfo-style keys + extrinsics)."""
+        return {
+            'camera_name': self.name,
+            'frame_id': self.frame_id,
+            'image_width': self.width,
+            'image_height': self.height,
+            'camera_matrix': {'rows': 3, 'cols': 3, 'data': self.K.ravel().tolist()},
+            'distortion_model': 'plumb_bob',
+            'distortion_coefficients': {'rows': 1, 'cols': 5, 'data': self.dist.tolist()},
+            'rectification_matrix': {'rows': 3, 'cols': 3, 'data': np.eye(3).ravel().tolist()},
+            'projection_matrix': {
+                'rows': 3, 'cols': 4, 'data': self.projection_matrix.ravel().tolist()},
+            'extrinsics': {
+                'rotation': self.R.ravel().tolist(),
+                'translation': self.t.tolist(),
+            },
+        }
+
+    @classmethod
+    def from_dict(cls, entry: Mapping[str, Any]) -> Camera:
+        """Build a camera from a calibration-file entry; raises :class:`CalibrationError`."""
+        def data(key: str) -> Any:
+            value = entry[key]
+            return value['data'] if isinstance(value, Mapping) else value
+
+        try:
+            name = str(entry['camera_name'])
+            model = entry.get('distortion_model', 'plumb_bob')
+            if model not in ('plumb_bob', 'rational_polynomial') and model:
+                raise CalibrationError(f'{name}: unsupported distortion model {model!r}')
+            dist = np.asarray(data('distortion_coefficients'), dtype=np.float64).ravel()[:5]
+            ext = entry['extrinsics']
+            return cls(name=name, width=entry['image_width'], height=entry['image_height'],
+                       K=data('camera_matrix'), dist=dist, R=ext['rotation'],
+                       t=ext['translation'], frame_id=str(entry.get('frame_id', '')))
+        except KeyError as err:
+            raise CalibrationError(f'camera entry misses key {err}') from err
+        except TypeError as err:
+            raise CalibrationError(f'malformed camera entry: {err}') from err
+
+
+def look_at(eye: Iterable[float], target: Iterable[float],
+            up: Iterable[float] = (0.0, 0.0, 1.0)) -> tuple[np.ndarray, np.ndarray]:
+    """World->camera ``(R, t)`` for an optical frame at ``eye`` looking at ``target``."""
+    eye = np.asarray(eye, dtype=np.float64)
+    forward = np.asarray(target, dtype=np.float64) - eye
+    forward /= np.linalg.norm(forward)
+    up = np.asarray(up, dtype=np.float64)
+    right = np.cross(forward, up)
+    if np.linalg.norm(right) < 1e-9:  # looking straight down: pick any right vector
+        right = np.cross(forward, np.array([0.0, 1.0, 0.0]))
+    right /= np.linalg.norm(right)
+    down = np.cross(forward, right)
+    R = np.stack([right, down, forward])
+    return R, -R @ eye
+
+
+@dataclass(frozen=True, eq=False)
+class RoomCalibration:
+    """All cameras of a room plus the floor area people can walk on.
+
+    Attributes:
+        cameras: cameras by name, in file order.
+        floor: ``(x_min, y_min, x_max, y_max)`` of the walkable floor, metres.
+        frame_id: the world frame id (default ``room``).
+        entry_zones: optional floor rectangles ``(x_min, y_min, x_max, y_max)`` where people
+            enter (detection may be restricted to them).
+    """
+
+    cameras: dict[str, Camera]
+    floor: tuple[float, float, float, float]
+    frame_id: str = 'room'
+    entry_zones: tuple[tuple[float, float, float, float], ...] = field(default_factory=tuple)
+
+    def __post_init__(self) -> None:
+        if not self.cameras:
+            raise CalibrationError('a room needs at least one camera')
+        x0, y0, x1, y1 = (float(v) for v in self.floor)
+        if not (x1 > x0 and y1 > y0):
+            raise CalibrationError(f'floor bounds are empty: {self.floor}')
+        object.__setattr__(self, 'floor', (x0, y0, x1, y1))
+
+    @property
+    def names(self) -> list[str]:
+        return list(self.cameras)
+
+    def subset(self, names: Iterable[str]) -> RoomCalibration:
+        """The same room with only the named cameras, in the given order."""
+        names = list(names)
+        missing = [n for n in names if n not in self.cameras]
+        if missing:
+            raise CalibrationError(
+                f'unknown camera(s) {", ".join(missing)}; known: {", ".join(self.cameras)}')
+        return replace(self, cameras={n: self.cameras[n] for n in names})
+
+    def scaled(self, width: int, height: int) -> RoomCalibration:
+        """All cameras resized to the same image size."""
+        return replace(self, cameras={n: c.scaled(width, height)
+                                      for n, c in self.cameras.items()})
+
+    def to_dict(self) -> dict[str, Any]:
+        x0, y0, x1, y1 = self.floor
+        return {
+            'format': 'mbtrack_ros/room_calibration',
+            'version': 1,
+            'frame_id': self.frame_id,
+            'floor': {'x_min': x0, 'y_min': y0, 'x_max': x1, 'y_max': y1},
+            'entry_zones': [list(z) for z in self.entry_zones],
+            'cameras': [c.to_dict() for c in self.cameras.values()],
+        }
+
+    @classmethod
+    def from_dict(cls, doc: Mapping[str, Any]) -> RoomCalibration:
+        if not isinstance(doc, Mapping) or 'cameras' not in doc:
+            raise CalibrationError('not a room calibration (no "cameras" list)')
+        try:
+            cams = [Camera.from_dict(entry) for entry in doc['cameras']]
+            f = doc['floor']
+            floor = (f['x_min'], f['y_min'], f['x_max'], f['y_max'])
+        except (KeyError, TypeError) as err:
+            raise CalibrationError(f'malformed room calibration: {err}') from err
+        names = [c.name for c in cams]
+        if len(set(names)) != len(names):
+            raise CalibrationError(f'duplicate camera names in {names}')
+        zones = tuple(tuple(float(v) for v in z) for z in doc.get('entry_zones', []) or [])
+        return cls(cameras={c.name: c for c in cams}, floor=floor,
+                   frame_id=str(doc.get('frame_id', 'room')), entry_zones=zones)
+
+    def save(self, path: str | Path) -> None:
+        """Write the calibration as YAML."""
+        Path(path).write_text(
+            '# mbtrack_ros room calibration: metres, floor z = 0, z up;\n'
+            '# extrinsics map world to camera: x_cam = R X + t (R row-major).\n'
+            + yaml.safe_dump(self.to_dict(), sort_keys=False), encoding='utf-8')
+
+    @classmethod
+    def load(cls, path: str | Path) -> RoomCalibration:
+        """Read a calibration YAML; raises :class:`CalibrationError` with a one-line reason."""
+        path = Path(path)
+        try:
+            doc = yaml.safe_load(path.read_text(encoding='utf-8'))
+        except OSError as err:
+            raise CalibrationError(f'cannot read calibration {path}: {err.strerror}') from err
+        except yaml.YAMLError as err:
+            raise CalibrationError(f'{path} is not valid YAML: {err}') from err
+        try:
+            return cls.from_dict(doc)
+        except CalibrationError as err:
+            raise CalibrationError(f'{path}: {err}') from err

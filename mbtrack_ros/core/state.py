@@ -1,0 +1,62 @@
+"""Single-person state layout and the per-frame tracker outputs.
+
+A particle (one hypothesis of one person) is a row of a float64 array of width
+:data:`STATE_DIM` with columns ``x, y`` (floor position, metres, room frame),
+``vx, vy`` (floor velocity, m/s), ``theta`` (body orientation, radians, world frame,
+0 = facing +x) and ``sitting`` (0.0 standing, 1.0 sitting).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ['STATE_DIM', 'X', 'Y', 'VX', 'VY', 'THETA', 'SIT', 'FrameResult', 'TrackEstimate']
+
+X, Y, VX, VY, THETA, SIT = range(6)
+STATE_DIM = 6
+
+
+@dataclass
+class TrackEstimate:
+    """What the tracker reports for one person at one frame.
+
+    Attributes:
+        track_id: increasing integer, never reused within a run.
+        mean: (6,) posterior mean state (``sitting`` is the probability of sitting).
+        covariance: (4, 4) posterior covariance of ``x, y, vx, vy``.
+        height: body height of the person's model, metres.
+        visible_fraction: per camera, the expected visible fraction of the silhouette under
+            the prior (from the HJS occlusion maps w*); 0 where the camera does not see it.
+        visibility: per camera, posterior probability that the person is seen there.
+        existence: posterior probability that the person exists.
+        particles: (N, 6) particle states after the update, or None.
+        weights: (N,) normalised particle weights, or None.
+    """
+
+    track_id: int
+    mean: np.ndarray
+    covariance: np.ndarray
+    height: float
+    visible_fraction: dict[str, float] = field(default_factory=dict)
+    visibility: dict[str, float] = field(default_factory=dict)
+    existence: float = 1.0
+    particles: np.ndarray | None = None
+    weights: np.ndarray | None = None
+
+
+@dataclass
+class FrameResult:
+    """The tracker's output for one synchronised frame set.
+
+    Attributes:
+        stamp_ns: the frame set's stamp, integer nanoseconds (image header time).
+        tracks: the reported tracks, ordered by id.
+        ended: ids of tracks released at this frame.
+        timings: seconds spent per stage (``predict``, ``update``, ``detect`` ...).
+    """
+
+    stamp_ns: int
+    tracks: list[TrackEstimate] = field(default_factory=list)
+    ended: list[int] = field(default_factory=list)
+    timings: dict[str, float] = field(default_factory=dict)
