@@ -1,0 +1,479 @@
+"""Multi-person filters behind one interface: HJS (000 Algorithm 1), separable and joint.
+
+The filter interface
+--------------------
+Every tracking algorithm the :class:`~mbtrack_ros.core.tracker.Tracker` can run implements
+:class:`TrackingFilter`::
+
+    class TrackingFilter(Protocol):
+        name: str                         # 'hjs', 'separable', 'joint', 'pdaf', ...
+        timings: dict[str, float]         # seconds per stage of the last step()
+        stats: dict[str, float]           # diagnostics of the last step() (BP iterations ...)
+        def add(self, track_id: int, model: PersonModel, state: np.ndarray,
+                rng: np.random.Generator) -> None      # state (6,) valid at the last step
+        def remove(self, track_id: int) -> None
+        def track_ids(self) -> list[int]               # in insertion order
+        def reset(self) -> None                         # forget every track
+        def step(self, dt: float, measurement: MeasurementModel,
+                 images: dict[str, np.ndarray],
+                 rng: np.random.Generator) -> dict[int, TrackUpdate]
+
+``step`` predicts every track over ``dt`` seconds and updates it with the current frame:
+``measurement`` is the :class:`~mbtrack_ros.core.likelihood.MeasurementModel` on which
+``set_images(images)`` has already been called (particle filters use its ``hjs``,
+``separable`` or ``joint`` evaluation); ``images`` are the raw ``(H, W, 3) uint8`` RGB frames
+by camera name for filters that extract their own measurements (PDAF/JPDAF/JLF). It returns
+one :class:`TrackUpdate` per track: posterior mean ``(6,)``, covariance ``(4, 4)`` of
+``x, y, vx, vy``, expected visible fraction per camera, and, for particle filters, the
+posterior particles ``(N, 6)`` with normalised weights ``(N,)`` (``None`` for Kalman-based
+filters).
+
+Plugging in further algorithms
+------------------------------
+A factory ``factory(calibration: RoomCalibration, config: TrackerConfig) -> TrackingFilter``
+is registered under a name with :func:`register_filter`. Names not registered yet are
+looked up by importing the modules in :data:`PLUGIN_MODULES` (the association package of
+the PDAF/JPDAF/JLF baselines registers ``'pdaf'``, ``'jpdaf'`` and ``'jlf'`` on import).
+:func:`make_filter` builds a filter by name.
+"""
+from __future__ import annotations
+
+import importlib
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from mbtrack_ros.core.dynamics import MotionConfig, predict
+from mbtrack_ros.core.mrf import belief_propagation, exclusion_potential
+from mbtrack_ros.core.resampling import normalize_log_weights, systematic_resample
+from mbtrack_ros.core.state import STATE_DIM, THETA, VX, VY, X, Y
+
+if TYPE_CHECKING:  # pragma: no cover - typing only
+    from mbtrack_ros.core.appearance import PersonModel
+    from mbtrack_ros.core.camera import RoomCalibration
+    from mbtrack_ros.core.likelihood import MeasurementModel
+    from mbtrack_ros.core.tracker import TrackerConfig
+
+__all__ = [
+    'PLUGIN_MODULES', 'FilterConfig', 'FilterError', 'HJSFilter', 'JointFilter',
+    'SeparableFilter', 'TrackUpdate', 'TrackingFilter', 'available_filters', 'make_filter',
+    'register_filter', 'summarize_particles',
+]
+
+
+class FilterError(ValueError):
+    """Invalid filter configuration, unknown track or algorithm, malformed state."""
+
+
+@dataclass
+class TrackUpdate:
+    """One track's posterior after a filter step.
+
+    Attributes:
+        mean: (6,) posterior mean state (circular mean of theta, sitting probability).
+        covariance: (4, 4) posterior covariance of x, y, vx, vy (m, m/s).
+        visible_fraction: per camera name, expected visible fraction of the silhouette.
+        particles: (N, 6) posterior particles, or None (Kalman-based filters).
+        weights: (N,) normalised posterior weights, or None.
+    """
+
+    mean: np.ndarray
+    covariance: np.ndarray
+    visible_fraction: dict[str, float] = field(default_factory=dict)
+    particles: np.ndarray | None = None
+    weights: np.ndarray | None = None
+
+
+@runtime_checkable
+class TrackingFilter(Protocol):
+    """The interface every tracking algorithm implements (see the module docstring)."""
+
+    name: str
+    timings: dict[str, float]
+    stats: dict[str, float]
+
+    def add(self, track_id: int, model: PersonModel, state: np.ndarray,
+            rng: np.random.Generator) -> None: ...
+
+    def remove(self, track_id: int) -> None: ...
+
+    def track_ids(self) -> list[int]: ...
+
+    def reset(self) -> None: ...
+
+    def step(self, dt: float, measurement: MeasurementModel, images: dict[str, np.ndarray],
+             rng: np.random.Generator) -> dict[int, TrackUpdate]: ...
+
+
+@dataclass(frozen=True)
+class FilterConfig:
+    """Parameters of the particle filters.
+
+    Attributes:
+        particles: particles per target (HJS, separable).
+        joint_particles: joint particles (joint filter).
+        motion: motion model noise (:class:`~mbtrack_ros.core.dynamics.MotionConfig`).
+        use_mrf: apply the spatial-exclusion MRF prior (000 §III-B).
+        mrf_radius: exclusion radius r, metres (000 §VI-A: 0.4).
+        mrf_epsilon: floor of the exclusion potential (see :mod:`mbtrack_ros.core.mrf`).
+        theta_bp: BP stopping threshold (000 Eq. 43: 0.01).
+        max_bp_iterations: BP iteration limit.
+        init_position_spread: m, std of the initial particle cloud around a new state.
+        init_velocity_spread: m/s, std of the initial velocities.
+    """
+
+    particles: int = 100
+    joint_particles: int = 10_000
+    motion: MotionConfig = field(default_factory=MotionConfig)
+    use_mrf: bool = True
+    mrf_radius: float = 0.4
+    mrf_epsilon: float = 1e-3
+    theta_bp: float = 0.01
+    max_bp_iterations: int = 20
+    init_position_spread: float = 0.05
+    init_velocity_spread: float = 0.1
+
+    def __post_init__(self) -> None:
+        if int(self.particles) < 1 or int(self.joint_particles) < 1:
+            raise FilterError('particle counts must be >= 1')
+        if not (self.mrf_radius >= 0 and 0 < self.mrf_epsilon <= 1):
+            raise FilterError('mrf_radius must be >= 0 and mrf_epsilon in (0, 1]')
+        if not (self.theta_bp > 0 and self.max_bp_iterations >= 1):
+            raise FilterError('theta_bp must be > 0 and max_bp_iterations >= 1')
+        if not (self.init_position_spread >= 0 and self.init_velocity_spread >= 0):
+            raise FilterError('initial spreads must be >= 0')
+
+
+def summarize_particles(particles: np.ndarray,
+                        weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted mean (6,) and covariance (4, 4) of x, y, vx, vy of particles (N, 6).
+
+    theta is averaged on the circle; the sitting column becomes the sitting probability.
+    """
+    w = weights / weights.sum()
+    mean = w @ particles
+    mean[THETA] = np.arctan2(w @ np.sin(particles[:, THETA]), w @ np.cos(particles[:, THETA]))
+    d = particles[:, X:VY + 1] - mean[X:VY + 1]
+    cov = (d * w[:, None]).T @ d
+    return mean, cov
+
+
+def _check_state(state: np.ndarray) -> np.ndarray:
+    s = np.asarray(state, dtype=np.float64).reshape(-1)
+    if s.shape != (STATE_DIM,) or not np.all(np.isfinite(s)):
+        raise FilterError(f'a track state must be {STATE_DIM} finite numbers, got {state!r}')
+    return s
+
+
+def _initial_cloud(state: np.ndarray, n: int, config: FilterConfig,
+                   rng: np.random.Generator) -> np.ndarray:
+    """(n, 6) particles around a state: Gaussian position and velocity spread."""
+    cloud = np.repeat(state[None, :], n, axis=0)
+    cloud[:, [X, Y]] += rng.normal(0.0, config.init_position_spread, size=(n, 2))
+    cloud[:, [VX, VY]] += rng.normal(0.0, config.init_velocity_spread, size=(n, 2))
+    return cloud
+
+
+def _visible(result: Any, k: int, names: list[str]) -> dict[str, float]:
+    vf = getattr(result, 'visible_fraction', None)
+    if vf is None:
+        return {}
+    vf = np.asarray(vf)
+    if vf.ndim != 2 or vf.shape[0] <= k or vf.shape[1] != len(names):
+        return {}
+    return {name: float(vf[k, c]) for c, name in enumerate(names)}
+
+
+class _MarginalParticleFilter:
+    """Shared bookkeeping of filters that keep one particle set per target."""
+
+    name = 'marginal'
+
+    def __init__(self, config: FilterConfig | None = None, *,
+                 floor: tuple[float, float, float, float] | None = None,
+                 camera_names: list[str] | None = None) -> None:
+        self.config = config or FilterConfig()
+        self.floor = floor
+        self.camera_names = list(camera_names or [])
+        self.timings: dict[str, float] = {}
+        self.stats: dict[str, float] = {}
+        self._particles: dict[int, np.ndarray] = {}
+        self._logw: dict[int, np.ndarray] = {}
+        self._models: dict[int, Any] = {}
+
+    def add(self, track_id: int, model: PersonModel, state: np.ndarray,
+            rng: np.random.Generator) -> None:
+        """Start a track with N particles around ``state`` (6,)."""
+        if track_id in self._particles:
+            raise FilterError(f'track {track_id} already exists')
+        s = _check_state(state)
+        n = int(self.config.particles)
+        self._particles[track_id] = _initial_cloud(s, n, self.config, rng)
+        self._logw[track_id] = np.full(n, -np.log(n))
+        self._models[track_id] = model
+
+    def remove(self, track_id: int) -> None:
+        if track_id not in self._particles:
+            raise FilterError(f'no track {track_id}')
+        for store in (self._particles, self._logw, self._models):
+            del store[track_id]
+
+    def track_ids(self) -> list[int]:
+        return list(self._particles)
+
+    def reset(self) -> None:
+        self._particles.clear()
+        self._logw.clear()
+        self._models.clear()
+
+    def _propagate(self, ids: list[int], dt: float,
+                   rng: np.random.Generator) -> list[np.ndarray]:
+        """Algorithm 1 predict, first loop: resample by weight, sample the 1-body dynamics."""
+        out = []
+        n = int(self.config.particles)
+        for tid in ids:
+            w = np.exp(self._logw[tid])
+            idx = systematic_resample(w, n, rng)
+            out.append(predict(self._particles[tid][idx], dt, self.config.motion, rng,
+                               floor=self.floor))
+        return out
+
+    def _finish(self, ids: list[int], particles: list[np.ndarray],
+                log_prior: list[np.ndarray], loglik: list[np.ndarray],
+                result: Any) -> dict[int, TrackUpdate]:
+        updates = {}
+        degenerate = 0
+        for k, tid in enumerate(ids):
+            ll = np.asarray(loglik[k], dtype=np.float64)
+            if ll.shape != (particles[k].shape[0],):
+                raise FilterError(f'likelihood for track {tid} has shape {ll.shape}, '
+                                  f'expected ({particles[k].shape[0]},)')
+            # Algorithm 1 / 000 Eq. 41: posterior weight = prior weight x likelihood
+            lw, flat = normalize_log_weights(log_prior[k] + ll)
+            degenerate += int(flat)
+            self._particles[tid] = particles[k]
+            self._logw[tid] = lw
+            w = np.exp(lw)
+            mean, cov = summarize_particles(particles[k], w)
+            updates[tid] = TrackUpdate(mean=mean, covariance=cov,
+                                       visible_fraction=_visible(result, k, self.camera_names),
+                                       particles=particles[k], weights=w)
+        self.stats['degenerate_tracks'] = float(degenerate)
+        return updates
+
+
+class HJSFilter(_MarginalParticleFilter):
+    """Hybrid Joint-Separable particle filter (000 Algorithm 1).
+
+    Predict: per target resample + 1-body dynamics (000 Eq. 15), then belief propagation of
+    the spatial-exclusion MRF on the particle weights (000 Eq. 16-18, 43) unless
+    ``config.use_mrf`` is False (the ablation of 000 §VI-C). Update: the HJS likelihood
+    ``measurement.hjs`` with the BP beliefs as priors (000 Eq. 26-40).
+    """
+
+    name = 'hjs'
+
+    def step(self, dt: float, measurement: MeasurementModel, images: dict[str, np.ndarray],
+             rng: np.random.Generator) -> dict[int, TrackUpdate]:
+        self.timings = {}
+        self.stats = {}
+        ids = self.track_ids()
+        if not ids:
+            return {}
+        t0 = time.perf_counter()
+        particles = self._propagate(ids, dt, rng)
+        t1 = time.perf_counter()
+        n = [p.shape[0] for p in particles]
+        if self.config.use_mrf and len(ids) > 1:
+            bp = belief_propagation(
+                [p[:, X:Y + 1] for p in particles], [np.full(m, 1.0 / m) for m in n],
+                radius=self.config.mrf_radius, epsilon=self.config.mrf_epsilon,
+                theta=self.config.theta_bp, max_iterations=self.config.max_bp_iterations)
+            prior = bp.weights
+            self.stats['bp_iterations'] = float(bp.iterations)
+            self.stats['bp_kl'] = float(bp.kl)
+        else:
+            prior = [np.full(m, 1.0 / m) for m in n]
+        t2 = time.perf_counter()
+        models = [self._models[t] for t in ids]
+        result = measurement.hjs(particles, prior, models)
+        t3 = time.perf_counter()
+        with np.errstate(divide='ignore'):
+            log_prior = [np.log(p) for p in prior]
+        updates = self._finish(ids, particles, log_prior, result.loglik, result)
+        self.timings = {'predict': t1 - t0, 'mrf': t2 - t1, 'update': t3 - t2,
+                        'posterior': time.perf_counter() - t3}
+        return updates
+
+
+class SeparableFilter(_MarginalParticleFilter):
+    """K independent particle filters (000 §II-A): same dynamics, blind likelihood, no MRF."""
+
+    name = 'separable'
+
+    def step(self, dt: float, measurement: MeasurementModel, images: dict[str, np.ndarray],
+             rng: np.random.Generator) -> dict[int, TrackUpdate]:
+        self.timings = {}
+        self.stats = {}
+        ids = self.track_ids()
+        if not ids:
+            return {}
+        t0 = time.perf_counter()
+        particles = self._propagate(ids, dt, rng)
+        t1 = time.perf_counter()
+        models = [self._models[t] for t in ids]
+        result = measurement.separable(particles, models)
+        t2 = time.perf_counter()
+        log_prior = [np.full(p.shape[0], -np.log(p.shape[0])) for p in particles]
+        updates = self._finish(ids, particles, log_prior, result.loglik, result)
+        self.timings = {'predict': t1 - t0, 'update': t2 - t1,
+                        'posterior': time.perf_counter() - t2}
+        return updates
+
+
+class JointFilter:
+    """One particle filter over the joint state of all K targets (000 §II-A).
+
+    ``N = config.joint_particles`` joint particles ``(N, K, 6)``; joint resampling, 1-body
+    dynamics per component, optional spatial-exclusion prior ``prod p(x^h, x^k)`` as a joint
+    weight factor (000 Eq. 13, 16 without the BP approximation), ``measurement.joint``
+    likelihood with a per-pixel depth buffer. Marginal means/covariances per target.
+    """
+
+    name = 'joint'
+
+    def __init__(self, config: FilterConfig | None = None, *,
+                 floor: tuple[float, float, float, float] | None = None,
+                 camera_names: list[str] | None = None) -> None:
+        self.config = config or FilterConfig()
+        self.floor = floor
+        self.camera_names = list(camera_names or [])
+        self.timings: dict[str, float] = {}
+        self.stats: dict[str, float] = {}
+        self._ids: list[int] = []
+        self._models: list[Any] = []
+        n = int(self.config.joint_particles)
+        self._joint = np.zeros((n, 0, STATE_DIM))
+        self._logw = np.full(n, -np.log(n))
+
+    def add(self, track_id: int, model: PersonModel, state: np.ndarray,
+            rng: np.random.Generator) -> None:
+        """Append a target: each joint particle gets its own sample around ``state``."""
+        if track_id in self._ids:
+            raise FilterError(f'track {track_id} already exists')
+        s = _check_state(state)
+        cloud = _initial_cloud(s, self._joint.shape[0], self.config, rng)
+        self._joint = np.concatenate([self._joint, cloud[:, None, :]], axis=1)
+        self._ids.append(track_id)
+        self._models.append(model)
+
+    def remove(self, track_id: int) -> None:
+        if track_id not in self._ids:
+            raise FilterError(f'no track {track_id}')
+        k = self._ids.index(track_id)
+        self._joint = np.delete(self._joint, k, axis=1)
+        del self._ids[k]
+        del self._models[k]
+        if not self._ids:
+            self.reset()
+
+    def track_ids(self) -> list[int]:
+        return list(self._ids)
+
+    def reset(self) -> None:
+        n = int(self.config.joint_particles)
+        self._ids, self._models = [], []
+        self._joint = np.zeros((n, 0, STATE_DIM))
+        self._logw = np.full(n, -np.log(n))
+
+    def step(self, dt: float, measurement: MeasurementModel, images: dict[str, np.ndarray],
+             rng: np.random.Generator) -> dict[int, TrackUpdate]:
+        self.timings = {}
+        self.stats = {}
+        if not self._ids:
+            return {}
+        t0 = time.perf_counter()
+        n, k_count = self._joint.shape[:2]
+        idx = systematic_resample(np.exp(self._logw), n, rng)
+        flat = predict(self._joint[idx].reshape(n * k_count, STATE_DIM), dt,
+                       self.config.motion, rng, floor=self.floor)
+        joint = flat.reshape(n, k_count, STATE_DIM)
+        log_prior = np.zeros(n)
+        if self.config.use_mrf and k_count > 1:
+            r2 = self.config.mrf_radius ** 2
+            log_eps = np.log(self.config.mrf_epsilon)
+            for h in range(k_count):
+                for k in range(h + 1, k_count):
+                    d2 = ((joint[:, h, X:Y + 1] - joint[:, k, X:Y + 1]) ** 2).sum(axis=1)
+                    # 000 Eq. 16: joint exclusion prior, same soft-floored potential as BP
+                    log_prior += np.where(d2 > r2, 0.0, log_eps)
+        t1 = time.perf_counter()
+        ll = np.asarray(measurement.joint(joint, list(self._models)), dtype=np.float64)
+        if ll.shape != (n,):
+            raise FilterError(f'joint likelihood has shape {ll.shape}, expected ({n},)')
+        t2 = time.perf_counter()
+        self._joint = joint
+        self._logw, flat_w = normalize_log_weights(log_prior + ll)
+        self.stats['degenerate_tracks'] = float(flat_w)
+        w = np.exp(self._logw)
+        updates = {}
+        for k, tid in enumerate(self._ids):
+            mean, cov = summarize_particles(joint[:, k, :], w)
+            updates[tid] = TrackUpdate(mean=mean, covariance=cov, particles=joint[:, k, :],
+                                       weights=w)
+        self.timings = {'predict': t1 - t0, 'update': t2 - t1,
+                        'posterior': time.perf_counter() - t2}
+        return updates
+
+
+# -- registry --------------------------------------------------------------------------------
+FilterFactory = Callable[['RoomCalibration', 'TrackerConfig'], TrackingFilter]
+_REGISTRY: dict[str, FilterFactory] = {}
+#: modules imported to find algorithms that are not registered yet (they self-register)
+PLUGIN_MODULES: tuple[str, ...] = ('mbtrack_ros.core.association',)
+
+
+def register_filter(name: str, factory: FilterFactory) -> None:
+    """Make ``factory(calibration, tracker_config)`` available as algorithm ``name``."""
+    _REGISTRY[name] = factory
+
+
+def available_filters() -> list[str]:
+    """Names of the registered algorithms (after importing the plug-in modules)."""
+    _load_plugins()
+    return sorted(_REGISTRY)
+
+
+def _load_plugins() -> None:
+    for module in PLUGIN_MODULES:
+        try:
+            importlib.import_module(module)
+        except ModuleNotFoundError as err:
+            if err.name is None or not module.startswith(err.name):
+                raise
+
+
+def make_filter(name: str, calibration: RoomCalibration,
+                config: TrackerConfig) -> TrackingFilter:
+    """Build the algorithm ``name`` for a room; raises :class:`FilterError` if unknown."""
+    if name not in _REGISTRY:
+        _load_plugins()
+    if name not in _REGISTRY:
+        raise FilterError(f'unknown algorithm {name!r}; available: '
+                          f'{", ".join(sorted(_REGISTRY))}')
+    return _REGISTRY[name](calibration, config)
+
+
+def _particle_factory(cls: type) -> FilterFactory:
+    def factory(calibration: RoomCalibration, config: TrackerConfig) -> TrackingFilter:
+        return cls(config.filter_config(), floor=calibration.floor,
+                   camera_names=list(calibration.names))
+    return factory
+
+
+register_filter('hjs', _particle_factory(HJSFilter))
+register_filter('separable', _particle_factory(SeparableFilter))
+register_filter('joint', _particle_factory(JointFilter))

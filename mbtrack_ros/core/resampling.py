@@ -1,0 +1,85 @@
+"""Log-weight normalisation, effective sample size and systematic resampling.
+
+The one resampling routine of the package: every particle filter (HJS, separable, joint and
+the detection processes) draws its indices with :func:`systematic_resample`.
+Weights are handled in log space and normalised with logsumexp; NaN log-weights count as
+``-inf`` (impossible). When every weight is impossible the set falls back to uniform weights
+and the caller gets a flag so it can report the degeneracy.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ['ResamplingError', 'effective_sample_size', 'normalize_log_weights',
+           'normalized_weights', 'systematic_resample']
+
+
+class ResamplingError(ValueError):
+    """Weights or sizes that cannot be resampled."""
+
+
+def normalize_log_weights(log_weights: np.ndarray) -> tuple[np.ndarray, bool]:
+    """Normalise log-weights so that their exponentials sum to one.
+
+    Args:
+        log_weights: (N,) unnormalised log-weights; NaN is treated as -inf.
+
+    Returns:
+        ``(normalised, degenerate)``: (N,) float64 log-weights with logsumexp 0, and True if
+        every input was -inf/NaN (the output is then uniform, ``-log N``).
+    """
+    lw = np.asarray(log_weights, dtype=np.float64)
+    if lw.ndim != 1 or lw.size == 0:
+        raise ResamplingError(f'log-weights must be a non-empty 1-D array, got shape {lw.shape}')
+    lw = np.where(np.isnan(lw), -np.inf, lw)
+    if np.any(lw == np.inf):
+        raise ResamplingError('log-weights contain +inf')
+    top = lw.max()
+    if not np.isfinite(top):
+        return np.full(lw.size, -np.log(lw.size)), True
+    shifted = lw - top
+    return shifted - np.log(np.exp(shifted).sum()), False
+
+
+def normalized_weights(log_weights: np.ndarray) -> tuple[np.ndarray, bool]:
+    """(N,) weights summing to one from log-weights, and the degeneracy flag (see above)."""
+    lw, degenerate = normalize_log_weights(log_weights)
+    w = np.exp(lw)
+    return w / w.sum(), degenerate
+
+
+def effective_sample_size(weights: np.ndarray) -> float:
+    """Effective sample size ``1 / sum(w^2)`` of (N,) weights (normalised internally)."""
+    w = np.asarray(weights, dtype=np.float64)
+    total = w.sum()
+    if w.ndim != 1 or w.size == 0 or not np.isfinite(total) or total <= 0 or np.any(w < 0):
+        raise ResamplingError('weights must be a non-empty 1-D array of non-negative numbers '
+                              'with a positive finite sum')
+    w = w / total
+    return float(1.0 / np.dot(w, w))
+
+
+def systematic_resample(weights: np.ndarray, count: int,
+                        rng: np.random.Generator) -> np.ndarray:
+    """Systematic resampling: ``count`` indices drawn with one uniform offset.
+
+    Args:
+        weights: (N,) non-negative weights (normalised internally).
+        count: number of indices to draw.
+        rng: random generator (one uniform draw).
+
+    Returns:
+        (count,) int64 indices into ``weights``, sorted ascending.
+    """
+    w = np.asarray(weights, dtype=np.float64)
+    if count < 1:
+        raise ResamplingError(f'resampling needs count >= 1, got {count}')
+    total = w.sum() if w.ndim == 1 else np.nan
+    if w.ndim != 1 or w.size == 0 or not np.isfinite(total) or total <= 0 or np.any(w < 0):
+        raise ResamplingError('weights must be a non-empty 1-D array of non-negative numbers '
+                              'with a positive finite sum')
+    cumulative = np.cumsum(w / total)
+    cumulative[-1] = 1.0  # guard against round-off leaving the last bin short
+    positions = (rng.random() + np.arange(count)) / count
+    idx = np.searchsorted(cumulative, positions, side='right')
+    return np.minimum(idx, w.size - 1).astype(np.int64)

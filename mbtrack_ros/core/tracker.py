@@ -1,0 +1,236 @@
+"""The multi-person tracker: owns the tracks, runs one filter per frame, reports results.
+
+::
+
+    tracker = Tracker(calibration, TrackerConfig(algorithm='hjs'), rng=np.random.default_rng(0))
+    tid = tracker.add_track(model, state, stamp_ns)    # ids 1, 2, ... never reused
+    result = tracker.step(stamp_ns, images)            # FrameResult (core/state.py)
+
+Time comes only from the integer nanosecond stamps: each step predicts over
+``(stamp_ns - previous stamp) / 1e9`` seconds. A stamp earlier than the previous one raises
+:class:`TrackerError` (the caller resets the tracker, e.g. when a bag loops). The algorithm
+is picked by name from the filter registry (:mod:`mbtrack_ros.core.filters`): ``hjs``,
+``separable``, ``joint`` and the association baselines once registered.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, fields
+
+import numpy as np
+
+from mbtrack_ros.core.camera import RoomCalibration
+from mbtrack_ros.core.dynamics import DynamicsError, MotionConfig
+from mbtrack_ros.core.filters import FilterConfig, FilterError, TrackingFilter, make_filter
+from mbtrack_ros.core.state import STATE_DIM, FrameResult, TrackEstimate, VX, VY, X, Y
+
+__all__ = ['Tracker', 'TrackerConfig', 'TrackerError']
+
+
+class TrackerError(ValueError):
+    """Invalid configuration, unknown track, or stamps going backwards."""
+
+
+@dataclass(frozen=True)
+class TrackerConfig:
+    """Everything that parameterises a tracking run (validated on construction).
+
+    Attributes:
+        algorithm: 'hjs', 'separable', 'joint' (or a registered baseline: 'pdaf', ...).
+        particles: particles per target (HJS, separable; 000 §VI: 100).
+        joint_particles: joint particles of the joint filter (000 §VI-B: 10^4).
+        sigma: likelihood width sigma (000 Eq. 19).
+        d_occ: occlusion penalty d_occ (000 Eq. 26).
+        mrf_radius: spatial-exclusion radius, metres (000 §VI-A: 0.4).
+        mrf_epsilon: floor of the exclusion potential.
+        use_mrf: apply the MRF prior (False = ablation of 000 §VI-C).
+        theta_bp: BP stopping threshold (000 Eq. 43: 0.01).
+        max_bp_iterations: BP iteration limit.
+        motion: motion-model noise (:class:`~mbtrack_ros.core.dynamics.MotionConfig`).
+        init_position_spread: m, spread of a new track's particles.
+        init_velocity_spread: m/s, spread of a new track's velocities.
+        seed: seed of the default random generator (None = fresh entropy).
+    """
+
+    algorithm: str = 'hjs'
+    particles: int = 100
+    joint_particles: int = 10_000
+    sigma: float = 0.12
+    d_occ: float = 0.15
+    mrf_radius: float = 0.4
+    mrf_epsilon: float = 1e-3
+    use_mrf: bool = True
+    theta_bp: float = 0.01
+    max_bp_iterations: int = 20
+    motion: MotionConfig = field(default_factory=MotionConfig)
+    init_position_spread: float = 0.05
+    init_velocity_spread: float = 0.1
+    seed: int | None = None
+
+    def __post_init__(self) -> None:
+        def bad(msg: str) -> None:
+            raise TrackerError(f'invalid tracker config: {msg}')
+
+        if not isinstance(self.algorithm, str) or not self.algorithm:
+            bad(f'algorithm must be a name, got {self.algorithm!r}')
+        for name in ('particles', 'joint_particles', 'max_bp_iterations'):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+                bad(f'{name} must be an integer >= 1, got {value!r}')
+        for name in ('sigma', 'theta_bp'):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and np.isfinite(value) and value > 0):
+                bad(f'{name} must be a finite number > 0, got {value!r}')
+        for name in ('d_occ', 'mrf_radius', 'init_position_spread', 'init_velocity_spread'):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and np.isfinite(value) and value >= 0):
+                bad(f'{name} must be a finite number >= 0, got {value!r}')
+        if not (isinstance(self.mrf_epsilon, (int, float)) and 0 < self.mrf_epsilon <= 1):
+            bad(f'mrf_epsilon must be in (0, 1], got {self.mrf_epsilon!r}')
+        if not isinstance(self.motion, MotionConfig):
+            bad('motion must be a MotionConfig')
+        if self.seed is not None and (isinstance(self.seed, bool)
+                                      or not isinstance(self.seed, (int, np.integer))):
+            bad(f'seed must be an integer or None, got {self.seed!r}')
+
+    def filter_config(self) -> FilterConfig:
+        """The particle-filter parameters of this configuration."""
+        return FilterConfig(
+            particles=int(self.particles), joint_particles=int(self.joint_particles),
+            motion=self.motion, use_mrf=bool(self.use_mrf), mrf_radius=float(self.mrf_radius),
+            mrf_epsilon=float(self.mrf_epsilon), theta_bp=float(self.theta_bp),
+            max_bp_iterations=int(self.max_bp_iterations),
+            init_position_spread=float(self.init_position_spread),
+            init_velocity_spread=float(self.init_velocity_spread))
+
+    @classmethod
+    def from_dict(cls, values: dict) -> TrackerConfig:
+        """Build from plain values (YAML/CLI); ``motion`` may be a dict of MotionConfig keys."""
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise TrackerError(f'invalid tracker config: unknown key(s) {", ".join(unknown)}')
+        values = dict(values)
+        if isinstance(values.get('motion'), dict):
+            try:
+                values['motion'] = MotionConfig(**values['motion'])
+            except (TypeError, DynamicsError) as err:
+                raise TrackerError(f'invalid tracker config: motion: {err}') from err
+        return cls(**values)
+
+
+class Tracker:
+    """Tracks people across frames with the configured algorithm.
+
+    Args:
+        calibration: the room (cameras and floor bounds).
+        config: tracker parameters.
+        rng: random generator; default ``np.random.default_rng(config.seed)``.
+        measurement: optional measurement model (default: the real
+            :class:`~mbtrack_ros.core.likelihood.MeasurementModel` built from ``config``).
+    """
+
+    def __init__(self, calibration: RoomCalibration, config: TrackerConfig | None = None, *,
+                 rng: np.random.Generator | None = None, measurement=None) -> None:
+        self.calibration = calibration
+        self.config = config or TrackerConfig()
+        self.rng = rng if rng is not None else np.random.default_rng(self.config.seed)
+        try:
+            self.filter: TrackingFilter = make_filter(self.config.algorithm, calibration,
+                                                      self.config)
+        except FilterError as err:
+            raise TrackerError(str(err)) from err
+        if measurement is None:
+            from mbtrack_ros.core.likelihood import LikelihoodConfig, MeasurementModel
+            measurement = MeasurementModel(
+                calibration, LikelihoodConfig(sigma=self.config.sigma, d_occ=self.config.d_occ))
+        self.measurement = measurement
+        self._next_id = 1
+        self._last_stamp: int | None = None
+        self._heights: dict[int, float] = {}
+
+    @property
+    def track_ids(self) -> list[int]:
+        """Ids of the live tracks, in creation order."""
+        return self.filter.track_ids()
+
+    @property
+    def last_stamp_ns(self) -> int | None:
+        return self._last_stamp
+
+    def add_track(self, model, state: np.ndarray, stamp_ns: int) -> int:
+        """Start a track for ``model`` at ``state`` (6,) observed at ``stamp_ns``.
+
+        If the tracker has already processed a later or earlier frame, the state is moved to
+        the tracker's current time with its own velocity (constant-velocity extrapolation),
+        so that the next :meth:`step` predicts it over the right interval.
+
+        Returns:
+            the new track id (1, 2, ...; never reused).
+        """
+        s = np.asarray(state, dtype=np.float64).reshape(-1)
+        if s.shape != (STATE_DIM,) or not np.all(np.isfinite(s)):
+            raise TrackerError(f'a track state must be {STATE_DIM} finite numbers')
+        stamp_ns = int(stamp_ns)
+        if self._last_stamp is None:
+            self._last_stamp = stamp_ns
+        elif stamp_ns != self._last_stamp:
+            s = s.copy()
+            s[[X, Y]] += s[[VX, VY]] * (self._last_stamp - stamp_ns) / 1e9
+        track_id = self._next_id
+        try:
+            self.filter.add(track_id, model, s, self.rng)
+        except FilterError as err:
+            raise TrackerError(str(err)) from err
+        self._next_id += 1
+        self._heights[track_id] = float(getattr(model, 'height', float('nan')))
+        return track_id
+
+    def remove_track(self, track_id: int) -> None:
+        """End a track; its id is not reused."""
+        try:
+            self.filter.remove(track_id)
+        except FilterError as err:
+            raise TrackerError(str(err)) from err
+        self._heights.pop(track_id, None)
+
+    def reset(self) -> None:
+        """Forget all tracks and the time base (ids keep increasing)."""
+        self.filter.reset()
+        self._heights.clear()
+        self._last_stamp = None
+
+    def step(self, stamp_ns: int, images: dict[str, np.ndarray]) -> FrameResult:
+        """Predict all tracks to ``stamp_ns`` and update them with ``images``.
+
+        Args:
+            stamp_ns: frame stamp, integer nanoseconds; must not go backwards.
+            images: ``(H, W, 3) uint8`` RGB images by camera name.
+
+        Returns:
+            :class:`~mbtrack_ros.core.state.FrameResult` with one estimate per track.
+        """
+        stamp_ns = int(stamp_ns)
+        if self._last_stamp is not None and stamp_ns < self._last_stamp:
+            raise TrackerError(f'stamp {stamp_ns} ns is before the previous frame '
+                               f'{self._last_stamp} ns; reset the tracker')
+        dt = 0.0 if self._last_stamp is None else (stamp_ns - self._last_stamp) / 1e9
+        t0 = time.perf_counter()
+        self.measurement.set_images(images)
+        t1 = time.perf_counter()
+        updates = self.filter.step(dt, self.measurement, images, self.rng)
+        t2 = time.perf_counter()
+        self._last_stamp = stamp_ns
+        tracks = []
+        for tid in sorted(updates):
+            u = updates[tid]
+            tracks.append(TrackEstimate(
+                track_id=tid, mean=u.mean, covariance=u.covariance,
+                height=self._heights.get(tid, float('nan')),
+                visible_fraction=dict(u.visible_fraction), existence=1.0,
+                particles=u.particles, weights=u.weights))
+        timings = {'prepare': t1 - t0}
+        timings.update(self.filter.timings)
+        timings['filter'] = t2 - t1
+        timings['total'] = time.perf_counter() - t0
+        return FrameResult(stamp_ns=stamp_ns, tracks=tracks, timings=timings)
