@@ -1,0 +1,288 @@
+"""Output messages of the tracker node, built from a :class:`~mbtrack_ros.core.state.FrameResult`.
+
+Every builder stamps its message with the frame set's time (``FrameResult.stamp_ns``, image
+header time, never wall-clock time) and the output frame id (default ``room``). The same
+builders feed the live node and the offline output bag (:mod:`.output_bag`).
+
+``~/tracks`` (sensor_msgs/PointCloud2) layout, one point per reported track, little endian,
+``point_step`` = 4 bytes x number of fields, no padding; read it into numpy with
+``np.frombuffer(msg.data, dtype=tracks_dtype(cameras))``:
+
+==================  =======  ==============================================================
+field               type     meaning
+==================  =======  ==============================================================
+x, y                float32  posterior mean floor position, metres, output frame
+z                   float32  0.0 (floor point)
+id                  uint32   track id (exact; a UINT32 PointField, not a float)
+existence           float32  posterior existence probability (001)
+visibility          float32  largest per-camera visibility (probability seen by a camera)
+vx, vy              float32  posterior mean velocity, m/s
+cov_xx/cov_xy/yy    float32  posterior position covariance, m^2
+height              float32  body height of the person model, metres
+visibility_<cam>    float32  per camera: posterior visibility (001), or the expected
+                             visible silhouette fraction from the HJS occlusion map (000
+                             Eq. 34) when the tracker reports no visibility process
+==================  =======  ==============================================================
+
+Camera names are sanitised to ``[A-Za-z0-9_]`` in field names.
+"""
+from __future__ import annotations
+
+import colorsys
+import math
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from builtin_interfaces.msg import Duration
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import Pose, PoseArray
+from sensor_msgs.msg import PointCloud2, PointField
+from std_msgs.msg import Header
+from visualization_msgs.msg import Marker, MarkerArray
+
+from mbtrack_ros.core.state import SIT, THETA, VX, VY, X, Y, FrameResult, TrackEstimate
+from mbtrack_ros.nodes.conversions import ns_to_stamp
+
+__all__ = [
+    'DiagnosticsSnapshot', 'TRACK_FIELDS', 'debug_overlay', 'delete_all_markers',
+    'diagnostics_message', 'field_name', 'make_header', 'markers_message', 'people_message',
+    'track_color', 'tracks_cloud', 'tracks_dtype', 'yaw_to_quaternion',
+]
+
+#: fixed fields of the ``~/tracks`` cloud, in order (then ``visibility_<camera>``)
+TRACK_FIELDS = ('x', 'y', 'z', 'id', 'existence', 'visibility', 'vx', 'vy', 'cov_xx',
+                'cov_xy', 'cov_yy', 'height')
+GOLDEN = 0.618033988749895
+BODY_DIAMETER = 0.5  # marker cylinder diameter, metres
+
+
+def make_header(stamp_ns: int, frame_id: str) -> Header:
+    """A ``std_msgs/Header`` with the given stamp (integer ns) and frame id."""
+    header = Header()
+    header.frame_id = frame_id
+    ns_to_stamp(stamp_ns, header.stamp)
+    return header
+
+
+def yaw_to_quaternion(yaw: float) -> tuple[float, float, float, float]:
+    """Rotation about +z by ``yaw`` radians -> quaternion ``(x, y, z, w)``."""
+    return 0.0, 0.0, math.sin(0.5 * yaw), math.cos(0.5 * yaw)
+
+
+def field_name(camera: str) -> str:
+    """The ``visibility_<camera>`` field name of a camera (sanitised)."""
+    return 'visibility_' + re.sub(r'[^A-Za-z0-9_]', '_', camera)
+
+
+def tracks_dtype(cameras: Sequence[str]) -> np.dtype:
+    """Structured numpy dtype of one ``~/tracks`` point for these cameras."""
+    names = list(TRACK_FIELDS) + [field_name(c) for c in cameras]
+    return np.dtype([(n, '<u4' if n == 'id' else '<f4') for n in names])
+
+
+def _pose(track: TrackEstimate, z: float = 0.0) -> Pose:
+    pose = Pose()
+    pose.position.x, pose.position.y, pose.position.z = (
+        float(track.mean[X]), float(track.mean[Y]), float(z))
+    q = yaw_to_quaternion(float(track.mean[THETA]))
+    pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w = q
+    return pose
+
+
+def people_message(result: FrameResult, frame_id: str = 'room') -> PoseArray:
+    """``~/people``: one pose per reported track (floor point z = 0, yaw = body orientation)."""
+    msg = PoseArray()
+    msg.header = make_header(result.stamp_ns, frame_id)
+    msg.poses = [_pose(t) for t in result.tracks]
+    return msg
+
+
+def _camera_visibility(track: TrackEstimate, camera: str) -> float:
+    if camera in track.visibility:
+        return float(track.visibility[camera])
+    return float(track.visible_fraction.get(camera, 0.0))
+
+
+def tracks_cloud(result: FrameResult, cameras: Sequence[str],
+                 frame_id: str = 'room') -> PointCloud2:
+    """``~/tracks``: one PointCloud2 point per track (fields in the module docstring)."""
+    dtype = tracks_dtype(cameras)
+    points = np.zeros(len(result.tracks), dtype=dtype)
+    for i, t in enumerate(result.tracks):
+        cov = np.asarray(t.covariance, dtype=np.float64)
+        per_cam = [_camera_visibility(t, c) for c in cameras]
+        row = {'x': t.mean[X], 'y': t.mean[Y], 'z': 0.0, 'id': t.track_id,
+               'existence': t.existence, 'visibility': max(per_cam, default=0.0),
+               'vx': t.mean[VX], 'vy': t.mean[VY], 'cov_xx': cov[0, 0], 'cov_xy': cov[0, 1],
+               'cov_yy': cov[1, 1], 'height': t.height}
+        row.update({field_name(c): v for c, v in zip(cameras, per_cam)})
+        points[i] = tuple(row[n] for n in dtype.names)
+    msg = PointCloud2()
+    msg.header = make_header(result.stamp_ns, frame_id)
+    msg.height, msg.width = 1, len(points)
+    msg.fields = [
+        PointField(name=n, offset=int(dtype.fields[n][1]), count=1,
+                   datatype=PointField.UINT32 if n == 'id' else PointField.FLOAT32)
+        for n in dtype.names]
+    msg.is_bigendian = False
+    msg.point_step = dtype.itemsize
+    msg.row_step = dtype.itemsize * len(points)
+    msg.is_dense = True
+    msg.data = points.tobytes()
+    return msg
+
+
+def track_color(track_id: int) -> tuple[float, float, float]:
+    """A colour stable per id: hue stepped by the golden ratio -> RGB in [0, 1]."""
+    hue = (int(track_id) * GOLDEN) % 1.0
+    return colorsys.hsv_to_rgb(hue, 0.85, 0.95)
+
+
+def _marker(header: Header, ns: str, track_id: int, action: int) -> Marker:
+    m = Marker()
+    m.header = header
+    m.ns, m.id, m.action = ns, int(track_id), action
+    m.lifetime = Duration()  # forever: tracks are removed with explicit DELETE markers
+    return m
+
+
+def markers_message(result: FrameResult, frame_id: str = 'room') -> MarkerArray:
+    """``~/markers``: per track a cylinder of the person's height, a label with id and
+    existence and a heading arrow; DELETE markers for the tracks that ended this frame."""
+    header = make_header(result.stamp_ns, frame_id)
+    out = MarkerArray()
+    for t in result.tracks:
+        r, g, b = track_color(t.track_id)
+        height = float(t.height) * (1.0 - 0.3 * float(np.clip(t.mean[SIT], 0.0, 1.0)))
+        body = _marker(header, 'people', t.track_id, Marker.ADD)
+        body.type = Marker.CYLINDER
+        body.pose = _pose(t, 0.5 * height)
+        body.scale.x = body.scale.y = BODY_DIAMETER
+        body.scale.z = max(height, 1e-3)
+        body.color.r, body.color.g, body.color.b = r, g, b
+        body.color.a = float(0.25 + 0.5 * np.clip(t.existence, 0.0, 1.0))
+        label = _marker(header, 'labels', t.track_id, Marker.ADD)
+        label.type = Marker.TEXT_VIEW_FACING
+        label.pose = _pose(t, height + 0.25)
+        label.pose.orientation.z, label.pose.orientation.w = 0.0, 1.0
+        label.scale.z = 0.25
+        label.color.r, label.color.g, label.color.b, label.color.a = r, g, b, 1.0
+        label.text = f'{t.track_id} ({t.existence:.2f})'
+        arrow = _marker(header, 'heading', t.track_id, Marker.ADD)
+        arrow.type = Marker.ARROW
+        arrow.pose = _pose(t, 0.05)
+        arrow.scale.x, arrow.scale.y, arrow.scale.z = 0.5, 0.08, 0.08
+        arrow.color.r, arrow.color.g, arrow.color.b, arrow.color.a = r, g, b, 0.9
+        out.markers += [body, label, arrow]
+    for track_id in result.ended:
+        out.markers += [_marker(header, ns, track_id, Marker.DELETE)
+                        for ns in ('people', 'labels', 'heading')]
+    return out
+
+
+def delete_all_markers(stamp_ns: int, frame_id: str = 'room') -> MarkerArray:
+    """A MarkerArray clearing every marker (sent when the tracker is reset)."""
+    out = MarkerArray()
+    out.markers = [_marker(make_header(stamp_ns, frame_id), '', 0, Marker.DELETEALL)]
+    return out
+
+
+@dataclass
+class DiagnosticsSnapshot:
+    """What ``/diagnostics`` reports (collected by the node between two messages).
+
+    Attributes:
+        input_rate_hz: camera -> received frames per second (message time).
+        step_seconds: mean wall-clock processing time of one tracker step, seconds.
+        frame_sets: complete frame sets processed so far.
+        incomplete_sets: frame sets processed with missing views so far.
+        dropped_frames: frames dropped (bad, late, wrong size, overflow) so far.
+        tracks: tracks reported in the last result.
+        missing_cameras: cameras missing in the last frame set (WARN when not empty).
+        resets: tracker resets so far (stamps jumped or went backwards).
+    """
+
+    input_rate_hz: dict[str, float] = field(default_factory=dict)
+    step_seconds: float = 0.0
+    frame_sets: int = 0
+    incomplete_sets: int = 0
+    dropped_frames: int = 0
+    tracks: int = 0
+    missing_cameras: tuple[str, ...] = ()
+    resets: int = 0
+
+
+def diagnostics_message(stamp_ns: int, snap: DiagnosticsSnapshot, *,
+                        name: str = 'mbtrack_ros: tracker',
+                        hardware_id: str = 'smart_room') -> DiagnosticArray:
+    """``/diagnostics``: one tracker status plus one status per camera input."""
+    def kv(key: str, value) -> KeyValue:
+        return KeyValue(key=key, value=str(value))
+
+    msg = DiagnosticArray()
+    msg.header = make_header(stamp_ns, '')
+    main = DiagnosticStatus(name=name, hardware_id=hardware_id)
+    if snap.missing_cameras:
+        main.level = DiagnosticStatus.WARN
+        main.message = 'missing camera(s): ' + ', '.join(snap.missing_cameras)
+    else:
+        main.level = DiagnosticStatus.OK
+        main.message = f'tracking {snap.tracks} people'
+    main.values = [
+        kv('step time [ms]', f'{1e3 * snap.step_seconds:.1f}'),
+        kv('frame sets', snap.frame_sets), kv('incomplete frame sets', snap.incomplete_sets),
+        kv('dropped frames', snap.dropped_frames), kv('tracks', snap.tracks),
+        kv('resets', snap.resets), kv('missing cameras', ','.join(snap.missing_cameras))]
+    statuses = [main]
+    for cam, rate in snap.input_rate_hz.items():
+        st = DiagnosticStatus(name=f'{name}: input {cam}', hardware_id=cam)
+        missing = cam in snap.missing_cameras
+        st.level = DiagnosticStatus.WARN if missing or rate <= 0 else DiagnosticStatus.OK
+        st.message = 'no frame in the last set' if missing else f'{rate:.1f} Hz'
+        st.values = [kv('rate [Hz]', f'{rate:.2f}')]
+        statuses.append(st)
+    msg.status = statuses
+    return msg
+
+
+def debug_overlay(rgb: np.ndarray, *, occlusion: np.ndarray | None = None,
+                  silhouettes: Mapping[int, np.ndarray] | None = None,
+                  alpha: float = 0.45) -> np.ndarray:
+    """Paint the HJS occlusion map and the track silhouettes over a camera image.
+
+    Args:
+        rgb: (H, W, 3) uint8 camera image.
+        occlusion: (H, W) float in [0, 1], the occlusion map w* (000 Eq. 34: probability
+            that a pixel is hidden by a target in front); shown as a red tint.
+        silhouettes: track id -> (H, W) bool or float mask of its rendered silhouette
+            (000 Fig. 4), outlined and tinted in the track colour.
+        alpha: blending weight of the overlays.
+
+    Returns:
+        (H, W, 3) uint8 RGB image (a new array).
+    """
+    out = np.ascontiguousarray(rgb, dtype=np.uint8).copy()
+    h, w = out.shape[:2]
+    if occlusion is not None:
+        occ = np.clip(np.asarray(occlusion, dtype=np.float32), 0.0, 1.0)
+        if occ.shape != (h, w):
+            occ = cv2.resize(occ, (w, h), interpolation=cv2.INTER_LINEAR)
+        tint = np.zeros_like(out)
+        tint[..., 0] = 255
+        weight = (alpha * occ)[..., None]
+        out = (out * (1.0 - weight) + tint * weight).astype(np.uint8)
+    for track_id, mask in (silhouettes or {}).items():
+        m = np.asarray(mask)
+        if m.shape != (h, w):
+            m = cv2.resize(m.astype(np.float32), (w, h), interpolation=cv2.INTER_NEAREST)
+        m8 = (m > 0.5).astype(np.uint8)
+        colour = tuple(int(255 * c) for c in track_color(track_id))
+        layer = out.copy()
+        layer[m8 > 0] = colour
+        out = cv2.addWeighted(layer, 0.5 * alpha, out, 1.0 - 0.5 * alpha, 0.0)
+        contours, _ = cv2.findContours(m8, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+        cv2.drawContours(out, contours, -1, colour, 2)
+    return out

@@ -1,0 +1,140 @@
+"""Output message builders: PointCloud2 layout, PoseArray yaw, MarkerArray lifecycle."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticStatus
+from sensor_msgs.msg import PointField
+from visualization_msgs.msg import Marker
+
+from mbtrack_ros.core.state import FrameResult, TrackEstimate
+from mbtrack_ros.nodes.conversions import stamp_to_ns
+from mbtrack_ros.nodes.messages import (
+    TRACK_FIELDS, DiagnosticsSnapshot, debug_overlay, delete_all_markers, diagnostics_message,
+    markers_message, people_message, track_color, tracks_cloud, tracks_dtype)
+
+CAMS = ('cam0', 'cam-1')
+STAMP = 1_700_000_000_123_456_789
+
+
+def make_result(seed=0, n=3, ended=()):
+    rng = np.random.default_rng(seed)
+    tracks = []
+    for k in range(n):
+        mean = np.array([rng.uniform(0, 5), rng.uniform(0, 4), rng.normal(), rng.normal(),
+                         rng.uniform(-math.pi, math.pi), 0.0])
+        a = rng.normal(size=(4, 4))
+        tracks.append(TrackEstimate(
+            track_id=int(rng.integers(1, 2 ** 24 + 100)) if k == 0 else 2 ** 24 + 1 + k,
+            mean=mean, covariance=a @ a.T, height=float(rng.uniform(1.5, 1.9)),
+            visible_fraction={'cam0': 0.25, 'cam-1': 0.75},
+            visibility={'cam0': float(rng.uniform())} if k != 1 else {},
+            existence=float(rng.uniform())))
+    return FrameResult(stamp_ns=STAMP, tracks=tracks, ended=list(ended))
+
+
+def test_tracks_cloud_reads_back_into_numpy():
+    result = make_result()
+    msg = tracks_cloud(result, CAMS, frame_id='world')
+    assert msg.header.frame_id == 'world' and stamp_to_ns(msg.header.stamp) == STAMP
+    names = [f.name for f in msg.fields]
+    assert names == list(TRACK_FIELDS) + ['visibility_cam0', 'visibility_cam_1']
+    assert {f.name: f.datatype for f in msg.fields}['id'] == PointField.UINT32
+    assert all(f.datatype == PointField.FLOAT32 for f in msg.fields if f.name != 'id')
+    assert msg.width == 3 and msg.height == 1 and msg.point_step == 4 * len(names)
+    assert msg.row_step == msg.point_step * msg.width and len(msg.data) == msg.row_step
+    # offsets declared in the fields agree with the documented dtype
+    dtype = tracks_dtype(CAMS)
+    assert [f.offset for f in msg.fields] == [dtype.fields[n][1] for n in dtype.names]
+    pts = np.frombuffer(bytes(msg.data), dtype=dtype)
+    for p, t in zip(pts, result.tracks):
+        assert int(p['id']) == t.track_id  # exact beyond 2^24
+        np.testing.assert_allclose([p['x'], p['y'], p['vx'], p['vy']], t.mean[:4], rtol=1e-6)
+        np.testing.assert_allclose([p['cov_xx'], p['cov_xy'], p['cov_yy']],
+                                   [t.covariance[0, 0], t.covariance[0, 1],
+                                    t.covariance[1, 1]], rtol=1e-6)
+        assert p['z'] == 0.0
+        np.testing.assert_allclose(p['existence'], t.existence, rtol=1e-6)
+        np.testing.assert_allclose(p['height'], t.height, rtol=1e-6)
+        # visibility process when reported, else the expected visible fraction
+        v0 = t.visibility.get('cam0', 0.25)
+        np.testing.assert_allclose(p['visibility_cam0'], v0, rtol=1e-6)
+        np.testing.assert_allclose(p['visibility_cam_1'], 0.75)
+        np.testing.assert_allclose(p['visibility'], max(v0, 0.75), rtol=1e-6)
+
+
+def test_empty_cloud_is_valid():
+    msg = tracks_cloud(FrameResult(stamp_ns=5), CAMS)
+    assert msg.width == 0 and len(msg.data) == 0 and len(msg.fields) == 14
+
+
+def test_people_pose_yaw_and_position():
+    result = make_result(seed=1)
+    msg = people_message(result)
+    assert msg.header.frame_id == 'room' and stamp_to_ns(msg.header.stamp) == STAMP
+    assert len(msg.poses) == 3
+    for pose, t in zip(msg.poses, result.tracks):
+        q = pose.orientation
+        assert abs(q.x) < 1e-12 and abs(q.y) < 1e-12
+        np.testing.assert_allclose(q.z ** 2 + q.w ** 2, 1.0)
+        yaw = 2 * math.atan2(q.z, q.w)
+        np.testing.assert_allclose(math.remainder(yaw - t.mean[4], 2 * math.pi), 0,
+                                   atol=1e-9)
+        assert (pose.position.x, pose.position.y, pose.position.z) == (
+            t.mean[0], t.mean[1], 0.0)
+
+
+def test_markers_add_and_delete_ended():
+    result = make_result(seed=2, ended=[7, 9])
+    msg = markers_message(result)
+    adds = [m for m in msg.markers if m.action == Marker.ADD]
+    deletes = [m for m in msg.markers if m.action == Marker.DELETE]
+    assert {(m.ns, m.id) for m in deletes} == {
+        (ns, i) for ns in ('people', 'labels', 'heading') for i in (7, 9)}
+    cylinders = [m for m in adds if m.type == Marker.CYLINDER]
+    assert [m.id for m in cylinders] == [t.track_id for t in result.tracks]
+    for m, t in zip(cylinders, result.tracks):
+        np.testing.assert_allclose(m.scale.z, t.height)
+        np.testing.assert_allclose(m.pose.position.z, 0.5 * t.height)
+        np.testing.assert_allclose((m.color.r, m.color.g, m.color.b), track_color(t.track_id),
+                                   rtol=1e-6)
+    labels = [m for m in adds if m.type == Marker.TEXT_VIEW_FACING]
+    assert [m.text for m in labels] == [
+        f'{t.track_id} ({t.existence:.2f})' for t in result.tracks]
+    assert all(stamp_to_ns(m.header.stamp) == STAMP for m in msg.markers)
+    # colours are stable per id and differ between consecutive ids
+    assert track_color(5) == track_color(5)
+    assert np.linalg.norm(np.subtract(track_color(5), track_color(6))) > 0.2
+    clear = delete_all_markers(STAMP)
+    assert [m.action for m in clear.markers] == [Marker.DELETEALL]
+
+
+def test_diagnostics_warn_on_missing_camera():
+    snap = DiagnosticsSnapshot(input_rate_hz={'cam0': 25.0, 'cam1': 0.0}, step_seconds=0.05,
+                               frame_sets=10, incomplete_sets=2, dropped_frames=1, tracks=2,
+                               missing_cameras=('cam1',))
+    msg = diagnostics_message(STAMP, snap)
+    levels = {s.name: s.level for s in msg.status}
+    main = msg.status[0]
+    assert main.level == DiagnosticStatus.WARN and 'cam1' in main.message
+    assert levels['mbtrack_ros: tracker: input cam0'] == DiagnosticStatus.OK
+    assert levels['mbtrack_ros: tracker: input cam1'] == DiagnosticStatus.WARN
+    values = {kv.key: kv.value for kv in main.values}
+    assert values['step time [ms]'] == '50.0' and values['incomplete frame sets'] == '2'
+    ok = diagnostics_message(STAMP, DiagnosticsSnapshot(input_rate_hz={'cam0': 25.0}))
+    assert ok.status[0].level == DiagnosticStatus.OK
+
+
+def test_debug_overlay_marks_only_occluded_and_silhouette_pixels():
+    rgb = np.full((40, 60, 3), 100, np.uint8)
+    occ = np.zeros((40, 60))
+    occ[:, :10] = 1.0
+    mask = np.zeros((40, 60), bool)
+    mask[15:30, 30:45] = True
+    out = debug_overlay(rgb, occlusion=occ, silhouettes={3: mask})
+    assert out.shape == rgb.shape and out.dtype == np.uint8
+    assert out[20, 5, 0] > 150 and out[20, 5, 1] < 100  # red tint where occluded
+    np.testing.assert_array_equal(out[5, 20], rgb[5, 20])  # untouched elsewhere
+    assert np.abs(out[22, 37].astype(int) - 100).max() > 10  # tinted inside the silhouette
+    np.testing.assert_array_equal(rgb, 100)  # input not modified
