@@ -310,6 +310,8 @@ class RoomCalibration:
     def from_dict(cls, doc: Mapping[str, Any]) -> RoomCalibration:
         if not isinstance(doc, Mapping) or 'cameras' not in doc:
             raise CalibrationError('not a room calibration (no "cameras" list)')
+        if not doc['cameras']:
+            raise CalibrationError('a room needs at least one camera')
         try:
             cams = [Camera.from_dict(entry) for entry in doc['cameras']]
             f = doc['floor']

@@ -1,0 +1,425 @@
+"""rosbag2 recordings (MCAP or sqlite3) of a calibrated camera rig, read and written with rosbags.
+
+Topics of a recording (documented in the README):
+
+========================================  =====================================================
+``/<camera>/image_raw``                   ``sensor_msgs/Image`` (rgb8), or with ``compressed``
+``/<camera>/image_raw/compressed``        ``sensor_msgs/CompressedImage`` (jpeg)
+``/<camera>/camera_info``                 ``sensor_msgs/CameraInfo`` (plumb_bob)
+``/ground_truth/people``                  ``sensor_msgs/PointCloud2``, one point per person,
+                                          float32 fields ``x, y, z, z_head, sitting`` and
+                                          uint32 ``id`` (synthetic recordings only)
+========================================  =====================================================
+
+Header stamps are the capture time (integer nanoseconds); frame ids are the cameras'
+optical frames (``Camera.frame_id``) and ``room`` for the ground truth, as a ROS camera
+driver and a motion-capture bridge would write them. No rclpy is imported here.
+"""
+from __future__ import annotations
+
+import re
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import TracebackType
+
+import numpy as np
+from mcap.records import Channel, Message, Schema
+from mcap.stream_reader import StreamReader
+from rosbags.highlevel import AnyReader
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.typesys import Stores, get_typestore
+
+from mbtrack_ros.core.camera import RoomCalibration
+from mbtrack_ros.recording.csvfiles import GroundTruthRow
+from mbtrack_ros.recording.images import (
+    ImageConversionError, decode_compressed, decode_raw, encode_compressed)
+
+__all__ = [
+    'GROUND_TRUTH_TOPIC', 'BagError', 'FrameSet', 'RecordingReader', 'RecordingWriter',
+    'camera_info_topic', 'image_topic', 'typestore',
+]
+
+GROUND_TRUTH_TOPIC = '/ground_truth/people'
+IMAGE = 'sensor_msgs/msg/Image'
+COMPRESSED = 'sensor_msgs/msg/CompressedImage'
+CAMERA_INFO = 'sensor_msgs/msg/CameraInfo'
+POINT_CLOUD = 'sensor_msgs/msg/PointCloud2'
+
+typestore = get_typestore(Stores.ROS2_JAZZY)
+_T = typestore.types
+
+
+class BagError(RuntimeError):
+    """A bag that cannot be read or written (one-line reason)."""
+
+
+def image_topic(camera: str, compressed: bool = False) -> str:
+    """The image topic of a camera: ``/<camera>/image_raw[/compressed]``."""
+    return f'/{camera}/image_raw' + ('/compressed' if compressed else '')
+
+
+def camera_info_topic(camera: str) -> str:
+    return f'/{camera}/camera_info'
+
+
+def _header(stamp_ns: int, frame_id: str):
+    sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
+    return _T['std_msgs/msg/Header'](
+        stamp=_T['builtin_interfaces/msg/Time'](sec=sec, nanosec=nanosec), frame_id=frame_id)
+
+
+def _stamp_ns(header) -> int:
+    return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
+
+
+# Ground-truth point layout: (name, numpy dtype, PointField datatype)
+_GT_FIELDS = (('x', '<f4', 7), ('y', '<f4', 7), ('z', '<f4', 7), ('z_head', '<f4', 7),
+              ('sitting', '<f4', 7), ('id', '<u4', 6))
+_GT_DTYPE = np.dtype([(n, t) for n, t, _ in _GT_FIELDS])
+
+
+class RecordingWriter:
+    """Write a camera recording into a new rosbag2 directory.
+
+    Args:
+        path: the bag directory to create (must not exist).
+        calibration: the cameras; CameraInfo is written from it with every frame.
+        storage: ``'mcap'`` (default) or ``'sqlite3'``.
+        compressed: write ``CompressedImage`` (JPEG) instead of raw ``Image``.
+        jpeg_quality: JPEG quality 1-100.
+    """
+
+    def __init__(self, path: str | Path, calibration: RoomCalibration, *,
+                 storage: str = 'mcap', compressed: bool = False,
+                 jpeg_quality: int = 90) -> None:
+        plugins = {'mcap': StoragePlugin.MCAP, 'sqlite3': StoragePlugin.SQLITE3}
+        if storage not in plugins:
+            raise BagError(f'unknown storage {storage!r} (mcap or sqlite3)')
+        self.path = Path(path)
+        if self.path.exists():
+            raise BagError(f'{self.path} exists already; choose a new bag directory')
+        self.calibration = calibration
+        self.compressed = compressed
+        self.jpeg_quality = int(jpeg_quality)
+        self._writer = Writer(self.path, version=9, storage_plugin=plugins[storage])
+        self._image_conn: dict[str, object] = {}
+        self._info_conn: dict[str, object] = {}
+        self._gt_conn = None
+        self._infos = {}
+        self.frames_written = 0
+
+    def __enter__(self) -> RecordingWriter:
+        self._writer.open()
+        for name, cam in self.calibration.cameras.items():
+            self._image_conn[name] = self._writer.add_connection(
+                image_topic(name, self.compressed), COMPRESSED if self.compressed else IMAGE,
+                typestore=typestore)
+            self._info_conn[name] = self._writer.add_connection(
+                camera_info_topic(name), CAMERA_INFO, typestore=typestore)
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self._writer.close()
+
+    def _camera_info(self, name: str, stamp_ns: int):
+        cam = self.calibration.cameras[name]
+        return _T[CAMERA_INFO](
+            header=_header(stamp_ns, cam.frame_id), height=cam.height, width=cam.width,
+            distortion_model='plumb_bob', d=cam.dist.astype(np.float64),
+            k=cam.K.ravel().astype(np.float64), r=np.eye(3).ravel(),
+            p=cam.projection_matrix.ravel().astype(np.float64), binning_x=0, binning_y=0,
+            roi=_T['sensor_msgs/msg/RegionOfInterest'](
+                x_offset=0, y_offset=0, height=0, width=0, do_rectify=False))
+
+    def write_frame(self, stamp_ns: int, images: dict[str, np.ndarray]) -> None:
+        """Write one synchronised frame set: an image and a CameraInfo per camera.
+
+        ``images`` maps camera names to ``(H, W, 3) uint8`` RGB arrays of the calibrated size.
+        """
+        unknown = set(images) - set(self.calibration.cameras)
+        if unknown:
+            raise BagError(f'unknown camera(s) {sorted(unknown)}')
+        for name, rgb in images.items():
+            cam = self.calibration.cameras[name]
+            rgb = np.asarray(rgb)
+            if rgb.shape != (cam.height, cam.width, 3) or rgb.dtype != np.uint8:
+                raise BagError(f'{name}: expected ({cam.height}, {cam.width}, 3) uint8 RGB, '
+                               f'got {rgb.dtype} {rgb.shape}')
+            header = _header(stamp_ns, cam.frame_id)
+            if self.compressed:
+                fmt, data = encode_compressed(rgb, 'jpeg', quality=self.jpeg_quality)
+                msg = _T[COMPRESSED](header=header, format=fmt,
+                                     data=np.frombuffer(data, dtype=np.uint8))
+            else:
+                msg = _T[IMAGE](header=header, height=cam.height, width=cam.width,
+                                encoding='rgb8', is_bigendian=0, step=cam.width * 3,
+                                data=np.ascontiguousarray(rgb).reshape(-1))
+            self._writer.write(self._image_conn[name], int(stamp_ns),
+                               typestore.serialize_cdr(msg, msg.__msgtype__))
+            info = self._camera_info(name, stamp_ns)
+            self._writer.write(self._info_conn[name], int(stamp_ns),
+                               typestore.serialize_cdr(info, CAMERA_INFO))
+        self.frames_written += 1
+
+    def write_ground_truth(self, stamp_ns: int, rows: Sequence[GroundTruthRow]) -> None:
+        """Write the people's true positions at a frame as a PointCloud2."""
+        if self._gt_conn is None:
+            self._gt_conn = self._writer.add_connection(GROUND_TRUTH_TOPIC, POINT_CLOUD,
+                                                        typestore=typestore)
+        points = np.zeros(len(rows), dtype=_GT_DTYPE)
+        for i, r in enumerate(rows):
+            points[i] = (r.x, r.y, 0.0, r.z_head, float(r.sitting), r.person_id)
+        fields = [_T['sensor_msgs/msg/PointField'](
+            name=n, offset=_GT_DTYPE.fields[n][1], datatype=d, count=1)
+            for n, _, d in _GT_FIELDS]
+        msg = _T[POINT_CLOUD](
+            header=_header(stamp_ns, self.calibration.frame_id), height=1, width=len(rows),
+            fields=fields, is_bigendian=False, point_step=_GT_DTYPE.itemsize,
+            row_step=_GT_DTYPE.itemsize * len(rows),
+            data=np.frombuffer(points.tobytes(), dtype=np.uint8), is_dense=True)
+        self._writer.write(self._gt_conn, int(stamp_ns),
+                           typestore.serialize_cdr(msg, POINT_CLOUD))
+
+
+@dataclass
+class FrameSet:
+    """Images of all cameras taken at one instant.
+
+    Attributes:
+        index: position of the set in the recording, from 0.
+        stamp_ns: header stamp of the set (the earliest of its images), nanoseconds.
+        images: camera name -> ``(H, W, 3) uint8`` RGB.
+        missing: cameras without an image in this set.
+        errors: camera name -> one-line reason, for images that could not be decoded.
+    """
+
+    index: int
+    stamp_ns: int
+    images: dict[str, np.ndarray]
+    missing: list[str] = field(default_factory=list)
+    errors: dict[str, str] = field(default_factory=dict)
+
+
+_IMAGE_TOPIC = re.compile(r'^/?(?P<camera>.+?)/image(?:_raw|_rect|_rect_color|_color)?'
+                          r'(?P<compressed>/compressed)?$')
+
+
+class RecordingReader:
+    """Read a rosbag2 recording (MCAP or sqlite3) as synchronised frame sets.
+
+    Cameras are found from the image topics (``/<camera>/image_raw`` and the like, raw or
+    compressed; if both exist for a camera the raw one is used). Images whose header stamps
+    lie within ``slop_ns`` of each other form one set.
+
+    Args:
+        path: the bag directory (or a recording directory with a ``bag/`` inside).
+        cameras: restrict to these cameras, in this order (default: all, sorted).
+        slop_ns: largest stamp difference inside one set (default 10 ms).
+    """
+
+    def __init__(self, path: str | Path, *, cameras: Iterable[str] | None = None,
+                 slop_ns: int = 10_000_000) -> None:
+        path = Path(path)
+        if (path / 'bag' / 'metadata.yaml').exists():
+            path = path / 'bag'
+        if not (path / 'metadata.yaml').exists():
+            raise BagError(f'{path} is not a rosbag2 directory (no metadata.yaml)')
+        self.path = path
+        self.slop_ns = int(slop_ns)
+        self._wanted = list(cameras) if cameras is not None else None
+        self._reader: AnyReader | None = None
+        self._mcap_files: list[Path] = []
+        self._damaged: str | None = None
+
+    def __enter__(self) -> RecordingReader:
+        try:
+            reader = AnyReader([self.path], default_typestore=typestore)
+            reader.open()
+            self._reader = reader
+            self._all = {c.topic: c.msgtype for c in reader.connections}
+            self._counts = {c.topic: c.msgcount for c in reader.connections}
+        except Exception as err:  # rosbags raises several types for damaged bags
+            files = sorted(self.path.glob('*.mcap'))
+            if not files:
+                raise BagError(f'cannot open bag {self.path}: {err}') from err
+            # A truncated MCAP has no summary section, which rosbags needs; the mcap
+            # stream reader still reads every complete record before the damage.
+            self._damaged = f'{err}'
+            self._mcap_files = files
+            self._all, self._counts = {}, {}
+            try:
+                for topic, msgtype, _ in self._stream(None):
+                    self._all.setdefault(topic, msgtype)
+                    self._counts[topic] = self._counts.get(topic, 0) + 1
+            except BagError:
+                pass
+        self._index_topics()
+        return self
+
+    def _stream(self, topics: set[str] | None) -> Iterator[tuple[str, str, bytes]]:
+        """(topic, msgtype, cdr) of every complete message of damaged MCAP files."""
+        for path in self._mcap_files:
+            schemas: dict[int, str] = {}
+            channels: dict[int, tuple[str, str]] = {}
+            try:
+                with path.open('rb') as handle:
+                    for record in StreamReader(handle).records:
+                        if isinstance(record, Schema):
+                            schemas[record.id] = record.name
+                        elif isinstance(record, Channel):
+                            channels[record.id] = (record.topic,
+                                                   schemas.get(record.schema_id, ''))
+                        elif isinstance(record, Message):
+                            topic, msgtype = channels[record.channel_id]
+                            if topics is None or topic in topics:
+                                yield topic, msgtype, record.data
+            except Exception as err:
+                raise BagError(f'{path.name}: damaged MCAP ({err or type(err).__name__})') \
+                    from err
+
+    def _messages(self, topics: Iterable[str]) -> Iterator[tuple[str, str, bytes]]:
+        topics = set(topics)
+        if self._reader is None:
+            yield from self._stream(topics)
+            return
+        conns = [c for c in self._reader.connections if c.topic in topics]
+        for conn, _, raw in self._reader.messages(connections=conns):
+            yield conn.topic, conn.msgtype, raw
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        if self._reader is not None:
+            self._reader.close()
+            self._reader = None
+
+    def _index_topics(self) -> None:
+        found: dict[str, tuple[str, str]] = {}
+        for topic, msgtype in self._all.items():
+            match = _IMAGE_TOPIC.match(topic)
+            if not match or msgtype not in (IMAGE, COMPRESSED):
+                continue
+            cam = match['camera'].strip('/')
+            if cam in found and found[cam][1] == IMAGE:
+                continue  # prefer raw over compressed
+            found[cam] = (topic, msgtype)
+        if self._wanted is not None:
+            missing = [c for c in self._wanted if c not in found]
+            if missing:
+                raise BagError(f'{self.path}: no image topic for camera(s) '
+                               f'{", ".join(missing)}; found {", ".join(sorted(found))}')
+            found = {c: found[c] for c in self._wanted}
+        else:
+            found = dict(sorted(found.items()))
+        if not found:
+            raise BagError(f'{self.path}: no sensor_msgs/Image or CompressedImage topics')
+        self._connections = found
+        self._by_topic = {topic: cam for cam, (topic, _) in found.items()}
+        self.frame_count = max(self._counts.get(topic, 0) for topic, _ in found.values())
+
+    @property
+    def cameras(self) -> list[str]:
+        return list(self._connections)
+
+    @property
+    def topics(self) -> dict[str, str]:
+        """All topics of the bag with their message types."""
+        return dict(self._all)
+
+    @property
+    def damaged(self) -> str | None:
+        """Why the bag could only be read up to a damaged part, or None if it is intact."""
+        return self._damaged
+
+    def _decode(self, msgtype: str, raw: bytes) -> tuple[int, np.ndarray]:
+        msg = typestore.deserialize_cdr(raw, msgtype)
+        if msgtype == IMAGE:
+            image = decode_raw(msg.encoding, msg.height, msg.width, msg.step, msg.data)
+        else:
+            image = decode_compressed(msg.format, msg.data)
+        return _stamp_ns(msg.header), image
+
+    def frames(self) -> Iterator[FrameSet]:
+        """Yield frame sets in stamp order.
+
+        A set is complete when every camera has an image within ``slop_ns``; a camera with
+        no image by the time a later image of another camera arrives is listed in
+        ``missing``. Undecodable images are listed in ``errors``. A damaged bag raises
+        :class:`BagError` naming the last good frame.
+        """
+        pending: dict[str, tuple[int, np.ndarray | None, str | None]] = {}
+        index = 0
+
+        def emit() -> FrameSet:
+            nonlocal index
+            stamp = min(s for s, _, _ in pending.values())
+            fs = FrameSet(index=index, stamp_ns=stamp,
+                          images={c: im for c, (_, im, e) in pending.items() if im is not None},
+                          missing=[c for c in self.cameras if c not in pending],
+                          errors={c: e for c, (_, _, e) in pending.items() if e})
+            index += 1
+            pending.clear()
+            return fs
+
+        iterator = self._messages(self._by_topic)
+        while True:
+            try:
+                topic, msgtype, raw = next(iterator)
+            except StopIteration:
+                break
+            except Exception as err:  # damaged chunk, truncated file ...
+                if pending:
+                    yield emit()
+                raise BagError(f'{self.path}: unreadable after frame set {index - 1}: '
+                               f'{err}') from err
+            cam = self._by_topic[topic]
+            try:
+                stamp, image = self._decode(msgtype, raw)
+                error = None
+            except ImageConversionError as err:
+                stamp, image, error = None, None, str(err)
+            except Exception as err:  # undecodable CDR
+                stamp, image, error = None, None, f'cannot deserialise: {err}'
+            if stamp is None:
+                stamp = max((s for s, _, _ in pending.values()), default=0)
+            if pending:
+                first = min(s for s, _, _ in pending.values())
+                if cam in pending or abs(stamp - first) > self.slop_ns:
+                    yield emit()
+            pending[cam] = (stamp, image, error)
+            if len(pending) == len(self.cameras):
+                yield emit()
+        if pending:
+            yield emit()
+        if self._damaged:
+            raise BagError(f'{self.path}: damaged bag, read up to frame set {index - 1} '
+                           f'({self._damaged})')
+
+    def camera_infos(self) -> dict[str, object]:
+        """The first CameraInfo message of every camera that has one (rosbags objects)."""
+        infos: dict[str, object] = {}
+        topics = [t for t, m in self._all.items()
+                  if m == CAMERA_INFO and t.endswith('/camera_info')]
+        for topic, _, raw in self._messages(topics):
+            cam = topic[: -len('/camera_info')].strip('/')
+            if cam not in infos:
+                infos[cam] = typestore.deserialize_cdr(raw, CAMERA_INFO)
+            if len(infos) == len(topics):
+                break
+        return infos
+
+    def ground_truth(self) -> list[GroundTruthRow]:
+        """Ground truth stored on :data:`GROUND_TRUTH_TOPIC` (empty list if none)."""
+        rows: list[GroundTruthRow] = []
+        if GROUND_TRUTH_TOPIC not in self._all:
+            return rows
+        for frame, (_, _, raw) in enumerate(self._messages([GROUND_TRUTH_TOPIC])):
+            msg = typestore.deserialize_cdr(raw, POINT_CLOUD)
+            pts = np.frombuffer(np.asarray(msg.data, dtype=np.uint8).tobytes(),
+                                dtype=_GT_DTYPE, count=msg.width)
+            stamp = _stamp_ns(msg.header)
+            rows.extend(GroundTruthRow(stamp, frame, int(p['id']), float(p['x']),
+                                       float(p['y']), float(p['z_head']),
+                                       bool(p['sitting'] > 0.5), ()) for p in pts)
+        return rows

@@ -1,0 +1,78 @@
+"""Camera model and room calibration file."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mbtrack_ros.core.camera import CalibrationError, Camera, RoomCalibration, look_at
+
+
+def test_principal_point_and_known_pixel():
+    R, t = look_at((0.0, 0.0, 2.0), (4.0, 0.0, 2.0))  # looking along +x, horizontal
+    cam = Camera('c', 320, 240, [[200, 0, 160], [0, 200, 120], [0, 0, 1]], [0] * 5, R, t)
+    # the look-at point lands on the principal point
+    assert np.allclose(cam.project(np.array([4.0, 0.0, 2.0])), [160, 120])
+    # 1 m to the left (+y world) at 4 m depth: x = cx - f * 1 / 4; 0.5 m up: y = cy - f*0.5/4
+    assert np.allclose(cam.project(np.array([4.0, 1.0, 2.5])), [160 - 50, 120 - 25])
+    assert np.allclose(cam.center, [0, 0, 2])
+    assert cam.depth(np.array([4.0, 1.0, 2.5])) == pytest.approx(4.0)
+
+
+def test_points_behind_camera_are_nan(room):
+    cam = room.cameras['cam0']
+    behind = cam.center - 1.0 * cam.R[2]
+    assert np.all(np.isnan(cam.project(behind[None])))
+
+
+def test_floor_point_inverts_projection_with_distortion(room, rng):
+    cam = room.cameras['cam0']
+    pts = np.column_stack([rng.uniform(1, 5, 50), rng.uniform(1, 4, 50), np.zeros(50)])
+    pix = cam.project(pts)
+    ok = cam.in_image(pix)
+    assert ok.sum() > 20
+    back = cam.floor_point(pix[ok])
+    assert np.allclose(back, pts[ok], atol=1e-6)
+    # a head point at 1.7 m is recovered on the plane z = 1.7 as well
+    head = pts[ok][:5] + [0, 0, 1.7]
+    assert np.allclose(cam.floor_point(cam.project(head), height=1.7), head, atol=1e-6)
+
+
+def test_scaled_camera_scales_pixels(room):
+    cam = room.cameras['cam1']
+    big = cam.scaled(cam.width * 2, cam.height * 2)
+    p = np.array([[3.0, 2.5, 1.0], [2.0, 3.0, 0.0]])
+    assert np.allclose((cam.project(p) + 0.5) * 2 - 0.5, big.project(p), atol=1e-9)
+
+
+def test_calibration_round_trip(tmp_path, room):
+    path = tmp_path / 'room.yaml'
+    room.save(path)
+    back = RoomCalibration.load(path)
+    assert back.names == room.names and back.floor == room.floor
+    assert back.entry_zones == room.entry_zones
+    p = np.array([[3.0, 2.0, 1.2]])
+    for name in room.names:
+        assert np.allclose(back.cameras[name].project(p), room.cameras[name].project(p))
+        assert back.cameras[name].frame_id == room.cameras[name].frame_id
+
+
+@pytest.mark.parametrize('text, message', [
+    ('cameras: []', 'at least one camera'),
+    ('foo: 1', 'no "cameras"'),
+    (': : :', 'not valid YAML'),
+])
+def test_bad_calibration_files(tmp_path, text, message):
+    path = tmp_path / 'bad.yaml'
+    path.write_text(text)
+    with pytest.raises(CalibrationError, match=message):
+        RoomCalibration.load(path)
+
+
+def test_missing_calibration_file(tmp_path):
+    with pytest.raises(CalibrationError, match='cannot read'):
+        RoomCalibration.load(tmp_path / 'nope.yaml')
+
+
+def test_not_a_rotation_is_refused():
+    with pytest.raises(CalibrationError, match='rotation'):
+        Camera('c', 10, 10, np.eye(3), [0] * 5, np.diag([1.0, 1.0, -1.0]), [0, 0, 0])
