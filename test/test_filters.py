@@ -1,0 +1,233 @@
+"""Resampling, dynamics and the particle filters' mechanics (stand-in measurement model)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from mbtrack_ros.core.dynamics import DynamicsError, MotionConfig, predict
+from mbtrack_ros.core.filters import (
+    FilterConfig, FilterError, HJSFilter, JointFilter, SeparableFilter, TrackingFilter,
+    summarize_particles)
+from mbtrack_ros.core.resampling import (
+    ResamplingError, effective_sample_size, normalize_log_weights, normalized_weights,
+    systematic_resample)
+
+ZERO_NOISE = MotionConfig(velocity_noise=0.0, position_noise=0.0, orientation_noise=0.0,
+                          sit_flip_rate=0.0)
+
+
+# -- resampling --------------------------------------------------------------------------------
+def test_degenerate_weights_resample_to_copies():
+    rng = np.random.default_rng(0)
+    w = np.zeros(50)
+    w[17] = 1.0
+    idx = systematic_resample(w, 50, rng)
+    assert np.all(idx == 17)
+
+
+def test_systematic_resampling_counts_match_weights():
+    rng = np.random.default_rng(1)
+    w = rng.random(10)
+    w /= w.sum()
+    idx = systematic_resample(w, 1000, rng)
+    counts = np.bincount(idx, minlength=10)
+    # systematic resampling: every count is floor or ceil of the expected count
+    assert np.all(np.abs(counts - 1000 * w) < 1.0 + 1e-9)
+
+
+def test_effective_sample_size():
+    assert effective_sample_size(np.ones(40)) == pytest.approx(40.0)
+    assert effective_sample_size(np.array([0.0, 3.0, 0.0])) == pytest.approx(1.0)
+    assert effective_sample_size(np.array([1.0, 1.0, 2.0])) == pytest.approx(16 / 6)
+
+
+def test_log_weight_normalisation_and_nan():
+    lw, flat = normalize_log_weights(np.array([np.nan, 0.0, np.log(3.0), -np.inf]))
+    assert not flat
+    np.testing.assert_allclose(np.exp(lw), [0.0, 0.25, 0.75, 0.0], atol=1e-15)
+    w, flat = normalized_weights(np.array([1000.0, 1000.0]))  # no overflow
+    np.testing.assert_allclose(w, [0.5, 0.5])
+    lw, flat = normalize_log_weights(np.array([np.nan, -np.inf, np.nan]))
+    assert flat
+    np.testing.assert_allclose(np.exp(lw), np.full(3, 1 / 3))
+
+
+def test_resampling_bad_input():
+    rng = np.random.default_rng(0)
+    with pytest.raises(ResamplingError):
+        systematic_resample(np.zeros(4), 4, rng)
+    with pytest.raises(ResamplingError):
+        systematic_resample(np.array([1.0, -1.0, 1.0]), 3, rng)
+    with pytest.raises(ResamplingError):
+        normalize_log_weights(np.array([]))
+    with pytest.raises(ResamplingError):
+        effective_sample_size(np.array([np.nan, 1.0]))
+
+
+# -- dynamics ----------------------------------------------------------------------------------
+def test_zero_noise_is_constant_velocity():
+    rng = np.random.default_rng(2)
+    p = np.array([[1.0, 2.0, 0.5, -0.25, 0.3, 1.0],
+                  [0.0, 0.0, 0.05, 0.0, 1.0, 0.0]])
+    out = predict(p, 0.8, ZERO_NOISE, rng)
+    np.testing.assert_allclose(out[:, :2], p[:, :2] + 0.8 * p[:, 2:4])
+    np.testing.assert_allclose(out[:, 2:4], p[:, 2:4])
+    # fast: faces the walking direction; slow (0.05 m/s < 0.2): keeps its orientation
+    assert out[0, 4] == pytest.approx(np.arctan2(-0.25, 0.5))
+    assert out[1, 4] == pytest.approx(1.0)
+    np.testing.assert_array_equal(out[:, 5], p[:, 5])
+
+
+def test_noise_statistics():
+    rng = np.random.default_rng(3)
+    cfg = MotionConfig(velocity_noise=0.6, position_noise=0.1, sit_flip_rate=2.0)
+    n, dt = 40000, 0.25
+    p = np.zeros((n, 6))
+    out = predict(p, dt, cfg, rng)
+    sv = 0.6 * np.sqrt(dt)
+    assert np.std(out[:, 2]) == pytest.approx(sv, rel=0.03)
+    assert np.std(out[:, 3]) == pytest.approx(sv, rel=0.03)
+    assert abs(np.mean(out[:, 2])) < 4 * sv / np.sqrt(n)
+    # position: new velocity * dt plus position noise, independent
+    sp = np.sqrt((sv * dt) ** 2 + 0.1 ** 2 * dt)
+    assert np.std(out[:, 0]) == pytest.approx(sp, rel=0.03)
+    flip = 1 - np.exp(-2.0 * dt)
+    assert np.mean(out[:, 5]) == pytest.approx(flip, abs=4 * np.sqrt(flip * (1 - flip) / n))
+
+
+def test_floor_reflection():
+    rng = np.random.default_rng(4)
+    p = np.array([[0.5, 0.5, 1.0, -3.0, 0.0, 0.0]])
+    cfg = MotionConfig(velocity_noise=0.0, position_noise=0.0, orientation_noise=0.0,
+                       sit_flip_rate=0.0, max_speed=10.0)
+    out = predict(p, 1.0, cfg, rng, floor=(0.0, 0.0, 2.0, 2.0))
+    # x: 0.5 + 1 = 1.5 inside; y: 0.5 - 3 bounces off 0 then 2 -> 1.5, moving down again
+    np.testing.assert_allclose(out[0, :4], [1.5, 1.5, 1.0, -3.0])
+    out = predict(p, 0.5, cfg, rng, floor=(0.0, 0.0, 2.0, 2.0))
+    np.testing.assert_allclose(out[0, :4], [1.0, 1.0, 1.0, 3.0])  # one bounce off y = 0
+
+
+def test_dynamics_bad_input():
+    rng = np.random.default_rng(0)
+    with pytest.raises(DynamicsError):
+        predict(np.zeros((3, 4)), 0.1, MotionConfig(), rng)
+    with pytest.raises(DynamicsError):
+        predict(np.zeros((3, 6)), -0.1, MotionConfig(), rng)
+    with pytest.raises(DynamicsError):
+        MotionConfig(velocity_noise=-1.0)
+
+
+# -- filters with a stand-in measurement model ------------------------------------------------
+@dataclass
+class _Result:
+    loglik: list
+    visible_fraction: np.ndarray
+
+
+class GaussianMeasurement:
+    """Stand-in: each target's log-likelihood is a Gaussian around its true position."""
+
+    def __init__(self, truth: list[np.ndarray], sigma: float = 0.1) -> None:
+        self.truth = truth
+        self.sigma = sigma
+        self.prior_weights = None
+
+    def set_images(self, images):
+        pass
+
+    def _ll(self, p, k):
+        return -((p[:, :2] - self.truth[k]) ** 2).sum(axis=1) / (2 * self.sigma ** 2)
+
+    def hjs(self, particles, weights, models):
+        self.prior_weights = [w.copy() for w in weights]
+        return _Result([self._ll(p, k) for k, p in enumerate(particles)],
+                       np.full((len(particles), 1), 0.5))
+
+    def separable(self, particles, models):
+        return _Result([self._ll(p, k) for k, p in enumerate(particles)],
+                       np.full((len(particles), 1), 0.5))
+
+    def joint(self, joint_particles, models):
+        return sum(self._ll(joint_particles[:, k], k) for k in range(joint_particles.shape[1]))
+
+
+def _run(filt, truth_fn, steps, rng, dt=0.1):
+    meas = GaussianMeasurement(truth_fn(0))
+    out = []
+    for t in range(1, steps + 1):
+        meas.truth = truth_fn(t * dt)
+        out.append(filt.step(dt, meas, {}, rng))
+    return out, meas
+
+
+@pytest.mark.parametrize('cls', [HJSFilter, SeparableFilter, JointFilter])
+def test_filters_follow_moving_targets(cls):
+    rng = np.random.default_rng(5)
+    cfg = FilterConfig(particles=200, joint_particles=3000)
+    filt = cls(cfg, floor=(-5.0, -5.0, 5.0, 5.0), camera_names=['cam0'])
+    assert isinstance(filt, TrackingFilter)
+    v = [np.array([0.5, 0.0]), np.array([0.0, -0.4])]
+    start = [np.array([0.0, 0.0]), np.array([2.0, 2.0])]
+    truth = lambda t: [start[k] + v[k] * t for k in range(2)]  # noqa: E731
+    for k, tid in enumerate((3, 8)):
+        filt.add(tid, object(), np.r_[start[k], v[k], 0.0, 0.0], rng)
+    assert filt.track_ids() == [3, 8]
+    out, _ = _run(filt, truth, 20, rng)
+    last = out[-1]
+    assert set(last) == {3, 8}
+    for k, tid in enumerate((3, 8)):
+        u = last[tid]
+        assert np.linalg.norm(u.mean[:2] - truth(2.0)[k]) < 0.1
+        assert np.linalg.norm(u.mean[2:4] - v[k]) < 0.3
+        assert u.covariance.shape == (4, 4)
+        assert np.all(np.linalg.eigvalsh(u.covariance) > -1e-12)
+        assert u.weights.sum() == pytest.approx(1.0)
+        assert u.particles.shape[1] == 6
+    filt.remove(3)
+    assert filt.track_ids() == [8]
+    with pytest.raises(FilterError):
+        filt.remove(3)
+    assert set(filt.step(0.1, GaussianMeasurement([truth(2.1)[1]]), {}, rng)) == {8}
+
+
+def test_hjs_uses_mrf_beliefs_as_prior_and_ablation_does_not():
+    rng = np.random.default_rng(6)
+    # two targets 0.2 m apart: the exclusion MRF must down-weight overlapping particles
+    for use_mrf in (True, False):
+        filt = HJSFilter(FilterConfig(particles=100, use_mrf=use_mrf))
+        filt.add(1, object(), np.array([0.0, 0.0, 0, 0, 0, 0]), rng)
+        filt.add(2, object(), np.array([0.2, 0.0, 0, 0, 0, 0]), rng)
+        meas = GaussianMeasurement([np.zeros(2), np.array([0.2, 0.0])])
+        filt.step(0.1, meas, {}, rng)
+        spread = max(np.ptp(w) for w in meas.prior_weights)
+        if use_mrf:
+            assert spread > 1e-3 and filt.stats['bp_iterations'] >= 1
+        else:
+            assert spread < 1e-15 and 'bp_iterations' not in filt.stats
+
+
+def test_summarize_particles_matches_numpy():
+    rng = np.random.default_rng(9)
+    p = rng.normal(size=(300, 6))
+    w = rng.random(300)
+    mean, cov = summarize_particles(p, w)
+    wn = w / w.sum()
+    np.testing.assert_allclose(mean[:4], wn @ p[:, :4])
+    np.testing.assert_allclose(cov, np.cov(p[:, :4].T, aweights=w, bias=True))
+    angles = np.array([[0, 0, 0, 0, np.pi - 0.1, 0], [0, 0, 0, 0, -np.pi + 0.1, 0]])
+    m, _ = summarize_particles(angles, np.ones(2))
+    assert abs(abs(m[4]) - np.pi) < 1e-9  # circular mean across the +-pi seam
+
+
+def test_duplicate_and_bad_states():
+    rng = np.random.default_rng(0)
+    filt = HJSFilter()
+    filt.add(1, object(), np.zeros(6), rng)
+    with pytest.raises(FilterError):
+        filt.add(1, object(), np.zeros(6), rng)
+    with pytest.raises(FilterError):
+        filt.add(2, object(), np.array([0.0, np.nan, 0, 0, 0, 0]), rng)
+    with pytest.raises(FilterError):
+        FilterConfig(particles=0)
