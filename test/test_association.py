@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import itertools
+from dataclasses import dataclass
 
 import numpy as np
 import pytest
@@ -391,3 +392,76 @@ def test_best_orders_equals_brute_force_over_all_permutations(room) -> None:
         assert loglik[i] == pytest.approx(brute.max())
         assert painter(js[i][None], orders[i][None])[0] == pytest.approx(brute.max())
     assert n_eval < len(js) * 36  # distinct orders only, camera by camera
+
+
+# -- filters behind the tracker interface (stand-in measurement model) ----------------------
+@dataclass
+class _Person:
+    index: int
+    height: float = 1.7
+    width: float = 0.5
+
+
+@dataclass
+class _Result:
+    loglik: list
+    visible_fraction: np.ndarray
+
+
+class _StandIn:
+    """Log-likelihood = Gaussian bump of width 0.15 m around each person's true position
+    (in every camera); joint = sum of the components; hjs reports visible fraction 0.5."""
+
+    def __init__(self, n_cameras: int) -> None:
+        self.truth = np.zeros((0, 2))
+        self.n_cameras = n_cameras
+        self.joint_orders_seen = False
+
+    def set_images(self, images) -> None:
+        pass
+
+    def _ll(self, states, model):
+        d2 = ((states[..., :2] - self.truth[model.index]) ** 2).sum(axis=-1)
+        return -0.5 * d2 / 0.15 ** 2
+
+    def separable(self, particles, models):
+        return _Result([self._ll(p, m) for p, m in zip(particles, models)],
+                       np.ones((len(models), self.n_cameras)))
+
+    def hjs(self, particles, weights, models):
+        return _Result([self._ll(p, m) for p, m in zip(particles, models)],
+                       np.full((len(models), self.n_cameras), 0.5))
+
+    def joint(self, joint_particles, models, *, orders=None):
+        assert orders is not None and orders.shape == joint_particles.shape[:1] + (
+            self.n_cameras, len(models))
+        self.joint_orders_seen = True
+        return sum(self._ll(joint_particles[:, k], m) for k, m in enumerate(models))
+
+
+@pytest.mark.parametrize('algorithm', ['pdaf', 'jpdaf', 'jlf'])
+def test_association_filters_track_through_the_tracker(room, algorithm) -> None:
+    from mbtrack_ros.core.tracker import Tracker, TrackerConfig
+    standin = _StandIn(len(room.cameras))
+    tracker = Tracker(room, TrackerConfig(algorithm=algorithm, particles=40, seed=3),
+                      measurement=standin)
+    assert tracker.filter.name == algorithm
+    start = np.array([[1.0, 1.0], [4.5, 3.5]])
+    vel = np.array([[0.8, 0.4], [-0.6, -0.2]])
+    ids = []
+    for k in range(2):
+        state = np.zeros(STATE_DIM)
+        state[:2] = start[k] + [0.1, -0.1]  # initialised 14 cm off, no velocity
+        ids.append(tracker.add_track(_Person(k), state, 0))
+    for frame in range(1, 31):
+        standin.truth = start + vel * frame * 0.1
+        result = tracker.step(int(frame * 1e8), {})
+    assert [t.track_id for t in result.tracks] == ids
+    for k, est in enumerate(result.tracks):
+        assert np.linalg.norm(est.mean[:2] - standin.truth[k]) < 0.1
+        assert np.linalg.norm(est.mean[2:4] - vel[k]) < 0.3
+        assert est.covariance.shape == (4, 4) and est.particles is None
+        assert set(est.visible_fraction.values()) == {0.5}
+    assert standin.joint_orders_seen == (algorithm == 'jlf')
+    tracker.remove_track(ids[0])
+    assert tracker.track_ids == ids[1:]

@@ -120,7 +120,11 @@ def event_log_weights(events: np.ndarray, log_assoc: np.ndarray,
 
 def marginal_associations(events: np.ndarray, probabilities: np.ndarray,
                           n_meas: int) -> tuple[np.ndarray, np.ndarray]:
-    """Marginal beta_tj = sum of P(Theta) over events with a_t = j, and beta_t0 -> ((K, M), (K,))."""
+    """Marginals beta_tj = sum of P(Theta) over events with a_t = j, and beta_t0.
+
+    Returns:
+        (beta (K, M), beta0 (K,)).
+    """
     events = np.asarray(events)
     n_targets = events.shape[1]
     beta = np.zeros((n_targets, n_meas + 1))
