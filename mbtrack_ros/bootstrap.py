@@ -1,0 +1,110 @@
+"""Set up a local virtual environment and run the demo or the tests (standard library only).
+
+Run from a checkout on a machine with nothing but Python >= 3.11::
+
+    python3 -m mbtrack_ros.bootstrap demo      # the tracking demo
+    python3 -m mbtrack_ros.bootstrap test      # the test suite (extra args go to pytest)
+
+It creates (or reuses) ``.venv`` beside ``setup.py``, installs the package with everything it
+needs from the package index (ROS 2 Jazzy wheels included), and reinstalls only when
+``setup.py`` changed. Debian and Ubuntu ship Python without ``ensurepip`` unless
+``python3-venv`` is installed; then pip itself is fetched from the package index.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import urllib.request
+import venv
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+VENV = Path(os.environ.get('MBTRACK_VENV', ROOT / '.venv'))
+STAMP = VENV / '.mbtrack-installed'
+
+
+def _say(message: str) -> None:
+    print(f'[bootstrap] {message}', file=sys.stderr, flush=True)
+
+
+def _python() -> Path:
+    return VENV / ('Scripts/python.exe' if os.name == 'nt' else 'bin/python')
+
+
+def _fetch_pip(target: Path) -> Path:
+    """Download the newest pip wheel from the package index (for Pythons without ensurepip)."""
+    index = os.environ.get('MBTRACK_PYPI_JSON', 'https://pypi.org/pypi/pip/json')
+    with urllib.request.urlopen(index, timeout=60) as response:
+        info = json.load(response)
+    wheel = next(u for u in info['urls'] if u['filename'].endswith('.whl'))
+    path = target / wheel['filename']
+    with urllib.request.urlopen(wheel['url'], timeout=120) as response:
+        path.write_bytes(response.read())
+    return path
+
+
+def ensure_venv() -> Path:
+    """Create the virtual environment with a working pip; returns its python."""
+    python = _python()
+    if python.exists() and subprocess.run([python, '-m', 'pip', '--version'],
+                                          capture_output=True).returncode == 0:
+        return python
+    _say(f'creating virtual environment {VENV}')
+    try:
+        venv.create(VENV, with_pip=True, clear=True)
+    except subprocess.CalledProcessError:
+        venv.create(VENV, with_pip=False, clear=True)  # no ensurepip on this Python
+    if subprocess.run([python, '-m', 'pip', '--version'], capture_output=True).returncode:
+        _say('this Python has no ensurepip: fetching pip from the package index')
+        with tempfile.TemporaryDirectory() as tmp:
+            wheel = _fetch_pip(Path(tmp))
+            subprocess.run([python, str(wheel / 'pip'), 'install', '--quiet', str(wheel)],
+                           check=True)
+    return python
+
+
+def ensure_installed(python: Path) -> None:
+    """Install the package and its dependencies if setup.py changed since the last time."""
+    digest = hashlib.sha256((ROOT / 'setup.py').read_bytes()).hexdigest()
+    if STAMP.exists() and STAMP.read_text().strip() == digest:
+        return
+    _say('installing mbtrack_ros and its dependencies (ROS 2 Jazzy wheels, OpenCV, numba, '
+         '...); this takes a minute or two the first time')
+    subprocess.run([python, '-m', 'pip', 'install', '--quiet', '--upgrade', 'pip'],
+                   check=True)
+    subprocess.run([python, '-m', 'pip', 'install', '--quiet', '-e', f'{ROOT}[test]'],
+                   check=True)
+    STAMP.write_text(digest)
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0] not in ('demo', 'test', 'shell'):
+        print(__doc__, file=sys.stderr)
+        return 2
+    if sys.version_info < (3, 11):
+        _say(f'Python >= 3.11 is needed, this is {sys.version.split()[0]}')
+        return 2
+    command, rest = argv[0], argv[1:]
+    try:
+        python = ensure_venv()
+        ensure_installed(python)
+    except (OSError, subprocess.CalledProcessError, StopIteration) as err:
+        _say(f'setting up the environment failed: {err}')
+        return 1
+    if command == 'demo':
+        cmd = [str(python), '-m', 'mbtrack_ros.cli', 'demo', *rest]
+    elif command == 'test':
+        cmd = [str(python), '-m', 'pytest', *(rest or ['-q'])]
+    else:
+        cmd = [str(python), *rest]
+    _say(' '.join(cmd[1:]))
+    return subprocess.run(cmd, cwd=ROOT).returncode
+
+
+if __name__ == '__main__':
+    sys.exit(main())
