@@ -4,6 +4,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 from diagnostic_msgs.msg import DiagnosticStatus
 from sensor_msgs.msg import PointField
 from visualization_msgs.msg import Marker
@@ -138,3 +139,37 @@ def test_debug_overlay_marks_only_occluded_and_silhouette_pixels():
     np.testing.assert_array_equal(out[5, 20], rgb[5, 20])  # untouched elsewhere
     assert np.abs(out[22, 37].astype(int) - 100).max() > 10  # tinted inside the silhouette
     np.testing.assert_array_equal(rgb, 100)  # input not modified
+
+
+def test_output_bag_round_trip(tmp_path):
+    from rosbags.highlevel import AnyReader
+
+    from mbtrack_ros.core.camera import Camera, RoomCalibration, look_at
+    from mbtrack_ros.nodes.output_bag import OutputBagError, OutputBagWriter
+
+    R, t = look_at((0.0, 0.0, 2.5), (3.0, 3.0, 0.0))
+    cam = Camera('cam0', 64, 48, [[50, 0, 32], [0, 50, 24], [0, 0, 1]], [0] * 5, R, t)
+    calibration = RoomCalibration(cameras={'cam0': cam}, floor=(0, 0, 5, 5))
+    results = [make_result(seed=k, n=k + 1, ended=[99] if k == 2 else []) for k in range(3)]
+    for k, r in enumerate(results):
+        r.stamp_ns = STAMP + k * 40_000_000
+    out = tmp_path / 'tracks.mcap'
+    with OutputBagWriter(out, calibration, ['cam0']) as writer:
+        for r in results:
+            writer.write(r)
+    with pytest.raises(OutputBagError, match='already exists'):
+        OutputBagWriter(out, calibration)
+    seen = {}
+    with AnyReader([out]) as reader:
+        for conn, stamp, raw in reader.messages():
+            msg = reader.deserialize(raw, conn.msgtype)
+            seen.setdefault(conn.topic, []).append((stamp, msg))
+    assert set(seen) == {'/tracker_node/people', '/tracker_node/tracks',
+                         '/tracker_node/markers'}
+    for (stamp, cloud), r in zip(seen['/tracker_node/tracks'], results):
+        assert stamp == r.stamp_ns
+        pts = np.frombuffer(bytes(cloud.data), dtype=tracks_dtype(['cam0']))
+        assert [int(i) for i in pts['id']] == [t.track_id for t in r.tracks]
+        np.testing.assert_allclose(pts['x'], [t.mean[0] for t in r.tracks], rtol=1e-6)
+    last_markers = seen['/tracker_node/markers'][-1][1].markers
+    assert sum(m.action == Marker.DELETE and m.id == 99 for m in last_markers) == 3

@@ -1,0 +1,135 @@
+"""Write everything the tracker node publishes to a rosbag2 MCAP bag, for offline replay.
+
+The messages are built by :mod:`mbtrack_ros.nodes.messages` (the same builders as the live
+node), serialised with ``rclpy.serialization.serialize_message`` (CDR) and written raw with
+``rosbags.rosbag2.Writer``. Topics (node name ``tracker_node``):
+
+=====================================  ==============================================
+``/tracker_node/people``               geometry_msgs/PoseArray
+``/tracker_node/tracks``               sensor_msgs/PointCloud2 (layout in messages.py)
+``/tracker_node/markers``              visualization_msgs/MarkerArray
+``/tracker_node/debug/<cam>/occlusion``  sensor_msgs/Image rgb8 (only when given)
+``/diagnostics``                       diagnostic_msgs/DiagnosticArray (when given)
+=====================================  ==============================================
+
+Log time of every message = the frame set's stamp (message time), so the bag replays in
+sync with the input recording.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from types import TracebackType
+
+from rclpy.serialization import serialize_message
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.rosbag2.errors import WriterError
+from rosbags.typesys import Stores, get_typestore
+
+from mbtrack_ros.core.camera import RoomCalibration
+from mbtrack_ros.core.state import FrameResult
+from mbtrack_ros.nodes import messages
+
+__all__ = ['OutputBagError', 'OutputBagWriter', 'output_topics']
+
+_TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
+_TYPES = {
+    'people': 'geometry_msgs/msg/PoseArray',
+    'tracks': 'sensor_msgs/msg/PointCloud2',
+    'markers': 'visualization_msgs/msg/MarkerArray',
+    'diagnostics': 'diagnostic_msgs/msg/DiagnosticArray',
+    'debug': 'sensor_msgs/msg/Image',
+}
+
+
+class OutputBagError(RuntimeError):
+    """The output bag cannot be created or written (one-line reason)."""
+
+
+def output_topics(node_name: str = 'tracker_node') -> dict[str, str]:
+    """Output kind -> topic name of a node called ``node_name`` (debug: a prefix)."""
+    base = f'/{node_name}'
+    return {'people': f'{base}/people', 'tracks': f'{base}/tracks',
+            'markers': f'{base}/markers', 'diagnostics': '/diagnostics',
+            'debug': f'{base}/debug'}
+
+
+class OutputBagWriter:
+    """Writes tracker outputs frame by frame into ``path`` (a new rosbag2 directory, MCAP).
+
+    Args:
+        path: bag directory to create (must not exist).
+        calibration: the room (its frame id is the default output frame).
+        camera_names: cameras of the ``visibility_<camera>`` fields of ``~/tracks``.
+        frame_id: output frame id (default: the calibration's).
+        node_name: node name used in the topic names.
+    """
+
+    def __init__(self, path: str | Path, calibration: RoomCalibration,
+                 camera_names: list[str] | tuple[str, ...] | None = None, *,
+                 frame_id: str | None = None, node_name: str = 'tracker_node') -> None:
+        self.path = Path(path)
+        self.camera_names = list(camera_names or calibration.names)
+        self.frame_id = frame_id or calibration.frame_id
+        self.topics = output_topics(node_name)
+        if self.path.exists():
+            raise OutputBagError(f'output bag {self.path} already exists')
+        if not self.path.parent.is_dir():
+            raise OutputBagError(f'directory {self.path.parent} does not exist')
+        try:
+            self._writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
+            self._writer.open()
+            self._conn = {kind: self._writer.add_connection(
+                self.topics[kind], _TYPES[kind], typestore=_TYPESTORE)
+                for kind in ('people', 'tracks', 'markers', 'diagnostics')}
+        except (WriterError, OSError) as err:
+            raise OutputBagError(f'cannot create output bag {self.path}: {err}') from err
+        self._debug_conn: dict[str, object] = {}
+        self.frames_written = 0
+        self._closed = False
+
+    def _put(self, conn, stamp_ns: int, msg) -> None:
+        try:
+            self._writer.write(conn, int(stamp_ns), serialize_message(msg))
+        except (WriterError, OSError) as err:
+            raise OutputBagError(f'cannot write to {self.path}: {err}') from err
+
+    def write(self, result: FrameResult, *, people=None, cloud=None, markers=None,
+              diagnostics=None, debug: dict | None = None) -> None:
+        """Write one frame's outputs; messages not given are built from ``result``."""
+        if self._closed:
+            raise OutputBagError(f'output bag {self.path} is closed')
+        stamp = result.stamp_ns
+        self._put(self._conn['people'], stamp,
+                  people if people is not None
+                  else messages.people_message(result, self.frame_id))
+        self._put(self._conn['tracks'], stamp,
+                  cloud if cloud is not None
+                  else messages.tracks_cloud(result, self.camera_names, self.frame_id))
+        self._put(self._conn['markers'], stamp,
+                  markers if markers is not None
+                  else messages.markers_message(result, self.frame_id))
+        if diagnostics is not None:
+            self._put(self._conn['diagnostics'], stamp, diagnostics)
+        for cam, image in (debug or {}).items():
+            if cam not in self._debug_conn:
+                self._debug_conn[cam] = self._writer.add_connection(
+                    f'{self.topics["debug"]}/{cam}/occlusion', _TYPES['debug'],
+                    typestore=_TYPESTORE)
+            self._put(self._debug_conn[cam], stamp, image)
+        self.frames_written += 1
+
+    def write_markers(self, stamp_ns: int, markers) -> None:
+        """Write an extra MarkerArray (e.g. DELETEALL after a reset)."""
+        self._put(self._conn['markers'], stamp_ns, markers)
+
+    def close(self) -> None:
+        if not self._closed:
+            self._closed = True
+            self._writer.close()
+
+    def __enter__(self) -> OutputBagWriter:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
