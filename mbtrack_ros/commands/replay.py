@@ -1,0 +1,345 @@
+"""``mbtrack replay``: run the tracker offline over a recording, write tracks (and particles).
+
+BAG is a rosbag2 directory (MCAP or sqlite3) or a recording directory made by
+``mbtrack synth`` (then ``--config`` defaults to its ``calibration.yaml``). Frames are read
+with :class:`~mbtrack_ros.recording.bag.RecordingReader` and fed to the
+:class:`~mbtrack_ros.core.tracker.Tracker` as fast as possible. Outputs in ``--out``:
+
+* ``tracks.csv`` (``recording.csvfiles`` format), written row by row while tracking;
+* ``particles.npz`` with ``--save-particles`` (format of ``evaluation.posterior``).
+
+Tracks are initialised from ground truth (``--init-from``, :mod:`mbtrack_ros.core.initiation`):
+each person's track starts at its first ground-truth frame and ends after its last one.
+A damaged bag stops the run with a message naming the last good frame; what was tracked up
+to there is kept on disk and the exit code is 1.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+
+from mbtrack_ros.core.camera import CalibrationError, RoomCalibration
+from mbtrack_ros.core.filters import FilterError
+from mbtrack_ros.core.initiation import InitiationError, initial_tracks, plan_key_views
+from mbtrack_ros.core.tracker import Tracker, TrackerConfig, TrackerError
+from mbtrack_ros.recording.bag import BagError, RecordingReader
+from mbtrack_ros.recording.csvfiles import (
+    CsvFormatError, GroundTruthRow, TrackRow, read_ground_truth, write_tracks)
+
+__all__ = ['add_parser', 'run']
+
+_PROG = 'mbtrack replay'
+
+
+class _UserError(Exception):
+    """A problem with the command's input, reported as one line with exit code 2."""
+
+
+def _parser_error(message: str) -> None:
+    print(f'{_PROG}: error: {message}', file=sys.stderr)
+    raise SystemExit(2)
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """Register ``replay``."""
+    parser = subparsers.add_parser(
+        'replay', help='run the tracker offline over a recorded bag',
+        description='Track people through a recorded rosbag2 (or an mbtrack synth '
+                    'recording directory) as fast as possible; writes OUTDIR/tracks.csv and '
+                    'optionally the particle sets, and scores the tracks with CLEAR MOT.')
+    parser.add_argument('bag', type=Path, metavar='BAG',
+                        help='rosbag2 directory, or a recording directory with bag/ inside')
+    parser.add_argument('--config', type=Path, default=None, metavar='ROOM.yaml',
+                        help='room calibration (default: BAG/calibration.yaml)')
+    parser.add_argument('--out', type=Path, required=True, metavar='OUTDIR',
+                        help='output directory (created)')
+    parser.add_argument('--algorithm', default='hjs',
+                        help='hjs (default), separable, joint, or a registered baseline')
+    parser.add_argument('--particles', type=int, default=100, metavar='N',
+                        help='particles per person (default 100)')
+    parser.add_argument('--joint-particles', type=int, default=10_000, metavar='N',
+                        help='joint particles of --algorithm joint (default 10000)')
+    parser.add_argument('--no-mrf', action='store_true',
+                        help='disable the spatial-exclusion MRF prior (ablation)')
+    parser.add_argument('--sigma', type=float, default=0.12, help='likelihood width sigma')
+    parser.add_argument('--d-occ', type=float, default=0.15, help='occlusion penalty d_occ')
+    parser.add_argument('--init-from', type=Path, default=None, metavar='GROUND_TRUTH.csv',
+                        help='start tracks from this ground truth (models from key views)')
+    parser.add_argument('--eval', type=Path, default=None, metavar='GROUND_TRUTH.csv',
+                        help='score the tracks against this ground truth (CLEAR MOT)')
+    parser.add_argument('--seed', type=int, default=0, help='random seed (default 0)')
+    parser.add_argument('--save-particles', action='store_true',
+                        help='write OUTDIR/particles.npz (posterior particle sets)')
+    parser.add_argument('--max-frames', type=int, default=None, metavar='N',
+                        help='stop after N frames')
+    parser.error = _parser_error  # one-line errors for bad arguments, exit code 2
+    return parser
+
+
+def _error(msg: str, code: int = 2) -> int:
+    print(f'{_PROG}: error: {msg}', file=sys.stderr)
+    return code
+
+
+def _resolve_inputs(args: argparse.Namespace) -> tuple[Path, RoomCalibration]:
+    bag = Path(args.bag)
+    if not bag.exists():
+        raise _UserError(f'{bag} does not exist')
+    config = args.config
+    if config is None:
+        if (bag / 'calibration.yaml').exists():
+            config = bag / 'calibration.yaml'
+        else:
+            raise _UserError(f'{bag} is not a recording directory with calibration.yaml; '
+                             'give the room calibration with --config ROOM.yaml')
+    try:
+        calibration = RoomCalibration.load(config)
+    except CalibrationError as err:
+        raise _UserError(str(err)) from err
+    return bag, calibration
+
+
+def _config(args: argparse.Namespace) -> TrackerConfig:
+    if args.max_frames is not None and args.max_frames < 1:
+        raise _UserError(f'--max-frames must be >= 1, got {args.max_frames}')
+    try:
+        return TrackerConfig(algorithm=args.algorithm, particles=args.particles,
+                             joint_particles=args.joint_particles, sigma=args.sigma,
+                             d_occ=args.d_occ, use_mrf=not args.no_mrf, seed=args.seed)
+    except TrackerError as err:
+        raise _UserError(str(err)) from err
+
+
+class _FrameIndex:
+    """Maps frame-set stamps to ground-truth frame numbers (nearest stamp, half a period)."""
+
+    def __init__(self, truth: list[GroundTruthRow]) -> None:
+        pairs = sorted({(r.stamp_ns, r.frame) for r in truth})
+        self.stamps = np.array([p[0] for p in pairs], dtype=np.int64)
+        self.frames = np.array([p[1] for p in pairs], dtype=np.int64)
+        step = np.median(np.diff(self.stamps)) if self.stamps.size > 1 else 1e9
+        self.tolerance = max(1, int(step // 2))
+
+    def frame(self, stamp_ns: int) -> int | None:
+        if self.stamps.size == 0:
+            return None
+        i = int(np.searchsorted(self.stamps, stamp_ns))
+        best = None
+        for j in (i - 1, i):
+            if 0 <= j < self.stamps.size:
+                d = abs(int(self.stamps[j]) - stamp_ns)
+                if d <= self.tolerance and (best is None or d < best[0]):
+                    best = (d, int(self.frames[j]))
+        return None if best is None else best[1]
+
+
+def _match_calibration(calibration: RoomCalibration, reader: RecordingReader,
+                       first_images: dict[str, np.ndarray]) -> RoomCalibration:
+    """Restrict to the bag's cameras and scale cameras whose images have another size."""
+    names = [n for n in calibration.names if n in reader.cameras]
+    if not names:
+        raise _UserError(f'no camera of the calibration ({", ".join(calibration.names)}) is '
+                         f'in the bag ({", ".join(reader.cameras) or "no image topics"})')
+    extra = [c for c in reader.cameras if c not in calibration.cameras]
+    if extra:
+        print(f'{_PROG}: note: ignoring camera(s) without calibration: {", ".join(extra)}',
+              file=sys.stderr)
+    calibration = calibration.subset(names)
+    cams = dict(calibration.cameras)
+    for name, image in first_images.items():
+        cam = cams.get(name)
+        if cam is not None and image.shape[:2] != (cam.height, cam.width):
+            print(f'{_PROG}: note: {name} images are {image.shape[1]}x{image.shape[0]}, '
+                  f'calibration says {cam.width}x{cam.height}; scaling the intrinsics',
+                  file=sys.stderr)
+            cams[name] = cam.scaled(image.shape[1], image.shape[0])
+    return RoomCalibration(cameras=cams, floor=calibration.floor,
+                           frame_id=calibration.frame_id,
+                           entry_zones=calibration.entry_zones)
+
+
+def _collect_key_images(reader: RecordingReader, index: _FrameIndex,
+                        needed: set[int]) -> dict[int, dict[str, np.ndarray]]:
+    """Images of the key-view frames (frame number -> camera -> image)."""
+    images: dict[int, dict[str, np.ndarray]] = {}
+    if not needed:
+        return images
+    try:
+        for fs in reader.frames():
+            frame = index.frame(fs.stamp_ns)
+            if frame in needed:
+                images[frame] = dict(fs.images)
+                if len(images) == len(needed):
+                    break
+    except BagError:
+        pass  # the tracking pass reports the damage
+    return images
+
+
+def _track_rows(tracker: Tracker, reader: RecordingReader, index: _FrameIndex, starts: list,
+                args: argparse.Namespace, recorder, status: dict) -> Iterator[TrackRow]:
+    """Tracking pass: yields the rows of tracks.csv frame by frame."""
+    from tqdm import tqdm
+
+    total = reader.frame_count
+    if args.max_frames is not None:
+        total = min(total, args.max_frames) if total else args.max_frames
+    pending = list(starts)  # InitialTrack, ordered by first stamp
+    live: dict[int, object] = {}  # track id -> InitialTrack
+    bar = tqdm(total=total or None, unit='frame', desc='replay', file=sys.stderr,
+               disable=not sys.stderr.isatty())
+    t_start = time.perf_counter()
+    try:
+        for fs in reader.frames():
+            if args.max_frames is not None and status['frames'] >= args.max_frames:
+                break
+            frame = index.frame(fs.stamp_ns)
+            if tracker.last_stamp_ns is not None and fs.stamp_ns < tracker.last_stamp_ns:
+                status['skipped'] += 1  # stamps going backwards: skip the frame set
+                continue
+            for tid, init in list(live.items()):
+                if frame is not None and frame > init.last_frame:
+                    tracker.remove_track(tid)
+                    del live[tid]
+            while pending and pending[0].stamp_ns <= fs.stamp_ns:
+                init = pending.pop(0)
+                if frame is not None and frame > init.last_frame:
+                    continue  # the person left before the replay got there
+                tid = tracker.add_track(init.model, init.state, init.stamp_ns)
+                live[tid] = init
+                status['tracks'] += 1
+            result = tracker.step(fs.stamp_ns, fs.images)
+            status['frames'] += 1
+            status['tracker_s'] += result.timings.get('total', 0.0)
+            status['last_frame'] = fs.index
+            if recorder is not None:
+                recorder.add_frame(result)
+            for t in result.tracks:
+                vis = max(t.visible_fraction.values()) if t.visible_fraction else float('nan')
+                yield TrackRow(stamp_ns=fs.stamp_ns, frame=fs.index, track_id=t.track_id,
+                               x=float(t.mean[0]), y=float(t.mean[1]), visibility=vis,
+                               existence=t.existence)
+            bar.update(1)
+            elapsed = time.perf_counter() - t_start
+            bar.set_postfix(fps=f'{status["frames"] / max(elapsed, 1e-9):.1f}')
+    except BagError as err:
+        status['bag_error'] = str(err)
+    finally:
+        bar.close()
+        status['wall_s'] = time.perf_counter() - t_start
+
+
+def run(args: argparse.Namespace) -> int:
+    """Replay a recording through the tracker; 0 on success, 2 on bad input, 1 on a bad bag."""
+    try:
+        bag, calibration = _resolve_inputs(args)
+        config = _config(args)
+        if args.init_from is None:
+            raise _UserError('automatic detection is not available yet; start the tracks '
+                             'from ground truth with --init-from GROUND_TRUTH.csv')
+        try:
+            truth = read_ground_truth(args.init_from)
+            eval_truth = read_ground_truth(args.eval) if args.eval is not None else None
+        except CsvFormatError as err:
+            raise _UserError(str(err)) from err
+        if not truth:
+            raise _UserError(f'{args.init_from}: ground truth is empty')
+        out = Path(args.out)
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise _UserError(f'cannot create {out}: {err.strerror or err}') from err
+        index = _FrameIndex(truth)
+        if not ((bag / 'metadata.yaml').exists() or (bag / 'bag' / 'metadata.yaml').exists()):
+            raise _UserError(f'{bag} is not a rosbag2 directory nor a recording directory '
+                             '(no metadata.yaml)')
+        try:
+            with RecordingReader(bag) as reader:
+                first: dict[str, np.ndarray] = {}
+                try:
+                    for fs in reader.frames():
+                        first = dict(fs.images)
+                        break
+                except BagError:
+                    pass
+                calibration = _match_calibration(calibration, reader, first)
+            plan = plan_key_views(calibration, truth)
+            needed = {v.frame for views in plan.values() for v in views}
+            with RecordingReader(bag) as reader:
+                key_images = _collect_key_images(reader, index, needed)
+            starts = initial_tracks(calibration, truth, key_images, plan, skip_missing=True)
+            skipped = sorted(set(plan) - {s.person_id for s in starts})
+            if skipped:
+                print(f'{_PROG}: note: no unoccluded key view of person(s) '
+                      f'{", ".join(map(str, skipped))}; not tracked', file=sys.stderr)
+            if not starts:
+                raise _UserError('no person could be initialised from the ground truth')
+            try:
+                tracker = Tracker(calibration, config, rng=np.random.default_rng(args.seed))
+            except TrackerError as err:
+                raise _UserError(str(err)) from err
+            with RecordingReader(bag) as reader:
+                recorder = None
+                if args.save_particles:
+                    from mbtrack_ros.evaluation.posterior import ParticleRecorder
+                    recorder = ParticleRecorder()
+                status = {'frames': 0, 'tracks': 0, 'skipped': 0, 'tracker_s': 0.0,
+                          'wall_s': 0.0, 'last_frame': -1, 'bag_error': None}
+                tracks_path = out / 'tracks.csv'
+                rows: list[TrackRow] = []
+
+                def collect() -> Iterator[TrackRow]:
+                    for row in _track_rows(tracker, reader, index, starts, args, recorder,
+                                           status):
+                        rows.append(row)
+                        yield row
+
+                write_tracks(tracks_path, collect())
+        except BagError as err:
+            return _error(str(err), 1)
+        except (InitiationError, FilterError, CalibrationError) as err:
+            raise _UserError(str(err)) from err
+        if recorder is not None:
+            recorder.save(out / 'particles.npz')
+        fps = status['frames'] / max(status['wall_s'], 1e-9)
+        tracker_fps = status['frames'] / max(status['tracker_s'], 1e-9)
+        print(f'{_PROG}: {status["frames"]} frames, {status["tracks"]} tracks, '
+              f'{fps:.1f} frames/s overall, {tracker_fps:.1f} frames/s in the tracker '
+              f'({config.algorithm}, N={config.particles}); wrote {tracks_path}'
+              + (f' and {out / "particles.npz"}' if recorder is not None else ''),
+              file=sys.stderr)
+        if status['skipped']:
+            print(f'{_PROG}: note: skipped {status["skipped"]} frame set(s) whose stamps went '
+                  'backwards', file=sys.stderr)
+        if eval_truth is not None:
+            _evaluate(rows, eval_truth, out, bag, recorder)
+        if status['bag_error']:
+            return _error(f'{status["bag_error"]} (kept {status["frames"]} tracked frames, '
+                          f'up to frame {status["last_frame"]}, in {tracks_path})', 1)
+        return 0
+    except _UserError as err:
+        return _error(str(err))
+
+
+def _evaluate(rows: list[TrackRow], truth: list[GroundTruthRow], out: Path, bag: Path,
+              recorder) -> None:
+    from mbtrack_ros.evaluation.clear_mot import clear_mot
+    from mbtrack_ros.evaluation.errors import EvaluationError
+    from mbtrack_ros.evaluation.posterior import posterior_mass
+    from mbtrack_ros.evaluation.report import format_table
+
+    name = bag.name if bag.name != 'bag' else bag.parent.name
+    try:
+        result = clear_mot(rows, truth, name=name)
+        posterior = {}
+        if recorder is not None and len(recorder):
+            posterior[name] = posterior_mass(recorder.particle_set(), truth, rows,
+                                             matching=result)
+        print(format_table([result], posterior))
+    except EvaluationError as err:
+        print(f'{_PROG}: note: evaluation failed: {err}', file=sys.stderr)
