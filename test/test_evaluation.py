@@ -281,7 +281,9 @@ def test_posterior_mass_uses_the_clear_mot_association():
     np.testing.assert_allclose(curve, [1.0, 1.0], atol=1e-6)
 
 
-def test_posterior_mass_equals_brute_force(tmp_path):
+def test_posterior_mass_equals_brute_force(tmp_path, monkeypatch):
+    import mbtrack_ros.evaluation.posterior as posterior_module
+    monkeypatch.setattr(posterior_module, '_CHUNK_ROWS', 5)  # several distance batches
     rng = np.random.default_rng(7)
     truth = walk(1, range(12), 1.0) + walk(2, range(12), 2.5)
     tracks = [tr(r.frame, r.person_id + 40, r.x + rng.normal(0, 0.1), r.y) for r in truth
@@ -293,7 +295,7 @@ def test_posterior_mass_equals_brute_force(tmp_path):
                 rng.random(n))
     path = rec.save(tmp_path / 'particles.npz')
     ps = load_particles(path)
-    d = np.linspace(0, 1, 21)
+    d = rng.permutation(np.linspace(0, 1, 21))  # any order of the distances
     got = posterior_mass_curve(path, truth, tracks, d)
     matching = clear_mot(tracks, truth)
     m = matching.matches_detail
@@ -306,7 +308,7 @@ def test_posterior_mass_equals_brute_force(tmp_path):
         want += [ps.weights[k][dist <= dd].sum() for dd in d]
     want /= len(m)
     np.testing.assert_allclose(got, want, atol=1e-9)
-    assert np.all(np.diff(got) >= 0) and 0 < got[-1] < 1
+    assert np.all(np.diff(got[np.argsort(d)]) >= 0) and 0 < got.max() < 1
 
 
 def test_particle_recorder_round_trip_from_frame_results(tmp_path):
@@ -375,7 +377,7 @@ def test_plots_write_png_files(tmp_path):
 
 def _args(tracks, truth, **kw) -> argparse.Namespace:
     base = dict(tracks=tracks, ground_truth=truth, out=None, particles=None, threshold=0.5,
-                name=None, no_plots=False)
+                name=None, no_plots=False, calibration=None)
     base.update(kw)
     return argparse.Namespace(**base)
 
@@ -411,7 +413,7 @@ def test_eval_command_writes_report_and_plots(tmp_path, capsys):
     assert seq['motp_mm'] == pytest.approx(100.0, abs=0.1)  # CSV keeps 4 decimals
     assert seq['mota'] == pytest.approx(0.9)
     # particle at the track (0.1 m from the truth) and one 0.8 m away, 18 of 20 matched
-    pm = doc['posterior_mass']['tracks']
+    pm = doc['posterior_mass'][tmp_path.name]
     assert pm['mass_within_0_5m'] == pytest.approx(0.5 * 18 / 20, abs=1e-5)
     md = (out / 'scores.md').read_text()
     assert '| tracks |' in md and '90.0 %' in md and 'trajectories.png' in md
@@ -430,8 +432,21 @@ def test_eval_command_default_out_dir_and_cli_dispatch(tmp_path, capsys):
     assert not list(tmp_path.glob('*.png'))
 
 
+def test_eval_command_draws_calibration_beside_ground_truth(tmp_path, capsys, room):
+    _write_inputs(tmp_path)
+    room.save(tmp_path / 'calibration.yaml')
+    code = eval_cmd.run(_args(tmp_path / 'tracks.csv', tmp_path / 'ground_truth.csv'))
+    captured = capsys.readouterr()
+    assert code == 0 and 'warning' not in captured.err
+    assert _is_png(tmp_path / 'trajectories.png')
+    # the sequence is named after the directory of tracks.csv
+    doc = json.loads((tmp_path / 'scores.json').read_text())
+    assert doc['sequences'][0]['name'] == tmp_path.name
+
+
 @pytest.mark.parametrize('case', ['missing_tracks', 'missing_truth', 'wrong_columns',
-                                  'empty_truth', 'bad_particles', 'bad_threshold'])
+                                  'empty_truth', 'bad_particles', 'bad_threshold',
+                                  'bad_calibration'])
 def test_eval_command_bad_inputs_exit_2_with_one_line(tmp_path, capsys, case):
     _write_inputs(tmp_path)
     tracks, truth = tmp_path / 'tracks.csv', tmp_path / 'ground_truth.csv'
@@ -450,6 +465,9 @@ def test_eval_command_bad_inputs_exit_2_with_one_line(tmp_path, capsys, case):
         kw['particles'] = tmp_path / 'p.npz'
     elif case == 'bad_threshold':
         kw['threshold'] = -1.0
+    elif case == 'bad_calibration':
+        (tmp_path / 'c.yaml').write_text('cameras: [\n  - {a: 1\n')
+        kw['calibration'] = tmp_path / 'c.yaml'
     code = eval_cmd.run(_args(tracks, truth, **kw))
     err = capsys.readouterr().err
     assert code == 2

@@ -6,6 +6,7 @@ import math
 import sys
 from pathlib import Path
 
+from mbtrack_ros.core.camera import CalibrationError, RoomCalibration
 from mbtrack_ros.evaluation.clear_mot import clear_mot
 from mbtrack_ros.evaluation.errors import EvaluationError
 from mbtrack_ros.evaluation.posterior import posterior_mass
@@ -34,15 +35,33 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                         help='particle file of mbtrack replay --save-particles')
     parser.add_argument('--threshold', type=float, default=0.5, metavar='METRES',
                         help='match threshold in metres (default 0.5, as CLEAR\'07)')
+    parser.add_argument('--calibration', type=Path, default=None, metavar='calibration.yaml',
+                        help='room calibration drawn in the top view (default: '
+                             'calibration.yaml beside the ground truth, if present)')
     parser.add_argument('--name', default=None,
-                        help='sequence name in the tables (default: the tracks file stem)')
+                        help='sequence name in the tables (default: the tracks file stem, or '
+                             'its directory name for tracks.csv)')
     parser.add_argument('--no-plots', action='store_true', help='skip the PNG plots')
     return parser
 
 
 def _error(msg: str) -> int:
-    print(f'{_PROG}: error: {msg}', file=sys.stderr)
+    print(f'{_PROG}: error: {" ".join(msg.split())}', file=sys.stderr)
     return 2
+
+
+def _calibration(args: argparse.Namespace, notes: list[str]) -> RoomCalibration | None:
+    """The explicitly given calibration (errors propagate) or the optional default one."""
+    if args.calibration is not None:
+        return RoomCalibration.load(args.calibration)
+    default = Path(args.ground_truth).parent / 'calibration.yaml'
+    if not default.is_file():
+        return None
+    try:
+        return RoomCalibration.load(default)
+    except CalibrationError as err:
+        notes.append(f'{default} not drawn: {err}')
+        return None
 
 
 def run(args: argparse.Namespace) -> int:
@@ -50,7 +69,9 @@ def run(args: argparse.Namespace) -> int:
     if not (math.isfinite(args.threshold) and args.threshold > 0):
         return _error(f'--threshold must be a positive number of metres, got {args.threshold}')
     out_dir = Path(args.out) if args.out is not None else Path(args.tracks).parent
-    name = args.name or Path(args.tracks).stem
+    tracks_path = Path(args.tracks)
+    name = args.name or (tracks_path.stem if tracks_path.stem != 'tracks'
+                         else tracks_path.resolve().parent.name or 'tracks')
     notes = []
     try:
         tracks = read_tracks(args.tracks)
@@ -75,8 +96,10 @@ def run(args: argparse.Namespace) -> int:
         images = []
         if not args.no_plots:
             from mbtrack_ros.evaluation import plots  # matplotlib import only when plotting
+            calibration = _calibration(args, notes)
             images.append(plots.plot_trajectories(
-                tracks, truth, out_dir / 'trajectories.png', title=f'{name}: trajectories'))
+                tracks, truth, out_dir / 'trajectories.png', title=f'{name}: trajectories',
+                calibration=calibration))
             images.append(plots.plot_localisation_error(result, out_dir / 'error.png'))
             if posterior:
                 images.append(plots.plot_posterior_curves(
@@ -86,7 +109,7 @@ def run(args: argparse.Namespace) -> int:
             inputs['particles'] = str(args.particles)
         paths = write_report(out_dir, [result], posterior=posterior, images=images,
                              inputs=inputs, notes=notes)
-    except (CsvFormatError, EvaluationError) as err:
+    except (CsvFormatError, EvaluationError, CalibrationError) as err:
         return _error(str(err))
     for note in notes:
         print(f'{_PROG}: warning: {note}', file=sys.stderr)

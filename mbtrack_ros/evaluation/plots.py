@@ -14,6 +14,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from mbtrack_ros.core.camera import RoomCalibration
 from mbtrack_ros.evaluation.clear_mot import ClearMotResult
 from mbtrack_ros.evaluation.errors import EvaluationError
 from mbtrack_ros.recording.csvfiles import GroundTruthRow, TrackRow
@@ -58,18 +59,27 @@ def _frame_step(stamps: np.ndarray) -> float:
 
 def plot_trajectories(tracks: Sequence[TrackRow], truth: Sequence[GroundTruthRow],
                       out_png: str | Path, *, title: str | None = None,
-                      room: tuple[float, float, float, float] | None = None) -> Path:
-    """Top view of floor trajectories; ``room`` = (xmin, xmax, ymin, ymax) metres."""
+                      calibration: RoomCalibration | None = None) -> Path:
+    """Top view of floor trajectories (metres); with ``calibration`` also the walkable floor
+    and the camera positions."""
     fig = _figure(7.0, 6.0)
     ax = fig.add_subplot()
+    if calibration is not None:
+        x0, y0, x1, y1 = calibration.floor
+        ax.plot([x0, x1, x1, x0, x0], [y0, y0, y1, y1, y0], '-', color='0.2', lw=1.0)
+        for cam_name, cam in calibration.cameras.items():
+            c = cam.center
+            ax.plot(c[0], c[1], 's', color='0.2', ms=5)
+            ax.annotate(cam_name, (c[0], c[1]), fontsize=7, color='0.2', xytext=(4, -9),
+                        textcoords='offset points')
     g_stamp = np.array([r.stamp_ns for r in truth], np.int64)
     g_xy = np.array([(r.x, r.y) for r in truth], np.float64).reshape(-1, 2)
     step = _frame_step(g_stamp)
     for pid, idx in _by_id(g_stamp, np.array([r.person_id for r in truth], np.int64)).items():
         xy = _gaps(g_stamp[idx], g_xy[idx], step)
-        ax.plot(xy[:, 0], xy[:, 1], '--', color='0.55', lw=1.2, zorder=1)
-        ax.annotate(f'P{pid}', g_xy[idx[0]], color='0.3', fontsize=8, zorder=3,
-                    xytext=(3, 3), textcoords='offset points')
+        ax.plot(xy[:, 0], xy[:, 1], '--', color='0.35', lw=1.3, zorder=3)
+        ax.annotate(f'P{pid}', g_xy[idx[0]], color='0.1', fontsize=8, zorder=4,
+                    xytext=(3, 3), textcoords='offset points', fontweight='bold')
     t_stamp = np.array([r.stamp_ns for r in tracks], np.int64)
     t_xy = np.array([(r.x, r.y) for r in tracks], np.float64).reshape(-1, 2)
     t_ids = np.array([r.track_id for r in tracks], np.int64)
@@ -80,16 +90,13 @@ def plot_trajectories(tracks: Sequence[TrackRow], truth: Sequence[GroundTruthRow
         colour = cmap[k % len(cmap)]
         ax.plot(xy[:, 0], xy[:, 1], '-', color=colour, lw=1.4, zorder=2, label=f'T{tid}')
         ax.plot(*t_xy[idx[0]], 'o', color=colour, ms=4, zorder=2)
-    if room is not None:
-        ax.set_xlim(room[0], room[1])
-        ax.set_ylim(room[2], room[3])
     ax.set_aspect('equal', adjustable='datalim')
     ax.set_xlabel('x [m]')
     ax.set_ylabel('y [m]')
     ax.grid(True, lw=0.4, alpha=0.5)
     ax.set_title(title or 'trajectories (tracks coloured, ground truth dashed grey)')
     if len(t_ids) and np.unique(t_ids).size <= 20:
-        ax.legend(loc='upper right', fontsize=7, ncol=2)
+        ax.legend(loc='upper left', bbox_to_anchor=(1.01, 1.0), fontsize=7)
     return _save(fig, out_png)
 
 

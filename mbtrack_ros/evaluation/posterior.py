@@ -39,6 +39,7 @@ __all__ = [
 #: (101,) distances 0, 0.01, ..., 1.0 metres
 DEFAULT_DISTANCES = np.linspace(0.0, 1.0, 101)
 PARTICLE_KEYS = ('stamp_ns', 'track_id', 'xy', 'weights')
+_CHUNK_ROWS = 2048  # particle rows per distance batch
 
 
 @dataclass(frozen=True)
@@ -100,7 +101,7 @@ def load_particles(path: str | Path) -> ParticleSet:
     try:
         ps = ParticleSet(stamp_ns=arrays['stamp_ns'].astype(np.int64),
                          track_id=arrays['track_id'].astype(np.int64),
-                         xy=arrays['xy'].astype(np.float64),
+                         xy=arrays['xy'].astype(np.float32, copy=False),
                          weights=arrays['weights'].astype(np.float64))
     except EvaluationError as err:
         raise EvaluationError(f'{path}: {err}') from err
@@ -246,13 +247,21 @@ def posterior_mass(particles: ParticleSet | str | Path | Mapping,
     prow = rows[found]
     truth_xy = np.stack([m.x[sel[found]], m.y[sel[found]]], axis=1)  # (K, 2)
 
-    # one weighted cumulative distribution over all (person-frame, particle) pairs: the mean
-    # over person-frames of the mass within d equals sum_{pairs, dist <= d} w / G
-    dist = np.linalg.norm(ps.xy[prow] - truth_xy[:, None, :], axis=2).ravel()
-    w = ps.weights[prow].astype(np.float64).ravel()
-    order = np.argsort(dist, kind='stable')
-    cum = np.concatenate([[0.0], np.cumsum(w[order])])
-    frac = cum[np.searchsorted(dist[order], d, side='right')] / g
+    # the mean over person-frames of the mass within d equals sum_{pairs, dist <= d} w / G over
+    # all (person-frame, particle) pairs: bin each pair at the first grid distance >= its own
+    # distance, then accumulate; chunked over rows to bound memory
+    d_order = np.argsort(d, kind='stable')
+    d_sorted = d[d_order]
+    mass = np.zeros(d.shape[0] + 1)
+    for c in range(0, prow.shape[0], _CHUNK_ROWS):
+        rows_c = prow[c:c + _CHUNK_ROWS]
+        diff = ps.xy[rows_c].astype(np.float64) - truth_xy[c:c + _CHUNK_ROWS, None, :]
+        dist = np.hypot(diff[..., 0], diff[..., 1]).ravel()
+        w = ps.weights[rows_c].astype(np.float64).ravel()
+        mass += np.bincount(np.searchsorted(d_sorted, dist, side='left'), weights=w,
+                            minlength=d.shape[0] + 1)
+    frac = np.empty(d.shape[0])
+    frac[d_order] = np.cumsum(mass[:-1]) / g
     return PosteriorMassResult(distances=d.copy(), fraction=np.clip(frac, 0.0, 1.0),
                                person_frames=g, with_particles=int(found.sum()),
                                missing_particle_rows=int((~found).sum()))
