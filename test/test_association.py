@@ -465,3 +465,19 @@ def test_association_filters_track_through_the_tracker(room, algorithm) -> None:
     assert standin.joint_orders_seen == (algorithm == 'jlf')
     tracker.remove_track(ids[0])
     assert tracker.track_ids == ids[1:]
+
+
+@pytest.mark.parametrize('density', [0.0, 0.4])
+def test_pdaf_update_is_the_moment_matched_mixture_of_kalman_updates(density) -> None:
+    rng = np.random.default_rng(11)
+    mean, cov = _prediction(rng)
+    z = mean[:2] + rng.normal(scale=0.12, size=(4, 2))
+    res = pdaf.pdaf_update(mean, cov, z, R2, p_detect=0.85, p_gate=0.995,
+                           clutter_density=density)
+    assert np.all(res.gated)
+    comps = [(mean, cov)] + [kalman.update(mean, cov, zi, R2) for zi in z]
+    w = np.concatenate([[res.beta0], res.beta])
+    mix_mean = sum(wi * m for wi, (m, _) in zip(w, comps))
+    mix_cov = sum(wi * (P + np.outer(m - mix_mean, m - mix_mean)) for wi, (m, P) in zip(w, comps))
+    np.testing.assert_allclose(res.mean, mix_mean, atol=1e-12)
+    np.testing.assert_allclose(res.cov, mix_cov, atol=1e-10)
