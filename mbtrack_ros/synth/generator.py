@@ -1,0 +1,266 @@
+"""Frame generation: crowd simulation + ray-cast rendering + image formation + ground truth.
+
+Per frame and camera: copy the static radiance and depth buffers, redraw the wall screen and
+the door pixels, ray-cast every body ellipsoid inside its projected bounding box (compiled
+kernel, z-tested, writing a person-id buffer), then apply the camera response: per-camera
+channel gains, a slow global illumination drift and Gaussian sensor noise (sigma 2.5 grey
+levels, slices of a noise bank drawn once from the generator), quantised to uint8.
+
+Ground truth per present person inside the walls: floor point under the pelvis, top of the
+head, sitting (pose blend > 0.5) and the cameras where at least ``30 * W * H / (320 * 240)``
+of its pixels are visible in the id buffer.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from mbtrack_ros.core.camera import RoomCalibration
+from mbtrack_ros.recording.csvfiles import GroundTruthRow, write_ground_truth
+from mbtrack_ros.synth.body import Ellipsoids, pose_ellipsoids
+from mbtrack_ros.synth.errors import SynthError
+from mbtrack_ros.synth.motion import PersonState
+from mbtrack_ros.synth.presets import Preset, get_preset, populate
+from mbtrack_ros.synth.raster import draw_ellipsoids
+from mbtrack_ros.synth.room import (CameraView, Room, default_room, make_calibration,
+                                    screen_radiance)
+
+__all__ = ['EPOCH_NS', 'SynthFrame', 'Synthesizer', 'generate', 'iter_frames',
+           'render_view', 'visible_threshold']
+
+EPOCH_NS = 1_700_000_000 * 1_000_000_000
+NOISE_SIGMA = 2.5
+
+
+@dataclass
+class SynthFrame:
+    """One synthetic frame set.
+
+    Attributes:
+        index: frame number from 0.
+        stamp_ns: integer nanoseconds, ``EPOCH_NS + index * round(1e9 / fps)``.
+        images: camera name -> (H, W, 3) uint8 RGB.
+        ground_truth: one row per person inside the room.
+        id_buffers: camera name -> (H, W) int16 person id per pixel (0 = none).
+        people: states of all present people (also those still in the corridor).
+    """
+
+    index: int
+    stamp_ns: int
+    images: dict[str, np.ndarray]
+    ground_truth: list[GroundTruthRow]
+    id_buffers: dict[str, np.ndarray] = field(repr=False)
+    people: list[PersonState] = field(default_factory=list, repr=False)
+
+
+def visible_threshold(width: int, height: int) -> int:
+    """Visible pixels a person needs in a camera to count as seen: 30 at 320 x 240."""
+    return max(1, int(round(30.0 * width * height / (320 * 240))))
+
+
+def _bboxes(view: CameraView, ell: Ellipsoids) -> np.ndarray:
+    """(P, 4) int pixel windows ``u0, v0, u1, v1`` covering each projected ellipsoid."""
+    cam = view.camera
+    corners = ell.corners()
+    pix = cam.project(corners)  # (P, 8, 2), NaN behind the camera
+    behind = np.isnan(pix[..., 0])
+    with np.errstate(invalid='ignore'):
+        lo = np.nanmin(np.where(behind[..., None], np.inf, pix), axis=1)
+        hi = np.nanmax(np.where(behind[..., None], -np.inf, pix), axis=1)
+    margin = 2.0 + 0.05 * (hi - lo)
+    out = np.empty((len(pix), 4), dtype=np.int64)
+    with np.errstate(invalid='ignore'):
+        out[:, 0] = np.clip(np.floor(lo[:, 0] - margin[:, 0]), 0, cam.width)
+        out[:, 1] = np.clip(np.floor(lo[:, 1] - margin[:, 1]), 0, cam.height)
+        out[:, 2] = np.clip(np.ceil(hi[:, 0] + margin[:, 0]) + 1, 0, cam.width)
+        out[:, 3] = np.clip(np.ceil(hi[:, 1] + margin[:, 1]) + 1, 0, cam.height)
+    partly = behind.any(axis=1) & ~behind.all(axis=1)
+    out[partly] = (0, 0, cam.width, cam.height)   # straddles the camera plane: scan all
+    out[behind.all(axis=1)] = 0                     # entirely behind: skip
+    return out
+
+
+def render_view(view: CameraView, ellipsoids: Ellipsoids, *, time_s: float = 0.0,
+                door_angle: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Render one camera before the camera response.
+
+    Returns:
+        radiance (H, W, 3) float32 0..255, depth (H, W) float32 metres along the ray,
+        ids (H, W) int16 owner ids (0 = room).
+    """
+    radiance = view.radiance.copy()
+    depth = view.depth.copy()
+    ids = np.zeros(depth.shape, dtype=np.int16)
+    flat_r = radiance.reshape(-1, 3)
+    flat_d = depth.reshape(-1)
+    if view.screen_index.size:
+        flat_r[view.screen_index] = screen_radiance(view.screen_uv, time_s)
+    if view.door_index.size and door_angle > 0.0:
+        rad, dep = view.door_update(float(door_angle))
+        flat_r[view.door_index] = rad
+        flat_d[view.door_index] = dep
+    if len(ellipsoids.centers):
+        cam = view.camera
+        room = view.room
+        draw_ellipsoids(view.rays, cam.center, depth, radiance, ids, ellipsoids.to_unit,
+                        ellipsoids.axes, ellipsoids.radii, ellipsoids.centers,
+                        _bboxes(view, ellipsoids), ellipsoids.owner.astype(np.int16),
+                        ellipsoids.colour1, ellipsoids.colour2,
+                        ellipsoids.texture.astype(np.int64), ellipsoids.frequency,
+                        np.asarray(room.light, dtype=np.float64), room.ambient, room.diffuse)
+    return radiance, depth, ids
+
+
+class Synthesizer:
+    """A preset rendered frame by frame (deterministic for a seed).
+
+    Args:
+        preset: a preset name (see :data:`PRESETS`) or a :class:`Preset`.
+        seed: seed of the single ``np.random.Generator`` behind all randomness.
+        frames: number of frames (default: the preset's).
+        width, height: image size in pixels; fps: frame rate (Hz).
+        ceiling: include the ceiling camera where the preset uses all cameras.
+    """
+
+    def __init__(self, preset: str | Preset, *, seed: int = 0, frames: int | None = None,
+                 width: int = 320, height: int = 240, fps: float = 15.0,
+                 ceiling: bool = True, room: Room | None = None) -> None:
+        self.preset = get_preset(preset) if isinstance(preset, str) else preset
+        self.frames = self.preset.frames if frames is None else int(frames)
+        if self.frames <= 0:
+            raise SynthError(f'frames must be positive, got {frames}')
+        if not fps > 0 or not math.isfinite(fps):
+            raise SynthError(f'fps must be positive, got {fps}')
+        self.fps = float(fps)
+        self.period_ns = int(round(1e9 / self.fps))  # constant integer frame period
+        self.seed = int(seed)
+        self.width, self.height = int(width), int(height)
+        self.room = room or default_room()
+        self.calibration: RoomCalibration = make_calibration(
+            self.room, width=self.width, height=self.height, ceiling=ceiling,
+            cameras=self.preset.cameras)
+        self.views = {n: CameraView.build(c, self.room)
+                      for n, c in self.calibration.cameras.items()}
+        self.rng = np.random.default_rng(self.seed)
+        rng = self.rng
+        n_cam = len(self.views)
+        # per-camera colour response: overall gain x channel gains; illumination drift
+        self.gains = (rng.uniform(0.85, 1.15, (n_cam, 1))
+                      * rng.uniform(0.88, 1.12, (n_cam, 3))).astype(np.float32)
+        self.drift_period = rng.uniform(25.0, 50.0, 2)
+        self.drift_phase = rng.uniform(0, 2 * np.pi, 2)
+        pixels = self.width * self.height * 3
+        self.noise_bank = (NOISE_SIGMA * rng.standard_normal(4 * pixels)).astype(np.float32)
+        self.crowd = populate(self.preset, self.room, rng)
+        self.threshold = visible_threshold(self.width, self.height)
+
+    def stamp_ns(self, index: int) -> int:
+        """Exact integer stamp of frame ``index``."""
+        return EPOCH_NS + index * self.period_ns
+
+    def illumination(self, time_s: float) -> float:
+        """Global slow illumination factor (about 0.9 .. 1.1)."""
+        return float(1.0 + 0.06 * np.sin(2 * np.pi * time_s / self.drift_period[0]
+                                         + self.drift_phase[0])
+                     + 0.03 * np.sin(2 * np.pi * time_s / self.drift_period[1]
+                                     + self.drift_phase[1]))
+
+    def __iter__(self) -> Iterator[SynthFrame]:
+        dt = 1.0 / self.fps
+        pixels = self.width * self.height * 3
+        for index in range(self.frames):
+            if index:
+                self.crowd.step(dt)
+            time_s = index * dt
+            people = self.crowd.people()
+            bodies, tops = [], {}
+            for person in people:
+                ell, top = pose_ellipsoids(person.height, person.clothing, x=person.x,
+                                           y=person.y, theta=person.theta, phase=person.phase,
+                                           stride=person.stride, sit=person.sit,
+                                           owner=person.person_id)
+                bodies.append(ell)
+                tops[person.person_id] = top
+            ellipsoids = Ellipsoids.concat(bodies)
+            light = self.illumination(time_s)
+            images, id_buffers = {}, {}
+            counts = {}
+            offsets = self.rng.integers(0, 3 * pixels, len(self.views))
+            for k, (name, view) in enumerate(self.views.items()):
+                radiance, _, ids = render_view(view, ellipsoids, time_s=time_s,
+                                               door_angle=self.crowd.door_angle)
+                radiance *= self.gains[k] * np.float32(light)
+                radiance += self.noise_bank[offsets[k]:offsets[k] + pixels].reshape(
+                    radiance.shape)
+                np.clip(radiance, 0.0, 255.0, out=radiance)
+                images[name] = (radiance + 0.5).astype(np.uint8)
+                id_buffers[name] = ids
+                counts[name] = np.bincount(ids.ravel(), minlength=self.crowd.next_id)
+            stamp = self.stamp_ns(index)
+            rows = []
+            for person in people:
+                if not self.room.inside(np.array([person.x, person.y])):
+                    continue
+                cams = tuple(n for n in self.views if counts[n][person.person_id]
+                             >= self.threshold)
+                rows.append(GroundTruthRow(stamp, index, person.person_id, person.x, person.y,
+                                           tops[person.person_id], person.sit > 0.5, cams))
+            yield SynthFrame(index, stamp, images, rows, id_buffers, people)
+
+
+def iter_frames(preset: str | Preset, *, seed: int = 0, frames: int | None = None,
+                width: int = 320, height: int = 240, fps: float = 15.0,
+                ceiling: bool = True) -> Iterator[SynthFrame]:
+    """Render a preset frame by frame without writing anything (see :class:`Synthesizer`)."""
+    return iter(Synthesizer(preset, seed=seed, frames=frames, width=width, height=height,
+                            fps=fps, ceiling=ceiling))
+
+
+def generate(preset: str | Preset, outdir: str | Path, *, seed: int = 0,
+             frames: int | None = None, width: int = 320, height: int = 240,
+             fps: float = 15.0, ceiling: bool = True, compressed: bool = False,
+             storage: str = 'mcap', progress: bool = False) -> Path:
+    """Write a recording directory: ``bag/``, calibration.yaml, ground_truth.csv,
+    recording.yaml. ``outdir`` must not exist or be empty. Returns ``outdir``.
+    """
+    from mbtrack_ros.recording.bag import BagError, RecordingWriter
+
+    outdir = Path(outdir)
+    if outdir.exists() and (not outdir.is_dir() or any(outdir.iterdir())):
+        raise SynthError(f'output directory {outdir} exists and is not empty')
+    if storage not in ('mcap', 'sqlite3'):
+        raise SynthError(f'unknown storage {storage!r} (mcap or sqlite3)')
+    synth = Synthesizer(preset, seed=seed, frames=frames, width=width, height=height,
+                        fps=fps, ceiling=ceiling)
+    outdir.mkdir(parents=True, exist_ok=True)
+    synth.calibration.save(outdir / 'calibration.yaml')
+    rows: list[GroundTruthRow] = []
+    frames_iter: Iterator[SynthFrame] = iter(synth)
+    if progress:
+        from tqdm import tqdm
+        frames_iter = tqdm(frames_iter, total=synth.frames, unit='frame',
+                           desc=f'synth {synth.preset.name}')
+    try:
+        with RecordingWriter(outdir / 'bag', synth.calibration, storage=storage,
+                             compressed=compressed) as writer:
+            for frame in frames_iter:
+                writer.write_frame(frame.stamp_ns, frame.images)
+                writer.write_ground_truth(frame.stamp_ns, frame.ground_truth)
+                rows.extend(frame.ground_truth)
+    except BagError as err:
+        raise SynthError(f'cannot write the bag: {err}') from err
+    write_ground_truth(outdir / 'ground_truth.csv', rows)
+    meta = {'preset': synth.preset.name, 'description': synth.preset.description,
+            'seed': synth.seed, 'frames': synth.frames, 'fps': synth.fps,
+            'width': synth.width, 'height': synth.height,
+            'cameras': list(synth.calibration.cameras), 'compressed': bool(compressed),
+            'storage': storage, 'people': int(synth.crowd.next_id - 1),
+            'epoch_ns': EPOCH_NS}
+    (outdir / 'recording.yaml').write_text(yaml.safe_dump(meta, sort_keys=False),
+                                           encoding='utf-8')
+    return outdir

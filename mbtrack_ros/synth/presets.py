@@ -1,0 +1,121 @@
+"""Named scenarios of synthetic recordings (``mbtrack synth --list``).
+
+Each preset fixes the cameras, the number of frames and how the crowd is populated; every
+preset ``NAME`` also exists as ``NAME-short`` (a few dozen frames, same character) for tests.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from mbtrack_ros.synth.body import random_clothing
+from mbtrack_ros.synth.errors import SynthError
+from mbtrack_ros.synth.motion import Crowd
+from mbtrack_ros.synth.room import Room
+
+__all__ = ['PRESETS', 'Preset', 'get_preset', 'populate']
+
+# the single camera of the Lanz sequences sits in the corner (0.1, 0.1) looking at the centre
+_CAM_XY = np.array([0.1, 0.1])
+_VIEW = np.array([2.9, 2.4]) / np.hypot(2.9, 2.4)  # floor direction of its optical axis
+_ACROSS = np.array([-_VIEW[1], _VIEW[0]])          # perpendicular to it on the floor
+
+
+@dataclass(frozen=True)
+class Preset:
+    """A scenario: cameras (``None`` = all, ceiling optional), frames, crowd builder."""
+
+    name: str
+    description: str
+    frames: int
+    cameras: tuple[str, ...] | None
+    populate: Callable[[Crowd], None]
+
+
+def _lanz_area(n_people: int, area: tuple[float, float, float, float]) -> Callable:
+    def populate(crowd: Crowd) -> None:
+        for _ in range(n_people):
+            crowd.add(tuple(crowd.random_free_point(area, min_gap=0.7)), behaviour='area',
+                      area=area, speed_range=(0.4, 1.2))
+    return populate
+
+
+def _lanz_seq4(crowd: Crowd) -> None:
+    def at(dist: float, lateral: float) -> np.ndarray:
+        return _CAM_XY + dist * _VIEW + lateral * _ACROSS
+
+    # the occluder: tall, close to the camera, mostly standing, small steps sideways
+    crowd.add(tuple(at(2.6, 0.0)), behaviour='patrol', height=1.95,
+              patrol=[at(2.6, -0.2), at(2.6, 0.2)], patrol_pause=(1.5, 4.0),
+              speed_range=(0.3, 0.5))
+    twins = random_clothing(crowd.rng)
+    base = float(crowd.rng.uniform(1.62, 1.67))
+    # the twins walk back and forth behind him, pausing right behind him now and then
+    for k, (dist, h) in enumerate(((3.05, base), (3.4, base + 0.03))):
+        ends = [at(dist, -1.1), at(dist, 0.0), at(dist, 1.1), at(dist, 0.0)]
+        start = 2 * k
+        crowd.add(tuple(ends[start]), behaviour='patrol', height=h, clothing=twins,
+                  patrol=ends[start:] + ends[:start], patrol_pause=(0.3, 1.5),
+                  speed_range=(0.8, 1.1))
+
+
+def _clear_room(crowd: Crowd) -> None:
+    for _ in range(2):
+        crowd.add(tuple(crowd.random_free_point(min_gap=0.9)), behaviour='room',
+                  leave_time=float(crowd.rng.uniform(20.0, 70.0)))
+    crowd.schedule_arrivals(gap=(6.0, 18.0), visit=(30.0, 80.0), max_people=5,
+                            min_people=2, first=0.3)
+
+
+def _empty(crowd: Crowd) -> None:
+    pass
+
+
+_AREA_SMALL = (1.4, 1.25, 3.4, 3.0)
+_AREA_WIDE = (1.2, 1.25, 3.7, 3.3)
+
+_BASE = (
+    Preset('lanz-seq1', '3 people walking randomly in a small area in front of one corner '
+           'camera: frequent, long occlusions (670 frames)', 670, ('cam0',),
+           _lanz_area(3, _AREA_SMALL)),
+    Preset('lanz-seq2', '4 people walking randomly in front of one corner camera '
+           '(618 frames)', 618, ('cam0',), _lanz_area(4, _AREA_SMALL)),
+    Preset('lanz-seq3', '5 people walking randomly in front of one corner camera '
+           '(341 frames)', 341, ('cam0',), _lanz_area(5, _AREA_WIDE)),
+    Preset('lanz-seq4', '3 people, one corner camera: identically dressed twins (a few cm '
+           'apart in height) walk back and forth fully occluded behind a tall third person '
+           '(215 frames)', 215, ('cam0',), _lanz_seq4),
+    Preset('clear-room', 'four corner cameras + ceiling camera, 2-5 people entering and '
+           'leaving through the door, sitting on chairs; door and screen change (1800 frames, '
+           '2 min)', 1800, None, _clear_room),
+    Preset('empty-room', 'all cameras, nobody in the room, the screen changing (60 frames)',
+           60, None, _empty),
+)
+
+_SHORT_FRAMES = {'lanz-seq1': 40, 'lanz-seq2': 40, 'lanz-seq3': 30, 'lanz-seq4': 45,
+                 'clear-room': 45, 'empty-room': 10}
+
+PRESETS: dict[str, Preset] = {}
+for _p in _BASE:
+    PRESETS[_p.name] = _p
+    _short = _SHORT_FRAMES[_p.name]
+    PRESETS[f'{_p.name}-short'] = replace(
+        _p, name=f'{_p.name}-short', frames=_short,
+        description=f'{_short}-frame version of {_p.name} for tests')
+
+
+def get_preset(name: str) -> Preset:
+    """The preset called ``name``; raises :class:`SynthError` listing the known names."""
+    try:
+        return PRESETS[name]
+    except KeyError as err:
+        raise SynthError(f'unknown preset {name!r}; known: {", ".join(PRESETS)}') from err
+
+
+def populate(preset: Preset, room: Room, rng: np.random.Generator) -> Crowd:
+    """A new crowd for the preset."""
+    crowd = Crowd(room, rng)
+    preset.populate(crowd)
+    return crowd
