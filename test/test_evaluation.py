@@ -133,6 +133,8 @@ def test_bad_inputs_raise_evaluation_error():
         clear_mot([tr(0, 1, 0, 0), tr(0, 1, 1, 1)], truth)
     with pytest.raises(EvaluationError, match='threshold'):
         clear_mot([], truth, threshold_m=0.0)
+    with pytest.raises(EvaluationError, match='finite'):
+        clear_mot([tr(0, 1, float('nan'), 0.0)], truth)
 
 
 def _reference_clear_mot(tracks, truth, threshold):

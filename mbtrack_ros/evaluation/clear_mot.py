@@ -218,6 +218,10 @@ def clear_mot(tracks: Sequence[TrackRow], truth: Sequence[GroundTruthRow], *,
     order = _sort_unique(t_stamp, t_tid, 'tracks', 'track')
     t_stamp, t_tid, t_x, t_y = t_stamp[order], t_tid[order], t_x[order], t_y[order]
 
+    for what, arr in (('ground truth', g_x), ('ground truth', g_y), ('tracks', t_x),
+                      ('tracks', t_y)):
+        if not np.all(np.isfinite(arr)):
+            raise EvaluationError(f'{what}: positions must be finite')
     frames = np.unique(g_stamp)
     keep = np.isin(t_stamp, frames)
     ignored = int(np.count_nonzero(~keep))
