@@ -481,3 +481,45 @@ def test_pdaf_update_is_the_moment_matched_mixture_of_kalman_updates(density) ->
     mix_cov = sum(wi * (P + np.outer(m - mix_mean, m - mix_mean)) for wi, (m, P) in zip(w, comps))
     np.testing.assert_allclose(res.mean, mix_mean, atol=1e-12)
     np.testing.assert_allclose(res.cov, mix_cov, atol=1e-10)
+
+
+# -- JLF with the real measurement model on a painted image ---------------------------------
+_COLOURS = {0: [(230, 40, 40), (200, 30, 30), (150, 20, 20)],  # person 0: reds per part
+            1: [(40, 40, 230), (30, 200, 30), (220, 220, 40)]}  # person 1: blue/green/yellow
+
+
+def _uniform_model(k: int):
+    from mbtrack_ros.core.appearance import PersonModel, quantize
+    hists = np.zeros((1, 3, 512))
+    for part, rgb in enumerate(_COLOURS[k]):
+        hists[0, part, int(quantize(np.array([[rgb]], dtype=np.uint8))[0, 0])] = 1.0
+    return PersonModel(height=1.7, width=0.5, view_angles=[0.0], histograms=hists)
+
+
+@pytest.mark.parametrize('front', [0, 1])
+def test_jlf_with_the_measurement_model_picks_the_painted_occluder(room, front) -> None:
+    from mbtrack_ros.core.likelihood import LikelihoodConfig, MeasurementModel
+    cams, truth = _two_in_line(room)
+    mm = MeasurementModel(room, LikelihoodConfig())
+    models = [_uniform_model(0), _uniform_model(1)]
+    name = cams[0].name
+    image = np.full((cams[0].height, cams[0].width, 3), 128, dtype=np.uint8)
+    for k in (1 - front, front):  # back to front
+        labels = mm.render_labels(name, truth[k], models[k])
+        for part in range(3):
+            image[labels == part + 1] = _COLOURS[k][part]
+    assert np.any(np.all(image == _COLOURS[0][1], axis=2))  # both partly visible
+    assert np.any(np.all(image == _COLOURS[1][1], axis=2))
+    mm.set_images({name: image})
+
+    def joint_score(js, orders):
+        return mm.joint(js, models, orders=orders)
+
+    covs = np.stack([np.diag([0.003, 0.003, 0.1, 0.1])] * 2)
+    res = jlf.jlf_measurement(truth, covs, joint_score, cams, np.full(2, 1.7),
+                              np.full(2, 0.5), np.random.default_rng(1), n_samples=10)
+    assert res.orders[0].tolist() == [front, 1 - front]
+    # the chosen order scores better than the other one for the chosen joint sample
+    other = res.orders.copy()
+    other[0] = other[0][::-1]
+    assert res.loglik > joint_score(res.states[None], other[None])[0]
