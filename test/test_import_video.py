@@ -14,7 +14,7 @@ from mbtrack_ros.core.camera import RoomCalibration
 from mbtrack_ros.recording.bag import RecordingReader
 from mbtrack_ros.recording.calibration_io import read_opencv_calibration
 from mbtrack_ros.recording.video import (
-    VideoImportError, fit_camera, import_videos, read_trc, trc_to_room)
+    EPOCH_NS, VideoImportError, fit_camera, import_videos, read_trc, trc_to_room)
 
 DATA = Path(__file__).resolve().parents[1] / 'mbtrack_ros' / 'data' / 'real_clip'
 CAMS = ('cam01', 'cam02', 'cam03', 'cam04')
@@ -66,9 +66,10 @@ def test_round_trip_small_real_clip(tmp_path, capsys):
     with RecordingReader(out) as reader:
         assert reader.cameras == list(CAMS)
         sets = list(reader.frames())
-    assert len(sets) == 10
+        bag_truth = reader.ground_truth()
+    assert len(sets) == 10 and len(bag_truth) == 10
     for fs in sets:
-        assert fs.stamp_ns == round(fs.index * 1e9 / 60)
+        assert fs.stamp_ns == EPOCH_NS + round(fs.index * 1e9 / 60)
         for cam in CAMS:
             np.testing.assert_array_equal(fs.images[cam], expected[cam][fs.index])
 
@@ -84,7 +85,7 @@ def test_round_trip_small_real_clip(tmp_path, capsys):
                                    atol=1e-6)
     meta = yaml.safe_load((out / 'recording.yaml').read_text())
     assert meta['frames'] == 10 and meta['fps'] == 60 and meta['cameras'] == list(CAMS)
-    assert meta['size'] == [136, 240]
+    assert meta['width'] == 136 and meta['height'] == 240 and meta['epoch_ns'] == EPOCH_NS
 
     with (out / 'ground_truth.csv').open() as handle:
         rows = list(csv.DictReader(handle))

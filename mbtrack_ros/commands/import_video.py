@@ -7,7 +7,7 @@ from pathlib import Path
 
 from mbtrack_ros.core.camera import CalibrationError
 from mbtrack_ros.recording.calibration_io import FORMATS, UP_AXES, read_calibration
-from mbtrack_ros.recording.video import VideoImportError, import_videos
+from mbtrack_ros.recording.video import EPOCH_NS, VideoImportError, import_videos
 
 __all__ = ['add_parser', 'run']
 
@@ -59,8 +59,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                         help='Pose2Sim TRC keypoints of the subject -> ground_truth.csv')
     parser.add_argument('--reference-offset', type=int, default=0, metavar='ROWS',
                         help='TRC row of recording frame 0 (default 0)')
-    parser.add_argument('--start-time', type=float, default=0.0, metavar='SECONDS',
-                        help='stamp of the first frame set (default 0)')
+    parser.add_argument('--start-time', type=float, default=EPOCH_NS / 1e9, metavar='SECONDS',
+                        help='stamp of the first frame set, seconds since the epoch '
+                             '(default 1.7e9, as mbtrack synth)')
     return parser
 
 

@@ -2,7 +2,8 @@
 
 A recording directory has the same layout as ``mbtrack synth`` writes::
 
-    OUTDIR/bag/               rosbag2 (MCAP) written by RecordingWriter
+    OUTDIR/bag/               rosbag2 (MCAP) written by RecordingWriter (with the reference
+                              also on the ground-truth topic)
     OUTDIR/calibration.yaml   the cameras, scaled to the imported image size
     OUTDIR/recording.yaml     source videos, offsets, frames, fps, size, cameras
     OUTDIR/ground_truth.csv   only with a reference (Pose2Sim TRC keypoints)
@@ -35,9 +36,13 @@ from mbtrack_ros.recording.calibration_io import world_rotation
 from mbtrack_ros.recording.csvfiles import GroundTruthRow, write_ground_truth
 
 __all__ = [
-    'ImportSummary', 'TrcData', 'VideoImportError', 'VideoInfo', 'fit_camera', 'import_videos',
+    'EPOCH_NS', 'ImportSummary', 'TrcData', 'VideoImportError', 'VideoInfo', 'fit_camera', 'import_videos',
     'probe_video', 'read_trc', 'reference_ground_truth', 'resize_frame', 'trc_to_room',
 ]
+
+
+#: default stamp of the first imported frame set (the epoch synthetic recordings use), ns
+EPOCH_NS = 1_700_000_000 * 1_000_000_000
 
 
 class VideoImportError(ValueError):
@@ -300,7 +305,7 @@ def import_videos(outdir: str | Path, calibration: RoomCalibration,
                   start_offsets: Mapping[str, int] | None = None, compressed: bool = False,
                   reference: str | Path | None = None, reference_offset: int = 0,
                   shortest: bool = False, max_frames: int | None = None,
-                  fit_size: bool = False, start_ns: int = 0,
+                  fit_size: bool = False, start_ns: int = EPOCH_NS,
                   source: Mapping[str, object] | None = None,
                   progress: bool | None = None,
                   note: Callable[[str], None] | None = None) -> ImportSummary:
@@ -319,7 +324,8 @@ def import_videos(outdir: str | Path, calibration: RoomCalibration,
         shortest: cut all videos to the shortest instead of refusing differing counts.
         max_frames: import at most this many frame sets.
         fit_size: stretch calibrations whose aspect ratio differs from the video.
-        start_ns: stamp of the first frame set, integer nanoseconds.
+        start_ns: stamp of the first frame set, integer nanoseconds (default
+            :data:`EPOCH_NS`, 2023-11-14, as synthetic recordings).
         source: extra entries for ``recording.yaml`` (e.g. the calibration file).
         progress: tqdm bar on stderr (None: only on a TTY).
         note: receives one-line notes (default: print to stderr).
@@ -414,6 +420,11 @@ def import_videos(outdir: str | Path, calibration: RoomCalibration,
         raise VideoImportError(f'cannot create {outdir}: {err.strerror or err}') from err
     period_ns = 1e9 / fps
     stamps = [int(start_ns) + int(round(i * period_ns)) for i in range(n_frames)]
+    truth: dict[int, list[GroundTruthRow]] = {}
+    if trc is not None:
+        for row in reference_ground_truth(trc, room, stamps, [i + int(reference_offset)
+                                                              for i in range(n_frames)]):
+            truth.setdefault(row.frame, []).append(row)
     captures = {n: _open(p) for n, p in paths.items()}
     written = 0
     try:
@@ -440,6 +451,8 @@ def import_videos(outdir: str | Path, calibration: RoomCalibration,
                     note(msg)
                     break
                 writer.write_frame(stamps[i], images)
+                if trc is not None:
+                    writer.write_ground_truth(stamps[i], truth.get(i, []))
                 written += 1
                 bar.update(1)
     finally:
@@ -450,21 +463,23 @@ def import_videos(outdir: str | Path, calibration: RoomCalibration,
     room.save(outdir / 'calibration.yaml')
     gt_rows = 0
     if trc is not None:
-        rows = reference_ground_truth(trc, room, stamps,
-                                      [i + int(reference_offset) for i in range(written)])
+        rows = [r for i in range(written) for r in truth.get(i, [])]
         write_ground_truth(outdir / 'ground_truth.csv', rows)
         gt_rows = len(rows)
+    sizes_set = set(sizes.values())
     meta = {
         'source': 'import-video',
         'frames': written,
         'fps': fps,
-        'start_ns': int(start_ns),
-        'size': (list(next(iter(sizes.values()))) if len(set(sizes.values())) == 1
-                 else {n: list(s) for n, s in sizes.items()}),
+        'width': next(iter(sizes_set))[0] if len(sizes_set) == 1 else None,
+        'height': next(iter(sizes_set))[1] if len(sizes_set) == 1 else None,
+        'size': {n: list(s) for n, s in sizes.items()},
         'cameras': list(cameras),
         'videos': {n: str(p) for n, p in paths.items()},
         'start_offsets': {n: offsets.get(n, 0) for n in paths},
         'compressed': bool(compressed),
+        'storage': 'mcap',
+        'epoch_ns': int(start_ns),
         'reference': None if reference is None else str(reference),
         'reference_offset': int(reference_offset),
         'notes': notes,
