@@ -1,0 +1,187 @@
+"""``bag_player``: publish a rosbag2 recording's topics in (scaled) real time, with ``/clock``.
+
+There is no ``ros2 bag`` on this platform: the bag is read with rosbags and every message is
+published as the raw CDR bytes stored in the bag (rclpy publishers accept serialised
+messages), so nothing is decoded. Message time comes from the bag's log time; ``/clock``
+(rosgraph_msgs/Clock) follows it, so a tracker with ``use_sim_time`` sees bag time.
+
+Parameters: ``bag`` (rosbag2 directory, or a recording directory with ``bag/`` inside;
+required), ``rate`` (playback speed factor, 1.0), ``loop`` (restart at the end, false),
+``exit_when_done`` (true), ``publish_clock`` (true), ``topics`` (only these; default all),
+``start_delay`` (s before the first message, 0.5), ``wait_for_subscribers`` (wait up to
+``start_delay + 10`` s until every image topic has a subscriber, false).
+"""
+from __future__ import annotations
+
+import importlib
+import sys
+import threading
+import time
+from pathlib import Path
+
+import rclpy
+from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rosbags.highlevel import AnyReader
+from rosgraph_msgs.msg import Clock
+
+from mbtrack_ros.nodes.conversions import ns_to_stamp
+
+__all__ = ['BagPlayer', 'PlayerError', 'main', 'message_class']
+
+SENSOR_TYPES = {'sensor_msgs/msg/Image', 'sensor_msgs/msg/CompressedImage',
+                'sensor_msgs/msg/CameraInfo'}
+
+
+class PlayerError(RuntimeError):
+    """The bag cannot be played (one-line reason)."""
+
+
+def message_class(msgtype: str) -> type:
+    """rclpy message class of a rosbag type name such as ``sensor_msgs/msg/Image``."""
+    try:
+        package, kind, name = msgtype.split('/')
+        return getattr(importlib.import_module(f'{package}.{kind}'), name)
+    except (ValueError, ImportError, AttributeError) as err:
+        raise PlayerError(f'message type {msgtype!r} is not available in this ROS '
+                          'installation') from err
+
+
+def _resolve_bag(path: str) -> Path:
+    bag = Path(path)
+    if (bag / 'bag' / 'metadata.yaml').exists():
+        bag = bag / 'bag'
+    if not (bag / 'metadata.yaml').exists():
+        raise PlayerError(f'{path!r} is not a rosbag2 directory (no metadata.yaml)')
+    return bag
+
+
+class BagPlayer(Node):
+    """Plays one bag (see the module docstring); :meth:`play` blocks until done."""
+
+    def __init__(self, *, cli_args: list[str] | None = None, context=None) -> None:
+        super().__init__('bag_player', cli_args=cli_args, context=context)
+
+        def declare(name, default, description, lo=None, hi=None):
+            extra = {}
+            if lo is not None:
+                extra['floating_point_range'] = [
+                    FloatingPointRange(from_value=lo, to_value=hi, step=0.0)]
+            try:
+                return self.declare_parameter(
+                    name, default, ParameterDescriptor(description=description, **extra)).value
+            except Exception as err:  # rclpy raises several parameter exceptions
+                raise PlayerError(f'parameter {name!r}: {err}') from err
+
+        self.bag = _resolve_bag(str(declare('bag', '', 'rosbag2 directory to play')))
+        self.rate = float(declare('rate', 1.0, 'playback speed factor', 0.01, 100.0))
+        self.loop = bool(declare('loop', False, 'restart at the end'))
+        self.exit_when_done = bool(declare('exit_when_done', True, 'exit after the last message'))
+        self.publish_clock = bool(declare('publish_clock', True, 'publish /clock from bag time'))
+        self.start_delay = float(declare('start_delay', 0.5, 'seconds before playing',
+                                         0.0, 3600.0))
+        self.wait_for_subscribers = bool(declare(
+            'wait_for_subscribers', False, 'wait until every image topic has a subscriber'))
+        topics = [t for t in declare('topics', [''], 'topics to play (default all)') if t]
+        try:
+            self._reader = AnyReader([self.bag])
+            self._reader.open()
+        except Exception as err:  # rosbags raises several types for damaged bags
+            raise PlayerError(f'cannot open bag {self.bag}: {err}') from err
+        self._conns = [c for c in self._reader.connections if not topics or c.topic in topics]
+        if not self._conns:
+            raise PlayerError(f'bag {self.bag} has none of the requested topics')
+        reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+        self._pubs = {}
+        for c in self._conns:
+            if c.topic not in self._pubs:
+                qos = qos_profile_sensor_data if c.msgtype in SENSOR_TYPES else reliable
+                self._pubs[c.topic] = self.create_publisher(message_class(c.msgtype),
+                                                            c.topic, qos)
+        self._clock = self.create_publisher(Clock, '/clock', 10) if self.publish_clock else None
+        self.published = 0
+        self.loops = 0
+        self.done = threading.Event()
+        self._stop = threading.Event()
+
+    def stop(self) -> None:
+        self._stop.set()
+
+    def _wait_subscribers(self) -> None:
+        deadline = time.monotonic() + self.start_delay + 10.0
+        images = [p for c, p in self._pubs.items()
+                  if any(x.topic == c and x.msgtype in SENSOR_TYPES for x in self._conns)]
+        while time.monotonic() < deadline and not self._stop.is_set():
+            if all(p.get_subscription_count() > 0 for p in images):
+                return
+            time.sleep(0.05)
+        self.get_logger().warning('not every image topic has a subscriber; playing anyway')
+
+    def play(self) -> None:
+        """Publish every message at its (scaled) time; returns when done or stopped."""
+        if self.wait_for_subscribers:
+            self._wait_subscribers()
+        if self._stop.wait(self.start_delay):
+            return
+        try:
+            while not self._stop.is_set():
+                self._play_once()
+                self.loops += 1
+                if not self.loop:
+                    break
+        finally:
+            self.done.set()
+
+    def _play_once(self) -> None:
+        wall0 = bag0 = None
+        clock = Clock()
+        for conn, stamp, raw in self._reader.messages(connections=self._conns):
+            if self._stop.is_set():
+                return
+            if wall0 is None:
+                wall0, bag0 = time.monotonic(), stamp
+            delay = wall0 + (stamp - bag0) / 1e9 / self.rate - time.monotonic()
+            if delay > 0 and self._stop.wait(delay):
+                return
+            if self._clock is not None:
+                ns_to_stamp(stamp, clock.clock)
+                self._clock.publish(clock)
+            self._pubs[conn.topic].publish(bytes(raw))
+            self.published += 1
+
+    def destroy_node(self) -> None:
+        self._stop.set()
+        self._reader.close()
+        super().destroy_node()
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point ``bag_player``; exits non-zero when the bag cannot be played."""
+    rclpy.init(args=args)
+    node = None
+    code = 0
+    try:
+        node = BagPlayer()
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        player = threading.Thread(target=node.play, daemon=True)
+        player.start()
+        while rclpy.ok() and not (node.done.is_set() and node.exit_when_done):
+            executor.spin_once(timeout_sec=0.1)
+        node.get_logger().info(f'published {node.published} messages from {node.bag}')
+    except PlayerError as err:
+        print(f'bag_player: error: {err}', file=sys.stderr)
+        code = 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return code
+
+
+if __name__ == '__main__':
+    sys.exit(main())

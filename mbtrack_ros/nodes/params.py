@@ -1,0 +1,240 @@
+"""Parameters of ``tracker_node``: declared in one place, read once into frozen dataclasses.
+
+Parameter reference (YAML: ``tracker_node: ros__parameters: ...``; doubles written as
+``1.0``; per-camera entries under ``camera.<name>.``):
+
+==============================  =========  =================================================
+name                            type       meaning (default)
+==============================  =========  =================================================
+calibration_file                string     room calibration YAML (required)
+cameras                         string[]   cameras to use (default: all in the calibration)
+image_transport                 string     ``raw`` or ``compressed`` for every camera (raw)
+camera.<name>.image_topic       string     (``/<name>/image_raw``, ``.../compressed``)
+camera.<name>.transport         string     per-camera override of ``image_transport``
+camera.<name>.camera_info_topic string     optional CameraInfo topic for a size check ('')
+sync.slop                       double     largest stamp spread in a frame set, s (0.01)
+sync.timeout                    double     wait for a late camera, message time, s (0.2)
+output_frame_id                 string     frame of all outputs ('' = calibration frame)
+rescale_images                  bool       resize images whose size differs from the
+                                           calibration instead of dropping them (false)
+debug_images                    bool       always publish ``~/debug/<cam>/occlusion``
+                                           (default false: only when subscribed)
+diagnostics_period              double     seconds of message time between /diagnostics (1.0)
+init_ground_truth               string     ground-truth CSV to start/end tracks from ('')
+output_bag                      string     also write every output to this MCAP bag ('')
+max_pending_sets                int        frame sets queued for the tracker; older ones
+                                           are dropped when it falls behind (2)
+tracker.algorithm               string     hjs | separable | joint | registered baseline
+tracker.particles               int        particles per target (100)
+tracker.joint_particles         int        joint-filter particles (10000)
+tracker.sigma                   double     likelihood width, 000 Eq. 19 (0.12)
+tracker.d_occ                   double     occlusion penalty, 000 Eq. 26 (0.15)
+tracker.mrf_radius              double     exclusion radius, m, 000 §VI-A (0.4)
+tracker.use_mrf                 bool       spatial-exclusion MRF prior (true)
+tracker.seed                    int        random seed, -1 = fresh entropy (-1)
+tracker.release_time            double     placeholder (issue 4): s without support before
+                                           a track is released (2.0)
+detection.enabled               bool       placeholder (issue 4): automatic detection (false)
+detection.threshold             double     placeholder (issue 4): acquisition threshold (0.5)
+==============================  =========  =================================================
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Any
+
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.exceptions import (
+    InvalidParameterTypeException, InvalidParameterValueException, ParameterException)
+from rclpy.node import Node
+
+from mbtrack_ros.core.camera import CalibrationError, RoomCalibration
+from mbtrack_ros.core.tracker import TrackerConfig, TrackerError
+
+__all__ = ['TRANSPORTS', 'CameraInput', 'NodeParams', 'ParamsError', 'declare_and_read']
+
+TRANSPORTS = ('raw', 'compressed')
+
+
+class ParamsError(ValueError):
+    """A missing, out-of-range or inconsistent node parameter (one-line reason)."""
+
+
+@dataclass(frozen=True)
+class CameraInput:
+    """Where one camera's images come from."""
+
+    name: str
+    image_topic: str
+    transport: str
+    camera_info_topic: str = ''
+
+
+@dataclass(frozen=True)
+class NodeParams:
+    """Every tracker_node parameter, validated (see the module docstring)."""
+
+    calibration_file: str
+    cameras: tuple[CameraInput, ...]
+    tracker: TrackerConfig
+    slop_ns: int
+    timeout_ns: int
+    output_frame_id: str
+    rescale_images: bool
+    debug_images: bool
+    diagnostics_period_ns: int
+    init_ground_truth: str
+    output_bag: str
+    max_pending_sets: int
+    release_time: float
+    detection_enabled: bool
+    detection_threshold: float
+
+    @property
+    def camera_names(self) -> list[str]:
+        return [c.name for c in self.cameras]
+
+
+def _fr(lo: float, hi: float) -> dict[str, Any]:
+    return {'floating_point_range': [FloatingPointRange(from_value=lo, to_value=hi, step=0.0)]}
+
+
+def _ir(lo: int, hi: int) -> dict[str, Any]:
+    return {'integer_range': [IntegerRange(from_value=lo, to_value=hi, step=1)]}
+
+
+# name -> (default, description, extra descriptor fields). The one place parameters live.
+GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
+    'calibration_file': ('', 'room calibration YAML (required)', {}),
+    'cameras': ([''], 'camera names to use; empty = all cameras of the calibration', {}),
+    'image_transport': ('raw', 'raw | compressed: default image transport', {}),
+    'sync.slop': (0.01, 'largest stamp spread within one frame set, s', _fr(0.0, 1.0)),
+    'sync.timeout': (0.2, 'message-time wait for a late camera, s', _fr(0.001, 10.0)),
+    'output_frame_id': ('', 'frame id of all outputs; empty = calibration frame', {}),
+    'rescale_images': (False, 'resize images whose size differs from the calibration', {}),
+    'debug_images': (False, 'always compute the occlusion debug images', {}),
+    'diagnostics_period': (1.0, 'message time between /diagnostics messages, s',
+                           _fr(0.05, 60.0)),
+    'init_ground_truth': ('', 'ground-truth CSV used to start and end tracks', {}),
+    'output_bag': ('', 'also write all outputs to this MCAP bag directory', {}),
+    'max_pending_sets': (2, 'frame sets queued for the tracker before dropping the oldest',
+                         _ir(1, 100)),
+    'tracker.algorithm': ('hjs', 'hjs | separable | joint | a registered baseline', {}),
+    'tracker.particles': (100, 'particles per target (000 §VI)', _ir(1, 100_000)),
+    'tracker.joint_particles': (10_000, 'joint-filter particles', _ir(1, 1_000_000)),
+    'tracker.sigma': (0.12, 'likelihood width sigma (000 Eq. 19)', _fr(1e-4, 10.0)),
+    'tracker.d_occ': (0.15, 'occlusion penalty d_occ (000 Eq. 26)', _fr(0.0, 10.0)),
+    'tracker.mrf_radius': (0.4, 'spatial exclusion radius, m (000 §VI-A)', _fr(0.0, 5.0)),
+    'tracker.use_mrf': (True, 'apply the spatial-exclusion MRF prior', {}),
+    'tracker.seed': (-1, 'random seed; -1 = fresh entropy', _ir(-1, 2 ** 31 - 1)),
+    'tracker.release_time': (2.0, 'placeholder (detection): s before a lost track is released',
+                             _fr(0.0, 3600.0)),
+    'detection.enabled': (False, 'placeholder: automatic detection of new people', {}),
+    'detection.threshold': (0.5, 'placeholder: acquisition threshold', _fr(0.0, 1.0)),
+}
+
+
+def _declare(node: Node, name: str, default: Any, description: str,
+             extra: dict[str, Any]) -> Any:
+    descriptor = ParameterDescriptor(description=description, **extra)
+    try:
+        return node.declare_parameter(name, default, descriptor).value
+    except InvalidParameterTypeException as err:
+        raise ParamsError(f'parameter {name!r}: wrong type (expected '
+                          f'{type(default).__name__}, e.g. {default!r})') from err
+    except InvalidParameterValueException as err:
+        rng = extra.get('floating_point_range') or extra.get('integer_range')
+        bounds = f' (allowed {rng[0].from_value} .. {rng[0].to_value})' if rng else ''
+        raise ParamsError(f'parameter {name!r}: value out of range{bounds}') from err
+    except ParameterException as err:
+        raise ParamsError(f'parameter {name!r}: {err}') from err
+
+
+def declare_and_read(node: Node) -> tuple[NodeParams, RoomCalibration]:
+    """Declare every parameter on ``node``, validate and return them with the calibration.
+
+    Raises:
+        ParamsError: with a one-line reason (bad enum or range, missing calibration file,
+            camera unknown to the calibration ...).
+    """
+    v = {name: _declare(node, name, *spec) for name, spec in GLOBAL_PARAMETERS.items()}
+    calib_file = str(v['calibration_file'])
+    if not calib_file:
+        raise ParamsError('parameter calibration_file is required')
+    if not Path(calib_file).is_file():
+        raise ParamsError(f'calibration_file {calib_file!r} does not exist')
+    try:
+        calibration = RoomCalibration.load(calib_file)
+    except CalibrationError as err:
+        raise ParamsError(str(err)) from err
+    names = [str(c) for c in v['cameras'] if str(c)] or calibration.names
+    try:
+        calibration = calibration.subset(names)
+    except CalibrationError as err:
+        raise ParamsError(f'parameter cameras: {err}') from err
+    default_transport = str(v['image_transport'])
+    if default_transport not in TRANSPORTS:
+        raise ParamsError(f'parameter image_transport: {default_transport!r} is not one of '
+                          f'{", ".join(TRANSPORTS)}')
+    cameras = []
+    for cam in names:
+        transport = str(_declare(node, f'camera.{cam}.transport', default_transport,
+                                 f'raw | compressed for {cam}', {}))
+        if transport not in TRANSPORTS:
+            raise ParamsError(f'parameter camera.{cam}.transport: {transport!r} is not one '
+                              f'of {", ".join(TRANSPORTS)}')
+        suffix = '/compressed' if transport == 'compressed' else ''
+        topic = str(_declare(node, f'camera.{cam}.image_topic', f'/{cam}/image_raw{suffix}',
+                             f'image topic of {cam}', {}))
+        info = str(_declare(node, f'camera.{cam}.camera_info_topic', '',
+                            f'optional CameraInfo topic of {cam} (size check)', {}))
+        if not topic:
+            raise ParamsError(f'parameter camera.{cam}.image_topic is empty')
+        cameras.append(CameraInput(cam, topic, transport, info))
+    slop_ns = int(round(v['sync.slop'] * 1e9))
+    timeout_ns = int(round(v['sync.timeout'] * 1e9))
+    if timeout_ns <= slop_ns:
+        raise ParamsError(f'sync.timeout ({v["sync.timeout"]}) must exceed sync.slop '
+                          f'({v["sync.slop"]})')
+    gt = str(v['init_ground_truth'])
+    if gt and not Path(gt).is_file():
+        raise ParamsError(f'init_ground_truth {gt!r} does not exist')
+    tracker_values: dict[str, Any] = {
+        'algorithm': str(v['tracker.algorithm']), 'particles': int(v['tracker.particles']),
+        'joint_particles': int(v['tracker.joint_particles']),
+        'sigma': float(v['tracker.sigma']), 'd_occ': float(v['tracker.d_occ']),
+        'mrf_radius': float(v['tracker.mrf_radius']), 'use_mrf': bool(v['tracker.use_mrf']),
+        'seed': None if v['tracker.seed'] < 0 else int(v['tracker.seed']),
+        # hooks for automatic detection (issue 4): passed on once TrackerConfig has them
+        'release_time': float(v['tracker.release_time']),
+        'detection_enabled': bool(v['detection.enabled']),
+        'detection_threshold': float(v['detection.threshold']),
+    }
+    known = {f.name for f in fields(TrackerConfig)}
+    try:
+        tracker = TrackerConfig.from_dict({k: x for k, x in tracker_values.items()
+                                           if k in known})
+    except TrackerError as err:
+        raise ParamsError(str(err)) from err
+    _check_algorithm(tracker.algorithm)
+    params = NodeParams(
+        calibration_file=calib_file, cameras=tuple(cameras), tracker=tracker,
+        slop_ns=slop_ns, timeout_ns=timeout_ns,
+        output_frame_id=str(v['output_frame_id']) or calibration.frame_id,
+        rescale_images=bool(v['rescale_images']), debug_images=bool(v['debug_images']),
+        diagnostics_period_ns=int(round(v['diagnostics_period'] * 1e9)),
+        init_ground_truth=gt, output_bag=str(v['output_bag']),
+        max_pending_sets=int(v['max_pending_sets']),
+        release_time=float(v['tracker.release_time']),
+        detection_enabled=bool(v['detection.enabled']),
+        detection_threshold=float(v['detection.threshold']))
+    return params, calibration
+
+
+def _check_algorithm(name: str) -> None:
+    from mbtrack_ros.core.filters import available_filters
+    names = available_filters()
+    if name not in names:
+        raise ParamsError(f'parameter tracker.algorithm: {name!r} is not one of '
+                          f'{", ".join(names)}')

@@ -1,0 +1,425 @@
+"""``tracker_node``: multi-camera people tracking as a ROS 2 node.
+
+Inputs (``qos_profile_sensor_data``): one image topic per camera (``sensor_msgs/Image`` or
+``sensor_msgs/CompressedImage``), optional ``sensor_msgs/CameraInfo`` per camera.
+Outputs (reliable, stamped with the frame set's time, frame ``output_frame_id``):
+``~/people`` (PoseArray), ``~/tracks`` (PointCloud2), ``~/markers`` (MarkerArray),
+``~/debug/<camera>/occlusion`` (Image, only computed when subscribed or enabled) and
+``/diagnostics`` (DiagnosticArray). See :mod:`mbtrack_ros.nodes.params` for parameters and
+:mod:`mbtrack_ros.nodes.messages` for the message layouts.
+
+Threading: image callbacks only convert the image and hand it to the
+:class:`~mbtrack_ros.recording.sync.FrameSetSynchronizer`; complete (or timed-out) frame sets
+wake the tracker step through a guard condition in its own mutually exclusive callback
+group, run by a :class:`~rclpy.executors.MultiThreadedExecutor`. Time is message time only.
+
+Track start: until automatic detection (issue 4) is part of :meth:`Tracker.step`, tracks are
+started and ended from the ``init_ground_truth`` CSV (oracle initialisation, for
+experiments); :meth:`TrackerNode.start_track` is the hook for other sources.
+"""
+from __future__ import annotations
+
+import sys
+import threading
+import time
+from collections import deque
+from collections.abc import Sequence
+
+import cv2
+import numpy as np
+import rclpy
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image
+
+from mbtrack_ros.core.appearance import AppearanceError, PersonModel, model_from_images
+from mbtrack_ros.core.camera import RoomCalibration
+from mbtrack_ros.core.initiation import KeyView, body_height, initial_state, plan_key_views
+from mbtrack_ros.core.state import FrameResult
+from mbtrack_ros.core.tracker import Tracker, TrackerError
+from mbtrack_ros.nodes import messages
+from mbtrack_ros.nodes.conversions import (
+    ImageConversionError, compressed_to_rgb, image_to_rgb, rgb_to_image, stamp_to_ns)
+from mbtrack_ros.nodes.params import NodeParams, ParamsError, declare_and_read
+from mbtrack_ros.recording.csvfiles import CsvFormatError, GroundTruthRow, read_ground_truth
+from mbtrack_ros.recording.sync import FrameSet, FrameSetSynchronizer
+
+__all__ = ['GroundTruthInitializer', 'TrackerNode', 'main']
+
+OUTPUT_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+WARN_PERIOD_S = 10.0
+
+
+class GroundTruthInitializer:
+    """Starts and ends tracks from ground truth (oracle initialisation, 000 §VI "by hand").
+
+    Key views are planned from the ground truth alone (:func:`plan_key_views`: unoccluded,
+    large views among each person's first frames). While frame sets stream in, the images of
+    planned views are turned into appearance models (:func:`model_from_images`); a person's
+    track starts at the first frame set where its model has a key view, with the
+    ground-truth state of that frame (:func:`initial_state`), and ends when the person
+    leaves the ground truth. Later planned views are added to the model as they arrive.
+    """
+
+    def __init__(self, calibration: RoomCalibration, rows: Sequence[GroundTruthRow], *,
+                 tolerance_ns: int = 20_000_000, width: float = 0.5) -> None:
+        self.calibration = calibration
+        self.tolerance_ns = int(tolerance_ns)
+        self.width = float(width)
+        rows = [r for r in rows]
+        self._frames_by_stamp: dict[int, int] = {}
+        for r in rows:
+            self._frames_by_stamp.setdefault(int(r.stamp_ns), int(r.frame))
+        self._stamps = np.array(sorted(self._frames_by_stamp), dtype=np.int64)
+        self._person_rows: dict[int, list[GroundTruthRow]] = {}
+        for r in sorted(rows, key=lambda r: r.stamp_ns):
+            self._person_rows.setdefault(r.person_id, []).append(r)
+        self._present: dict[int, set[int]] = {}
+        for r in rows:
+            self._present.setdefault(int(r.frame), set()).add(r.person_id)
+        plan = plan_key_views(calibration, rows, width=self.width) if rows else {}
+        self._views_at: dict[int, list[KeyView]] = {}
+        for views in plan.values():
+            for v in views:
+                self._views_at.setdefault(int(v.frame), []).append(v)
+        self._heights = {pid: body_height(rs) for pid, rs in self._person_rows.items()}
+        self.unplanned = sorted(pid for pid in self._person_rows if not plan.get(pid))
+        self._models: dict[int, PersonModel] = {}
+        self._track_of: dict[int, int] = {}  # person id -> track id
+
+    def reset(self) -> None:
+        """Forget the started tracks and learnt models (the recording restarted)."""
+        self._models.clear()
+        self._track_of.clear()
+
+    def frame_at(self, stamp_ns: int) -> int | None:
+        """Ground-truth frame index nearest ``stamp_ns`` within the tolerance, else None."""
+        if self._stamps.size == 0:
+            return None
+        i = int(np.searchsorted(self._stamps, stamp_ns))
+        j = min((k for k in (i - 1, i) if 0 <= k < self._stamps.size),
+                key=lambda k: abs(int(self._stamps[k]) - stamp_ns))
+        if abs(int(self._stamps[j]) - stamp_ns) > self.tolerance_ns:
+            return None
+        return self._frames_by_stamp[int(self._stamps[j])]
+
+    def update(self, node: TrackerNode, stamp_ns: int,
+               images: dict[str, np.ndarray]) -> list[int]:
+        """Start/end tracks on ``node`` for this frame set; returns the ended track ids."""
+        frame = self.frame_at(stamp_ns)
+        if frame is None:
+            return []
+        present = self._present.get(frame, set())
+        ended = []
+        for pid in [p for p in self._track_of if p not in present]:
+            tid = self._track_of.pop(pid)
+            node.end_track(tid)
+            ended.append(tid)
+        for v in self._views_at.get(frame, []):
+            if v.camera not in images:
+                continue
+            height = self._heights[v.person_id]
+            try:
+                single = model_from_images({v.camera: images[v.camera]}, self.calibration,
+                                           v.state, height, self.width)
+            except AppearanceError as err:
+                node.warn_once('gt-model', f'ground-truth key view unusable: {err}')
+                continue
+            model = self._models.setdefault(
+                v.person_id, PersonModel(height=height, width=self.width))
+            for angle, hists in zip(single.view_angles, single.histograms):
+                model.add_view(float(angle), hists)  # 003 §4: views within 20 deg merge
+        for pid in sorted(present):
+            model = self._models.get(pid)
+            if pid in self._track_of or model is None or model.view_angles.size == 0:
+                continue
+            rows = self._person_rows[pid]
+            index = next(i for i, r in enumerate(rows) if r.frame == frame)
+            tid = node.start_track(model, initial_state(rows, index), stamp_ns)
+            if tid is not None:
+                self._track_of[pid] = tid
+        return ended
+
+
+class TrackerNode(Node):
+    """The tracker node (see the module docstring). Raises :class:`ParamsError` at start."""
+
+    def __init__(self, *, cli_args: list[str] | None = None, context=None,
+                 tracker: Tracker | None = None) -> None:
+        super().__init__('tracker_node', cli_args=cli_args, context=context)
+        self.params: NodeParams
+        self.params, self.calibration = declare_and_read(self)
+        p = self.params
+        self.tracker = tracker or Tracker(self.calibration, p.tracker,
+                                          rng=np.random.default_rng(p.tracker.seed))
+        self.sync = FrameSetSynchronizer(p.camera_names, p.slop_ns, p.timeout_ns)
+        self._lock = threading.Lock()
+        self._pending: deque[FrameSet] = deque()
+        self._warned: dict[str, float] = {}
+        self._dropped = 0
+        self._dropped_sets = 0
+        self._resets = 0
+        self._last_stamp: int | None = None
+        self._last_diag: int | None = None
+        self._step_times: list[float] = []
+        self._rate_window: dict[str, list[int]] = {c: [] for c in p.camera_names}
+        self._last_missing: tuple[str, ...] = ()
+        self._ground_truth: GroundTruthInitializer | None = None
+        if p.init_ground_truth:
+            try:
+                rows = read_ground_truth(p.init_ground_truth)
+            except CsvFormatError as err:
+                raise ParamsError(f'init_ground_truth: {err}') from err
+            self._ground_truth = GroundTruthInitializer(self.calibration, rows)
+            if self._ground_truth.unplanned:
+                self.get_logger().warning(
+                    'no unoccluded key view in the ground truth for person(s) '
+                    f'{self._ground_truth.unplanned}: they will not be tracked')
+        self._output_bag = None
+        if p.output_bag:
+            from mbtrack_ros.nodes.output_bag import OutputBagError, OutputBagWriter
+            try:
+                self._output_bag = OutputBagWriter(p.output_bag, self.calibration,
+                                                   p.camera_names,
+                                                   frame_id=p.output_frame_id)
+            except OutputBagError as err:
+                raise ParamsError(f'output_bag: {err}') from err
+
+        # outputs
+        self.pub_people = self.create_publisher(messages.PoseArray, '~/people', OUTPUT_QOS)
+        self.pub_tracks = self.create_publisher(messages.PointCloud2, '~/tracks', OUTPUT_QOS)
+        self.pub_markers = self.create_publisher(messages.MarkerArray, '~/markers', OUTPUT_QOS)
+        self.pub_diag = self.create_publisher(messages.DiagnosticArray, '/diagnostics',
+                                              OUTPUT_QOS)
+        self.pub_debug = {c: self.create_publisher(Image, f'~/debug/{c}/occlusion', OUTPUT_QOS)
+                          for c in p.camera_names}
+        # inputs: cheap callbacks, reentrant so cameras do not wait for each other
+        inputs = ReentrantCallbackGroup()
+        self._subs = []
+        for cam in p.cameras:
+            kind = CompressedImage if cam.transport == 'compressed' else Image
+            self._subs.append(self.create_subscription(
+                kind, cam.image_topic, lambda msg, c=cam.name: self._on_image(c, msg),
+                qos_profile_sensor_data, callback_group=inputs))
+            if cam.camera_info_topic:
+                self._subs.append(self.create_subscription(
+                    CameraInfo, cam.camera_info_topic,
+                    lambda msg, c=cam.name: self._on_camera_info(c, msg),
+                    qos_profile_sensor_data, callback_group=inputs))
+        # the tracker step: its own mutually exclusive group, woken by a guard condition
+        self._step_group = MutuallyExclusiveCallbackGroup()
+        self._wake = self.create_guard_condition(self._on_frame_sets,
+                                                 callback_group=self._step_group)
+        self.get_logger().info(
+            f'tracking with {p.tracker.algorithm} on {len(p.cameras)} camera(s): '
+            + ', '.join(f'{c.name} <- {c.image_topic} ({c.transport})' for c in p.cameras))
+
+    # -- hooks ----------------------------------------------------------------------------
+    def start_track(self, model: PersonModel, state: np.ndarray, stamp_ns: int) -> int | None:
+        """Start a track with appearance ``model`` at ``state`` (6,); None if refused.
+
+        The hook for track sources outside :meth:`Tracker.step` (ground truth for now;
+        automatic detection, issue 4, will start tracks inside the step).
+        """
+        try:
+            return self.tracker.add_track(model, state, stamp_ns)
+        except TrackerError as err:
+            self.warn_once('add_track', f'cannot start a track: {err}')
+            return None
+
+    def end_track(self, track_id: int) -> None:
+        try:
+            self.tracker.remove_track(track_id)
+        except TrackerError as err:
+            self.warn_once('remove_track', f'cannot end track {track_id}: {err}')
+
+    # -- callbacks ------------------------------------------------------------------------
+    def warn_once(self, cause: str, text: str) -> None:
+        """Log once per cause every WARN_PERIOD_S seconds (throttled per cause)."""
+        now = time.monotonic()
+        if now - self._warned.get(cause, -1e9) >= WARN_PERIOD_S:
+            self._warned[cause] = now
+            self.get_logger().warning(text)
+
+    def _on_camera_info(self, camera: str, msg: CameraInfo) -> None:
+        cam = self.calibration.cameras[camera]
+        if (msg.width, msg.height) != (cam.width, cam.height):
+            self.warn_once(f'{camera}:info', f'{camera}: CameraInfo says {msg.width}x{msg.height}'
+                       f', the calibration {cam.width}x{cam.height}')
+
+    def _on_image(self, camera: str, msg: Image | CompressedImage) -> None:
+        stamp = stamp_to_ns(msg.header.stamp)
+        try:
+            rgb = (compressed_to_rgb(msg) if isinstance(msg, CompressedImage)
+                   else image_to_rgb(msg))
+        except ImageConversionError as err:
+            self._dropped += 1
+            self.warn_once(f'{camera}:convert', f'{camera}: dropping bad image: {err}')
+            return
+        cam = self.calibration.cameras[camera]
+        if rgb.shape[:2] != (cam.height, cam.width):
+            if not self.params.rescale_images:
+                self._dropped += 1
+                self.warn_once(f'{camera}:size', f'{camera}: image is {rgb.shape[1]}x'
+                           f'{rgb.shape[0]}, calibration {cam.width}x{cam.height}: dropped '
+                           '(set rescale_images to resize)')
+                return
+            rgb = cv2.resize(rgb, (cam.width, cam.height), interpolation=cv2.INTER_AREA)
+        if msg.header.frame_id and msg.header.frame_id != cam.frame_id:
+            self.warn_once(f'{camera}:frame', f'{camera}: unexpected frame id '
+                       f'{msg.header.frame_id!r} (calibration: {cam.frame_id!r})')
+        with self._lock:
+            self._rate_window[camera].append(stamp)
+            ready = self.sync.add(camera, stamp, rgb)
+            for fs in ready:
+                self._pending.append(fs)
+            while len(self._pending) > self.params.max_pending_sets:
+                old = self._pending.popleft()
+                if old.after_reset and self._pending:
+                    self._pending[0].after_reset = True  # keep the reset request
+                self._dropped_sets += 1
+        if ready:
+            self._wake.trigger()
+
+    def _on_frame_sets(self) -> None:
+        while True:
+            with self._lock:
+                if not self._pending:
+                    return
+                fs = self._pending.popleft()
+            try:
+                self.process(fs)
+            except Exception as err:  # noqa: BLE001 - a bad frame must not kill the node
+                self._dropped_sets += 1
+                self.warn_once(f'step:{type(err).__name__}',
+                           f'frame set at {fs.stamp_ns} ns dropped: '
+                           f'{type(err).__name__}: {err}')
+
+    # -- processing -----------------------------------------------------------------------
+    def reset(self, stamp_ns: int, reason: str) -> None:
+        """Reset the tracker (and ground-truth bookkeeping), clear the markers."""
+        self._resets += 1
+        self.get_logger().warning(f'resetting the tracker: {reason}')
+        self.tracker.reset()
+        if self._ground_truth is not None:
+            self._ground_truth.reset()
+        clear = messages.delete_all_markers(stamp_ns, self.params.output_frame_id)
+        self.pub_markers.publish(clear)
+        if self._output_bag is not None:
+            self._output_bag.write_markers(stamp_ns, clear)
+
+    def process(self, fs: FrameSet) -> FrameResult:
+        """Run one tracker step on a frame set and publish everything."""
+        if fs.after_reset or (self._last_stamp is not None and fs.stamp_ns < self._last_stamp):
+            self.reset(fs.stamp_ns, 'image stamps jumped or went backwards '
+                       f'(now {fs.stamp_ns} ns, before {self._last_stamp} ns)')
+        if fs.missing:
+            self.warn_once('missing', f'frame set without camera(s) {", ".join(fs.missing)}')
+        ended = []
+        if self._ground_truth is not None:
+            ended = self._ground_truth.update(self, fs.stamp_ns, fs.images)
+        # (issue 4) automatic detection will run inside tracker.step and report new tracks
+        t0 = time.perf_counter()
+        try:
+            result = self.tracker.step(fs.stamp_ns, fs.images)
+        except TrackerError as err:
+            self.reset(fs.stamp_ns, str(err))
+            result = self.tracker.step(fs.stamp_ns, fs.images)
+        self._step_times.append(time.perf_counter() - t0)
+        result.ended = list(result.ended) + [t for t in ended if t not in result.ended]
+        self._last_stamp = fs.stamp_ns
+        self._last_missing = fs.missing
+        self.publish(result, fs)
+        return result
+
+    def publish(self, result: FrameResult, fs: FrameSet) -> None:
+        frame = self.params.output_frame_id
+        cams = self.params.camera_names
+        people = messages.people_message(result, frame)
+        cloud = messages.tracks_cloud(result, cams, frame)
+        markers = messages.markers_message(result, frame)
+        self.pub_people.publish(people)
+        self.pub_tracks.publish(cloud)
+        self.pub_markers.publish(markers)
+        debug = {}
+        for cam, pub in self.pub_debug.items():
+            if cam in fs.images and (self.params.debug_images
+                                     or pub.get_subscription_count() > 0):
+                debug[cam] = self.debug_image(cam, fs.images[cam], result)
+                pub.publish(debug[cam])
+        diag = None
+        if self._last_diag is None or (
+                result.stamp_ns - self._last_diag >= self.params.diagnostics_period_ns):
+            diag = messages.diagnostics_message(result.stamp_ns, self.snapshot(result))
+            self.pub_diag.publish(diag)
+            self._last_diag = result.stamp_ns
+        if self._output_bag is not None:
+            self._output_bag.write(result, people=people, cloud=cloud, markers=markers,
+                                   diagnostics=diag, debug=debug)
+
+    def debug_image(self, camera: str, rgb: np.ndarray, result: FrameResult) -> Image:
+        """``~/debug/<camera>/occlusion``: occlusion maps and silhouettes (000 Fig. 4)."""
+        from mbtrack_ros.nodes.debug import occlusion_layers
+        occ, sil = occlusion_layers(self.tracker, self.calibration.cameras[camera], result)
+        out = messages.debug_overlay(rgb, occlusion=occ, silhouettes=sil)
+        return rgb_to_image(out, messages.make_header(
+            result.stamp_ns, self.calibration.cameras[camera].frame_id))
+
+    def snapshot(self, result: FrameResult) -> messages.DiagnosticsSnapshot:
+        with self._lock:
+            rates = {}
+            for cam, stamps in self._rate_window.items():
+                span = (max(stamps) - min(stamps)) / 1e9 if len(stamps) > 1 else 0.0
+                rates[cam] = (len(stamps) - 1) / span if span > 0 else 0.0
+                self._rate_window[cam] = stamps[-1:]
+            counters = self.sync.counters
+            snap = messages.DiagnosticsSnapshot(
+                input_rate_hz=rates,
+                step_seconds=float(np.mean(self._step_times)) if self._step_times else 0.0,
+                frame_sets=counters.complete, incomplete_sets=counters.incomplete,
+                dropped_frames=self._dropped + counters.dropped_frames + self._dropped_sets,
+                tracks=len(result.tracks), missing_cameras=tuple(self._last_missing),
+                resets=self._resets)
+            self._step_times.clear()
+        return snap
+
+    def flush(self) -> None:
+        """Process every frame set still buffered (end of a replay)."""
+        with self._lock:
+            for fs in self.sync.flush():
+                self._pending.append(fs)
+        self._on_frame_sets()
+
+    def destroy_node(self) -> None:
+        if self._output_bag is not None:
+            self._output_bag.close()
+            self._output_bag = None
+        super().destroy_node()
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point ``tracker_node``; exits non-zero on bad parameters."""
+    rclpy.init(args=args)
+    node = None
+    code = 0
+    try:
+        node = TrackerNode()
+        executor = MultiThreadedExecutor(num_threads=3)
+        executor.add_node(node)
+        executor.spin()
+    except ParamsError as err:
+        print(f'tracker_node: error: {err}', file=sys.stderr)
+        code = 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return code
+
+
+if __name__ == '__main__':
+    sys.exit(main())
