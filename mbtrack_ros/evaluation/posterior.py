@@ -138,7 +138,8 @@ class ParticleRecorder:
             raise EvaluationError('particle weights must be finite, non-negative, not all 0')
         if not np.all(np.isfinite(xy)):
             raise EvaluationError('particle positions must be finite')
-        self._rows.append((int(stamp_ns), int(track_id), xy, w / w.sum()))
+        self._rows.append((int(stamp_ns), int(track_id), xy.astype(np.float32),
+                           (w / w.sum()).astype(np.float32)))
 
     def add_frame(self, result: FrameResult) -> None:
         """Add every track of a tracker result that carries particles and weights."""
