@@ -12,7 +12,7 @@ from mbtrack_ros.commands import eval as eval_cmd
 from mbtrack_ros.core.state import FrameResult, TrackEstimate
 from mbtrack_ros.evaluation import (
     EvaluationError, ParticleRecorder, ParticleSet, clear_mot, evaluate_many, format_table,
-    load_particles, posterior_mass, posterior_mass_curve, save_particles)
+    load_particles, posterior_mass, posterior_mass_curve, save_particles, write_report)
 from mbtrack_ros.evaluation.plots import (
     plot_localisation_error, plot_posterior_curves, plot_trajectories)
 from mbtrack_ros.recording.csvfiles import (
@@ -231,6 +231,24 @@ def test_evaluate_many_sums_counts_and_weights_motp():
     assert len(lines) == 5 and lines[-1].startswith('overall')
     assert len({len(line) for line in lines}) == 1  # aligned
     json.dumps(table.to_dict())
+
+
+def test_write_report_for_several_sequences(tmp_path):
+    truth = walk(1, range(6), 1.0)
+    good = [tr(r.frame, 1, r.x + 0.2, r.y) for r in truth]
+    table = evaluate_many({'s1': (good, truth), 's2': (good[:3], truth)})
+    ps = _particles_for(truth, [1] * 6, [[0.2, 0.2]] * 6, [[0.5, 0.5]] * 6)
+    post = {'s1': posterior_mass(ps, truth, good)}
+    paths = write_report(tmp_path, table.rows(), posterior=post, notes=['something odd'])
+    doc = json.loads(paths['json'].read_text())
+    assert [s['name'] for s in doc['sequences']] == ['s1', 's2', 'overall']
+    assert doc['sequences'][2]['misses'] == 3 and doc['sequences'][2]['gt_objects'] == 12
+    assert doc['posterior_mass']['s1']['mass_within_0_5m'] == pytest.approx(1.0, abs=1e-6)
+    assert doc['warnings'] == ['something odd']
+    md = paths['markdown'].read_text().splitlines()
+    rows = [line for line in md if line.startswith(('| s1 ', '| s2 ', '| overall '))]
+    assert len(rows) == 3 and rows[0].split('|')[-2].strip() == '1.000'
+    assert rows[1].split('|')[2].strip() == '50.0 %'  # s2: MOTA 1 - 3/6
 
 
 # ---------------------------------------------------------------- posterior-mass curve
