@@ -1,0 +1,18 @@
+"""Automatic target detection, model acquisition and track release (003 §4), and the
+visibility/existence auxiliary processes (001 §3) in :mod:`mbtrack_ros.core.existence`.
+
+* :mod:`.background` - per-camera Y-Cb-Cr background model and foreground masks;
+* :mod:`.features` - single-view detection features: foreground coverage, contour
+  likelihood (003 Eq. 5), upper-body colour symmetry;
+* :mod:`.detector` - coarse-to-fine grid search over the floor, multi-camera fusion,
+  non-maximum suppression and confirmation over consecutive frames;
+* :mod:`.acquisition` - key-view appearance model of a newly detected person;
+* :mod:`.release` - termination of tracks without foreground support.
+"""
+from __future__ import annotations
+
+__all__ = ['DetectionError']
+
+
+class DetectionError(ValueError):
+    """Bad input to the detection subpackage (image size, configuration, missing model)."""

@@ -1,0 +1,143 @@
+"""Background model (003 §4.2): bootstrap, masked temporal filtering, foreground test."""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from mbtrack_ros.core.detection import DetectionError
+from mbtrack_ros.core.detection.background import (
+    BackgroundBank, BackgroundConfig, BackgroundModel, _to_ycc, clean_mask)
+
+H, W = 120, 160
+
+
+def scene(rng: np.random.Generator) -> np.ndarray:
+    """A smooth textured empty room image (H, W, 3) uint8."""
+    base = rng.integers(50, 180, size=(6, 8, 3)).astype(np.uint8)
+    return cv2.resize(base, (W, H), interpolation=cv2.INTER_CUBIC)
+
+
+def noisy(image: np.ndarray, rng: np.random.Generator, amp: int = 4) -> np.ndarray:
+    return np.clip(image.astype(np.int16) + rng.integers(-amp, amp + 1, image.shape),
+                   0, 255).astype(np.uint8)
+
+
+def test_bootstrap_is_median_and_noise_is_background():
+    rng = np.random.default_rng(0)
+    bg = scene(rng)
+    frames = [noisy(bg, rng) for _ in range(5)]
+    model = BackgroundModel(BackgroundConfig(bootstrap_frames=5))
+    for f in frames:
+        assert model.apply(f) is None          # still collecting bootstrap frames
+    assert model.ready
+    expected = np.median(np.stack([_to_ycc(f) for f in frames]), axis=0)
+    np.testing.assert_allclose(model.background_ycc, expected, atol=1e-4)
+    for _ in range(5):
+        fg = model.apply(noisy(bg, rng))
+        assert fg.dtype == bool and fg.shape == (H, W)
+        assert fg.mean() < 0.002
+
+
+def test_temporal_filter_matches_formula_and_converges():
+    rng = np.random.default_rng(1)
+    a, b = scene(rng), scene(rng)
+    cfg = BackgroundConfig(alpha=0.8, motion_threshold=255.0, mask_dilation=0)
+    model = BackgroundModel(cfg)
+    model.bootstrap([a])
+    before = model.background_ycc.copy()
+    exclude = np.zeros((H, W), bool)
+    exclude[10:30, 20:50] = True
+    model.update(b, exclude=exclude)
+    after = model.background_ycc
+    # 003 §4.2: B_t = alpha B_{t-1} + (1 - alpha) I_t on updated pixels, unchanged elsewhere
+    np.testing.assert_allclose(after[~exclude], (0.8 * before + 0.2 * _to_ycc(b))[~exclude],
+                               atol=1e-3)
+    np.testing.assert_array_equal(after[exclude], before[exclude])
+    # repeated updates converge to the new scene: error shrinks like alpha^n
+    for _ in range(40):
+        model.update(b)
+    err = np.abs(model.background_ycc - _to_ycc(b)).max()
+    assert err < 0.8 ** 40 * 255 + 1e-3
+    assert model.foreground(b).mean() == 0.0
+
+
+def test_tracked_person_is_not_absorbed_but_untracked_is():
+    rng = np.random.default_rng(2)
+    bg = scene(rng)
+    person = bg.copy()
+    person[30:100, 60:85] = (200, 30, 40)
+    region = np.zeros((H, W), bool)
+    region[30:100, 60:85] = True
+    cfg = BackgroundConfig(alpha=0.9)
+    masked, free = BackgroundModel(cfg), BackgroundModel(cfg)
+    masked.bootstrap([bg])
+    free.bootstrap([bg])
+    for _ in range(80):                        # a parked person, ~5 s at 15 fps
+        frame = noisy(person, rng)
+        fg_m = masked.apply(frame, exclude=region)
+        fg_f = free.apply(frame)
+    assert fg_m[region].mean() > 0.95          # still foreground while tracked
+    assert fg_f[region].mean() < 0.05          # absorbed without the track mask
+    assert fg_m[~region].mean() < 0.01
+
+
+def test_persistent_motion_region_is_not_updated():
+    rng = np.random.default_rng(3)
+    bg = scene(rng)
+    model = BackgroundModel(BackgroundConfig(alpha=0.5, mask_dilation=2))
+    model.bootstrap([bg])
+    for k in range(12):                        # a flickering rectangle
+        frame = bg.copy()
+        frame[20:40, 100:140] = (255, 255, 255) if k % 2 else (0, 0, 0)
+        model.apply(frame)
+        if k == 3:                             # motion has become persistent by now
+            assert model.persistent_motion[25:35, 110:130].all()
+            before = model.background_ycc.copy()
+    assert model.persistent_motion[25:35, 110:130].all()
+    np.testing.assert_allclose(model.background_ycc[25:35, 110:130],
+                               before[25:35, 110:130])
+
+
+def test_global_illumination_change_is_not_foreground():
+    rng = np.random.default_rng(4)
+    bg = scene(rng)
+    model = BackgroundModel()
+    model.bootstrap([bg])
+    brighter = np.clip(bg.astype(np.float64) * 1.25, 0, 255).astype(np.uint8)
+    assert model.foreground(brighter).mean() < 0.02
+    assert model.gain == pytest.approx(1.25, abs=0.05)
+    # without gain normalisation a 25 % change exceeds the luminance threshold
+    diff = np.abs(_to_ycc(brighter)[..., 0] - _to_ycc(bg)[..., 0])
+    assert (diff > model.config.luma_threshold).mean() > 0.3
+
+
+def test_clean_mask_drops_small_blobs_and_keeps_large():
+    m = np.zeros((H, W), bool)
+    m[10:40, 10:40] = True
+    m[80, 80] = True
+    m[60:63, 120:123] = True
+    out = clean_mask(m, open_size=3, close_size=3, min_area=20)
+    assert out[15:35, 15:35].all()
+    assert not out[80, 80] and not out[60:63, 120:123].any()
+
+
+def test_bank_and_errors():
+    rng = np.random.default_rng(5)
+    bg = scene(rng)
+    bank = BackgroundBank(BackgroundConfig(bootstrap_frames=2))
+    assert bank.apply({'a': bg, 'b': bg}) == {}
+    out = bank.apply({'a': bg, 'b': bg})
+    assert out == {} or set(out) == {'a', 'b'}
+    out = bank.apply({'a': bg, 'b': bg})
+    assert set(out) == {'a', 'b'}
+    with pytest.raises(DetectionError, match='differs from the background'):
+        bank.models['a'].apply(bg[:50])
+    with pytest.raises(DetectionError, match='uint8 RGB'):
+        bank.models['a'].apply(bg.astype(np.float32))
+    with pytest.raises(DetectionError, match='exclusion mask'):
+        bank.models['a'].update(bg, exclude=np.zeros((5, 5), bool))
+    with pytest.raises(DetectionError, match='alpha'):
+        BackgroundConfig(alpha=1.5)
+    with pytest.raises(DetectionError, match='not bootstrapped'):
+        BackgroundModel().foreground(bg)
