@@ -56,6 +56,7 @@ def run_cli(capsys, *argv: str) -> tuple[int, str, str]:
 def test_round_trip_small_real_clip(tmp_path, capsys):
     out = tmp_path / 'rec'
     code, stdout, err = run_cli(capsys, str(out), '--calibration', CALIB, '--width', '136',
+                                '--floor=-3,-2,2,2',
                                 '--reference', str(DATA / 'single_0-100.trc'),
                                 '--reference-offset', str(CLIP_FIRST), *VIDEOS)
     assert code == 0, err
@@ -74,6 +75,7 @@ def test_round_trip_small_real_clip(tmp_path, capsys):
             np.testing.assert_array_equal(fs.images[cam], expected[cam][fs.index])
 
     room = RoomCalibration.load(out / 'calibration.yaml')
+    assert room.floor == (-3.0, -2.0, 2.0, 2.0)
     full = read_opencv_calibration(CALIB)
     trc = read_trc(DATA / 'single_0-100.trc')
     head = trc_to_room(trc.points[50, trc.markers.index('Head')])
@@ -169,6 +171,11 @@ def test_bad_inputs_exit_2_with_one_line(tmp_path, capsys):
     code, _, err = run_cli(capsys, str(out), '--calibration', CALIB, '--start-offset',
                            'cam02=x', *VIDEOS)
     assert_one_line_error(code, err, 'cam02=x')
+    code, _, err = run_cli(capsys, str(out), '--calibration', CALIB, '--floor', '1,2,3', *VIDEOS)
+    assert_one_line_error(code, err, '--floor')
+    code, _, err = run_cli(capsys, str(out), '--calibration', CALIB, '--floor', '1,2,0,3',
+                           *VIDEOS)
+    assert_one_line_error(code, err, 'floor bounds are empty')
     assert not out.exists()  # nothing written on any refusal
 
     code, _, err = run_cli(capsys, str(out), '--calibration', CALIB, '--fit-size', '--frames',

@@ -2,7 +2,9 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
+from decimal import Decimal
 from pathlib import Path
 
 from mbtrack_ros.core.camera import CalibrationError
@@ -40,6 +42,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                         help='axis of the calibration\'s world frame that points up (default z)')
     parser.add_argument('--floor-offset', type=float, default=0.0, metavar='METRES',
                         help='floor coordinate along the up axis in the calibration frame')
+    parser.add_argument('--floor', default=None, metavar='X0,Y0,X1,Y1',
+                        help='walkable floor rectangle in metres, room frame (default: the '
+                             'bounding box of the camera centres)')
     parser.add_argument('--fps', type=float, default=None,
                         help='frame rate for the stamps (default: the videos\')')
     parser.add_argument('--width', type=int, default=None, metavar='W',
@@ -98,19 +103,31 @@ def run(args: argparse.Namespace) -> int:
             except ValueError as err:
                 raise VideoImportError(f'--start-offset {name}={value}: not a whole number '
                                        f'of frames') from err
+        if not math.isfinite(args.start_time) or args.start_time < 0:
+            raise VideoImportError(f'--start-time must be >= 0 seconds, got {args.start_time}')
         camera_info = _pairs(args.camera_info, '--camera-info') or None
+        floor = None
+        if args.floor is not None:
+            try:
+                floor = tuple(float(v) for v in args.floor.split(','))
+            except ValueError as err:
+                raise VideoImportError(f'--floor expects X0,Y0,X1,Y1 in metres, '
+                                       f'got {args.floor!r}') from err
+            if len(floor) != 4:
+                raise VideoImportError(f'--floor expects 4 numbers X0,Y0,X1,Y1, '
+                                       f'got {args.floor!r}')
         if args.calibration_format == 'camera-info' and not camera_info:
             raise VideoImportError('--calibration-format camera-info needs --camera-info '
                                    'NAME=YAML for each camera')
         calibration = read_calibration(args.calibration, args.calibration_format,
                                        camera_info=camera_info, up_axis=args.up_axis,
-                                       floor_offset=args.floor_offset)
+                                       floor_offset=args.floor_offset, floor=floor)
         summary = import_videos(
             args.outdir, calibration, videos, fps=args.fps, width=args.width,
             start_offsets=offsets, compressed=args.compressed, reference=args.reference,
             reference_offset=args.reference_offset, shortest=args.shortest,
             max_frames=args.frames, fit_size=args.fit_size,
-            start_ns=int(round(args.start_time * 1e9)),
+            start_ns=int(Decimal(str(args.start_time)) * 10**9),
             source={'calibration_file': str(args.calibration),
                     'calibration_format': args.calibration_format},
             note=lambda msg: print(f'{_PROG}: note: {msg}', file=sys.stderr))

@@ -101,7 +101,8 @@ def reexpress_world(calibration: RoomCalibration, *, up_axis: str = 'z',
     New world points are ``X' = A X - (0, 0, floor_offset)`` with ``A = world_rotation(up_axis)``
     (``floor_offset``: the floor's coordinate along the up axis in the source frame, metres).
     Cameras keep their images: ``R' = R A^T``, ``t' = t + R' (0, 0, floor_offset)``.
-    ``floor`` (new frame, metres) defaults to :func:`default_floor` of the moved cameras.
+    ``floor`` (new frame, metres) defaults to :func:`default_floor` of the moved cameras;
+    entry zones are kept only if the frame does not change.
     """
     A = world_rotation(up_axis)
     if not np.isfinite(floor_offset):
@@ -112,10 +113,12 @@ def reexpress_world(calibration: RoomCalibration, *, up_axis: str = 'z',
         R = cam.R @ A.T
         cameras[name] = replace(cam, R=R, t=cam.t + R @ shift)
     moved = replace(calibration, cameras=cameras)
-    if np.allclose(A, np.eye(3)) and floor_offset == 0.0 and floor is None:
+    identity = bool(np.allclose(A, np.eye(3)) and floor_offset == 0.0)
+    if identity and floor is None:
         return moved
-    return replace(moved, floor=tuple(floor) if floor is not None else default_floor(cameras.values()),
-                   entry_zones=())
+    return replace(moved, floor=tuple(floor) if floor is not None
+                   else default_floor(cameras.values()),
+                   entry_zones=calibration.entry_zones if identity else ())
 
 
 def default_floor(cameras: Iterable[Camera], *, margin: float = 0.0
