@@ -123,6 +123,19 @@ def test_track_rows_at_stamps_absent_from_truth_are_ignored_and_counted():
     assert (r.false_positives, r.track_rows, r.mota) == (0, 4, pytest.approx(1.0))
 
 
+def test_tracks_in_frames_where_nobody_is_present_are_false_positives():
+    # the person is present in frames 0-3; frames 4-5 are empty, a phantom track stays
+    truth = walk(1, range(4), 1.0)
+    tracks = [tr(r.frame, 1, r.x, r.y) for r in truth]
+    tracks += [tr(f, 2, 4.0, 4.0) for f in (4, 5)]
+    r = clear_mot(tracks, truth)
+    assert (r.frames, r.false_positives, r.ignored_track_rows) == (6, 2, 0)
+    assert r.mota == pytest.approx(1 - 2 / 4)
+    # an explicit frame list gives the same answer
+    stamps = sorted({t.stamp_ns for t in tracks})
+    assert clear_mot(tracks, truth, frame_stamps=stamps).false_positives == 2
+
+
 def test_bad_inputs_raise_evaluation_error():
     truth = walk(1, range(3), 1.0)
     with pytest.raises(EvaluationError, match='empty'):

@@ -9,8 +9,9 @@ within the threshold, the remaining pairs are assigned with the Hungarian algori
 * MOTA = 1 - (misses + false positives + mismatches) / ground-truth objects,
 * miss rate, false-positive rate, mismatch rate = the counts / ground-truth objects.
 
-Frames are the ground-truth stamps. Track rows are matched to ground-truth rows by
-``stamp_ns``; track rows at stamps absent from the ground truth are ignored and counted in
+Frames are the ground-truth stamps plus the empty frames (nobody present) where tracks were
+reported. Track rows are matched to ground-truth rows by ``stamp_ns``; track rows at stamps
+off the frame grid (within half a period of a ground-truth stamp) are ignored and counted in
 :attr:`ClearMotResult.ignored_track_rows`. The distance matrix given to motmetrics is built here
 (plain Euclidean metres, NaN beyond the threshold) because some motmetrics helpers return
 squared distances.
@@ -191,8 +192,31 @@ def _sort_unique(stamp: np.ndarray, ident: np.ndarray, what: str,
     return order
 
 
+def _evaluation_frames(gt_frames: np.ndarray, t_stamp: np.ndarray,
+                       frame_stamps: Sequence[int] | None) -> np.ndarray:
+    """The stamps scored: ground-truth frames plus the frames where nobody was present.
+
+    The ground-truth CSV has rows only for people, so a frame with nobody in the room has
+    none; a track reported there is a false positive all the same. Without an explicit
+    ``frame_stamps`` list, a track stamp counts as such an empty frame unless it lies within
+    half a frame period of a ground-truth stamp without being equal to it (a stamping
+    mismatch, which is ignored and counted instead).
+    """
+    if frame_stamps is not None:
+        return np.union1d(gt_frames, np.asarray(frame_stamps, dtype=np.int64))
+    extra = np.setdiff1d(np.unique(t_stamp), gt_frames)
+    if extra.size == 0:
+        return gt_frames
+    period = float(np.median(np.diff(gt_frames))) if gt_frames.size > 1 else np.inf
+    idx = np.clip(np.searchsorted(gt_frames, extra), 1, max(gt_frames.size - 1, 1))
+    near = np.minimum(np.abs(extra - gt_frames[idx - 1]), np.abs(extra - gt_frames[
+        np.minimum(idx, gt_frames.size - 1)]))
+    return np.union1d(gt_frames, extra[near >= period / 2])
+
+
 def clear_mot(tracks: Sequence[TrackRow], truth: Sequence[GroundTruthRow], *,
-              threshold_m: float = 0.5, name: str = 'sequence') -> ClearMotResult:
+              threshold_m: float = 0.5, name: str = 'sequence',
+              frame_stamps: Sequence[int] | None = None) -> ClearMotResult:
     """CLEAR MOT scores of ``tracks`` against ``truth`` (floor positions, metres).
 
     Args:
@@ -200,6 +224,9 @@ def clear_mot(tracks: Sequence[TrackRow], truth: Sequence[GroundTruthRow], *,
         truth: ground-truth rows (any order); must not be empty.
         threshold_m: match threshold, metres (CLEAR'07: 0.5).
         name: label of the sequence in tables.
+        frame_stamps: every frame stamp of the recording, if known; frames without
+            ground-truth rows are frames where nobody is present (see
+            :func:`_evaluation_frames` for the default).
     Raises:
         EvaluationError: empty ground truth, bad threshold, a repeated (stamp, id) pair.
     """
@@ -222,7 +249,7 @@ def clear_mot(tracks: Sequence[TrackRow], truth: Sequence[GroundTruthRow], *,
                       ('tracks', t_y)):
         if not np.all(np.isfinite(arr)):
             raise EvaluationError(f'{what}: positions must be finite')
-    frames = np.unique(g_stamp)
+    frames = _evaluation_frames(np.unique(g_stamp), t_stamp, frame_stamps)
     keep = np.isin(t_stamp, frames)
     ignored = int(np.count_nonzero(~keep))
     t_stamp, t_tid, t_x, t_y = t_stamp[keep], t_tid[keep], t_x[keep], t_y[keep]
