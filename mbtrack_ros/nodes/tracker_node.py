@@ -8,10 +8,11 @@ Outputs (reliable, stamped with the frame set's time, frame ``output_frame_id``)
 ``/diagnostics`` (DiagnosticArray). See :mod:`mbtrack_ros.nodes.params` for parameters and
 :mod:`mbtrack_ros.nodes.messages` for the message layouts.
 
-Threading: image callbacks only convert the image and hand it to the
-:class:`~mbtrack_ros.recording.sync.FrameSetSynchronizer`; complete (or timed-out) frame sets
-wake the tracker step through a guard condition in its own mutually exclusive callback
-group, run by a :class:`~rclpy.executors.MultiThreadedExecutor`. Time is message time only.
+Threading: image callbacks (one mutually exclusive group per camera) only convert the image
+and hand it to the :class:`~mbtrack_ros.recording.sync.FrameSetSynchronizer`; complete (or
+timed-out) frame sets are queued and the tracker step runs in its own mutually exclusive
+callback group (a steady-clock timer draining the queue), under a
+:class:`~rclpy.executors.MultiThreadedExecutor`. Time is message time only.
 
 Track start: until automatic detection (issue 4) is part of :meth:`Tracker.step`, tracks are
 started and ended from the ``init_ground_truth`` CSV (oracle initialisation, for
@@ -28,7 +29,8 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 import rclpy
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
@@ -50,6 +52,7 @@ __all__ = ['GroundTruthInitializer', 'TrackerNode', 'main']
 
 OUTPUT_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 WARN_PERIOD_S = 10.0
+STEP_POLL_S = 0.005  # s, steady clock
 
 
 class GroundTruthInitializer:
@@ -195,23 +198,27 @@ class TrackerNode(Node):
                                               OUTPUT_QOS)
         self.pub_debug = {c: self.create_publisher(Image, f'~/debug/{c}/occlusion', OUTPUT_QOS)
                           for c in p.camera_names}
-        # inputs: cheap callbacks, reentrant so cameras do not wait for each other
-        inputs = ReentrantCallbackGroup()
+        # inputs: cheap callbacks, one mutually exclusive group per camera (frames of one
+        # camera stay in order, cameras do not wait for each other)
         self._subs = []
         for cam in p.cameras:
+            group = MutuallyExclusiveCallbackGroup()
             kind = CompressedImage if cam.transport == 'compressed' else Image
             self._subs.append(self.create_subscription(
                 kind, cam.image_topic, lambda msg, c=cam.name: self._on_image(c, msg),
-                qos_profile_sensor_data, callback_group=inputs))
+                qos_profile_sensor_data, callback_group=group))
             if cam.camera_info_topic:
                 self._subs.append(self.create_subscription(
                     CameraInfo, cam.camera_info_topic,
                     lambda msg, c=cam.name: self._on_camera_info(c, msg),
-                    qos_profile_sensor_data, callback_group=inputs))
-        # the tracker step: its own mutually exclusive group, woken by a guard condition
+                    qos_profile_sensor_data, callback_group=group))
+        # the tracker step: its own mutually exclusive group, polling the frame-set queue on
+        # a steady-clock timer (independent of sim time; a poll finds every queued set)
         self._step_group = MutuallyExclusiveCallbackGroup()
-        self._wake = self.create_guard_condition(self._on_frame_sets,
-                                                 callback_group=self._step_group)
+        self._closing = False
+        self._step_timer = self.create_timer(
+            STEP_POLL_S, self._on_frame_sets, callback_group=self._step_group,
+            clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.get_logger().info(
             f'tracking with {p.tracker.algorithm} on {len(p.cameras)} camera(s): '
             + ', '.join(f'{c.name} <- {c.image_topic} ({c.transport})' for c in p.cameras))
@@ -280,11 +287,9 @@ class TrackerNode(Node):
                 if old.after_reset and self._pending:
                     self._pending[0].after_reset = True  # keep the reset request
                 self._dropped_sets += 1
-        if ready:
-            self._wake.trigger()
 
     def _on_frame_sets(self) -> None:
-        while True:
+        while not self._closing:
             with self._lock:
                 if not self._pending:
                     return
@@ -393,6 +398,7 @@ class TrackerNode(Node):
         self._on_frame_sets()
 
     def destroy_node(self) -> None:
+        self._closing = True
         if self._output_bag is not None:
             self._output_bag.close()
             self._output_bag = None

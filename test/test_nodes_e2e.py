@@ -1,0 +1,219 @@
+"""The ROS 2 nodes: parameter files, start-up errors, and tracking end to end over DDS."""
+from __future__ import annotations
+
+import math
+import os
+import py_compile
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+# a domain of our own, before any rclpy import creates a participant
+os.environ['ROS_DOMAIN_ID'] = str(100 + os.getpid() % 100)
+
+import rclpy  # noqa: E402
+from rclpy.context import Context  # noqa: E402
+from rclpy.executors import MultiThreadedExecutor  # noqa: E402
+from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
+
+from mbtrack_ros.nodes import tracker_node  # noqa: E402
+from mbtrack_ros.nodes.params import ParamsError  # noqa: E402
+from mbtrack_ros.nodes.tracker_node import TrackerNode  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+CONFIGS = sorted((REPO / 'config').glob('*.yaml'))
+
+
+@pytest.fixture(scope='module')
+def room_calibration(tmp_path_factory) -> Path:
+    """The synthetic room's calibration (cam0..cam4), as the configs expect."""
+    from mbtrack_ros.synth.room import default_room, make_calibration
+    path = tmp_path_factory.mktemp('calib') / 'calibration.yaml'
+    make_calibration(default_room()).save(path)
+    return path
+
+
+@pytest.fixture
+def context():
+    ctx = Context()
+    rclpy.init(context=ctx)
+    yield ctx
+    rclpy.try_shutdown(context=ctx)
+
+
+def flatten(doc: dict, prefix: str = '') -> dict:
+    out = {}
+    for key, value in doc.items():
+        if isinstance(value, dict):
+            out.update(flatten(value, f'{prefix}{key}.'))
+        else:
+            out[prefix + key] = value
+    return out
+
+
+def start(context, *args: str) -> TrackerNode:
+    return TrackerNode(cli_args=['--ros-args', *args], context=context)
+
+
+@pytest.mark.parametrize('config', CONFIGS, ids=[c.name for c in CONFIGS])
+def test_every_example_config_loads(config, room_calibration, context):
+    node = start(context, '--params-file', str(config),
+                 '-p', f'calibration_file:={room_calibration}')
+    try:
+        values = flatten(yaml.safe_load(config.read_text())['tracker_node']['ros__parameters'])
+        values['calibration_file'] = str(room_calibration)
+        for name, value in values.items():
+            assert node.get_parameter(name).value == value, name
+        p = node.params
+        assert p.camera_names == values['cameras']
+        assert p.slop_ns == round(values['sync.slop'] * 1e9)
+        assert p.tracker.algorithm == values['tracker.algorithm']
+        assert p.tracker.particles == values.get('tracker.particles', 100)
+        transport = values.get('image_transport', 'raw')
+        for cam in p.cameras:
+            override = values.get(f'camera.{cam.name}.image_topic')
+            suffix = '/compressed' if transport == 'compressed' else ''
+            assert cam.image_topic == (override or f'/{cam.name}/image_raw{suffix}')
+            assert cam.transport == transport
+        assert sorted(node.pub_debug) == sorted(p.camera_names)
+    finally:
+        node.destroy_node()
+
+
+BAD = [
+    (['-p', 'tracker.particles:=0'], "'tracker.particles': value out of range"),
+    (['-p', 'image_transport:=udp'], "image_transport: 'udp' is not one of raw, compressed"),
+    (['-p', 'camera.cam0.transport:=theora'], 'camera.cam0.transport'),
+    (['-p', 'sync.slop:=1'], "'sync.slop': wrong type"),
+    (['-p', 'sync.slop:=0.5', '-p', 'sync.timeout:=0.2'], 'must exceed sync.slop'),
+    (['-p', 'tracker.algorithm:=magic'], "tracker.algorithm: 'magic' is not one of"),
+    (['-p', 'cameras:=[cam0,cam9]'], 'unknown camera(s) cam9'),
+    (['-p', 'init_ground_truth:=/nonexistent/gt.csv'], 'does not exist'),
+]
+
+
+@pytest.mark.parametrize('args,message', BAD, ids=[m for _, m in BAD])
+def test_bad_parameter_refused_with_clear_message(args, message, room_calibration, context):
+    with pytest.raises(ParamsError) as info:
+        start(context, '-p', f'calibration_file:={room_calibration}', *args)
+    assert message in str(info.value) and '\n' not in str(info.value)
+
+
+def test_missing_calibration_exits_nonzero(capsys):
+    code = tracker_node.main(['tracker_node', '--ros-args', '-p',
+                              'calibration_file:=/nonexistent/calibration.yaml'])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2
+    assert err[-1] == ("tracker_node: error: calibration_file "
+                       "'/nonexistent/calibration.yaml' does not exist")
+
+
+def test_launch_file_compiles(tmp_path):
+    py_compile.compile(str(REPO / 'launch' / 'smart_room.launch.py'),
+                       cfile=str(tmp_path / 'launch.pyc'), doraise=True)
+
+
+# -- end to end --------------------------------------------------------------------------
+@pytest.fixture(scope='module')
+def recording(tmp_path_factory) -> Path:
+    from mbtrack_ros.synth.generator import generate
+    return generate('lanz-seq1', tmp_path_factory.mktemp('rec') / 'lanz', frames=30, seed=3)
+
+
+def stamp_ns(header) -> int:
+    return header.stamp.sec * 1_000_000_000 + header.stamp.nanosec
+
+
+@pytest.mark.ros
+def test_end_to_end_bag_player_tracker_subscriber(recording, context):
+    """bag_player (own process) -> DDS -> tracker_node -> DDS -> test subscriber."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from geometry_msgs.msg import PoseArray
+    from visualization_msgs.msg import Marker, MarkerArray
+
+    from mbtrack_ros.recording.csvfiles import read_ground_truth
+
+    truth: dict[int, list[tuple[float, float]]] = {}
+    for row in read_ground_truth(recording / 'ground_truth.csv'):
+        truth.setdefault(row.stamp_ns, []).append((row.x, row.y))
+    node = start(context, '-p', f'calibration_file:={recording / "calibration.yaml"}',
+                 '-p', f'init_ground_truth:={recording / "ground_truth.csv"}',
+                 '-p', 'tracker.seed:=0', '-p', 'max_pending_sets:=100')
+    listener = rclpy.create_node('e2e_listener', context=context)
+    qos = QoSProfile(depth=200, reliability=ReliabilityPolicy.RELIABLE)
+    got: dict[str, list] = {'people': [], 'markers': [], 'diagnostics': []}
+    lock = threading.Lock()
+
+    def keep(kind):
+        def callback(msg):
+            with lock:
+                got[kind].append(msg)
+        return callback
+
+    listener.create_subscription(PoseArray, '/tracker_node/people', keep('people'), qos)
+    listener.create_subscription(MarkerArray, '/tracker_node/markers', keep('markers'), qos)
+    listener.create_subscription(DiagnosticArray, '/diagnostics', keep('diagnostics'), qos)
+    executor = MultiThreadedExecutor(num_threads=3, context=context)
+    executor.add_node(node)
+    executor.add_node(listener)
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    player = subprocess.Popen(
+        [sys.executable, '-m', 'mbtrack_ros.nodes.bag_player', '--ros-args',
+         '-p', f'bag:={recording}', '-p', 'rate:=1.0', '-p', 'wait_for_subscribers:=true',
+         '-p', 'start_delay:=1.0'],
+        cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        out, _ = player.communicate(timeout=45)
+        assert player.returncode == 0, out
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline:  # let the last frame sets through
+            with lock:
+                if got['people'] and stamp_ns(got['people'][-1].header) == max(truth):
+                    break
+            time.sleep(0.1)
+    finally:
+        if player.poll() is None:
+            player.kill()
+        executor.shutdown()
+        spinner.join(timeout=5)
+        node.destroy_node()
+        listener.destroy_node()
+
+    people = got['people']
+    assert len(people) >= 20, f'only {len(people)} PoseArray messages for 30 frames'
+    tracked = 0
+    for msg in people:
+        stamp = stamp_ns(msg.header)
+        assert stamp in truth, 'outputs must carry the frame set stamp'
+        assert msg.header.frame_id == 'room'
+        for pose in msg.poses:
+            d = min(math.hypot(pose.position.x - x, pose.position.y - y)
+                    for x, y in truth[stamp])
+            assert d < 0.5, f'track {d:.2f} m from the nearest person at {stamp}'
+            q = pose.orientation
+            assert abs(q.z ** 2 + q.w ** 2 - 1.0) < 1e-6
+            tracked += 1
+    assert tracked >= 20  # ground-truth starts produced tracks, not empty arrays
+    by_stamp = {stamp_ns(m.header): m for m in people}
+    cylinders = 0
+    for msg in got['markers']:
+        adds = [m for m in msg.markers if m.action == Marker.ADD and m.type == Marker.CYLINDER]
+        if adds:
+            stamp = stamp_ns(adds[0].header)
+            assert stamp in by_stamp and len(adds) == len(by_stamp[stamp].poses)
+            cylinders += len(adds)
+    assert cylinders == tracked
+    assert got['diagnostics'], 'no /diagnostics message'
+    status = got['diagnostics'][-1].status[0]
+    assert status.name == 'mbtrack_ros: tracker'
+    assert {kv.key for kv in status.values} >= {'step time [ms]', 'frame sets', 'tracks'}
+    rate = next(s for s in got['diagnostics'][-1].status if s.name.endswith('input cam0'))
+    assert np.isclose(float(rate.values[0].value), 15.0, rtol=0.15)  # message-time rate
