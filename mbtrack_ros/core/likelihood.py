@@ -1,0 +1,428 @@
+"""Measurement model: the HJS, separable and joint likelihoods (000 §IV-B, Algorithm 1).
+
+Per frame, :meth:`MeasurementModel.set_images` quantises every camera image once; the
+three evaluations then work on row-span silhouettes (:mod:`mbtrack_ros.core.shape`) and
+part histograms (:mod:`mbtrack_ros.core.appearance`) with numba kernels
+(:mod:`mbtrack_ros.core._kernels`):
+
+* :meth:`~MeasurementModel.hjs`: all K*N particles of a camera are visited from near to
+  far; occlusion maps w* (000 Eq. 34) and occlusion evidence (Eq. 36-40) are accumulated
+  incrementally in per-target image buffers. Cost O(K^2 N S), linear in K when the targets'
+  particle clouds do not overlap in the image (DBN shortcut, 000 §IV-B.3).
+* :meth:`~MeasurementModel.separable`: each target alone (w* = 1): 003 Eq. 3.
+* :meth:`~MeasurementModel.joint`: joint samples rendered with a per-pixel depth order
+  (000 Eq. 20) and scored with Eq. 26 on binary visibility masks.
+
+Log-likelihoods are ``-D^2 / (2 sigma^2)`` (000 Eq. 19) summed over cameras; a camera that
+sees fewer than ``min_visible_pixels`` of a silhouette adds 0.
+
+How w* enters the foreground term (000 Eq. 33): the image histogram of a part is
+accumulated with per-pixel weight w*(u); the rendered (model) histogram of a part is
+uniform over the part's pixels, so weighting it by w* and normalising gives back the
+model part histogram itself: the model side is fixed per part and only the image side and
+the part masses alpha_part = sum w* change.
+"""
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from mbtrack_ros.core import _kernels
+from mbtrack_ros.core.appearance import PersonModel, quantize, relative_angle
+from mbtrack_ros.core.camera import Camera, RoomCalibration
+from mbtrack_ros.core.shape import BodyShape, Silhouettes, rasterize
+from mbtrack_ros.core.state import STATE_DIM, THETA, X, Y
+
+__all__ = ['HJSDebug', 'LikelihoodConfig', 'LikelihoodError', 'LikelihoodResult',
+           'MeasurementModel']
+
+
+class LikelihoodError(ValueError):
+    """Bad input to the measurement model (image size, particle arrays, models)."""
+
+
+@dataclass(frozen=True)
+class LikelihoodConfig:
+    """Parameters of the likelihood.
+
+    Attributes:
+        sigma: width of 000 Eq. 19 / 003 Eq. 3.
+        d_occ: occlusion penalty of 000 Eq. 26 (000 §VI-B uses sigma 0.1, d_occ 0.15).
+        min_visible_pixels: a camera seeing fewer pixels of a silhouette is neutral.
+        subsample: use every k-th image row of the silhouettes (speed option).
+    """
+
+    sigma: float = 0.12
+    d_occ: float = 0.15
+    min_visible_pixels: int = 20
+    subsample: int = 1
+
+    def __post_init__(self) -> None:
+        if not (self.sigma > 0 and np.isfinite(self.sigma)):
+            raise LikelihoodError(f'sigma must be positive, got {self.sigma}')
+        if not (self.d_occ >= 0 and np.isfinite(self.d_occ)):
+            raise LikelihoodError(f'd_occ must be >= 0, got {self.d_occ}')
+        if int(self.subsample) < 1:
+            raise LikelihoodError(f'subsample must be >= 1, got {self.subsample}')
+
+
+@dataclass
+class LikelihoodResult:
+    """Output of :meth:`MeasurementModel.hjs` / :meth:`MeasurementModel.separable`.
+
+    Attributes:
+        loglik: K arrays (N_k,), log p summed over the cameras.
+        visible_fraction: (K, n_cameras) prior-expected visible fraction of each target's
+            silhouette (weighted mean over its particles of sum(w*) / unclipped area); 0 for
+            cameras without an image this frame.
+        timings: seconds per stage (``rasterize``, ``models``, ``kernel``).
+    """
+
+    loglik: list[np.ndarray]
+    visible_fraction: np.ndarray
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass
+class HJSDebug:
+    """Per-particle internals of the HJS update in one camera (for tests and debugging).
+
+    Particles are the K targets' particles concatenated in target order.
+    """
+
+    silhouettes: Silhouettes
+    target: np.ndarray      # (P,) int64 target index
+    prior: np.ndarray       # (P,) normalised prior weights
+    fc: np.ndarray          # (P,) foreground terms (000 Eq. 33 with Eq. 26)
+    bc: np.ndarray          # (P,) background terms (000 Eq. 40)
+    visible: np.ndarray     # (P,) sum of w* over the silhouette
+    w_star: np.ndarray      # (P, H, W) float64 occlusion maps w* (0 off the silhouette)
+
+
+def _normalised_priors(weights: np.ndarray, n: int, k: int, log_weights: bool) -> np.ndarray:
+    w = np.asarray(weights, dtype=np.float64).reshape(-1)
+    if w.shape != (n,):
+        raise LikelihoodError(f'target {k}: {w.size} weights for {n} particles')
+    if log_weights:
+        w = np.where(np.isnan(w), -np.inf, w)
+        top = np.max(w) if w.size else -np.inf
+        if not np.isfinite(top):
+            raise LikelihoodError(f'target {k}: all log-weights are -inf/NaN')
+        w = np.exp(w - top)
+    else:
+        if np.any(np.isnan(w)) or np.any(w < 0) or np.any(np.isinf(w)):
+            raise LikelihoodError(f'target {k}: weights must be finite and >= 0')
+    total = w.sum()
+    if not total > 0:
+        raise LikelihoodError(f'target {k}: weights sum to zero')
+    return w / total
+
+
+class MeasurementModel:
+    """Per-frame image preparation and the likelihood evaluations of every filter.
+
+    Args:
+        calibration: the room cameras (images must match their sizes).
+        config: likelihood parameters.
+    """
+
+    def __init__(self, calibration: RoomCalibration,
+                 config: LikelihoodConfig = LikelihoodConfig()) -> None:
+        self.calibration = calibration
+        self.config = config
+        self.camera_names: list[str] = list(calibration.cameras)
+        self._bins: dict[str, np.ndarray] = {}
+
+    # -- images ---------------------------------------------------------------------------
+    def set_images(self, images: Mapping[str, np.ndarray]) -> None:
+        """Quantise the frame's images (H, W, 3) uint8 RGB once; missing cameras are skipped.
+
+        Raises :class:`LikelihoodError` for unknown cameras or images of the wrong size.
+        """
+        bins: dict[str, np.ndarray] = {}
+        for name, image in images.items():
+            cam = self.calibration.cameras.get(name)
+            if cam is None:
+                raise LikelihoodError(f'image for unknown camera {name!r}; known: '
+                                      f'{", ".join(self.camera_names)}')
+            image = np.asarray(image)
+            if image.shape != (cam.height, cam.width, 3) or image.dtype != np.uint8:
+                raise LikelihoodError(
+                    f'{name}: expected ({cam.height}, {cam.width}, 3) uint8 RGB image, got '
+                    f'{image.shape} {image.dtype}')
+            bins[name] = quantize(image)
+        self._bins = bins
+
+    @property
+    def active_cameras(self) -> list[str]:
+        """Cameras with an image this frame, in calibration order."""
+        return [n for n in self.camera_names if n in self._bins]
+
+    def bins(self, camera: str) -> np.ndarray:
+        """(H, W) int16 quantised image of a camera this frame."""
+        try:
+            return self._bins[camera]
+        except KeyError as err:
+            raise LikelihoodError(f'no image for camera {camera!r} this frame') from err
+
+    # -- silhouettes ----------------------------------------------------------------------
+    def _camera(self, name: str) -> Camera:
+        try:
+            return self.calibration.cameras[name]
+        except KeyError as err:
+            raise LikelihoodError(f'unknown camera {name!r}') from err
+
+    def silhouettes(self, camera: str, states: np.ndarray,
+                    model: PersonModel | Sequence[PersonModel], *,
+                    row_step: int | None = None) -> Silhouettes:
+        """Rasterise states (N, 6) of one person (or one model per state) in a camera."""
+        cam = self._camera(camera)
+        states = self._check_states(states, 'states')
+        if isinstance(model, PersonModel):
+            heights = np.full(states.shape[0], float(model.height))
+            widths = np.full(states.shape[0], float(model.width))
+            chair = model.chair_height
+        else:
+            models = list(model)
+            if len(models) != states.shape[0]:
+                raise LikelihoodError(f'{len(models)} models for {states.shape[0]} states')
+            heights = np.array([m.height for m in models], dtype=np.float64)
+            widths = np.array([m.width for m in models], dtype=np.float64)
+            chair = models[0].chair_height if models else 0.45
+        step = self.config.subsample if row_step is None else row_step
+        return rasterize(cam, states, BodyShape(chair_height=chair), heights=heights,
+                         widths=widths, row_step=int(step))
+
+    def render_labels(self, camera: str, state: np.ndarray, model: PersonModel) -> np.ndarray:
+        """(H, W) int8 part labels (0 background, 1 head, 2 torso, 3 legs) of one state."""
+        return self.silhouettes(camera, np.asarray(state).reshape(1, -1), model,
+                                row_step=1).mask(0)
+
+    @staticmethod
+    def _check_states(states: np.ndarray, what: str) -> np.ndarray:
+        arr = np.asarray(states, dtype=np.float64)
+        if arr.ndim != 2 or arr.shape[1] != STATE_DIM:
+            raise LikelihoodError(f'{what} must be (N, {STATE_DIM}), got {arr.shape}')
+        if not np.all(np.isfinite(arr)):
+            raise LikelihoodError(f'{what} contain non-finite values')
+        return arr
+
+    def _check_targets(self, particles: Sequence[np.ndarray],
+                       models: Sequence[PersonModel]) -> list[np.ndarray]:
+        if len(particles) != len(models):
+            raise LikelihoodError(f'{len(particles)} particle sets for {len(models)} models')
+        out = [self._check_states(p, f'particles of target {k}')
+               for k, p in enumerate(particles)]
+        for k, m in enumerate(models):
+            if not isinstance(m, PersonModel):
+                raise LikelihoodError(f'model {k} is not a PersonModel')
+            if m.view_angles.size == 0:
+                raise LikelihoodError(f'model {k} has no key views')
+        return out
+
+    def _prepare(self, camera: str, particles: list[np.ndarray],
+                 models: Sequence[PersonModel], timings: dict[str, float]
+                 ) -> tuple[Silhouettes, np.ndarray, np.ndarray]:
+        """Silhouettes, target index (P,) and sqrt model histograms (P, 1536) of K targets."""
+        cam = self._camera(camera)
+        t0 = time.perf_counter()
+        states = (np.concatenate(particles, axis=0) if particles
+                  else np.zeros((0, STATE_DIM)))
+        target = np.concatenate([np.full(p.shape[0], k, np.int64)
+                                 for k, p in enumerate(particles)]) if particles else \
+            np.zeros(0, np.int64)
+        heights = np.array([m.height for m in models], dtype=np.float64)[target]
+        widths = np.array([m.width for m in models], dtype=np.float64)[target]
+        chair = models[0].chair_height if len(models) else 0.45
+        sil = rasterize(cam, states, BodyShape(chair_height=chair), heights=heights,
+                        widths=widths, row_step=int(self.config.subsample))
+        t1 = time.perf_counter()
+        sqrt_models = np.empty((states.shape[0], 3 * _kernels.N_BINS))
+        rel = relative_angle(states[:, THETA], cam.viewing_angle(states[:, [X, Y]]))
+        for k, m in enumerate(models):
+            sel = target == k
+            if np.any(sel):
+                sqrt_models[sel] = np.sqrt(m.interpolate(rel[sel]).reshape(int(sel.sum()), -1))
+        t2 = time.perf_counter()
+        timings['rasterize'] = timings.get('rasterize', 0.0) + t1 - t0
+        timings['models'] = timings.get('models', 0.0) + t2 - t1
+        return sil, target, sqrt_models
+
+    def _loglik(self, value: np.ndarray, sil: Silhouettes) -> np.ndarray:
+        # the exponent of 000 Eq. 19 is negative; Algorithm 1 as printed lost the minus sign
+        out = -value / (2.0 * self.config.sigma ** 2)
+        out[sil.area * sil.row_step < self.config.min_visible_pixels] = 0.0
+        out[sil.area <= 0] = 0.0
+        return out
+
+    # -- HJS --------------------------------------------------------------------------------
+    def _hjs_camera(self, camera: str, particles: list[np.ndarray], priors: list[np.ndarray],
+                    models: Sequence[PersonModel], *, separable: bool, record: bool,
+                    timings: dict[str, float]):
+        sil, target, sqrt_models = self._prepare(camera, particles, models, timings)
+        prior = (np.concatenate(priors) if priors else np.zeros(0))
+        t0 = time.perf_counter()
+        order = np.argsort(sil.distance, kind='stable')
+        widths = (sil.x1 - sil.x0).astype(np.int64)
+        if record:
+            per = np.add.reduceat(widths, sil.offsets[:-1]) if widths.size else None
+            counts = np.where(np.diff(sil.offsets) > 0, per, 0) if per is not None else \
+                np.zeros(len(sil), np.int64)
+            pix_offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+            rec = np.zeros(int(pix_offsets[-1]))
+        else:
+            pix_offsets = np.zeros(len(sil) + 1, np.int64)
+            rec = np.zeros(0)
+        fc, bc, vis = _kernels.hjs_camera(
+            self.bins(camera), sil.row, sil.x0, sil.x1, sil.part, sil.offsets, sil.area,
+            sil.bbox, order, target, prior, sqrt_models, len(particles),
+            float(self.config.d_occ), bool(separable), rec, pix_offsets)
+        timings['kernel'] = timings.get('kernel', 0.0) + time.perf_counter() - t0
+        return sil, target, prior, fc, bc, vis, rec, pix_offsets
+
+    def _evaluate(self, particles: Sequence[np.ndarray], weights: Sequence[np.ndarray] | None,
+                  models: Sequence[PersonModel], *, separable: bool,
+                  log_weights: bool) -> LikelihoodResult:
+        parts = self._check_targets(particles, models)
+        if weights is None:
+            priors = [np.full(p.shape[0], 1.0 / max(p.shape[0], 1)) for p in parts]
+        else:
+            if len(weights) != len(parts):
+                raise LikelihoodError(f'{len(weights)} weight sets for {len(parts)} targets')
+            priors = [_normalised_priors(w, p.shape[0], k, log_weights)
+                      for k, (w, p) in enumerate(zip(weights, parts))]
+        n_k = [p.shape[0] for p in parts]
+        starts = np.concatenate([[0], np.cumsum(n_k)]).astype(np.int64)
+        loglik = np.zeros(int(starts[-1]))
+        visible = np.zeros((len(parts), len(self.camera_names)))
+        timings: dict[str, float] = {}
+        for c, name in enumerate(self.camera_names):
+            if name not in self._bins or not parts:
+                continue
+            sil, target, prior, fc, bc, vis, _, _ = self._hjs_camera(
+                name, parts, priors, models, separable=separable, record=False,
+                timings=timings)
+            loglik += self._loglik(fc + bc, sil)
+            with np.errstate(invalid='ignore', divide='ignore'):
+                frac = np.where(sil.full_area > 0, vis / np.maximum(sil.full_area, 1), 0.0)
+            frac = np.clip(frac, 0.0, 1.0)
+            visible[:, c] = np.bincount(target, weights=prior * frac,
+                                        minlength=len(parts))[:len(parts)]
+        return LikelihoodResult(
+            loglik=[loglik[starts[k]:starts[k + 1]].copy() for k in range(len(parts))],
+            visible_fraction=visible, timings=timings)
+
+    def hjs(self, particles: Sequence[np.ndarray], weights: Sequence[np.ndarray],
+            models: Sequence[PersonModel], *, log_weights: bool = False) -> LikelihoodResult:
+        """HJS marginal log-likelihoods of every particle (000 Eq. 22-40, Algorithm 1).
+
+        Args:
+            particles: K arrays (N_k, 6) of particle states.
+            weights: K arrays (N_k,) of prior weights (the temporal prior after BP);
+                linear and >= 0 (normalised here), or log-weights with ``log_weights``.
+            models: K person models.
+        """
+        return self._evaluate(particles, weights, models, separable=False,
+                              log_weights=log_weights)
+
+    def separable(self, particles: Sequence[np.ndarray],
+                  models: Sequence[PersonModel]) -> LikelihoodResult:
+        """Each target scored alone, without occlusion reasoning (w* = 1): 003 Eq. 3."""
+        return self._evaluate(particles, None, models, separable=True, log_weights=False)
+
+    def hjs_debug(self, camera: str, particles: Sequence[np.ndarray],
+                  weights: Sequence[np.ndarray], models: Sequence[PersonModel]) -> HJSDebug:
+        """The HJS update of one camera with per-particle fc, bc and dense w* maps."""
+        parts = self._check_targets(particles, models)
+        priors = [_normalised_priors(w, p.shape[0], k, False)
+                  for k, (w, p) in enumerate(zip(weights, parts))]
+        sil, target, prior, fc, bc, vis, rec, pix = self._hjs_camera(
+            camera, parts, priors, models, separable=False, record=True, timings={})
+        w_star = np.zeros((len(sil), sil.height, sil.width))
+        for p in range(len(sil)):
+            q = int(pix[p])
+            for s in range(int(sil.offsets[p]), int(sil.offsets[p + 1])):
+                n = int(sil.x1[s] - sil.x0[s])
+                w_star[p, sil.row[s], sil.x0[s]:sil.x1[s]] = rec[q:q + n]
+                q += n
+        return HJSDebug(silhouettes=sil, target=target, prior=prior, fc=fc, bc=bc,
+                        visible=vis, w_star=w_star)
+
+    def occlusion_maps(self, camera: str, particles: Sequence[np.ndarray],
+                       weights: Sequence[np.ndarray], models: Sequence[PersonModel], *,
+                       log_weights: bool = False) -> np.ndarray:
+        """(K, H, W) float32 occlusion maps at infinity (000 Eq. 34, Fig. 4).
+
+        Map k is prod_{h != k} (1 - sum of the prior weights of h's particles covering u):
+        the prior probability that no other target hides pixel u.
+        """
+        parts = self._check_targets(particles, models)
+        priors = [_normalised_priors(w, p.shape[0], k, log_weights)
+                  for k, (w, p) in enumerate(zip(weights, parts))]
+        cam = self._camera(camera)
+        bfg = np.ones((len(parts), cam.height, cam.width))
+        for k, (p, m) in enumerate(zip(parts, models)):
+            sil = self.silhouettes(camera, p, m, row_step=1)
+            _kernels.accumulate_spans(bfg[k], sil.row, sil.x0, sil.x1, sil.offsets,
+                                      -priors[k], 0, 0)
+        out = np.empty_like(bfg, dtype=np.float32)
+        for k in range(len(parts)):
+            others = np.delete(bfg, k, axis=0)
+            out[k] = np.prod(others, axis=0) if others.size else 1.0
+        return np.clip(out, 0.0, 1.0)
+
+    # -- joint ------------------------------------------------------------------------------
+    def joint(self, joint_particles: np.ndarray, models: Sequence[PersonModel], *,
+              orders: np.ndarray | None = None) -> np.ndarray:
+        """Joint log-likelihood (N,) of joint samples (N, K, 6) (000 Eq. 19-21, 26).
+
+        Each sample is rendered with a per-pixel depth buffer: a pixel shows the nearest
+        silhouette covering it (by camera distance of the body centres, or by ``orders``
+        (N, n_cameras, K), the front-to-back target order per sample and camera, camera
+        index as in :attr:`camera_names`). Every target scores Eq. 26 with its binary
+        visibility mask (alpha visible, beta hidden pixels with penalty d_occ); the terms
+        add over targets and cameras.
+        """
+        jp = np.asarray(joint_particles, dtype=np.float64)
+        if jp.ndim != 3 or jp.shape[2] != STATE_DIM:
+            raise LikelihoodError(f'joint particles must be (N, K, {STATE_DIM}), got {jp.shape}')
+        n, k = jp.shape[:2]
+        if len(models) != k:
+            raise LikelihoodError(f'{k} targets per joint sample but {len(models)} models')
+        if orders is not None:
+            orders = np.asarray(orders)
+            if orders.shape != (n, len(self.camera_names), k):
+                raise LikelihoodError(f'orders must be ({n}, {len(self.camera_names)}, {k}),'
+                                      f' got {orders.shape}')
+            if not np.all(np.sort(orders, axis=2) == np.arange(k)):
+                raise LikelihoodError('each orders[n, c] must be a permutation of the targets')
+        flat = [jp[:, j] for j in range(k)]
+        self._check_targets(flat, models)
+        states = jp.reshape(n * k, STATE_DIM)
+        out = np.zeros(n)
+        if n == 0 or k == 0:
+            return out
+        model_list = [models[j] for j in range(k)] * n
+        min_pix = int(np.ceil(self.config.min_visible_pixels / self.config.subsample))
+        for c, name in enumerate(self.camera_names):
+            if name not in self._bins:
+                continue
+            cam = self._camera(name)
+            sil = self.silhouettes(name, states, model_list)
+            rel = relative_angle(states[:, THETA], cam.viewing_angle(states[:, [X, Y]]))
+            sqrt_models = np.empty((n * k, 3 * _kernels.N_BINS))
+            for j, m in enumerate(models):
+                sqrt_models[j::k] = np.sqrt(m.interpolate(rel[j::k]).reshape(n, -1))
+            if orders is None:
+                order = np.argsort(sil.distance.reshape(n, k), axis=1, kind='stable')
+            else:
+                order = orders[:, c, :]
+            order = np.ascontiguousarray(order, dtype=np.int64)
+            total = _kernels.joint_camera(self.bins(name), sil.row, sil.x0, sil.x1, sil.part,
+                                          sil.offsets, sil.area, order, k,
+                                          float(self.config.d_occ), sqrt_models, min_pix)
+            out -= total / (2.0 * self.config.sigma ** 2)
+        return out

@@ -1,0 +1,342 @@
+"""HJS, separable and joint likelihoods against brute-force evaluations on tiny images."""
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+from mbtrack_ros.core.appearance import (PersonModel, bhattacharyya_distance_sq, quantize,
+                                         relative_angle)
+from mbtrack_ros.core.camera import Camera, RoomCalibration, look_at
+from mbtrack_ros.core.likelihood import LikelihoodConfig, LikelihoodError, MeasurementModel
+from mbtrack_ros.core.state import THETA, X, Y
+
+D_OCC = 0.15
+
+
+def _camera(name: str, eye, target=(0.0, 0.0, 0.9), size=(40, 30), focal=50.0) -> Camera:
+    w, h = size
+    R, t = look_at(eye, target)
+    K = [[focal, 0, (w - 1) / 2], [0, focal, (h - 1) / 2], [0, 0, 1]]
+    return Camera(name, w, h, K, np.zeros(5), R, t)
+
+
+def _room(*cams: Camera) -> RoomCalibration:
+    return RoomCalibration({c.name: c for c in cams}, (-3.0, -3.0, 3.0, 3.0))
+
+
+def _random_image(rng: np.random.Generator, h: int, w: int) -> np.ndarray:
+    # blocky colours so that histograms are neither flat nor single-bin
+    small = rng.integers(0, 256, (h // 3 + 1, w // 3 + 1, 3), dtype=np.uint8)
+    return np.repeat(np.repeat(small, 3, axis=0), 3, axis=1)[:h, :w].copy()
+
+
+def _random_model(rng: np.random.Generator, height: float) -> PersonModel:
+    hists = rng.random((2, 3, 512)) ** 4
+    return PersonModel(height, 0.5, [0.0, np.pi / 2], hists)
+
+
+def _random_particles(rng, centre, n):
+    p = np.zeros((n, 6))
+    p[:, X] = centre[0] + rng.uniform(-0.35, 0.35, n)
+    p[:, Y] = centre[1] + rng.uniform(-0.35, 0.35, n)
+    p[:, THETA] = rng.uniform(-np.pi, np.pi, n)
+    return p
+
+
+def _F(bins, labels, w, model_hist, d_occ=D_OCC):
+    """000 Eq. 26 / 33 directly: w-weighted part histograms vs model, penalty d_occ."""
+    area = float((labels > 0).sum())
+    num = 0.0
+    alpha_tot = 0.0
+    for q in range(3):
+        sel = labels == q + 1
+        hist = np.bincount(bins[sel], weights=w[sel], minlength=512)
+        alpha = hist.sum()
+        if alpha > 0:
+            num += alpha * float(bhattacharyya_distance_sq(hist / alpha, model_hist[q]))
+        alpha_tot += alpha
+    return (num + (area - alpha_tot) * d_occ) / area
+
+
+def _brute_w_star(masks, dist, prior, target, p, exclude):
+    """000 Eq. 32: prior-weighted average of the binary visibility mask of particle p
+    over all joint configurations of the targets not in ``exclude`` (and not p's)."""
+    k = target[p]
+    others = [h for h in sorted(set(target.tolist())) if h != k and h not in exclude]
+    lists = [np.flatnonzero(target == h) for h in others]
+    w = np.zeros(masks[p].shape)
+    for combo in itertools.product(*lists):
+        pr = np.prod([prior[j] for j in combo]) if combo else 1.0
+        vis = masks[p].copy()
+        for j in combo:
+            if dist[j] < dist[p]:
+                vis &= ~masks[j]
+        w += pr * vis
+    return w
+
+
+@pytest.mark.parametrize('n_targets,n_particles,seed', [(2, 4, 0), (3, 3, 1), (3, 5, 2)])
+def test_hjs_incremental_equals_brute_force(n_targets, n_particles, seed):
+    rng = np.random.default_rng(seed)
+    cam = _camera('cam', (0.0, -3.5, 1.2))
+    mm = MeasurementModel(_room(cam), LikelihoodConfig(d_occ=D_OCC))
+    image = _random_image(rng, cam.height, cam.width)
+    mm.set_images({'cam': image})
+    bins = quantize(image)
+    models = [_random_model(rng, 1.6 + 0.1 * k) for k in range(n_targets)]
+    particles = [_random_particles(rng, (0.3 * k - 0.3, 0.4 * k), n_particles)
+                 for k in range(n_targets)]
+    weights = [rng.random(n_particles) + 0.05 for _ in range(n_targets)]
+    dbg = mm.hjs_debug('cam', particles, weights, models)
+    sil = dbg.silhouettes
+    labels = [sil.mask(p) for p in range(len(sil))]
+    masks = [lab > 0 for lab in labels]
+    assert all(m.sum() > 30 for m in masks)                 # all particles in view
+    dist = sil.distance
+    target, prior = dbg.target, dbg.prior
+    np.testing.assert_allclose(np.bincount(target, prior), 1.0)
+    overlaps = 0
+    states = np.concatenate(particles)
+    rel = relative_angle(states[:, THETA], cam.viewing_angle(states[:, :2]))
+    model_hists = [models[target[p]].interpolate(rel[p:p + 1])[0] for p in range(len(sil))]
+    for p in range(len(sil)):
+        k = target[p]
+        # (a) occlusion map w* (Eq. 32 by enumeration == Eq. 34 incremental)
+        w = _brute_w_star(masks, dist, prior, target, p, exclude=())
+        np.testing.assert_allclose(dbg.w_star[p], w, atol=1e-9, rtol=0)
+        overlaps += int(np.any(w[masks[p]] < 1))
+        # (b) foreground term, Eq. 33 evaluated at the brute-force w*
+        assert dbg.fc[p] == pytest.approx(_F(bins, labels[p], w, model_hists[p]), abs=1e-9)
+        # (c) background term, Eq. 36-38 directly
+        bc = 0.0
+        for j in range(len(sil)):
+            if target[j] == k or not dist[j] < dist[p]:
+                continue
+            r = (masks[j] & masks[p]).sum() / masks[j].sum()        # Eq. 37
+            if r == 0:
+                continue
+            w_hat = _brute_w_star(masks, dist, prior, target, j, exclude=(k,))
+            bc += prior[j] * r * _F(bins, labels[j], w_hat, model_hists[j])
+        assert dbg.bc[p] == pytest.approx(bc, abs=1e-9)
+    assert overlaps >= 2                                     # the case really has occlusions
+    assert np.any(dbg.bc > 0)
+
+
+def test_hjs_loglik_combines_fc_bc_and_is_neutral_out_of_view():
+    rng = np.random.default_rng(5)
+    cam = _camera('cam', (0.0, -3.5, 1.2))
+    mm = MeasurementModel(_room(cam), LikelihoodConfig(sigma=0.1, d_occ=D_OCC,
+                                                       min_visible_pixels=1))
+    mm.set_images({'cam': _random_image(rng, cam.height, cam.width)})
+    models = [_random_model(rng, 1.7) for _ in range(2)]
+    particles = [_random_particles(rng, (0.0, 0.0), 4), _random_particles(rng, (0.2, 0.5), 4)]
+    particles[1][0, X] = 50.0                                # far outside the view
+    weights = [np.ones(4), np.ones(4)]
+    res = mm.hjs(particles, weights, models)
+    dbg = mm.hjs_debug('cam', particles, weights, models)
+    expect = -(dbg.fc + dbg.bc) / (2 * 0.1 ** 2)
+    expect[dbg.silhouettes.area == 0] = 0.0
+    np.testing.assert_allclose(np.concatenate(res.loglik), expect, atol=1e-12)
+    assert res.loglik[1][0] == 0.0
+    assert res.visible_fraction.shape == (2, 1)
+    assert np.all((res.visible_fraction >= 0) & (res.visible_fraction <= 1))
+
+
+def test_hjs_without_overlap_equals_separable():
+    rng = np.random.default_rng(3)
+    cam = _camera('cam', (0.0, -6.0, 1.3), size=(160, 40), focal=60.0)
+    mm = MeasurementModel(_room(cam))
+    mm.set_images({'cam': _random_image(rng, cam.height, cam.width)})
+    models = [_random_model(rng, 1.7) for _ in range(2)]
+    particles = [_random_particles(rng, (-3.0, 0.0), 4), _random_particles(rng, (3.0, 0.0), 4)]
+    hjs = mm.hjs(particles, [rng.random(4) + 0.1 for _ in range(2)], models)
+    sep = mm.separable(particles, models)
+    for a, b in zip(hjs.loglik, sep.loglik):
+        np.testing.assert_allclose(a, b, atol=1e-12)
+        assert np.all(a < 0)
+    np.testing.assert_allclose(hjs.visible_fraction, 1.0)
+
+
+def _two_cameras():
+    return (_camera('front', (0.0, -4.0, 1.3), size=(48, 36), focal=55.0),
+            _camera('side', (4.0, 0.5, 1.3), size=(48, 36), focal=55.0))
+
+
+def test_joint_single_target_equals_separable():
+    rng = np.random.default_rng(7)
+    cams = _two_cameras()
+    mm = MeasurementModel(_room(*cams))
+    mm.set_images({c.name: _random_image(rng, c.height, c.width) for c in cams})
+    model = _random_model(rng, 1.75)
+    parts = _random_particles(rng, (0.0, 0.0), 6)
+    joint = mm.joint(parts[:, None, :], [model])
+    sep = mm.separable([parts], [model]).loglik[0]
+    np.testing.assert_allclose(joint, sep, atol=1e-12)
+    assert np.all(joint < 0)
+
+
+def test_joint_non_overlapping_is_sum_of_singles():
+    rng = np.random.default_rng(8)
+    cam = _camera('cam', (0.0, -6.0, 1.3), size=(160, 40), focal=60.0)
+    mm = MeasurementModel(_room(cam))
+    mm.set_images({'cam': _random_image(rng, cam.height, cam.width)})
+    models = [_random_model(rng, 1.7), _random_model(rng, 1.6)]
+    a = _random_particles(rng, (-3.0, 0.0), 5)
+    b = _random_particles(rng, (3.0, 0.0), 5)
+    joint = mm.joint(np.stack([a, b], axis=1), models)
+    sep = mm.separable([a, b], models).loglik
+    np.testing.assert_allclose(joint, sep[0] + sep[1], atol=1e-12)
+
+
+def test_joint_explicit_order_swaps_occluder():
+    rng = np.random.default_rng(9)
+    cam = _camera('cam', (0.0, -3.5, 1.2))
+    cfg = LikelihoodConfig(d_occ=0.4, min_visible_pixels=1)
+    mm = MeasurementModel(_room(cam), cfg)
+    image = _random_image(rng, cam.height, cam.width)
+    mm.set_images({'cam': image})
+    bins = quantize(image)
+    models = [_random_model(rng, 1.7), _random_model(rng, 1.7)]
+    sample = np.zeros((1, 2, 6))
+    sample[0, 0, [X, Y]] = (0.0, 0.0)                        # nearer the camera
+    sample[0, 1, [X, Y]] = (0.15, 1.0)                       # behind, partly hidden
+    lab = [mm.render_labels('cam', sample[0, k], models[k]) for k in range(2)]
+    m0, m1 = lab[0] > 0, lab[1] > 0
+    assert (m0 & m1).sum() > 10 and (m1 & ~m0).sum() > 10
+    rel = relative_angle(sample[0, :, THETA], cam.viewing_angle(sample[0, :, :2]))
+    hists = [models[k].interpolate(rel[k:k + 1])[0] for k in range(2)]
+    s2 = 2 * cfg.sigma ** 2
+
+    def expected(front: int) -> float:
+        back = 1 - front
+        vis_back = (~(lab[front] > 0)).astype(float)
+        return -(_F(bins, lab[front], np.ones(m0.shape), hists[front], cfg.d_occ)
+                 + _F(bins, lab[back], vis_back, hists[back], cfg.d_occ)) / s2
+
+    default = mm.joint(sample, models)[0]
+    assert default == pytest.approx(expected(0), abs=1e-12)   # depth order: target 0 front
+    order_swapped = np.array([[[1, 0]]])
+    swapped = mm.joint(sample, models, orders=order_swapped)[0]
+    assert swapped == pytest.approx(expected(1), abs=1e-12)
+    assert swapped != pytest.approx(default, abs=1e-6)
+    same = mm.joint(sample, models, orders=np.array([[[0, 1]]]))[0]
+    assert same == pytest.approx(default, abs=1e-12)
+    with pytest.raises(LikelihoodError):
+        mm.joint(sample, models, orders=np.array([[[0, 0]]]))
+
+
+def _paint(mm: MeasurementModel, cams, states, models, colours, background=(90, 90, 90)):
+    """Synthetic images: each person's parts painted in flat colours, near over far."""
+    images = {}
+    for cam in cams:
+        img = np.empty((cam.height, cam.width, 3), np.uint8)
+        img[:] = background
+        order = np.argsort([-cam.distance(np.array([s[X], s[Y], 0.9])) for s in states])
+        for k in order:
+            lab = mm.render_labels(cam.name, states[k], models[k])
+            for q in range(3):
+                img[lab == q + 1] = colours[k][q]
+        images[cam.name] = img
+    return images
+
+
+def _flat_model(colours, height):
+    hists = np.zeros((1, 3, 512))
+    for q, (r, g, b) in enumerate(colours):
+        hists[0, q, (r >> 5) * 64 + (g >> 5) * 8 + (b >> 5)] = 1.0
+    return PersonModel(height, 0.5, [0.0], hists)
+
+
+def test_correct_particle_scores_higher_than_displaced():
+    cams = _two_cameras()
+    mm = MeasurementModel(_room(*cams), LikelihoodConfig(min_visible_pixels=5))
+    colours = [((230, 190, 160), (200, 30, 30), (30, 30, 200)),
+               ((230, 190, 160), (30, 200, 30), (220, 220, 20))]
+    models = [_flat_model(colours[0], 1.75), _flat_model(colours[1], 1.65)]
+    truth = np.zeros((2, 6))
+    truth[0, [X, Y]] = (0.0, 0.0)
+    truth[1, [X, Y]] = (0.2, 0.9)
+    mm.set_images(_paint(mm, cams, truth, models, colours))
+    shifts = np.array([[0, 0], [0.3, 0], [-0.3, 0], [0, 0.3], [0.2, -0.2]])
+    parts = []
+    for k in range(2):
+        p = np.repeat(truth[k:k + 1], len(shifts), axis=0)
+        p[:, [X, Y]] += shifts
+        parts.append(p)
+    hjs = mm.hjs(parts, [np.ones(len(shifts))] * 2, models)
+    sep = mm.separable(parts, models)
+    for res in (hjs, sep):
+        for k in range(2):
+            assert np.argmax(res.loglik[k]) == 0
+            assert np.all(res.loglik[k][1:] < res.loglik[k][0] - 1.0)
+    joint = mm.joint(np.stack(parts, axis=1), models)
+    assert np.argmax(joint) == 0
+
+
+def test_occlusion_maps_match_prior_coverage():
+    rng = np.random.default_rng(11)
+    cam = _camera('cam', (0.0, -3.5, 1.2))
+    mm = MeasurementModel(_room(cam))
+    models = [_random_model(rng, 1.7) for _ in range(3)]
+    particles = [_random_particles(rng, (0.3 * k, 0.3 * k), 4) for k in range(3)]
+    weights = [rng.random(4) + 0.1 for _ in range(3)]
+    maps = mm.occlusion_maps('cam', particles, weights, models)
+    assert maps.shape == (3, cam.height, cam.width) and maps.dtype == np.float32
+    cover = []
+    for k in range(3):
+        w = weights[k] / weights[k].sum()
+        c = np.zeros((cam.height, cam.width))
+        for j in range(4):
+            c += w[j] * (mm.render_labels('cam', particles[k][j], models[k]) > 0)
+        cover.append(1.0 - c)
+    for k in range(3):
+        expect = np.prod([cover[h] for h in range(3) if h != k], axis=0)
+        np.testing.assert_allclose(maps[k], expect, atol=1e-6)
+    assert np.min(maps) < 0.9
+
+
+def test_missing_camera_is_skipped_and_bad_images_rejected():
+    rng = np.random.default_rng(12)
+    cams = _two_cameras()
+    mm = MeasurementModel(_room(*cams))
+    images = {c.name: _random_image(rng, c.height, c.width) for c in cams}
+    model = _random_model(rng, 1.7)
+    parts = _random_particles(rng, (0.0, 0.0), 5)
+    mm.set_images(images)
+    both = mm.separable([parts], [model]).loglik[0]
+    singles = []
+    for c in cams:
+        mm.set_images({c.name: images[c.name]})
+        res = mm.separable([parts], [model])
+        singles.append(res.loglik[0])
+        other = [i for i, n in enumerate(mm.camera_names) if n != c.name][0]
+        assert res.visible_fraction[0, other] == 0.0
+    np.testing.assert_allclose(both, singles[0] + singles[1], atol=1e-12)
+    with pytest.raises(LikelihoodError, match='expected'):
+        mm.set_images({'front': np.zeros((10, 10, 3), np.uint8)})
+    with pytest.raises(LikelihoodError, match='unknown camera'):
+        mm.set_images({'nope': images['front']})
+    with pytest.raises(LikelihoodError):
+        mm.hjs([parts], [np.full(5, np.nan)], [model])
+    with pytest.raises(LikelihoodError):
+        mm.hjs([parts[:, :4]], [np.ones(5)], [model])
+
+
+def test_subsample_uses_every_kth_row():
+    rng = np.random.default_rng(13)
+    cam = _camera('cam', (0.0, -4.0, 1.3), size=(60, 45), focal=45.0)
+    model = _random_model(rng, 1.7)
+    parts = _random_particles(rng, (0.0, 0.0), 4)
+    image = _random_image(rng, cam.height, cam.width)
+    full = MeasurementModel(_room(cam))
+    half = MeasurementModel(_room(cam), LikelihoodConfig(subsample=2))
+    for m in (full, half):
+        m.set_images({'cam': image})
+    sil = half.silhouettes('cam', parts, model)
+    assert np.all(sil.row % 2 == 0)
+    a = full.separable([parts], [model]).loglik[0]
+    b = half.separable([parts], [model]).loglik[0]
+    assert not np.allclose(a, b)
+    assert np.all(np.abs(a - b) < 0.5 * np.abs(a) + 1.0)    # an approximation, same scale
