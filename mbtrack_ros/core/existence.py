@@ -1,0 +1,252 @@
+"""Visibility and existence of a track as auxiliary binary processes (001 §2-3).
+
+Each track carries, beside its particle set, a binary **existence** process ``e`` (birth /
+death) and, per camera ``c``, a binary **visibility** process ``v_c`` (desocclusion /
+occlusion). They are filtered with the auxiliary-process recursion of 001 Eq. 12-16 while
+sampling only in the person's state space (001 §2.3): the state dynamics do not depend on
+``v`` (001 Eq. 22), so the single particle set of the tracker serves both visibility
+hypotheses and the predictive data likelihood of each hypothesis is a particle average
+(001 Eq. 18-19):
+
+* ``v_c = 1``: ``p_1(y_c | y^{t-1}) ~ sum_n pi_n p(y_c | s_n)``, the appearance likelihood
+  of the predicted particles in camera ``c`` (003 Eq. 3-4);
+* ``v_c = 0``: ``p_0(y_c)``, a state-independent background/clutter likelihood (001 Eq. 23),
+  here the appearance likelihood at a fixed clutter distance.
+
+The posterior ``xi_{i,t} ∝ p_i(y_t | y^{t-1}) sum_j alpha_{ji} xi_{j,t-1}`` (001 Eq. 16) is
+computed in log space. Existence follows 001 §3.2: non-existence forces the state into the
+void state ``u`` (Eq. 27, 30), so only the existing branch needs particles; its data
+likelihood relative to "no person" combines (a) the foreground support of the track's
+rendered silhouette (coverage ``f_c``, truncated-exponential densities on [0, 1] giving the
+log ratio ``k (2 f_c - 1)`` per camera) and (b) the visibility evidence, the likelihood of
+camera ``c`` under ``e = 1`` being the visibility mixture
+``xi_v p_1 + (1 - xi_v) p_0`` against ``p_0`` under ``e = 0`` (the joint (v, e) chain of the
+conclusion of 001 with states (0, 0), (0, 1), (1, 1)).
+
+**Relation to the HJS occlusion maps.** The HJS likelihood (000 Eq. 34) already weights the
+pixels of a target by ``w*``, the probability that no other target is in front of it under
+the *prior*; the expected visible fraction ``visible_fraction[c]`` derived from ``w*`` tells
+how much of the silhouette *should* be seen. The visibility process answers a different
+question: the *posterior* probability that the target *is* seen in camera ``c`` given the
+data. ``w*`` is used here to weight the evidence of each camera (a camera in which the
+target is expected to be hidden contributes neither support nor its absence), and the
+predicted ``xi_v`` can be fed back as a mixture weight of the per-camera likelihood
+(:func:`mixture_loglik`, 001 Eq. 14) so that a wrongly hidden view does not drag the
+particles.
+
+A track is reported while ``existence >= report_threshold`` and released when it stays
+below ``release_threshold`` (see :mod:`mbtrack_ros.core.detection.release`).
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.special import logsumexp
+
+__all__ = ['AuxiliaryConfig', 'ExistenceError', 'TrackAuxiliary', 'binary_step',
+           'mixture_loglik', 'predictive_loglik', 'transition']
+
+
+class ExistenceError(ValueError):
+    """Bad input to the visibility/existence filters."""
+
+
+def transition(p_on: float, p_off: float, dt: float) -> np.ndarray:
+    """Transition matrix ``A[j, i] = p(a_t = i | a_{t-1} = j)`` of a binary chain, (2, 2).
+
+    ``p_on`` (0 -> 1: desocclusion / birth) and ``p_off`` (1 -> 0: occlusion / death) are
+    probabilities per second; they are converted to continuous-time rates and integrated
+    exactly over ``dt`` seconds so that the filter does not depend on the frame rate.
+    """
+    if not (0.0 <= p_on < 1.0 and 0.0 <= p_off < 1.0):
+        raise ExistenceError(f'transition probabilities must be in [0, 1): {p_on}, {p_off}')
+    if not np.isfinite(dt) or dt < 0:
+        raise ExistenceError(f'time step must be finite and >= 0, got {dt}')
+    lam_on, lam_off = -np.log1p(-p_on), -np.log1p(-p_off)
+    total = lam_on + lam_off
+    if total <= 0.0:
+        return np.eye(2)
+    decay = 1.0 - np.exp(-total * dt)
+    a01 = lam_on / total * decay
+    a10 = lam_off / total * decay
+    return np.array([[1.0 - a01, a01], [a10, 1.0 - a10]])
+
+
+def binary_step(xi: float, A: np.ndarray, loglik0: float, loglik1: float
+                ) -> tuple[float, float]:
+    """One step of 001 Eq. 16 for a binary auxiliary process.
+
+    Args:
+        xi: previous posterior ``p(a_{t-1} = 1 | y^{t-1})``.
+        A: (2, 2) transition matrix ``A[j, i]``.
+        loglik0, loglik1: predictive data log-likelihoods ``log p_i(y_t | y^{t-1})``.
+
+    Returns:
+        (posterior ``p(a_t = 1 | y^t)``, predicted prior ``p(a_t = 1 | y^{t-1})``).
+    """
+    prev = np.array([1.0 - xi, xi])
+    prior = prev @ A                                   # 001 Eq. 16: sum_j alpha_ji xi_j
+    with np.errstate(divide='ignore'):
+        logp = np.log(prior) + np.array([loglik0, loglik1], dtype=np.float64)
+    logp = np.where(np.isnan(logp), -np.inf, logp)
+    norm = logsumexp(logp)
+    if not np.isfinite(norm):                          # no information: keep the prior
+        return float(prior[1]), float(prior[1])
+    return float(np.exp(logp[1] - norm)), float(prior[1])
+
+
+def predictive_loglik(loglik: np.ndarray, log_weights: np.ndarray | None = None) -> float:
+    """``log sum_n pi_n p(y | s_n)`` of predicted particles (001 Eq. 18-19).
+
+    Args:
+        loglik: (N,) per-particle log-likelihoods (NaN -> -inf).
+        log_weights: (N,) log predictive weights (uniform when None).
+    """
+    ll = np.asarray(loglik, dtype=np.float64)
+    if ll.ndim != 1 or ll.size == 0:
+        raise ExistenceError(f'loglik must be a non-empty (N,) array, got {ll.shape}')
+    ll = np.where(np.isnan(ll), -np.inf, ll)
+    if log_weights is None:
+        lw = np.full(ll.size, -np.log(ll.size))
+    else:
+        lw = np.asarray(log_weights, dtype=np.float64)
+        if lw.shape != ll.shape:
+            raise ExistenceError('loglik and log_weights differ in shape')
+        lw = np.where(np.isnan(lw), -np.inf, lw)
+        lw = lw - logsumexp(lw)
+    return float(logsumexp(ll + lw))
+
+
+def mixture_loglik(loglik_visible: np.ndarray, loglik_hidden: np.ndarray,
+                   prior_visible: np.ndarray) -> np.ndarray:
+    """Per-particle likelihood under uncertain visibility (001 Eq. 14, 23-24), (N,).
+
+    ``log sum_c log(xi_c p_1(y_c | x) + (1 - xi_c) p_0(y_c))`` with per-camera
+    ``loglik_visible`` (N, C), ``loglik_hidden`` (C,) and predicted visibility (C,).
+    """
+    lv = np.asarray(loglik_visible, dtype=np.float64)
+    lh = np.asarray(loglik_hidden, dtype=np.float64)
+    pv = np.clip(np.asarray(prior_visible, dtype=np.float64), 0.0, 1.0)
+    if lv.ndim != 2 or lh.shape != (lv.shape[1],) or pv.shape != lh.shape:
+        raise ExistenceError(
+            f'expected (N, C), (C,), (C,) arrays, got {lv.shape}, {lh.shape}, {pv.shape}')
+    with np.errstate(divide='ignore'):
+        a = np.log(pv)[None, :] + lv
+        b = np.log1p(-pv)[None, :] + lh[None, :]
+    out = np.logaddexp(a, b).sum(axis=1)
+    return np.where(np.isnan(out), -np.inf, out)
+
+
+@dataclass(frozen=True)
+class AuxiliaryConfig:
+    """Parameters of the visibility and existence processes.
+
+    Attributes:
+        occlusion, desocclusion: per-second probabilities of the visibility chain
+            (001 §3.1 alpha_10, alpha_01).
+        death, birth: per-second probabilities of the existence chain (001 §3.2).
+        initial_visibility, initial_existence: values at track creation.
+        support_gain: ``k`` of the coverage evidence ``k (2 f - 1)`` per camera.
+        appearance_weight: tempering of the visibility evidence in the existence update.
+        report_threshold: a track is reported while its existence is at least this.
+    """
+
+    occlusion: float = 0.3
+    desocclusion: float = 0.6
+    death: float = 0.3
+    birth: float = 0.05
+    initial_visibility: float = 0.8
+    initial_existence: float = 0.9
+    support_gain: float = 4.0
+    appearance_weight: float = 0.3
+    report_threshold: float = 0.5
+
+    def __post_init__(self) -> None:
+        for name in ('occlusion', 'desocclusion', 'death', 'birth'):
+            v = getattr(self, name)
+            if not 0.0 <= v < 1.0:
+                raise ExistenceError(f'{name} probability must be in [0, 1), got {v}')
+        for name in ('initial_visibility', 'initial_existence', 'report_threshold'):
+            v = getattr(self, name)
+            if not 0.0 <= v <= 1.0:
+                raise ExistenceError(f'{name} must be in [0, 1], got {v}')
+
+
+@dataclass
+class TrackAuxiliary:
+    """Visibility (per camera) and existence posteriors of one track.
+
+    Attributes:
+        visibility: camera -> ``p(v_c = 1 | y^t)``.
+        existence: ``p(e = 1 | y^t)``.
+        prior_visibility: camera -> predicted ``p(v_c = 1 | y^{t-1})`` of the last step.
+    """
+
+    config: AuxiliaryConfig = field(default_factory=AuxiliaryConfig)
+    visibility: dict[str, float] = field(default_factory=dict)
+    existence: float = -1.0
+    prior_visibility: dict[str, float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.existence < 0:
+            self.existence = self.config.initial_existence
+
+    @property
+    def reported(self) -> bool:
+        return self.existence >= self.config.report_threshold
+
+    def predicted_visibility(self, camera: str, dt: float) -> float:
+        """``p(v_c = 1 | y^{t-1})`` after ``dt`` seconds (001 Eq. 16, sum over j)."""
+        cfg = self.config
+        xi = self.visibility.get(camera, cfg.initial_visibility)
+        A = transition(cfg.desocclusion, cfg.occlusion, dt)
+        return float(np.array([1.0 - xi, xi]) @ A[:, 1])
+
+    def update(self, dt: float, *, loglik_visible: Mapping[str, float],
+               loglik_hidden: Mapping[str, float],
+               coverage: Mapping[str, float] | None = None,
+               visible_fraction: Mapping[str, float] | None = None) -> None:
+        """One filtering step of all auxiliary processes of the track.
+
+        Args:
+            dt: seconds since the previous step.
+            loglik_visible: camera -> ``log p_1(y_c | y^{t-1})`` (see
+                :func:`predictive_loglik`); cameras that do not see the track are omitted.
+            loglik_hidden: camera -> ``log p_0(y_c)`` clutter log-likelihood.
+            coverage: camera -> foreground coverage of the track's silhouette in [0, 1].
+            visible_fraction: camera -> expected visible fraction under the prior (w*);
+                weights the camera's evidence (1 when omitted).
+        """
+        cfg = self.config
+        coverage = coverage or {}
+        visible_fraction = visible_fraction or {}
+        missing = set(loglik_visible) ^ set(loglik_hidden)
+        if missing:
+            raise ExistenceError(
+                f'visible/hidden log-likelihoods must name the same cameras: {sorted(missing)}')
+        A_v = transition(cfg.desocclusion, cfg.occlusion, dt)
+        log_ratio_e = 0.0
+        self.prior_visibility = {}
+        for cam in loglik_visible:
+            l1, l0 = float(loglik_visible[cam]), float(loglik_hidden[cam])
+            l1 = -np.inf if np.isnan(l1) else l1
+            l0 = -np.inf if np.isnan(l0) else l0
+            xi_prev = self.visibility.get(cam, cfg.initial_visibility)
+            xi, prior = binary_step(xi_prev, A_v, l0, l1)    # 001 Eq. 16 per camera
+            self.visibility[cam] = xi
+            self.prior_visibility[cam] = prior
+            w = float(np.clip(visible_fraction.get(cam, 1.0), 0.0, 1.0))
+            # e = 1: visibility mixture xi p_1 + (1 - xi) p_0 against p_0 for e = 0
+            if np.isfinite(l0):
+                with np.errstate(divide='ignore'):
+                    mix = np.logaddexp(np.log(prior) + l1 - l0, np.log1p(-prior))
+                log_ratio_e += cfg.appearance_weight * w * float(mix)
+        for cam, f in coverage.items():
+            w = float(np.clip(visible_fraction.get(cam, 1.0), 0.0, 1.0))
+            f = float(np.clip(f, 0.0, 1.0)) if np.isfinite(f) else 0.0
+            # truncated exponentials on [0, 1]: log p(f | e=1) - log p(f | e=0) = k (2f - 1)
+            log_ratio_e += w * cfg.support_gain * (2.0 * f - 1.0)
+        A_e = transition(cfg.birth, cfg.death, dt)
+        self.existence, _ = binary_step(self.existence, A_e, 0.0, log_ratio_e)
