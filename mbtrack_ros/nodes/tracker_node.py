@@ -158,7 +158,9 @@ class TrackerNode(Node):
         self.tracker = tracker or Tracker(self.calibration, p.tracker,
                                           rng=np.random.default_rng(p.tracker.seed))
         self.sync = FrameSetSynchronizer(p.camera_names, p.slop_ns, p.timeout_ns)
-        self._lock = threading.Lock()
+        self._lock = threading.Lock()  # synchroniser and frame-set queue
+        self._step_lock = threading.Lock()  # one tracker step at a time; held while closing
+        self._closing = False
         self._pending: deque[FrameSet] = deque()
         self._warned: dict[str, float] = {}
         self._dropped = 0
@@ -215,7 +217,6 @@ class TrackerNode(Node):
         # the tracker step: its own mutually exclusive group, polling the frame-set queue on
         # a steady-clock timer (independent of sim time; a poll finds every queued set)
         self._step_group = MutuallyExclusiveCallbackGroup()
-        self._closing = False
         self._step_timer = self.create_timer(
             STEP_POLL_S, self._on_frame_sets, callback_group=self._step_group,
             clock=Clock(clock_type=ClockType.STEADY_TIME))
@@ -295,7 +296,10 @@ class TrackerNode(Node):
                     return
                 fs = self._pending.popleft()
             try:
-                self.process(fs)
+                with self._step_lock:
+                    if self._closing:
+                        return
+                    self.process(fs)
             except Exception as err:  # noqa: BLE001 - a bad frame must not kill the node
                 self._dropped_sets += 1
                 self.warn_once(f'step:{type(err).__name__}',
@@ -399,9 +403,10 @@ class TrackerNode(Node):
 
     def destroy_node(self) -> None:
         self._closing = True
-        if self._output_bag is not None:
-            self._output_bag.close()
-            self._output_bag = None
+        with self._step_lock:  # let a running step finish its output-bag write
+            if self._output_bag is not None:
+                self._output_bag.close()
+                self._output_bag = None
         super().destroy_node()
 
 
