@@ -1,0 +1,174 @@
+"""Appearance model: quantisation, part histograms, Bhattacharyya, key views."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mbtrack_ros.core.appearance import (AppearanceError, PersonModel,
+                                         bhattacharyya_distance_sq, model_from_images,
+                                         part_histograms, quantize, single_target_loglik)
+from mbtrack_ros.core.camera import Camera, RoomCalibration, look_at
+from mbtrack_ros.core.shape import BodyShape, rasterize, render_labels
+from mbtrack_ros.core.state import THETA, X, Y
+
+
+def _camera(name='cam', eye=(0.0, -4.0, 1.4), size=(120, 90), focal=90.0) -> Camera:
+    w, h = size
+    R, t = look_at(eye, (0.0, 0.0, 0.9))
+    K = [[focal, 0, (w - 1) / 2], [0, focal, (h - 1) / 2], [0, 0, 1]]
+    return Camera(name, w, h, K, np.zeros(5), R, t)
+
+
+def _bin(rgb) -> int:
+    r, g, b = rgb
+    return (r // 32) * 64 + (g // 32) * 8 + b // 32
+
+
+def test_quantize_bins():
+    img = np.array([[[0, 0, 0], [255, 255, 255], [32, 64, 96], [31, 63, 95]]], np.uint8)
+    bins = quantize(img)
+    assert bins.dtype == np.int16
+    np.testing.assert_array_equal(bins[0], [0, 511, 1 * 64 + 2 * 8 + 3, 0 * 64 + 1 * 8 + 2])
+    with pytest.raises(AppearanceError):
+        quantize(np.zeros((4, 4), np.uint8))
+    with pytest.raises(AppearanceError):
+        quantize(np.zeros((4, 4, 3), np.float32))
+
+
+def test_uniform_patch_histogram_is_one_bin():
+    cam = _camera()
+    colour = (200, 40, 90)
+    img = np.empty((cam.height, cam.width, 3), np.uint8)
+    img[:] = colour
+    sil = rasterize(cam, np.zeros(6), BodyShape())
+    hist = part_histograms(quantize(img), sil, 0)
+    assert hist.shape == (3, 512)
+    for q in range(3):
+        assert hist[q, _bin(colour)] == pytest.approx(1.0)
+        assert hist[q].sum() == pytest.approx(1.0)
+    raw = part_histograms(quantize(img), sil, 0, normalize=False)
+    np.testing.assert_array_equal(raw.sum(axis=1), sil.part_area[0])
+    # a weight map scales the mass and can zero out a part
+    lab = sil.mask(0)
+    wmap = np.where(lab == 3, 0.0, 0.5)
+    half = part_histograms(quantize(img), sil, 0, wmap, normalize=False)
+    np.testing.assert_allclose(half.sum(axis=1), [0.5 * sil.part_area[0, 0],
+                                                  0.5 * sil.part_area[0, 1], 0.0])
+
+
+def test_part_histograms_of_painted_parts_match_counts():
+    rng = np.random.default_rng(0)
+    cam = _camera()
+    img = rng.integers(0, 256, (cam.height, cam.width, 3), dtype=np.uint8)
+    bins = quantize(img)
+    state = np.zeros(6)
+    state[THETA] = 0.7
+    sil = rasterize(cam, state, BodyShape())
+    lab = render_labels(cam, state, BodyShape())
+    hist = part_histograms(bins, sil, 0, normalize=False)
+    for q in range(3):
+        expect = np.bincount(bins[lab == q + 1], minlength=512)
+        np.testing.assert_array_equal(hist[q], expect)
+
+
+def test_bhattacharyya_hand_values():
+    h = np.zeros(512)
+    h[3] = 1.0
+    k = np.zeros(512)
+    k[7] = 1.0
+    m = np.zeros(512)
+    m[3] = m[7] = 0.5
+    assert bhattacharyya_distance_sq(h, h) == pytest.approx(0.0)
+    assert bhattacharyya_distance_sq(h, k) == pytest.approx(1.0)
+    assert bhattacharyya_distance_sq(h, m) == pytest.approx(1.0 - np.sqrt(0.5))
+    batch = bhattacharyya_distance_sq(np.stack([h, k]), m)
+    np.testing.assert_allclose(batch, [1 - np.sqrt(0.5)] * 2)
+
+
+def test_interpolation_hand_weights():
+    rng = np.random.default_rng(1)
+    hists = rng.random((3, 3, 512))
+    model = PersonModel(1.7, 0.5, [0.0, np.pi / 2, np.pi], hists)
+    norm = hists / hists.sum(axis=2, keepdims=True)
+    out = model.interpolate(np.array([np.pi / 6, np.pi / 2, np.deg2rad(-170.0)]))
+    # 30 deg: views at 0 (30 deg away) and 90 (60 deg away): weights 2/3, 1/3
+    np.testing.assert_allclose(out[0], 2 / 3 * norm[0] + 1 / 3 * norm[1])
+    np.testing.assert_allclose(out[1], norm[1])
+    # -170 deg is 10 deg from the view at 180 and 100 deg from the view at 90 (wrap-around)
+    w = 100 / 110
+    np.testing.assert_allclose(out[2], w * norm[2] + (1 - w) * norm[1])
+    np.testing.assert_allclose(out.sum(axis=2), 1.0)
+    single = PersonModel(1.7, 0.5, [0.3], hists[:1])
+    np.testing.assert_allclose(single.interpolate(np.array([2.0, -1.0])), norm[[0, 0]])
+
+
+def test_add_view_merges_close_views():
+    h0 = np.zeros((3, 512))
+    h0[:, 1] = 1.0
+    h1 = np.zeros((3, 512))
+    h1[:, 2] = 1.0
+    model = PersonModel(1.7, 0.5)
+    model.add_view(0.0, h0)
+    model.add_view(np.deg2rad(10.0), h1)                 # merged: averaged
+    assert model.view_angles.size == 1
+    assert model.view_angles[0] == pytest.approx(np.deg2rad(5.0))
+    np.testing.assert_allclose(model.histograms[0, :, 1:3], 0.5)
+    model.add_view(np.deg2rad(90.0), h1)                 # new key view
+    assert model.view_angles.size == 2
+    with pytest.raises(AppearanceError):
+        model.add_view(0.0, np.zeros((2, 512)))
+    with pytest.raises(AppearanceError):
+        PersonModel(1.7, 0.5).interpolate(np.zeros(1))
+
+
+def _painted_frame(cams, state, shape, colours):
+    images = {}
+    for cam in cams:
+        img = np.full((cam.height, cam.width, 3), 80, np.uint8)
+        lab = render_labels(cam, state, shape)
+        for q in range(3):
+            img[lab == q + 1] = colours[q]
+        images[cam.name] = img
+    return images
+
+
+def test_model_from_images_and_single_target_likelihood():
+    cams = [_camera('a', (0.0, -4.0, 1.4)), _camera('b', (4.0, 0.0, 1.4))]
+    calib = RoomCalibration({c.name: c for c in cams}, (-3, -3, 3, 3))
+    colours = [(230, 190, 160), (200, 30, 30), (30, 30, 200)]
+    state = np.zeros(6)
+    state[THETA] = 0.0
+    shape = BodyShape(height=1.75, width=0.5)
+    images = _painted_frame(cams, state, shape, colours)
+    model = model_from_images(images, calib, state, 1.75, 0.5)
+    assert model.view_angles.size == 2
+    expect = [float(np.arctan2(np.sin(state[THETA] - c.viewing_angle(np.zeros(2))),
+                               np.cos(state[THETA] - c.viewing_angle(np.zeros(2)))))
+              for c in cams]
+    np.testing.assert_allclose(np.sort(model.view_angles), np.sort(expect), atol=1e-9)
+    for v in range(2):
+        for q in range(3):
+            assert model.histograms[v, q, _bin(colours[q])] > 0.9
+    # an occlusion mask hiding most of the person in camera b drops that view
+    occ = {'b': np.ones((cams[1].height, cams[1].width), bool)}
+    assert model_from_images(images, calib, state, 1.75, 0.5, occluded=occ).view_angles.size \
+        == 1
+    # the likelihood (003 Eq. 3) prefers the true position
+    shifted = np.zeros((4, 6))
+    shifted[:, X] = [0.0, 0.3, -0.3, 0.15]
+    shifted[:, Y] = [0.0, 0.0, 0.0, 0.4]
+    sil = rasterize(cams[0], shifted, shape)
+    rel = shifted[:, THETA] - cams[0].viewing_angle(shifted[:, [X, Y]])
+    ll = single_target_loglik(quantize(images['a']), sil, model.interpolate(rel))
+    assert np.argmax(ll) == 0 and ll[0] > -0.5
+    assert np.all(ll[1:] < ll[0] - 1.0)
+    # out of view -> neutral 0
+    far = np.zeros((1, 6))
+    far[0, X] = 50.0
+    sil_far = rasterize(cams[0], far, shape)
+    assert single_target_loglik(quantize(images['a']), sil_far,
+                                model.interpolate(np.zeros(1)))[0] == 0.0
+    with pytest.raises(AppearanceError):
+        model_from_images({'zz': images['a']}, calib, state, 1.75, 0.5)
+    with pytest.raises(AppearanceError):
+        model_from_images(images, calib, np.zeros(3), 1.75, 0.5)

@@ -1,0 +1,175 @@
+"""Body shape model: projection, s(o), sitting pose and the span rasteriser."""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from mbtrack_ros.core.camera import Camera, look_at
+from mbtrack_ros.core.shape import (HEAD, LEGS, TORSO, BodyShape, ShapeError, rasterize,
+                                    render_labels, silhouette_outline, width_scale)
+from mbtrack_ros.core.state import SIT, THETA, X, Y
+
+
+def _camera(eye=(0.0, -4.0, 1.4), target=(0.0, 0.0, 0.9), size=(160, 120),
+            focal=120.0, dist=(0.0,) * 5) -> Camera:
+    w, h = size
+    R, t = look_at(eye, target)
+    K = [[focal, 0, (w - 1) / 2], [0, focal, (h - 1) / 2], [0, 0, 1]]
+    return Camera('cam', w, h, K, np.asarray(dist), R, t)
+
+
+def _state(x=0.0, y=0.0, theta=0.0, sit=0.0) -> np.ndarray:
+    s = np.zeros(6)
+    s[[X, Y, THETA, SIT]] = (x, y, theta, sit)
+    return s
+
+
+def _facing(cam: Camera, x=0.0, y=0.0) -> float:
+    return float(cam.viewing_angle(np.array([x, y])))
+
+
+def test_standing_silhouette_covers_foot_and_head():
+    cam = _camera()
+    shape = BodyShape(height=1.8, width=0.5)
+    lab = render_labels(cam, _state(0.3, 0.2), shape)
+    foot = cam.project(np.array([0.3, 0.2, 0.05]))
+    head = cam.project(np.array([0.3, 0.2, 1.75]))
+    torso = cam.project(np.array([0.3, 0.2, 1.2]))
+    assert lab[int(round(foot[1])), int(round(foot[0]))] == LEGS
+    assert lab[int(round(head[1])), int(round(head[0]))] == HEAD
+    assert lab[int(round(torso[1])), int(round(torso[0]))] == TORSO
+    ys, _ = np.nonzero(lab)
+    # vertical extent spans the projected feet .. head top (within a pixel)
+    top = cam.project(np.array([0.3, 0.2, 1.8]))[1]
+    bottom = cam.project(np.array([0.3, 0.2, 0.0]))[1]
+    assert abs(ys.min() - top) <= 1.0 and abs(ys.max() - bottom) <= 1.0
+    # parts are stacked: head above torso above legs
+    mean_row = [np.nonzero(lab == q)[0].mean() for q in (HEAD, TORSO, LEGS)]
+    assert mean_row[0] < mean_row[1] < mean_row[2]
+
+
+def test_width_scale_narrows_profile_at_90_degrees():
+    assert width_scale(np.array([0.0, np.pi / 2, np.pi]))[1] == pytest.approx(0.7)
+    cam = _camera(size=(320, 240), focal=260.0)
+    facing = _facing(cam)
+    states = np.stack([_state(theta=facing), _state(theta=facing + np.pi / 2)])
+    left, right, _, valid, _ = silhouette_outline(cam, states, BodyShape())
+    assert valid.all()
+    w = np.linalg.norm(right - left, axis=2)                 # (2, P) outline widths
+    np.testing.assert_allclose(w[1], 0.7 * w[0], rtol=1e-9)
+    # and in the raster: shoulder row is ~0.7 as wide
+    sil = rasterize(cam, states, BodyShape())
+    assert sil.area[1] == pytest.approx(0.7 * sil.area[0], rel=0.06)
+
+
+def test_sitting_silhouette_is_shorter_and_has_no_legs():
+    cam = _camera()
+    shape = BodyShape(height=1.75)
+    sil = rasterize(cam, np.stack([_state(), _state(sit=1.0)]), shape)
+    h_stand = sil.bbox[0, 3] - sil.bbox[0, 1]
+    h_sit = sil.bbox[1, 3] - sil.bbox[1, 1]
+    assert h_sit < 0.7 * h_stand
+    assert sil.part_area[1, LEGS - 1] == 0 and sil.part_area[0, LEGS - 1] > 0
+    assert sil.part_area[1, TORSO - 1] > 0 and sil.part_area[1, HEAD - 1] > 0
+    # the seated head top is at chair height + upper body height
+    top = cam.project(np.array([0.0, 0.0, 0.45 + (1 - 0.47) * 1.75]))[1]
+    assert abs(sil.bbox[1, 1] - top) <= 1.0
+
+
+def test_raster_matches_fillpoly_and_parts_are_disjoint():
+    rng = np.random.default_rng(0)
+    cam = _camera(size=(320, 240), focal=400.0, dist=(-0.1, 0.02, 0, 0, 0))
+    n = 12
+    states = np.zeros((n, 6))
+    states[:, X] = rng.uniform(-1.0, 1.0, n)
+    states[:, Y] = rng.uniform(-1.0, 1.5, n)
+    states[:, THETA] = rng.uniform(-np.pi, np.pi, n)
+    states[::3, SIT] = 1.0
+    shape = BodyShape(height=1.7, width=0.55)
+    left, right, seg_part, valid, _ = silhouette_outline(cam, states, shape)
+    sil = rasterize(cam, states, shape)
+    for i in range(n):
+        ref = np.zeros((cam.height, cam.width), np.uint8)
+        for j in range(seg_part.shape[1]):
+            if seg_part[i, j] == 0:
+                continue
+            quad = np.array([left[i, j], right[i, j], right[i, j + 1], left[i, j + 1]])
+            cv2.fillPoly(ref, [np.round(quad * 16).astype(np.int32)], 1, shift=4)
+        cover = np.zeros((cam.height, cam.width), np.int32)
+        sl = sil.spans(i)
+        for r, a, b in zip(sil.row[sl], sil.x0[sl], sil.x1[sl]):
+            cover[r, a:b] += 1
+        assert cover.max() == 1                              # no pixel claimed twice
+        mine = cover > 0
+        assert mine.sum() == sil.area[i]
+        # cv2.fillPoly also fills pixels whose centres lie on the boundary: a little larger
+        assert 0 <= ref.sum() - mine.sum() <= 0.08 * ref.sum()
+        assert (mine & (ref == 0)).sum() <= 0.01 * mine.sum()
+        exact = sum(cv2.contourArea(np.array(
+            [left[i, j], right[i, j], right[i, j + 1], left[i, j + 1]], np.float32))
+            for j in range(seg_part.shape[1]) if seg_part[i, j])
+        if sil.full_area[i] == sil.area[i]:                  # not clipped: analytic area
+            assert abs(mine.sum() - exact) <= 0.015 * exact
+        iou = (mine & (ref > 0)).sum() / (mine | (ref > 0)).sum()
+        assert iou > 0.9
+        assert sil.part_area[i].sum() == sil.area[i]
+        ys, xs = np.nonzero(mine)
+        np.testing.assert_array_equal(sil.bbox[i], [xs.min(), ys.min(), xs.max() + 1,
+                                                    ys.max() + 1])
+
+
+def test_batch_equals_single_rasterisation_and_sizes_per_particle():
+    rng = np.random.default_rng(1)
+    cam = _camera()
+    n = 6
+    states = np.zeros((n, 6))
+    states[:, X] = rng.uniform(-1.0, 1.0, n)
+    states[:, THETA] = rng.uniform(-np.pi, np.pi, n)
+    heights = rng.uniform(1.5, 1.9, n)
+    widths = rng.uniform(0.4, 0.6, n)
+    batch = rasterize(cam, states, BodyShape(), heights=heights, widths=widths)
+    listed = rasterize(cam, states, [BodyShape(height=h, width=w)
+                                     for h, w in zip(heights, widths)])
+    np.testing.assert_array_equal(batch.x0, listed.x0)
+    for i in range(n):
+        one = rasterize(cam, states[i], BodyShape(height=heights[i], width=widths[i]))
+        np.testing.assert_array_equal(batch.mask(i), one.mask(0))
+        assert batch.distance[i] == pytest.approx(one.distance[0])
+    # taller people have larger silhouettes at the same place
+    two = rasterize(cam, np.stack([states[0]] * 2), BodyShape(), heights=[1.5, 1.9])
+    assert two.area[1] > two.area[0]
+
+
+def test_clipping_behind_camera_and_outside():
+    cam = _camera()
+    states = np.stack([_state(0.0, 0.0), _state(0.0, -6.0), _state(40.0, 0.0),
+                       _state(1.2, -2.0)])
+    sil = rasterize(cam, states, BodyShape())
+    assert sil.area[0] > 0
+    assert sil.area[1] == 0 and np.isinf(sil.distance[1])     # behind the camera
+    assert sil.area[2] == 0 and sil.full_area[2] > 0          # outside the image
+    assert 0 < sil.area[3] < sil.full_area[3]                  # partly outside
+    assert sil.full_area[0] == sil.area[0]
+    assert np.all((sil.row >= 0) & (sil.row < cam.height))
+    assert np.all((sil.x0 >= 0) & (sil.x1 <= cam.width) & (sil.x0 < sil.x1))
+    np.testing.assert_array_equal(np.diff(sil.offsets) > 0, sil.area > 0)
+    # camera distance of the body centre orders particles front to back
+    near = rasterize(cam, np.stack([_state(0, -1), _state(0, 1)]), BodyShape())
+    assert near.distance[0] < near.distance[1]
+
+
+def test_row_step_and_errors():
+    cam = _camera()
+    full = rasterize(cam, _state(), BodyShape())
+    half = rasterize(cam, _state(), BodyShape(), row_step=3)
+    assert np.all(half.row % 3 == 0)
+    assert half.area[0] == pytest.approx(full.area[0] / 3, rel=0.1)
+    with pytest.raises(ShapeError):
+        BodyShape(height=-1.0)
+    with pytest.raises(ShapeError):
+        rasterize(cam, np.zeros((3, 4)), BodyShape())
+    with pytest.raises(ShapeError):
+        rasterize(cam, np.zeros((2, 6)), [BodyShape()])
+    with pytest.raises(ShapeError):
+        rasterize(cam, _state(), BodyShape(), row_step=0)
