@@ -11,9 +11,10 @@ not fade into the background.
 Foreground is a Y-Cb-Cr threshold test with separate luminance and chroma thresholds. The
 luminance and chroma offsets of the background are first rescaled by a global gain
 (median ratio I/B of the luminance), which makes the test robust to slow global
-illumination changes; optional shadow suppression drops pixels that are darker than the background by a bounded ratio
-with unchanged chroma. The mask is cleaned by morphological opening/closing and by removing
-connected components smaller than ``min_blob_area`` pixels.
+illumination changes; optional shadow suppression drops pixels that are darker than the
+background by a bounded ratio with unchanged chroma. The mask is cleaned by morphological
+opening/closing and by removing connected components smaller than ``min_blob_area``
+pixels.
 
 Images are ``(H, W, 3) uint8`` RGB; masks are ``(H, W) bool``.
 """

@@ -1,0 +1,472 @@
+"""Coarse-to-fine detection of new people on a floor grid (003 §4.1).
+
+The floor (or the calibration's entry zones) is collapsed into a regular grid; each grid
+point carries hypotheses over body height, width, orientation and pose (standing/sitting).
+The likelihood of a hypothesis is the product over cameras of single-view responses
+(a sum of log responses here, 003 §4.1), each built from the three features of
+:mod:`.features`:
+
+* **coarse level** - a sub-sampled grid with one height/width, scored by foreground coverage
+  alone on all cameras (the ceiling camera included: it sees a person as a blob around the
+  floor point). The silhouettes of this static grid are rasterised once at construction,
+  so a frame costs one prefix-sum lookup per span;
+* **fine level** - in the neighbourhood of promising coarse points, a full-resolution grid
+  is scored with coverage, contour likelihood (003 Eq. 5) and colour symmetry (side
+  cameras; the ceiling camera contributes coverage only), first over position and pose,
+  then over height, width and orientation at the best position.
+
+Hypotheses near current tracks are removed before each search (003 §4.1), pixels covered
+by the tracks' rendered silhouettes are treated as unknown (neither support nor
+contradiction), several simultaneous entries are separated by non-maximum suppression, and
+a detection is only emitted after it has been found at a consistent position in
+``confirm_frames`` consecutive frames.
+
+Per-view log response of a hypothesis seen by camera ``c`` (relative to a neutral
+reference, so that cameras that do not see it contribute 0 and evidence adds up):
+``w_cov log(max(cov, floor) / cov_ref) + w_con (contour - con_ref) + w_sym (sym_ref - sym)``
+plus, at the fine level, ``w_ctx log(max(1 - extra, floor) / cov_ref)`` where ``extra`` is
+the foreground fraction of a larger standing body around the hypothesis that the
+hypothesis does not cover (coverage alone favours any hypothesis inside the blob, e.g. a
+sitting one inside a standing person).
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from mbtrack_ros.core.camera import Camera, RoomCalibration
+from mbtrack_ros.core.detection import DetectionError
+from mbtrack_ros.core.detection.features import (
+    EdgeMap, ForegroundIntegral, colour_symmetry, contour_loglik_spans, span_count)
+from mbtrack_ros.core.shape import BodyShape, rasterize
+from mbtrack_ros.core.state import SIT, STATE_DIM, THETA, X, Y
+
+__all__ = ['Detection', 'Detector', 'DetectorConfig', 'FrameEvidence', 'is_ceiling']
+
+
+def is_ceiling(camera: Camera, *, cos_limit: float = 0.8) -> bool:
+    """True for a camera looking (nearly) straight down at the floor."""
+    forward = camera.R[2]                     # optical axis in world coordinates
+    return bool(forward[2] < -cos_limit)
+
+
+@dataclass(frozen=True)
+class DetectorConfig:
+    """Parameters of the detection search (metres, radians, pixels at 320x240).
+
+    Attributes:
+        coarse_spacing, fine_spacing: grid spacings of the two levels.
+        fine_radius: half-size of the fine grid around a promising coarse point.
+        zones: 'floor' (whole walkable floor and entry zones) or 'entry' (entry zones only).
+        heights, widths, orientations: fine-level hypotheses (orientations in [0, pi)
+            suffice: the shape model is symmetric).
+        sitting: also test sitting hypotheses.
+        coarse_height, coarse_width: the single size of the coarse level.
+        coarse_coverage: mean coverage over the seeing cameras of a promising coarse point.
+        veto_coverage: a seeing camera with coverage below this rejects the hypothesis.
+        min_views: cameras that must see a hypothesis (in image, mostly not hidden by
+            tracks, at least ``min_area`` pixels).
+        min_known: fraction of the silhouette not covered by tracks for a camera to count.
+        min_area: smallest silhouette area in pixels at 320x240 (scaled with the image).
+        w_coverage, w_contour, w_symmetry: weights of the three log responses.
+        w_context, context_height, context_width: weight of the "unexplained foreground"
+            response and the size of the standing body around a hypothesis it is measured
+            in (fine level only).
+        coverage_floor, coverage_ref, contour_ref, symmetry_ref: response references.
+        threshold: smallest combined log response of a detection.
+        confirm_frames: consecutive frames a detection must be found in.
+        confirm_radius: largest position change between confirming frames.
+        exclusion_radius: hypotheses this close to a track are not tested.
+        nms_radius: non-maximum-suppression radius between detections.
+        max_candidates: coarse neighbourhoods refined per frame.
+    """
+
+    coarse_spacing: float = 0.3
+    fine_spacing: float = 0.1
+    fine_radius: float = 0.3
+    zones: str = 'floor'
+    heights: tuple[float, ...] = (1.6, 1.75, 1.9)
+    widths: tuple[float, ...] = (0.45, 0.55)
+    orientations: tuple[float, ...] = (0.0, np.pi / 4, np.pi / 2, 3 * np.pi / 4)
+    sitting: bool = True
+    coarse_height: float = 1.75
+    coarse_width: float = 0.5
+    coarse_coverage: float = 0.45
+    veto_coverage: float = 0.15
+    min_views: int = 2
+    min_known: float = 0.5
+    min_area: int = 60
+    w_coverage: float = 1.0
+    w_contour: float = 1.0
+    w_symmetry: float = 0.3
+    w_context: float = 1.0
+    context_height: float = 2.1
+    context_width: float = 0.8
+    coverage_floor: float = 0.02
+    coverage_ref: float = 0.5
+    contour_ref: float = 0.0
+    symmetry_ref: float = 1.0
+    threshold: float = 1.0
+    confirm_frames: int = 3
+    confirm_radius: float = 0.4
+    exclusion_radius: float = 0.5
+    nms_radius: float = 0.6
+    max_candidates: int = 6
+
+    def __post_init__(self) -> None:
+        for name in ('coarse_spacing', 'fine_spacing', 'nms_radius', 'confirm_radius'):
+            if not getattr(self, name) > 0:
+                raise DetectionError(f'detector {name} must be > 0')
+        if self.zones not in ('floor', 'entry'):
+            raise DetectionError(f"detector zones must be 'floor' or 'entry', got {self.zones!r}")
+        if not (self.heights and self.widths and self.orientations):
+            raise DetectionError('detector needs at least one height, width and orientation')
+        if min(self.heights) <= 0 or min(self.widths) <= 0:
+            raise DetectionError('detector heights and widths must be positive')
+        if self.min_views < 1 or self.confirm_frames < 1 or self.max_candidates < 1:
+            raise DetectionError('min_views, confirm_frames and max_candidates must be >= 1')
+
+
+@dataclass
+class Detection:
+    """One detected person.
+
+    Attributes:
+        state: (6,) state ``x, y, 0, 0, theta, sitting`` (metres, radians).
+        height, width: body size of the best hypothesis, metres.
+        score: combined log response.
+        coverage: per seeing camera, the foreground coverage of the silhouette.
+        frames: consecutive frames the detection was found in.
+    """
+
+    state: np.ndarray
+    height: float
+    width: float
+    score: float
+    coverage: dict[str, float] = field(default_factory=dict)
+    frames: int = 1
+
+    @property
+    def xy(self) -> np.ndarray:
+        return self.state[[X, Y]]
+
+
+@dataclass
+class FrameEvidence:
+    """Per-frame image evidence of one camera shared by detection and release.
+
+    Attributes:
+        image: (H, W, 3) uint8 RGB.
+        foreground: (H, W) bool foreground mask.
+        tracks: (H, W) bool pixels covered by the rendered silhouettes of current tracks.
+    """
+
+    image: np.ndarray
+    foreground: np.ndarray
+    tracks: np.ndarray | None = None
+    _integral: ForegroundIntegral | None = field(default=None, repr=False)
+    _plain: ForegroundIntegral | None = field(default=None, repr=False)
+    _edges: EdgeMap | None = field(default=None, repr=False)
+
+    @property
+    def integral(self) -> ForegroundIntegral:
+        """Prefix sums with the track pixels unknown (for new hypotheses)."""
+        if self._integral is None:
+            self._integral = ForegroundIntegral(self.foreground, self.tracks)
+        return self._integral
+
+    @property
+    def plain(self) -> ForegroundIntegral:
+        """Prefix sums of the foreground alone (for the support of current tracks)."""
+        if self._plain is None:
+            self._plain = ForegroundIntegral(self.foreground)
+        return self._plain
+
+    @property
+    def edges(self) -> EdgeMap:
+        if self._edges is None:
+            fg = self.foreground
+            if self.tracks is not None:
+                fg = fg & ~self.tracks
+            self._edges = EdgeMap.from_image(self.image, fg)
+        return self._edges
+
+
+def _grid(bounds: Sequence[tuple[float, float, float, float]], spacing: float) -> np.ndarray:
+    pts = []
+    for x0, y0, x1, y1 in bounds:
+        xs = np.arange(x0, x1 + 1e-9, spacing)
+        ys = np.arange(y0, y1 + 1e-9, spacing)
+        gx, gy = np.meshgrid(xs + 0.5 * (x1 - xs[-1]), ys + 0.5 * (y1 - ys[-1]))
+        pts.append(np.stack([gx.ravel(), gy.ravel()], axis=1))
+    out = np.concatenate(pts)
+    # drop duplicates of overlapping zones
+    _, keep = np.unique(np.round(out / (0.5 * spacing)).astype(np.int64), axis=0,
+                        return_index=True)
+    return out[np.sort(keep)]
+
+
+def _states(xy: np.ndarray, theta: np.ndarray | float = 0.0,
+            sitting: np.ndarray | float = 0.0) -> np.ndarray:
+    s = np.zeros((xy.shape[0], STATE_DIM))
+    s[:, X], s[:, Y] = xy[:, 0], xy[:, 1]
+    s[:, THETA] = theta
+    s[:, SIT] = sitting
+    return s
+
+
+def _max_span_width(sil) -> np.ndarray:
+    """(N,) widest span of each silhouette, pixels (the projected body width Delta)."""
+    n = span_count(sil)
+    w = (sil.x1 - sil.x0).astype(np.float64)
+    off = np.asarray(sil.offsets)
+    out = np.zeros(n)
+    nonempty = off[1:] > off[:-1]
+    if w.size:
+        red = np.maximum.reduceat(w, np.minimum(off[:-1], w.size - 1))
+        out[nonempty] = red[nonempty]
+    return out
+
+
+def _nms(xy: np.ndarray, score: np.ndarray, radius: float, limit: int) -> np.ndarray:
+    """Indices of local maxima of ``score`` at least ``radius`` apart, best first."""
+    order = np.argsort(-score, kind='stable')
+    keep: list[int] = []
+    for i in order:
+        if len(keep) >= limit:
+            break
+        if keep and np.min(np.linalg.norm(xy[keep] - xy[i], axis=1)) < radius:
+            continue
+        keep.append(int(i))
+    return np.asarray(keep, dtype=np.int64)
+
+
+class Detector:
+    """Grid search for new people over the floor of a calibrated room.
+
+    Args:
+        calibration: the room; only its cameras (any subset) and floor/entry zones are used.
+        config: search parameters.
+        shape: body profile used for the hypotheses (sizes are overridden per hypothesis).
+    """
+
+    def __init__(self, calibration: RoomCalibration, config: DetectorConfig | None = None, *,
+                 shape: BodyShape | None = None) -> None:
+        self.calibration = calibration
+        self.config = cfg = config or DetectorConfig()
+        self.shape = shape or BodyShape(height=cfg.coarse_height, width=cfg.coarse_width)
+        self.ceiling = {n: is_ceiling(c) for n, c in calibration.cameras.items()}
+        zones = list(calibration.entry_zones)
+        if cfg.zones == 'floor' or not zones:
+            zones = [calibration.floor] + zones
+        self.zones = zones
+        xy = _grid(zones, cfg.coarse_spacing)
+        poses = [0.0, 1.0] if cfg.sitting else [0.0]
+        self.coarse_xy = np.concatenate([xy] * len(poses))
+        self.coarse_states = np.concatenate([_states(xy, 0.0, p) for p in poses])
+        self._coarse = {n: rasterize(c, self.coarse_states, self.shape,
+                                     heights=np.full(len(self.coarse_states), cfg.coarse_height),
+                                     widths=np.full(len(self.coarse_states), cfg.coarse_width))
+                        for n, c in calibration.cameras.items()}
+        self._candidates: list[Detection] = []
+        self.last_timing: dict[str, float] = {}
+
+    # -- scoring --------------------------------------------------------------------------
+    def _min_area(self, camera: Camera) -> float:
+        return self.config.min_area * camera.width * camera.height / (320.0 * 240.0)
+
+    def _view_terms(self, name: str, ev: FrameEvidence, sil, *, full: bool,
+                    context=None, ctx_index: np.ndarray | None = None
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per-hypothesis (log response, seeing flag, coverage) of one camera."""
+        cfg = self.config
+        cam = self.calibration.cameras[name]
+        fg_n, kn_n, area = ev.integral.counts(sil)
+        cov = np.where(kn_n > 0, fg_n / np.maximum(kn_n, 1.0), 0.0)
+        known = np.where(area > 0, kn_n / np.maximum(area, 1.0), 0.0)
+        sees = (kn_n >= self._min_area(cam)) & (known >= cfg.min_known)
+        resp = cfg.w_coverage * np.log(np.maximum(cov, cfg.coverage_floor) / cfg.coverage_ref)
+        if context is not None:
+            # foreground around the hypothesis (a larger standing body at the same place)
+            # that the hypothesis leaves unexplained: penalises too small / sitting
+            # hypotheses inside a standing person's blob
+            cf, ck, _ = ev.integral.counts(context)
+            extra_fg = np.maximum(cf[ctx_index] - fg_n, 0.0)
+            extra_kn = np.maximum(ck[ctx_index] - kn_n, 1.0)
+            empty = 1.0 - np.minimum(extra_fg / extra_kn, 1.0)
+            resp = resp + cfg.w_context * np.log(
+                np.maximum(empty, cfg.coverage_floor) / cfg.coverage_ref)
+        if full and not self.ceiling[name]:
+            con, _ = contour_loglik_spans(ev.edges, sil, _max_span_width(sil))
+            resp = resp + cfg.w_contour * (con - cfg.contour_ref)
+            sym = colour_symmetry(ev.image, sil)
+            resp = resp + cfg.w_symmetry * np.where(np.isfinite(sym),
+                                                    cfg.symmetry_ref - sym, 0.0)
+        return np.where(sees, resp, 0.0), sees, np.where(sees, cov, np.nan)
+
+    def _score(self, evidence: Mapping[str, FrameEvidence], states: np.ndarray,
+               heights: np.ndarray, widths: np.ndarray, *, full: bool
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Combined log response (N,), seeing cameras (N,), coverage (C, N) of hypotheses."""
+        cfg = self.config
+        n = states.shape[0]
+        total = np.zeros(n)
+        views = np.zeros(n, np.int64)
+        vetoed = np.zeros(n, bool)
+        covs = []
+        key = np.round(states[:, [X, Y]] / 1e-3).astype(np.int64)
+        _, first, ctx_index = np.unique(key, axis=0, return_index=True, return_inverse=True)
+        ctx_states = states[first].copy()
+        ctx_states[:, SIT] = 0.0
+        ctx_states[:, THETA] = 0.0
+        m = len(ctx_states)
+        for name, ev in evidence.items():
+            if name not in self.calibration.cameras:
+                continue
+            cam = self.calibration.cameras[name]
+            sil = rasterize(cam, states, self.shape, heights=heights, widths=widths)
+            context = rasterize(cam, ctx_states, self.shape,
+                                heights=np.full(m, cfg.context_height),
+                                widths=np.full(m, cfg.context_width))
+            resp, sees, cov = self._view_terms(name, ev, sil, full=full, context=context,
+                                               ctx_index=ctx_index.ravel())
+            total += resp
+            views += sees
+            vetoed |= sees & (cov < cfg.veto_coverage)
+            covs.append(cov)
+        total = np.where((views >= cfg.min_views) & ~vetoed, total, -np.inf)
+        return total, views, np.asarray(covs).reshape(len(covs), n)
+
+    def coarse(self, evidence: Mapping[str, FrameEvidence], *,
+               track_xy: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Coarse level: (M,) log coverage response and (M,) mean coverage of the grid."""
+        cfg = self.config
+        m = len(self.coarse_states)
+        total = np.zeros(m)
+        views = np.zeros(m, np.int64)
+        cov_sum = np.zeros(m)
+        vetoed = np.zeros(m, bool)
+        for name, ev in evidence.items():
+            if name not in self._coarse:
+                continue
+            resp, sees, cov = self._view_terms(name, ev, self._coarse[name], full=False)
+            total += resp
+            views += sees
+            cov_sum += np.where(sees, cov, 0.0)
+            vetoed |= sees & (cov < cfg.veto_coverage)
+        mean_cov = cov_sum / np.maximum(views, 1)
+        ok = (views >= cfg.min_views) & ~vetoed & (mean_cov >= cfg.coarse_coverage)
+        if track_xy is not None and len(track_xy):
+            d = np.linalg.norm(self.coarse_xy[:, None, :] - np.asarray(track_xy)[None], axis=2)
+            ok &= d.min(axis=1) > cfg.exclusion_radius
+        return np.where(ok, total, -np.inf), mean_cov
+
+    def detect(self, evidence: Mapping[str, FrameEvidence], *,
+               track_xy: np.ndarray | None = None) -> list[Detection]:
+        """Single-frame detections (no confirmation), best first, NMS applied."""
+        cfg = self.config
+        track_xy = np.zeros((0, 2)) if track_xy is None else np.asarray(track_xy, float)
+        score, _ = self.coarse(evidence, track_xy=track_xy)
+        good = np.flatnonzero(np.isfinite(score))
+        if good.size == 0:
+            return []
+        picks = good[_nms(self.coarse_xy[good], score[good], cfg.coarse_spacing * 1.5,
+                          cfg.max_candidates)]
+        found: list[Detection] = []
+        for p in picks:
+            det = self._refine(evidence, self.coarse_xy[p], track_xy)
+            if det is not None and det.score >= cfg.threshold:
+                found.append(det)
+        if not found:
+            return []
+        xy = np.array([d.xy for d in found])
+        keep = _nms(xy, np.array([d.score for d in found]), cfg.nms_radius, len(found))
+        return [found[i] for i in keep]
+
+    def _refine(self, evidence: Mapping[str, FrameEvidence], centre: np.ndarray,
+                track_xy: np.ndarray) -> Detection | None:
+        cfg = self.config
+        r = cfg.fine_radius
+        off = np.arange(-r, r + 1e-9, cfg.fine_spacing)
+        gx, gy = np.meshgrid(off, off)
+        xy = centre + np.stack([gx.ravel(), gy.ravel()], axis=1)
+        x0, y0, x1, y1 = self._bounds()
+        xy = xy[(xy[:, 0] >= x0) & (xy[:, 0] <= x1) & (xy[:, 1] >= y0) & (xy[:, 1] <= y1)]
+        if len(track_xy):
+            d = np.linalg.norm(xy[:, None] - track_xy[None], axis=2).min(axis=1)
+            xy = xy[d > cfg.exclusion_radius]
+        if xy.size == 0:
+            return None
+        # step 1: position and pose with the mean size
+        poses = [0.0, 1.0] if cfg.sitting else [0.0]
+        h0 = float(np.median(cfg.heights))
+        w0 = float(np.median(cfg.widths))
+        states = np.concatenate([_states(xy, 0.0, p) for p in poses])
+        n = len(states)
+        score, _, _ = self._score(evidence, states, np.full(n, h0), np.full(n, w0), full=True)
+        best = int(np.argmax(score))
+        if not np.isfinite(score[best]):
+            return None
+        # step 2: size and orientation around the best position
+        bx = states[best, [X, Y]]
+        d = np.array([-cfg.fine_spacing, 0.0, cfg.fine_spacing]) * 0.5
+        sx, sy = np.meshgrid(d, d)
+        pos = bx + np.stack([sx.ravel(), sy.ravel()], axis=1)
+        H, W, O, P = np.meshgrid(np.asarray(cfg.heights), np.asarray(cfg.widths),
+                                 np.asarray(cfg.orientations), np.arange(len(pos)),
+                                 indexing='ij')
+        H, W, O, P = H.ravel(), W.ravel(), O.ravel(), P.ravel()
+        states2 = _states(pos[P], O, states[best, SIT])
+        score2, _, covs = self._score(evidence, states2, H, W, full=True)
+        b = int(np.argmax(score2))
+        if not np.isfinite(score2[b]):
+            return None
+        names = [nm for nm in evidence if nm in self.calibration.cameras]
+        coverage = {nm: float(covs[k, b]) for k, nm in enumerate(names)
+                    if np.isfinite(covs[k, b])}
+        return Detection(state=states2[b].copy(), height=float(H[b]), width=float(W[b]),
+                         score=float(score2[b]), coverage=coverage)
+
+    def _bounds(self) -> tuple[float, float, float, float]:
+        z = np.asarray(self.zones, dtype=np.float64)
+        return (float(z[:, 0].min()), float(z[:, 1].min()), float(z[:, 2].max()),
+                float(z[:, 3].max()))
+
+    # -- over time ------------------------------------------------------------------------
+    def step(self, evidence: Mapping[str, FrameEvidence], *,
+             track_xy: np.ndarray | None = None) -> list[Detection]:
+        """Detections confirmed in ``confirm_frames`` consecutive frames (then forgotten)."""
+        cfg = self.config
+        found = self.detect(evidence, track_xy=track_xy)
+        confirmed: list[Detection] = []
+        survivors: list[Detection] = []
+        used = set()
+        for det in found:
+            match = None
+            for k, cand in enumerate(self._candidates):
+                if k in used:
+                    continue
+                if np.linalg.norm(cand.xy - det.xy) <= cfg.confirm_radius:
+                    match = k
+                    break
+            det.frames = 1 if match is None else self._candidates[match].frames + 1
+            if match is not None:
+                used.add(match)
+            if det.frames >= cfg.confirm_frames:
+                confirmed.append(det)
+            else:
+                survivors.append(det)
+        self._candidates = survivors
+        return confirmed
+
+    def requeue(self, detection: Detection) -> None:
+        """Keep a confirmed detection that could not be acquired: it is emitted again as
+        soon as it is found once more."""
+        detection.frames = self.config.confirm_frames - 1
+        self._candidates.append(detection)
+
+    def reset(self) -> None:
+        """Forget unconfirmed candidates."""
+        self._candidates = []

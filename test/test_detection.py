@@ -1,0 +1,310 @@
+"""Detection features, grid detector, acquisition and release (003 §4)."""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from mbtrack_ros.core.camera import Camera, RoomCalibration, look_at
+from mbtrack_ros.core.detection import DetectionError
+from mbtrack_ros.core.detection.acquisition import acquire
+from mbtrack_ros.core.detection.background import BackgroundBank
+from mbtrack_ros.core.detection.detector import (
+    Detection, Detector, DetectorConfig, FrameEvidence, is_ceiling)
+from mbtrack_ros.core.detection.features import (
+    EdgeMap, ForegroundIntegral, Spans, colour_symmetry, contour_loglik, contour_loglik_spans,
+    outline)
+from mbtrack_ros.core.detection.release import ReleaseConfig, Releaser
+from mbtrack_ros.core.shape import TORSO, BodyShape, rasterize, render_labels
+
+W, H = 160, 120
+FPS = 15
+SKIN, SHIRT, TROUSERS = (215, 175, 145), (30, 70, 190), (45, 45, 50)
+
+
+def make_room(ceiling: bool = True) -> RoomCalibration:
+    """6 x 5 m room, four upper-corner cameras and optionally a ceiling camera."""
+    cams = {}
+    for k, (x, y) in enumerate([(0.1, 0.1), (5.9, 0.1), (5.9, 4.9), (0.1, 4.9)]):
+        R, t = look_at((x, y, 2.6), (3.0, 2.5, 0.8))
+        cams[f'cam{k}'] = Camera(f'cam{k}', W, H, [[90, 0, 79.5], [0, 90, 59.5], [0, 0, 1]],
+                                 [-0.1, 0.01, 0, 0, 0], R, t)
+    if ceiling:
+        R, t = look_at((3.0, 2.5, 2.75), (3.0, 2.5, 0.0), up=(0, 1, 0))
+        cams['cam4'] = Camera('cam4', W, H, [[60, 0, 79.5], [0, 60, 59.5], [0, 0, 1]],
+                              [0] * 5, R, t)
+    return RoomCalibration(cams, (0.3, 0.3, 5.7, 4.7), entry_zones=((4.0, 4.1, 5.3, 4.9),))
+
+
+def backgrounds(calib: RoomCalibration) -> dict[str, np.ndarray]:
+    rng = np.random.default_rng(99)
+    out = {}
+    for n in calib.cameras:
+        base = rng.integers(60, 190, size=(8, 10, 3)).astype(np.uint8)
+        out[n] = cv2.resize(base, (W, H), interpolation=cv2.INTER_CUBIC)
+    return out
+
+
+def paint(calib, bgs, people, rng, screen=None):
+    """Images with people painted far to near; ``screen`` = colour of a wall screen."""
+    out = {}
+    for n, cam in calib.cameras.items():
+        img = bgs[n].astype(np.int16) + rng.integers(-3, 4, bgs[n].shape)
+        if screen is not None:
+            corners = np.array([[5.99, 1.6, 0.9], [5.99, 3.4, 0.9], [5.99, 3.4, 2.0],
+                                [5.99, 1.6, 2.0]])
+            if np.all(cam.depth(corners) > 0.1):
+                poly = np.round(cam.project(corners)).astype(np.int32)
+                tmp = np.zeros((H, W), np.uint8)
+                cv2.fillConvexPoly(tmp, poly, 1)
+                img[tmp > 0] = screen
+        order = sorted(people, key=lambda p: -cam.distance(np.r_[p[0][:2], 0.9]))
+        for state, shape, colours in order:
+            lab = render_labels(cam, state, shape)
+            for part in (1, 2, 3):
+                img[lab == part] = colours[part - 1]
+        out[n] = np.clip(img, 0, 255).astype(np.uint8)
+    return out
+
+
+def person(x, y, theta=0.3, h=1.8, w=0.5, colours=(SKIN, SHIRT, TROUSERS)):
+    return (np.array([x, y, 0, 0, theta, 0.0]), BodyShape(h, w), colours)
+
+
+# -- features -----------------------------------------------------------------------------
+def test_coverage_equals_pixel_count_and_painted_fraction():
+    rng = np.random.default_rng(0)
+    calib = make_room()
+    cam = calib.cameras['cam1']
+    states = np.zeros((12, 6))
+    states[:, :2] = rng.uniform([0.5, 0.5], [5.5, 4.5], (12, 2))
+    states[:, 4] = rng.uniform(0, np.pi, 12)
+    states[::3, 5] = 1.0
+    sil = rasterize(cam, states, BodyShape(1.7, 0.5))
+    fg = rng.random((H, W)) < 0.4
+    unknown = np.zeros((H, W), bool)
+    unknown[:, :50] = True
+    cov, known, area = ForegroundIntegral(fg, unknown).coverage(sil)
+    for i in range(len(states)):
+        m = sil.mask(i) > 0
+        assert area[i] == m.sum()
+        if m.sum():
+            k = m & ~unknown
+            assert known[i] == pytest.approx(k.sum() / m.sum())
+            if k.sum():
+                assert cov[i] == pytest.approx((fg & k).sum() / k.sum())
+    # a foreground blob painted over the torso of one silhouette: coverage = torso share
+    i = int(np.argmax(area))
+    blob = sil.mask(i) == TORSO
+    c, _, _ = ForegroundIntegral(blob).coverage(sil)
+    assert c[i] == pytest.approx(sil.part_area[i, TORSO - 1] / sil.area[i])
+    assert 0.2 < c[i] < 0.8
+
+
+def test_spans_from_masks_roundtrip():
+    lab = np.zeros((20, 30), np.int8)
+    lab[2:5, 10:14] = 1
+    lab[5:15, 8:18] = 2
+    lab[15:19, 9:17] = 3
+    sp = Spans.from_masks([lab > 0], [lab])
+    assert sp.count == 1
+    back = np.zeros_like(lab)
+    for r, a, b, p in zip(sp.row, sp.x0, sp.x1, sp.part):
+        back[r, a:b] = p
+    np.testing.assert_array_equal(back, lab)
+
+
+def test_outline_normals_of_a_rectangle():
+    m = np.zeros((40, 40), bool)
+    m[10:30, 12:25] = True
+    o = outline(Spans.from_masks([m]), 40, 40)
+    left = o.x == 12
+    right = o.x == 24
+    assert np.allclose(o.nx[left & (o.y > 10) & (o.y < 29)], -1.0)
+    assert np.allclose(o.nx[right & (o.y > 10) & (o.y < 29)], 1.0)
+    top = (o.y == 10) & ~left & ~right
+    assert top.sum() == 11 and np.allclose(o.ny[top], -1.0)
+    assert len(o.x) == 2 * 20 + 2 * 11
+
+
+def painted_person_edges(calib, name, state, shape):
+    cam = calib.cameras[name]
+    img = np.full((H, W, 3), 120, np.uint8)
+    lab = render_labels(cam, state, shape)
+    img[lab > 0] = (30, 30, 200)
+    return EdgeMap.from_image(img, lab > 0), img
+
+
+def test_contour_kernel_equals_reference_and_prefers_the_aligned_hypothesis():
+    calib = make_room()
+    name = 'cam0'
+    cam = calib.cameras[name]
+    shape = BodyShape(1.8, 0.5)
+    true = np.array([2.5, 2.5, 0, 0, 0.4, 0])
+    edges, _ = painted_person_edges(calib, name, true, shape)
+    rng = np.random.default_rng(1)
+    states = np.tile(true, (30, 1))
+    states[1:, :2] += rng.normal(0, 0.3, (29, 2))
+    states[5:10, 5] = 1.0
+    sil = rasterize(cam, states, shape)
+    width = (sil.bbox[:, 2] - sil.bbox[:, 0]).astype(float)
+    ref, ref_len = contour_loglik(edges, outline(sil, H, W), width)
+    fast, fast_len = contour_loglik_spans(edges, sil, width)
+    np.testing.assert_allclose(fast, ref, atol=1e-12)
+    np.testing.assert_array_equal(fast_len, ref_len)
+    # aligned: all outline pixels on edges with matching normals -> close to the best 0.5
+    assert fast[0] > 0.2
+    shifted = true.copy()
+    shifted[0] += 0.3
+    sil2 = rasterize(cam, np.stack([true, shifted]), shape)
+    w2 = (sil2.bbox[:, 2] - sil2.bbox[:, 0]).astype(float)
+    ll, _ = contour_loglik_spans(edges, sil2, w2)
+    assert ll[0] > ll[1] + 0.3
+    assert np.all((fast >= -1.0) & (fast <= 0.5))
+
+
+def test_colour_symmetry_symmetric_vs_asymmetric_torso():
+    calib = make_room()
+    cam = calib.cameras['cam0']
+    state = np.array([2.5, 2.5, 0, 0, 0.0, 0])
+    shape = BodyShape(1.8, 0.5)
+    sil = rasterize(cam, state[None], shape)
+    lab = sil.mask(0)
+    sym = np.full((H, W, 3), 100, np.uint8)
+    sym[lab == TORSO] = (200, 40, 40)
+    asym = sym.copy()
+    cols = np.nonzero(lab == TORSO)[1]
+    mid = 0.5 * (cols.min() + cols.max())
+    left = (lab == TORSO) & (np.arange(W)[None, :] < mid)
+    asym[left] = (40, 200, 40)
+    d_sym = colour_symmetry(sym, sil)[0]
+    d_asym = colour_symmetry(asym, sil)[0]
+    assert d_sym < 0.1
+    assert d_asym > 1.5
+    with pytest.raises(DetectionError):
+        colour_symmetry(sym, sil, levels=3)
+
+
+# -- detector -----------------------------------------------------------------------------
+def run_detector(calib, frames, *, config=None, bootstrap=5, track_xy=None):
+    """Feed frames through background + detector; returns (frame index, detections)."""
+    det = Detector(calib, config or DetectorConfig())
+    bank = BackgroundBank()
+    found = []
+    for k, images in enumerate(frames):
+        fg = bank.apply(images)
+        if not fg:
+            continue
+        ev = {n: FrameEvidence(images[n], fg[n]) for n in fg}
+        for d in det.step(ev, track_xy=track_xy):
+            found.append((k, d))
+    return found
+
+
+def test_detector_finds_painted_people_within_the_bound():
+    rng = np.random.default_rng(2)
+    calib = make_room()
+    bgs = backgrounds(calib)
+    a = person(2.2, 3.1, h=1.8)
+    b = person(4.3, 1.6, h=1.65, colours=(SKIN, (180, 40, 40), (60, 60, 140)))
+    frames = [paint(calib, bgs, [], rng) for _ in range(5)]
+    frames += [paint(calib, bgs, [a, b], rng) for _ in range(6)]
+    found = run_detector(calib, frames)
+    first = min(k for k, _ in found)
+    assert (first - 5) / FPS <= 0.5 - 1e-9          # confirmed within half a second
+    at_first = [d for k, d in found if k == first]
+    assert len(at_first) == 2                         # two simultaneous entries, NMS
+    for truth in (a, b):
+        d = min(at_first, key=lambda d: np.linalg.norm(d.xy - truth[0][:2]))
+        assert np.linalg.norm(d.xy - truth[0][:2]) <= 0.15
+        assert abs(d.height - truth[1].height) <= 0.15
+        assert d.state[5] == 0.0
+        assert len(d.coverage) >= 2 and min(d.coverage.values()) > 0.5
+
+
+def test_detector_excludes_tracked_neighbourhood():
+    rng = np.random.default_rng(3)
+    calib = make_room()
+    bgs = backgrounds(calib)
+    a = person(2.2, 3.1)
+    frames = [paint(calib, bgs, [], rng) for _ in range(5)]
+    frames += [paint(calib, bgs, [a], rng) for _ in range(6)]
+    assert run_detector(calib, frames, track_xy=np.array([[2.25, 3.0]])) == []
+
+
+def test_detector_ignores_flickering_screen_and_empty_room():
+    rng = np.random.default_rng(4)
+    calib = make_room()
+    bgs = backgrounds(calib)
+    frames = []
+    for k in range(45):                              # 3 s of a screen changing slides
+        colour = tuple(int(v) for v in rng.integers(0, 255, 3)) if k % 7 < 4 else (20, 20, 20)
+        frames.append(paint(calib, bgs, [], rng, screen=colour))
+    assert run_detector(calib, frames) == []
+
+
+def test_detector_without_ceiling_camera_and_config_errors():
+    rng = np.random.default_rng(5)
+    calib = make_room(ceiling=False)
+    assert not any(is_ceiling(c) for c in calib.cameras.values())
+    assert is_ceiling(make_room().cameras['cam4'])
+    bgs = backgrounds(calib)
+    a = person(3.0, 2.0)
+    frames = [paint(calib, bgs, [], rng) for _ in range(5)]
+    frames += [paint(calib, bgs, [a], rng) for _ in range(4)]
+    found = run_detector(calib, frames)
+    assert found and np.linalg.norm(found[0][1].xy - a[0][:2]) <= 0.15
+    with pytest.raises(DetectionError, match='zones'):
+        DetectorConfig(zones='room')
+    with pytest.raises(DetectionError):
+        DetectorConfig(fine_spacing=0.0)
+
+
+# -- acquisition and release -------------------------------------------------------------
+def test_acquisition_uses_unoccluded_views_only():
+    rng = np.random.default_rng(6)
+    calib = make_room()
+    bgs = backgrounds(calib)
+    a = person(3.0, 2.5)
+    images = paint(calib, bgs, [a], rng)
+    det = Detection(state=a[0].copy(), height=1.8, width=0.5, score=1.0)
+    model = acquire(det, images, calib)
+    assert model is not None and model.height == 1.8
+    assert 2 <= model.view_angles.size <= 4           # the side cameras, not the ceiling
+    torso = model.histograms[:, TORSO - 1]
+    shirt_bin = (SHIRT[0] >> 5) * 64 + (SHIRT[1] >> 5) * 8 + (SHIRT[2] >> 5)
+    assert np.all(torso[:, shirt_bin] > 0.8)
+    # tall wide people right in front of the new one in every side camera: no key view
+    others = []
+    for n, cam in calib.cameras.items():
+        if is_ceiling(cam):
+            continue
+        toward = cam.center[:2] - a[0][:2]
+        toward /= np.linalg.norm(toward)
+        others.append(np.r_[a[0][:2] + 0.7 * toward, 0, 0, 0, 0])
+    shapes = [BodyShape(2.1, 1.0)] * len(others)
+    assert acquire(det, images, calib, others=np.array(others), other_shapes=shapes) is None
+
+
+def test_release_after_the_configured_time():
+    calib = make_room()
+    cam = calib.cameras['cam4']
+    rel = Releaser(calib, ReleaseConfig(timeout=1.0))
+    assert rel.deciding == ['cam4']
+    states = np.array([[2.0, 2.0, 0, 0, 0, 0], [4.0, 3.0, 0, 0, 0, 0]])
+    sil = rasterize(cam, states, BodyShape())
+    fg_both = (sil.mask(0) > 0) | (sil.mask(1) > 0)
+    fg_one = sil.mask(1) > 0
+    image = np.zeros((H, W, 3), np.uint8)
+    ended_at = {}
+    for k in range(40):
+        fg = fg_both if k < 10 else fg_one             # track 1 loses support at frame 10
+        ev = {'cam4': FrameEvidence(image, fg)}
+        supported, coverage = rel.support(ev, {'cam4': sil})
+        assert coverage['cam4'].shape == (2,)
+        for tid in rel.update(int(round(k * 1e9 / FPS)), [1, 2], supported):
+            ended_at.setdefault(tid, k)
+    assert 2 not in ended_at
+    assert ended_at[1] == 10 + int(np.ceil(1.0 * FPS))  # exactly after 1 s unsupported
+    with pytest.raises(DetectionError):
+        rel.update(0, [1], [True, False])
