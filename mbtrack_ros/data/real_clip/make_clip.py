@@ -20,8 +20,9 @@ def main(src: Path) -> None:
     here = Path(__file__).resolve().parent
     for name in ('LICENSE', 'Calib.qca.txt', 'calibration_opencv.json'):
         shutil.copy(src / name, here / name)
-    for name in ('single_0-100.trc', 'multi_P1_0-100.trc'):
-        shutil.copy(src / 'reference_pose2sim_output' / name, here / name)
+    # multi_P1_0-100.trc is not copied: it belongs to another Pose2Sim trial and does not
+    # project onto anyone in these videos with this calibration (see README.md)
+    shutil.copy(src / 'reference_pose2sim_output' / 'single_0-100.trc', here)
     calib = yaml.safe_load((src / 'calibration_opencv.json').read_text())
     (here / 'camera_info').mkdir(exist_ok=True)
     for cam, entry in calib.items():  # intrinsics only, camera_calibration_parsers layout
