@@ -220,8 +220,8 @@ def pose_ellipsoids(height: float, clothing: Clothing, *, x: float, y: float, th
     # arms: shoulder flexion phi (forward positive) opposite to the legs, elbow flexion
     sleeve = cl.shirt if cl.long_sleeves else cl.skin
     for side, sign in ((1.0, -1.0), (-1.0, 1.0)):
-        phi = (1 - sit) * 0.35 * amp * sign * np.sin(phase) + sit * 0.25
-        elbow = (1 - sit) * (0.15 + 0.25 * amp) + sit * 1.2
+        phi = (1 - sit) * 0.35 * amp * sign * np.sin(phase) + sit * 0.1
+        elbow = (1 - sit) * (0.15 + 0.25 * amp) + sit * 0.9
         shoulder = trunk(0.81) + side * 0.2 * s * ey
         e_dir = np.array([np.sin(phi), 0.0, -np.cos(phi)])
         el = shoulder + 0.17 * H * e_dir

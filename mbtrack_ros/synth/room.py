@@ -303,6 +303,10 @@ class CameraView:
                    screen_uv=screen_uv, door_index=door_index, door_rays=door_rays,
                    corridor_radiance=corr_rad.astype(np.float32),
                    corridor_depth=corr_depth.astype(np.float32))
+        if door_index.size:  # the closed door panel is part of the static image
+            rad, dep = view.door_update(0.0)
+            view.radiance.reshape(-1, 3)[door_index] = rad
+            view.depth.reshape(-1)[door_index] = dep
         return view
 
     def door_update(self, angle: float) -> tuple[np.ndarray, np.ndarray]:

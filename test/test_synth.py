@@ -1,0 +1,272 @@
+"""Tests of the synthetic recording generator (mbtrack_ros.synth, `mbtrack synth`)."""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+
+import cv2
+import numpy as np
+import pytest
+
+from mbtrack_ros.commands import synth as synth_command
+from mbtrack_ros.core.camera import RoomCalibration
+from mbtrack_ros.recording.csvfiles import read_ground_truth
+from mbtrack_ros.synth import (EPOCH_NS, PRESETS, SynthError, Synthesizer, generate,
+                               iter_frames, render_view, visible_threshold)
+from mbtrack_ros.synth.body import Ellipsoids, random_clothing
+from mbtrack_ros.synth.motion import MAX_SPEED
+from mbtrack_ros.synth.presets import Preset
+from mbtrack_ros.synth.room import CameraView, default_room, make_calibration
+
+W, H = 160, 120
+
+
+def _frames(preset, n, seed=0, **kw):
+    return list(iter_frames(preset, seed=seed, frames=n, width=W, height=H, **kw))
+
+
+def test_same_seed_same_recording_and_different_seed_differs():
+    a = _frames('lanz-seq2-short', 4, seed=5)
+    b = _frames('lanz-seq2-short', 4, seed=5)
+    c = _frames('lanz-seq2-short', 4, seed=6)
+    for fa, fb in zip(a, b):
+        assert fa.stamp_ns == fb.stamp_ns
+        assert fa.ground_truth == fb.ground_truth
+        for name in fa.images:
+            np.testing.assert_array_equal(fa.images[name], fb.images[name])
+    assert a[0].ground_truth != c[0].ground_truth
+    assert not np.array_equal(a[0].images['cam0'], c[0].images['cam0'])
+
+
+def test_stamps_advance_by_a_constant_integer_period():
+    frames = _frames('empty-room-short', 4, fps=15.0)
+    stamps = [f.stamp_ns for f in frames]
+    assert stamps[0] == EPOCH_NS
+    assert all(isinstance(s, int) for s in stamps)
+    assert np.all(np.diff(stamps) == round(1e9 / 15.0))
+    assert all(f.ground_truth == [] for f in frames)
+
+
+@pytest.mark.parametrize('camera', ['cam0', 'cam2', 'cam4'])
+def test_marker_lands_at_the_projected_pixel(camera):
+    """A small sphere rendered through the per-pixel rays appears where Camera.project puts
+    its centre, also near the image border where lens distortion moves it by pixels."""
+    room = default_room()
+    calib = make_calibration(room, width=W, height=H)
+    cam = calib.cameras[camera]
+    view = CameraView.build(cam, room)
+    assert abs(cam.dist[0]) > 0 and abs(cam.dist[1]) > 0
+    # points seen at the centre and near the corners of the image
+    targets = np.array([[W / 2, H / 2], [14.0, 12.0], [W - 15.0, H - 13.0]])
+    # points in front of the static surface seen at those pixels
+    reach = 0.8 * view.depth[targets[:, 1].astype(int), targets[:, 0].astype(int)]
+    points = cam.center + cam.pixel_rays(targets) * np.minimum(reach, 3.0)[:, None]
+    undistorted = dataclasses.replace(cam, dist=np.zeros(5))
+    moved = np.linalg.norm(undistorted.project(points) - cam.project(points), axis=1)
+    assert moved.max() > 2.0  # the test can tell distortion from none
+    for k, point in enumerate(points):
+        radius = 3.0 * cam.distance(point) / cam.focal  # about 3 pixels
+        marker = Ellipsoids.spheres(point[None], radius, owner=7)
+        _, depth, ids = render_view(view, marker)
+        vs, us = np.nonzero(ids == 7)
+        assert us.size >= 12
+        # brute force: project dense points of the sphere's visible half with Camera.project
+        # and rasterise them to the nearest pixel; the sets and their centroids must agree
+        rng = np.random.default_rng(k)
+        normals = rng.standard_normal((40000, 3))
+        normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+        surface = point + radius * normals
+        facing = np.sum(normals * (cam.center - surface), axis=1) > 0
+        pix = np.unique(np.round(cam.project(surface[facing])).astype(int), axis=0)
+        pix = pix[(pix[:, 0] >= 0) & (pix[:, 0] < W) & (pix[:, 1] >= 0) & (pix[:, 1] < H)]
+        # a near wall may hide part of the marker
+        behind = view.depth[pix[:, 1], pix[:, 0]]
+        dist = cam.distance(point)
+        brute = {(int(a), int(b)) for a, b in pix[behind > dist - radius]}
+        clear = {(int(a), int(b)) for a, b in pix[behind > dist + radius]}
+        rendered = set(zip(us.tolist(), vs.tolist()))
+        # every rendered pixel centre lies on the projected sphere; the projection reaches at
+        # most one pixel beyond the rendered blob
+        assert rendered <= brute
+        grown = {(a + i, b + j) for a, b in rendered for i in (-1, 0, 1) for j in (-1, 0, 1)}
+        assert clear <= grown
+        centroid = np.array([us.mean(), vs.mean()])
+        if len(clear) == len(pix):  # nothing hidden: the centroids agree
+            assert np.linalg.norm(centroid - pix.mean(axis=0)) < 0.6, (k, centroid)
+        if k == 0:  # at the image centre the blob is centred on the projected centre
+            assert np.linalg.norm(centroid - cam.project(point)) < 0.5
+        assert np.allclose(depth[vs, us], cam.distance(point), atol=radius + 1e-3)
+
+
+def test_marker_is_hidden_behind_furniture_and_in_front_of_wall():
+    room = default_room()
+    cam = make_calibration(room, width=W, height=H).cameras['cam1']
+    view = CameraView.build(cam, room)
+    table = room.boxes[0]
+    under_table = np.array([(table.lo[0] + table.hi[0]) / 2, (table.lo[1] + table.hi[1]) / 2,
+                            0.5])
+    pix = np.round(cam.project(under_table)).astype(int)
+    assert view.depth[pix[1], pix[0]] < cam.distance(under_table)  # the top hides it
+    _, _, ids = render_view(view, Ellipsoids.spheres(under_table[None], 0.05, owner=3))
+    assert not (ids == 3).any()
+    free = np.array([3.0, 2.5, 1.0])
+    _, _, ids = render_view(view, Ellipsoids.spheres(free[None], 0.12, owner=3))
+    assert (ids == 3).sum() > 10
+
+
+def _one_person_preset():
+    def populate(crowd):
+        crowd.add((2.4, 2.2), behaviour='area', area=(1.8, 1.6, 3.0, 2.8))
+    return Preset('one', 'one person in front of cam0', 12, ('cam0',), populate)
+
+
+def test_ground_truth_projects_onto_the_rendered_person():
+    synth = Synthesizer(_one_person_preset(), seed=2, width=W, height=H)
+    cam = synth.calibration.cameras['cam0']
+    for frame in synth:
+        (row,) = frame.ground_truth
+        ids = frame.id_buffers['cam0']
+        for z in (row.z_head - 0.06, 0.55 * row.z_head):  # inside head, pelvis/torso
+            u, v = np.round(cam.project(np.array([row.x, row.y, z]))).astype(int)
+            assert ids[v, u] == row.person_id, (frame.index, z)
+        u, v = np.round(cam.project(np.array([row.x, row.y, 0.0]))).astype(int)
+        vs, us = np.nonzero(ids == row.person_id)
+        assert us.min() - 1 <= u <= us.max() + 1 and vs.min() <= v <= vs.max() + 1
+        assert row.z_head == pytest.approx(synth.crowd.walkers[0].height, abs=0.1)
+        assert vs.min() <= cam.project(np.array([row.x, row.y, row.z_head]))[1] + 1.5
+
+
+def test_visible_cameras_agree_with_id_buffers_and_people_enter_through_the_door():
+    synth = Synthesizer('clear-room-short', seed=1, frames=30, width=W, height=H)
+    thr = visible_threshold(W, H)
+    assert thr == round(30 * W * H / (320 * 240))
+    seen_ids, corridor = set(), False
+    for frame in synth:
+        rows = {r.person_id: r for r in frame.ground_truth}
+        for person in frame.people:
+            if not synth.room.inside(np.array([person.x, person.y])):
+                corridor = True
+                assert person.person_id not in rows
+        for pid, row in rows.items():
+            expected = {n for n, ids in frame.id_buffers.items()
+                        if np.count_nonzero(ids == pid) >= thr}
+            assert set(row.visible_cameras) == expected
+            assert 1.5 * 0.85 < row.z_head <= 2.0 + 1e-9
+            assert row.stamp_ns == frame.stamp_ns and row.frame == frame.index
+        seen_ids |= set(rows)
+    assert corridor  # someone came in through the door during the short clip
+    assert min(seen_ids) == 1 and seen_ids <= set(range(1, synth.crowd.next_id))
+
+
+def test_motion_is_smooth_and_bodies_face_the_walking_direction():
+    synth = Synthesizer('lanz-seq1-short', seed=4, frames=40, width=W, height=H)
+    crowd, dt = synth.crowd, 1.0 / synth.fps
+    prev = {p.person_id: p for p in crowd.people()}
+    for _ in range(120):
+        crowd.step(dt)
+        for p in crowd.people():
+            q = prev[p.person_id]
+            step = np.array([p.x - q.x, p.y - q.y])
+            speed = np.linalg.norm(step) / dt
+            assert speed <= MAX_SPEED + 0.25  # + separation pushes
+            if speed > 0.3:
+                heading = np.array([np.cos(p.theta), np.sin(p.theta)])
+                assert step @ heading / np.linalg.norm(step) > 0.8
+            prev[p.person_id] = p
+    assert all(1.5 <= w.height <= 2.0 for w in crowd.walkers)
+
+
+def test_lanz_seq4_twins_are_dressed_identically():
+    synth = Synthesizer('lanz-seq4-short', seed=0, frames=2, width=W, height=H)
+    guard, a, b = synth.crowd.walkers
+    assert a.clothing == b.clothing and a.clothing != guard.clothing
+    assert 0.0 < abs(a.height - b.height) <= 0.05
+    assert guard.height > max(a.height, b.height)
+
+
+def test_sitting_pose_lowers_the_head():
+    from mbtrack_ros.synth.body import pose_ellipsoids
+    clothing = random_clothing(np.random.default_rng(0))
+    ell, standing = pose_ellipsoids(1.8, clothing, x=1.0, y=1.0, theta=0.3)
+    _, sitting = pose_ellipsoids(1.8, clothing, x=1.0, y=1.0, theta=0.3, sit=1.0)
+    assert standing == pytest.approx(1.8, abs=0.02)
+    assert 0.25 < standing - sitting < 0.6
+    assert ell.centers[:, 2].min() > 0.0
+    with pytest.raises(SynthError):
+        pose_ellipsoids(3.0, clothing, x=0, y=0, theta=0)
+
+
+def test_recording_round_trip_and_calibration_file(tmp_path):
+    from mbtrack_ros.recording.bag import RecordingReader
+
+    out = generate('lanz-seq4-short', tmp_path / 'rec', seed=3, frames=4, width=W, height=H)
+    rendered = _frames('lanz-seq4-short', 4, seed=3)
+    calib = RoomCalibration.load(out / 'calibration.yaml')
+    expected = Synthesizer('lanz-seq4-short', seed=3, frames=1, width=W, height=H).calibration
+    assert calib.names == expected.names == ['cam0']
+    for name, cam in calib.cameras.items():
+        ref = expected.cameras[name]
+        for attr in ('K', 'dist', 'R', 't'):
+            np.testing.assert_allclose(getattr(cam, attr), getattr(ref, attr), atol=1e-12)
+        assert (cam.width, cam.height) == (W, H)
+    assert calib.floor == expected.floor and calib.entry_zones == expected.entry_zones
+    gt = read_ground_truth(out / 'ground_truth.csv')
+    assert [(r.frame, r.person_id) for r in gt] == [
+        (r.frame, r.person_id) for f in rendered for r in f.ground_truth]
+    assert np.allclose([r.x for r in gt], [r.x for f in rendered for r in f.ground_truth],
+                       atol=1e-4)
+    with RecordingReader(out) as reader:
+        sets = list(reader.frames())
+    assert len(sets) == 4
+    for fs, frame in zip(sets, rendered):
+        assert fs.stamp_ns == frame.stamp_ns
+        np.testing.assert_array_equal(fs.images['cam0'], frame.images['cam0'])
+    meta = (out / 'recording.yaml').read_text()
+    assert 'preset: lanz-seq4-short' in meta and 'seed: 3' in meta
+
+
+def _run(argv):
+    parser = argparse.ArgumentParser()
+    sub = parser.add_subparsers()
+    synth_command.add_parser(sub)
+    return synth_command.run(parser.parse_args(['synth', *argv]))
+
+
+def test_command_errors_are_one_line(tmp_path, capsys):
+    assert _run(['no-such-preset', str(tmp_path / 'a')]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith('mbtrack synth: error:') and 'no-such' in err[0]
+    busy = tmp_path / 'busy'
+    busy.mkdir()
+    (busy / 'x.txt').write_text('x')
+    assert _run(['empty-room-short', str(busy)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and 'not empty' in err[0]
+    assert _run(['empty-room-short', str(tmp_path / 'b'), '--width', '0']) == 2
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1
+    assert _run(['empty-room-short', str(tmp_path / 'c'), '--frames', '-3']) == 2
+    assert not (tmp_path / 'b').exists() and not (tmp_path / 'c').exists()
+
+
+def test_command_list_and_small_run(tmp_path, capsys):
+    assert _run(['--list']) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert [ln.split()[0] for ln in lines] == list(PRESETS)
+    assert all(f'{name}-short' in PRESETS for name in PRESETS if not name.endswith('-short'))
+    out = tmp_path / 'rec'
+    assert _run(['empty-room-short', str(out), '--frames', '2', '--width', '64',
+                 '--height', '48', '--no-ceiling', '--compressed']) == 0
+    assert RoomCalibration.load(out / 'calibration.yaml').names == ['cam0', 'cam1', 'cam2',
+                                                                    'cam3']
+    assert (out / 'bag' / 'metadata.yaml').exists()
+
+
+def test_contact_sheet(tmp_path):
+    from mbtrack_ros.synth.preview import contact_sheet
+
+    out = generate('clear-room-short', tmp_path / 'rec', seed=1, frames=2, width=W, height=H)
+    png = contact_sheet(out, 1, tmp_path / 'sheet.png', tracks=[(4, 3.0, 2.5, 1.7)])
+    sheet = cv2.imread(str(png))
+    assert sheet.shape == (2 * 2 * H, 3 * 2 * W, 3)
+    with pytest.raises(SynthError):
+        contact_sheet(out, 5, tmp_path / 'x.png')
