@@ -173,3 +173,38 @@ def test_output_bag_round_trip(tmp_path):
         np.testing.assert_allclose(pts['x'], [t.mean[0] for t in r.tracks], rtol=1e-6)
     last_markers = seen['/tracker_node/markers'][-1][1].markers
     assert sum(m.action == Marker.DELETE and m.id == 99 for m in last_markers) == 3
+
+
+def test_occlusion_layers_with_the_measurement_model():
+    """Two people on one line of sight: the far one is hidden where the near one stands."""
+    from mbtrack_ros.core.appearance import PersonModel
+    from mbtrack_ros.core.camera import Camera, RoomCalibration, look_at
+    from mbtrack_ros.core.likelihood import LikelihoodConfig, MeasurementModel
+    from mbtrack_ros.nodes.debug import occlusion_layers
+
+    R, t = look_at((0.0, 0.0, 1.6), (4.0, 0.0, 1.0))
+    cam = Camera('cam0', 80, 60, [[60, 0, 39.5], [0, 60, 29.5], [0, 0, 1]], [0] * 5, R, t)
+    calibration = RoomCalibration(cameras={'cam0': cam}, floor=(-1, -3, 6, 3))
+    measurement = MeasurementModel(calibration, LikelihoodConfig())
+    rng = np.random.default_rng(4)
+    tracks, models = [], {}
+    for tid, x in ((1, 2.0), (2, 3.5)):  # 1 in front of 2
+        particles = np.zeros((40, 6))
+        particles[:, 0] = x + 0.02 * rng.normal(size=40)
+        particles[:, 1] = 0.02 * rng.normal(size=40)
+        tracks.append(TrackEstimate(tid, particles.mean(axis=0), np.eye(4) * 0.01, 1.75,
+                                    particles=particles, weights=np.full(40, 1 / 40)))
+        models[tid] = PersonModel(height=1.75, width=0.5)
+        models[tid].add_view(0.0, np.full((3, 512), 1.0 / 512))
+    result = FrameResult(stamp_ns=1, tracks=tracks)
+    occ, sil = occlusion_layers(measurement, cam, result, models)
+    assert set(sil) == {1, 2} and sil[1].sum() > sil[2].sum() > 0
+    overlap = sil[1] & sil[2]
+    assert overlap.sum() > 0.5 * sil[2].sum()
+    # pixels of the far person behind the near one: hidden with high probability
+    assert occ[overlap].mean() > 0.7
+    # nothing hides anybody outside the silhouettes
+    assert occ[~(sil[1] | sil[2])].max() == 0.0
+    # a single track has nobody to be hidden by: no occlusion layer
+    occ1, sil1 = occlusion_layers(measurement, cam, FrameResult(1, tracks[:1]), models)
+    assert occ1 is None and set(sil1) == {1}

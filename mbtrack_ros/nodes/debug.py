@@ -1,39 +1,22 @@
 """Layers of the ``~/debug/<camera>/occlusion`` image: occlusion maps and silhouettes.
 
-Shows what the HJS filter sees (000 Fig. 4): each track's silhouette, rendered with the body
-shape model (:mod:`mbtrack_ros.core.shape`) at its posterior mean, and the occlusion map w*
-of 000 Eq. 34 on it: the probability that a pixel of a person is hidden by the people in
-front, from their weighted particles. Debug only: computed when someone subscribes.
+Shows what the HJS filter sees (000 Fig. 4): each track's silhouette at its posterior mean
+and, on it, the probability that the pixel is hidden by the other people, i.e. one minus the
+occlusion map at infinity of 000 Eq. 34, both computed by the measurement model
+(:meth:`MeasurementModel.occlusion_maps`, :meth:`MeasurementModel.render_labels`) from the
+tracks' weighted particles. Debug only: the node computes it when someone subscribes.
 """
 from __future__ import annotations
+
+from collections.abc import Mapping
 
 import numpy as np
 
 from mbtrack_ros.core.camera import Camera
-from mbtrack_ros.core.shape import BodyShape, ShapeError, rasterize
-from mbtrack_ros.core.state import FrameResult, TrackEstimate, X, Y
+from mbtrack_ros.core.shape import BodyShape, ShapeError, render_labels
+from mbtrack_ros.core.state import FrameResult, TrackEstimate
 
-__all__ = ['coverage_map', 'occlusion_layers']
-
-
-def coverage_map(camera: Camera, states: np.ndarray, weights: np.ndarray,
-                 shape: BodyShape) -> np.ndarray:
-    """Weighted silhouette coverage ``sum_i w_i [u in silhouette_i]`` -> (H, W) float32."""
-    h, w = camera.height, camera.width
-    if states.shape[0] == 0:
-        return np.zeros((h, w), np.float32)
-    sil = rasterize(camera, states, shape)
-    # span weights, then a difference image summed along rows (no per-pixel loop)
-    owner = np.repeat(np.arange(len(sil)), np.diff(sil.offsets))
-    span_w = np.asarray(weights, dtype=np.float64)[owner]
-    diff = np.zeros((h, w + 1))
-    np.add.at(diff, (sil.row, sil.x0), span_w)
-    np.add.at(diff, (sil.row, sil.x1), -span_w)
-    out = np.cumsum(diff, axis=1)[:, :w]
-    if sil.row_step > 1:  # fill skipped rows from the sampled row above
-        rows = (np.arange(h) // sil.row_step) * sil.row_step
-        out = out[rows]
-    return np.clip(out, 0.0, 1.0).astype(np.float32)
+__all__ = ['occlusion_layers']
 
 
 def _subsample(track: TrackEstimate, max_particles: int) -> tuple[np.ndarray, np.ndarray]:
@@ -44,50 +27,51 @@ def _subsample(track: TrackEstimate, max_particles: int) -> tuple[np.ndarray, np
     cdf = np.cumsum(w / w.sum())
     m = min(max_particles, len(w))
     idx = np.minimum(np.searchsorted(cdf, (np.arange(m) + 0.5) / m), len(w) - 1)
-    return np.asarray(track.particles)[idx], np.full(m, 1.0 / m)
+    return np.asarray(track.particles, dtype=np.float64)[idx], np.full(m, 1.0 / m)
 
 
-def occlusion_layers(tracker, camera: Camera, result: FrameResult, *,
-                     max_particles: int = 24) -> tuple[np.ndarray | None,
-                                                       dict[int, np.ndarray]]:
+def occlusion_layers(measurement, camera: Camera, result: FrameResult,
+                     models: Mapping[int, object], *, max_particles: int = 50,
+                     ) -> tuple[np.ndarray | None, dict[int, np.ndarray]]:
     """Occlusion map and per-track silhouettes of one camera.
 
     Args:
-        tracker: the running tracker (unused for now; reserved for the measurement model's own
-            occlusion maps).
+        measurement: the tracker's measurement model (``occlusion_maps``, ``render_labels``);
+            without those methods only silhouettes from :mod:`mbtrack_ros.core.shape`.
         camera: the camera.
         result: the frame's tracker output (particles used when present).
-        max_particles: particles per track used for the soft coverage maps.
+        models: track id -> PersonModel of the live tracks.
+        max_particles: particles per track used for the occlusion maps.
 
     Returns:
-        ``(occlusion, silhouettes)``: (H, W) float32 in [0, 1], the w* value (000 Eq. 34)
-        on each track's silhouette (max over tracks), or None without tracks; and track id
-        -> (H, W) bool silhouette at the posterior mean.
+        ``(occlusion, silhouettes)``: (H, W) float32 in [0, 1], the probability that a pixel
+        of a track's silhouette is hidden by the others (max over tracks), or None; and
+        track id -> (H, W) bool silhouette at the posterior mean.
     """
-    del tracker
-    if not result.tracks:
-        return None, {}
-    order = sorted(result.tracks, key=lambda t: float(camera.distance(
-        np.array([t.mean[X], t.mean[Y], 0.5 * _height(t)]))))
-    occ = np.zeros((camera.height, camera.width), np.float32)
+    tracks = [t for t in result.tracks if t.track_id in models]
     silhouettes: dict[int, np.ndarray] = {}
-    visible_free = np.ones_like(occ)  # prod over nearer targets of (1 - coverage)
-    for t in order:  # nearest first
+    has_maps = hasattr(measurement, 'occlusion_maps') and hasattr(measurement, 'render_labels')
+    for t in result.tracks:
+        mean = np.asarray(t.mean, dtype=np.float64)
         try:
-            shape = BodyShape(height=_height(t))
-            mean_sil = rasterize(camera, np.asarray(t.mean, dtype=np.float64)[None], shape)
-            mask = mean_sil.mask(0) > 0
-            states, weights = _subsample(t, max_particles)
-            cov = coverage_map(camera, states, weights, shape)
-        except ShapeError:
+            if has_maps and t.track_id in models:
+                labels = measurement.render_labels(camera.name, mean, models[t.track_id])
+            else:
+                h = float(t.height) if np.isfinite(t.height) and t.height > 0 else 1.75
+                labels = render_labels(camera, mean, BodyShape(height=h))
+        except (ShapeError, ValueError):
             continue
-        silhouettes[t.track_id] = mask
-        w_star = 1.0 - visible_free  # 000 Eq. 34: occluded by someone nearer
-        occ = np.maximum(occ, np.where(mask, w_star, 0.0).astype(np.float32))
-        visible_free *= 1.0 - cov
+        silhouettes[t.track_id] = np.asarray(labels) > 0
+    if not has_maps or len(tracks) < 2:
+        return None, silhouettes
+    picks = [_subsample(t, max_particles) for t in tracks]
+    maps = measurement.occlusion_maps(camera.name, [p for p, _ in picks],
+                                      [w for _, w in picks],
+                                      [models[t.track_id] for t in tracks])
+    occ = np.zeros((camera.height, camera.width), np.float32)
+    for k, t in enumerate(tracks):
+        mask = silhouettes.get(t.track_id)
+        if mask is not None:
+            # 000 Eq. 34: 1 - w*_inf is the probability that another target hides the pixel
+            occ = np.maximum(occ, np.where(mask, 1.0 - maps[k], 0.0).astype(np.float32))
     return occ, silhouettes
-
-
-def _height(t: TrackEstimate) -> float:
-    h = float(t.height)
-    return h if np.isfinite(h) and h > 0 else 1.75

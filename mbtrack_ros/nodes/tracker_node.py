@@ -44,6 +44,7 @@ from mbtrack_ros.core.tracker import Tracker, TrackerError
 from mbtrack_ros.nodes import messages
 from mbtrack_ros.nodes.conversions import (
     ImageConversionError, compressed_to_rgb, image_to_rgb, rgb_to_image, stamp_to_ns)
+from mbtrack_ros.nodes.debug import occlusion_layers
 from mbtrack_ros.nodes.params import NodeParams, ParamsError, declare_and_read
 from mbtrack_ros.recording.csvfiles import CsvFormatError, GroundTruthRow, read_ground_truth
 from mbtrack_ros.recording.sync import FrameSet, FrameSetSynchronizer
@@ -161,6 +162,7 @@ class TrackerNode(Node):
         self._lock = threading.Lock()  # synchroniser and frame-set queue
         self._step_lock = threading.Lock()  # one tracker step at a time; held while closing
         self._closing = False
+        self._models: dict[int, PersonModel] = {}  # track id -> appearance model
         self._pending: deque[FrameSet] = deque()
         self._warned: dict[str, float] = {}
         self._dropped = 0
@@ -232,12 +234,16 @@ class TrackerNode(Node):
         automatic detection, issue 4, will start tracks inside the step).
         """
         try:
-            return self.tracker.add_track(model, state, stamp_ns)
+            track_id = self.tracker.add_track(model, state, stamp_ns)
         except TrackerError as err:
             self.warn_once('add_track', f'cannot start a track: {err}')
             return None
+        self._models[track_id] = model
+        return track_id
 
     def end_track(self, track_id: int) -> None:
+        """End a track started with :meth:`start_track`."""
+        self._models.pop(track_id, None)
         try:
             self.tracker.remove_track(track_id)
         except TrackerError as err:
@@ -312,6 +318,7 @@ class TrackerNode(Node):
         self._resets += 1
         self.get_logger().warning(f'resetting the tracker: {reason}')
         self.tracker.reset()
+        self._models.clear()
         if self._ground_truth is not None:
             self._ground_truth.reset()
         clear = messages.delete_all_markers(stamp_ns, self.params.output_frame_id)
@@ -370,8 +377,8 @@ class TrackerNode(Node):
 
     def debug_image(self, camera: str, rgb: np.ndarray, result: FrameResult) -> Image:
         """``~/debug/<camera>/occlusion``: occlusion maps and silhouettes (000 Fig. 4)."""
-        from mbtrack_ros.nodes.debug import occlusion_layers
-        occ, sil = occlusion_layers(self.tracker, self.calibration.cameras[camera], result)
+        occ, sil = occlusion_layers(self.tracker.measurement, self.calibration.cameras[camera],
+                                    result, self._models)
         out = messages.debug_overlay(rgb, occlusion=occ, silhouettes=sil)
         return rgb_to_image(out, messages.make_header(
             result.stamp_ns, self.calibration.cameras[camera].frame_id))
