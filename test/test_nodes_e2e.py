@@ -119,6 +119,51 @@ def test_launch_file_compiles(tmp_path):
                        cfile=str(tmp_path / 'launch.pyc'), doraise=True)
 
 
+def image_msg(rgb, stamp, frame_id='cam0_optical_frame'):
+    from mbtrack_ros.nodes.conversions import rgb_to_image
+    from mbtrack_ros.nodes.messages import make_header
+    return rgb_to_image(rgb, make_header(stamp, frame_id))
+
+
+def test_bad_frames_dropped_and_stamps_backwards_reset(room_calibration, context):
+    """Callbacks called directly (no DDS): bad frames are counted and dropped, the node keeps
+    running, and stamps going backwards reset synchroniser and tracker."""
+    node = start(context, '-p', f'calibration_file:={room_calibration}',
+                 '-p', 'cameras:=[cam0,cam1]', '-p', 'sync.timeout:=0.1')
+    try:
+        rgb = np.full((240, 320, 3), 90, np.uint8)
+        t0 = 1_000_000_000
+        bad = image_msg(rgb, t0)
+        bad.encoding = 'yuv422'
+        node._on_image('cam0', bad)
+        node._on_image('cam0', image_msg(rgb[:100], t0))  # wrong size, no rescaling
+        assert node._dropped == 2 and sum(node.sync.pending.values()) == 0
+        period = 66_666_667
+        for k in range(4):
+            node._on_image('cam0', image_msg(rgb, t0 + k * period))
+            if k != 2:  # cam1 misses frame 2: that set goes out without cam1
+                node._on_image('cam1', image_msg(rgb, t0 + k * period, 'cam1_optical_frame'))
+            node._on_frame_sets()  # what the step timer does
+        assert node._last_stamp == t0 + 3 * period
+        snap = node.snapshot(messages_result())
+        assert snap.frame_sets == 3 and snap.incomplete_sets == 1 and snap.dropped_frames == 2
+        assert snap.input_rate_hz['cam0'] == pytest.approx(1e9 / period)
+        assert snap.resets == 0
+        # the recording restarts: both cameras back at t0
+        node._on_image('cam0', image_msg(rgb, t0))
+        node._on_image('cam1', image_msg(rgb, t0, 'cam1_optical_frame'))
+        node._on_frame_sets()
+        assert node._resets == 1 and node._last_stamp == t0
+        assert node.sync.counters.resets == 1
+    finally:
+        node.destroy_node()
+
+
+def messages_result():
+    from mbtrack_ros.core.state import FrameResult
+    return FrameResult(stamp_ns=0)
+
+
 # -- end to end --------------------------------------------------------------------------
 @pytest.fixture(scope='module')
 def recording(tmp_path_factory) -> Path:
