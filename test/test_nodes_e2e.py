@@ -164,6 +164,40 @@ def messages_result():
     return FrameResult(stamp_ns=0)
 
 
+def test_compressed_transport_and_rescaling(room_calibration, context):
+    from sensor_msgs.msg import CompressedImage
+
+    from mbtrack_ros.nodes.conversions import rgb_to_compressed
+    from mbtrack_ros.nodes.messages import make_header
+
+    node = start(context, '-p', f'calibration_file:={room_calibration}',
+                 '-p', 'cameras:=[cam0]', '-p', 'image_transport:=compressed',
+                 '-p', 'rescale_images:=true')
+    try:
+        assert node._subs[0].msg_type is CompressedImage
+        assert node._subs[0].topic_name == '/cam0/image_raw/compressed'
+        half = np.zeros((120, 160, 3), np.uint8)
+        half[:, 80:] = 200  # right half bright
+        node._on_image('cam0', rgb_to_compressed(half, make_header(5, 'cam0_optical_frame'),
+                                                 'png'))
+        assert node._dropped == 0
+        fs = node._pending[0]
+        image = fs.images['cam0']
+        assert image.shape == (240, 320, 3)  # resized to the calibration
+        assert image[:, :150].max() == 0 and image[:, 170:].min() == 200
+    finally:
+        node.destroy_node()
+
+
+def test_bag_player_bad_bag_exits_nonzero(tmp_path, capsys):
+    from mbtrack_ros.nodes import bag_player
+    code = bag_player.main(['bag_player', '--ros-args', '-p', f'bag:={tmp_path}'])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2
+    assert err[-1] == (f"bag_player: error: '{tmp_path}' is not a rosbag2 directory "
+                       '(no metadata.yaml)')
+
+
 # -- end to end --------------------------------------------------------------------------
 @pytest.fixture(scope='module')
 def recording(tmp_path_factory) -> Path:
