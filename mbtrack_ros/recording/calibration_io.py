@@ -1,9 +1,9 @@
-"""Readers of foreign camera-calibration formats into :class:`~mbtrack_ros.core.camera.RoomCalibration`.
+"""Readers of foreign camera-calibration formats into a ``core.camera.RoomCalibration``.
 
 Three sources are understood:
 
 * **OpenCV style** (:func:`read_opencv_calibration`): JSON, YAML, Pose2Sim TOML or an OpenCV
-  ``FileStorage`` YAML (``%YAML:1.0`` / ``%YAML 1.2``, ``!!opencv-matrix``), one entry per camera with an
+  ``FileStorage`` YAML (``%YAML``, ``!!opencv-matrix``), one entry per camera with an
   intrinsic matrix, distortion, a world -> camera rotation (3x3 or Rodrigues vector) and
   translation, and the image size ``[width, height]``; ``x_cam = R X_world + t``.
 * **ROS camera_info YAML** (:func:`read_camera_info`, camera_calibration_parsers format) for
@@ -219,7 +219,8 @@ def _load_document(path: Path) -> Any:
         return yaml.safe_load(text)
     except (json.JSONDecodeError, tomllib.TOMLDecodeError, yaml.YAMLError, cv2.error) as err:
         first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
-        raise CalibrationError(f'{path}: not a readable {suffix or "YAML"} file ({first})') from err
+        raise CalibrationError(
+            f'{path}: not a readable {suffix or "YAML"} file ({first})') from err
 
 
 def _camera_entries(doc: Any, path: Path) -> list[tuple[str, Mapping[str, Any]]]:
@@ -408,7 +409,7 @@ def read_camera_info_calibration(
     return _finish(cameras, source, up_axis=up_axis, floor_offset=floor_offset, floor=floor)
 
 
-# -- Qualisys ---------------------------------------------------------------------------------------
+# -- Qualisys -------------------------------------------------------------------------------------
 
 _QCA_SUBPIXEL = 64.0  # Qualisys sensor coordinates are in 1/64 pixel
 
@@ -503,7 +504,7 @@ def read_qualisys_calibration(path: str | Path, *, up_axis: str = 'z',
     return _finish(cameras, path, up_axis=up_axis, floor_offset=floor_offset, floor=floor)
 
 
-# -- dispatch ---------------------------------------------------------------------------------------
+# -- dispatch -------------------------------------------------------------------------------------
 
 def read_calibration(path: str | Path, fmt: str = 'auto', *,
                      camera_info: Mapping[str, str | Path] | None = None,

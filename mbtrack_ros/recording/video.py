@@ -36,8 +36,9 @@ from mbtrack_ros.recording.calibration_io import world_rotation
 from mbtrack_ros.recording.csvfiles import GroundTruthRow, write_ground_truth
 
 __all__ = [
-    'EPOCH_NS', 'ImportSummary', 'TrcData', 'VideoImportError', 'VideoInfo', 'fit_camera', 'import_videos',
-    'probe_video', 'read_trc', 'reference_ground_truth', 'resize_frame', 'trc_to_room',
+    'EPOCH_NS', 'ImportSummary', 'TrcData', 'VideoImportError', 'VideoInfo', 'fit_camera',
+    'import_videos', 'probe_video', 'read_trc', 'reference_ground_truth', 'resize_frame',
+    'trc_to_room',
 ]
 
 
