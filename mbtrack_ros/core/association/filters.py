@@ -322,7 +322,9 @@ class JLFFilter(_KalmanTracks):
         def joint_score(joint_states: np.ndarray, orders: np.ndarray) -> np.ndarray:
             return measurement.joint(joint_states, models, orders=orders)
 
+        seen = set(getattr(measurement, 'active_cameras', self.camera_names))
         res = jlf_measurement(means, covs, joint_score, cameras, heights, widths, rng,
+                              active=[n in seen for n in self.camera_names],
                               n_samples=c.samples, refine=c.refine,
                               refine_evals=c.refine_evals, scale=c.sampling_scale,
                               min_std=c.min_sampling_std, min_speed=c.orientation_speed)

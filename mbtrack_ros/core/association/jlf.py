@@ -148,8 +148,8 @@ def geometric_orders(joint_states: np.ndarray, cameras: Sequence[Camera],
 
 
 def best_orders(joint_states: np.ndarray, joint_score: JointScoreFn,
-                cameras: Sequence[Camera], heights: np.ndarray,
-                widths: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+                cameras: Sequence[Camera], heights: np.ndarray, widths: np.ndarray, *,
+                active: Sequence[bool] | None = None) -> tuple[np.ndarray, np.ndarray, int]:
     """Most likely visually distinct order per joint sample and camera (004 §5.2.1).
 
     Args:
@@ -157,6 +157,8 @@ def best_orders(joint_states: np.ndarray, joint_score: JointScoreFn,
         joint_score: masked joint log-likelihood callable (module docstring).
         cameras: the C cameras, in the order of the ``orders`` axis.
         heights, widths: (K,) body sizes, metres (for the overlap test).
+        active: per camera, whether it has an image this frame (inactive cameras keep the
+            geometric order and cost no evaluations); default all.
     Returns:
         (orders (N, C, K), loglik (N,) under those orders, number of evaluated rows).
     """
@@ -170,8 +172,14 @@ def best_orders(joint_states: np.ndarray, joint_score: JointScoreFn,
     rows_n: list[int] = [*range(n)]
     rows_orders: list[np.ndarray] = [ref[i] for i in range(n)]
     variant_of: list[tuple[int, int, np.ndarray]] = []  # (sample, camera, order)
+    if active is None:
+        active = [True] * n_cam
+    if len(active) != n_cam:
+        raise AssociationError(f'{len(active)} activity flags for {n_cam} cameras')
     if k > 1:
         for c, cam in enumerate(cameras):
+            if not active[c]:
+                continue
             ov = overlaps(silhouette_boxes(js, cam, heights, widths))  # (N, K, K)
             pair_masks = ov[:, table.iu, table.ju] | ov[:, table.ju, table.iu]
             for i in np.flatnonzero(pair_masks.any(axis=1)):
@@ -235,6 +243,7 @@ def refine_joint(states: np.ndarray, orders: np.ndarray, joint_score: JointScore
 def jlf_measurement(means: np.ndarray, covs: np.ndarray, joint_score: JointScoreFn,
                     cameras: Sequence[Camera], heights: np.ndarray, widths: np.ndarray,
                     rng: np.random.Generator, *, n_samples: int = 50, include_mean: bool = True,
+                    active: Sequence[bool] | None = None,
                     refine: bool = False, refine_evals: int = 80, scale: float = 1.0,
                     min_std: float = 0.05, min_speed: float = 0.2) -> JLFResult:
     """One JLF joint measurement (004 §5.2.1, Fig. 16): sample, order, evaluate, pick best.
@@ -245,6 +254,7 @@ def jlf_measurement(means: np.ndarray, covs: np.ndarray, joint_score: JointScore
         cameras, heights, widths: see :func:`best_orders`.
         n_samples: number of joint samples N.
         include_mean: make the first joint sample the prediction itself.
+        active: cameras with an image this frame, see :func:`best_orders`.
         refine: Powell on the best joint sample with its orders fixed.
     Returns:
         :class:`JLFResult`.
@@ -258,7 +268,8 @@ def jlf_measurement(means: np.ndarray, covs: np.ndarray, joint_score: JointScore
                   axis=1)  # (N, K, 6), components independent (004 §5.2.1)
     if include_mean:  # orientation and sitting are the same in every sample
         js[0, :, [X, Y]] = means[:, [X, Y]].T
-    orders, loglik, evaluations = best_orders(js, joint_score, cameras, heights, widths)
+    orders, loglik, evaluations = best_orders(js, joint_score, cameras, heights, widths,
+                                              active=active)
     i = int(np.argmax(loglik))
     states, value = js[i].copy(), float(loglik[i])
     if refine and np.isfinite(value):
