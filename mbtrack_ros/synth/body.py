@@ -125,12 +125,18 @@ class Ellipsoids:
                           np.zeros(p))
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product of two (3,) vectors (np.cross is slow for single vectors)."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
+                     a[0] * b[1] - a[1] * b[0]])
+
+
 def _limb_axes(direction: np.ndarray, side: np.ndarray) -> np.ndarray:
     """(3, 3) columns: a unit vector perpendicular-ish to ``side``, ``side``, ``direction``."""
-    z = direction / np.linalg.norm(direction)
+    z = direction / np.sqrt(direction @ direction)
     y = side - (side @ z) * z
-    y /= np.linalg.norm(y)
-    return np.stack([np.cross(y, z), y, z], axis=1)
+    y = y / np.sqrt(y @ y)
+    return np.column_stack((_cross(y, z), y, z))
 
 
 def pose_ellipsoids(height: float, clothing: Clothing, *, x: float, y: float, theta: float,
@@ -197,7 +203,7 @@ def pose_ellipsoids(height: float, clothing: Clothing, *, x: float, y: float, th
         foot_dir = np.array([np.cos(0.3 * (alpha - kappa) * (1 - sit)), 0.0,
                              np.sin(0.3 * (alpha - kappa) * (1 - sit))])
         add(an + 0.06 * s * foot_dir - np.array([0, 0, 0.02 * H]),
-            np.stack([foot_dir, ey, np.cross(foot_dir, ey)], axis=1),
+            np.column_stack((foot_dir, ey, _cross(foot_dir, ey))),
             (0.13, 0.045, 0.035), cl.shoes)
     lean = 0.08 * sit
     up = np.array([np.sin(lean), 0.0, np.cos(lean)])

@@ -28,9 +28,8 @@ from mbtrack_ros.synth.body import Ellipsoids, pose_ellipsoids
 from mbtrack_ros.synth.errors import SynthError
 from mbtrack_ros.synth.motion import PersonState
 from mbtrack_ros.synth.presets import Preset, get_preset, populate
-from mbtrack_ros.synth.raster import draw_ellipsoids
-from mbtrack_ros.synth.room import (CameraView, Room, default_room, make_calibration,
-                                    screen_radiance)
+from mbtrack_ros.synth.raster import draw_ellipsoids, expose
+from mbtrack_ros.synth.room import CameraView, Room, default_room, make_calibration
 
 __all__ = ['EPOCH_NS', 'SynthFrame', 'Synthesizer', 'generate', 'iter_frames',
            'render_view', 'visible_threshold']
@@ -101,7 +100,7 @@ def render_view(view: CameraView, ellipsoids: Ellipsoids, *, time_s: float = 0.0
     flat_r = radiance.reshape(-1, 3)
     flat_d = depth.reshape(-1)
     if view.screen_index.size:
-        flat_r[view.screen_index] = screen_radiance(view.screen_uv, time_s)
+        flat_r[view.screen_index] = view.screen_update(time_s)
     if view.door_index.size and door_angle > 0.0:  # the closed door is in the static image
         rad, dep = view.door_update(float(door_angle))
         flat_r[view.door_index] = rad
@@ -196,11 +195,8 @@ class Synthesizer:
             for k, (name, view) in enumerate(self.views.items()):
                 radiance, _, ids = render_view(view, ellipsoids, time_s=time_s,
                                                door_angle=self.crowd.door_angle)
-                radiance *= self.gains[k] * np.float32(light)
-                radiance += self.noise_bank[offsets[k]:offsets[k] + pixels].reshape(
-                    radiance.shape)
-                np.clip(radiance, 0.0, 255.0, out=radiance)
-                images[name] = (radiance + 0.5).astype(np.uint8)
+                images[name] = expose(radiance, self.gains[k] * np.float32(light),
+                                      self.noise_bank, int(offsets[k]))
                 id_buffers[name] = ids
                 counts[name] = np.bincount(ids.ravel(), minlength=self.crowd.next_id)
             stamp = self.stamp_ns(index)

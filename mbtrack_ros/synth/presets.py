@@ -46,19 +46,21 @@ def _lanz_seq4(crowd: Crowd) -> None:
     def at(dist: float, lateral: float) -> np.ndarray:
         return _CAM_XY + dist * _VIEW + lateral * _ACROSS
 
-    # the occluder: tall, close to the camera, mostly standing, small steps sideways
-    crowd.add(tuple(at(2.6, 0.0)), behaviour='patrol', height=1.95,
-              patrol=[at(2.6, -0.2), at(2.6, 0.2)], patrol_pause=(1.5, 4.0),
-              speed_range=(0.3, 0.5))
+    # The occluder: tall (2.0 m), close to the camera, mostly standing. The camera looks
+    # down from 2.6 m, so a person at distance d2 behind him is fully hidden only while
+    # (2.6 - h2) / (2.6 - h1) >= d2 / d1: the twins stay within about 1.45 d1.
+    crowd.add(tuple(at(1.9, 0.0)), behaviour='patrol', height=2.0,
+              patrol=[at(1.9, -0.08), at(1.9, 0.08)], patrol_pause=(2.0, 5.0),
+              speed_range=(0.25, 0.35))
     twins = random_clothing(crowd.rng)
-    base = float(crowd.rng.uniform(1.62, 1.67))
+    base = float(crowd.rng.uniform(1.6, 1.65))
     # the twins walk back and forth behind him, pausing right behind him now and then
-    for k, (dist, h) in enumerate(((3.05, base), (3.4, base + 0.03))):
-        ends = [at(dist, -1.1), at(dist, 0.0), at(dist, 1.1), at(dist, 0.0)]
+    for k, (dist, h) in enumerate(((2.45, base), (2.75, base + 0.03))):
+        ends = [at(dist, -0.6), at(dist, 0.0), at(dist, 1.1), at(dist, 0.0)]
         start = 2 * k
         crowd.add(tuple(ends[start]), behaviour='patrol', height=h, clothing=twins,
-                  patrol=ends[start:] + ends[:start], patrol_pause=(0.3, 1.5),
-                  speed_range=(0.8, 1.1))
+                  patrol=ends[start:] + ends[:start], patrol_pause=(0.5, 3.0),
+                  speed_range=(0.7, 1.0))
 
 
 def _clear_room(crowd: Crowd) -> None:
@@ -73,8 +75,8 @@ def _empty(crowd: Crowd) -> None:
     pass
 
 
-_AREA_SMALL = (1.4, 1.25, 3.4, 3.0)
-_AREA_WIDE = (1.2, 1.25, 3.7, 3.3)
+_AREA_SMALL = (1.0, 1.2, 2.8, 2.8)
+_AREA_WIDE = (0.95, 1.2, 3.2, 3.1)
 
 _BASE = (
     Preset('lanz-seq1', '3 people walking randomly in a small area in front of one corner '

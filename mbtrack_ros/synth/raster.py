@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ['TEX_NOISE', 'TEX_SOLID', 'TEX_STRIPES', 'draw_ellipsoids', 'hash01']
+__all__ = ['TEX_NOISE', 'TEX_SOLID', 'TEX_STRIPES', 'draw_ellipsoids', 'expose', 'hash01']
 
 TEX_SOLID, TEX_STRIPES, TEX_NOISE = 0, 1, 2
 
@@ -132,3 +132,31 @@ def draw_ellipsoids(rays: np.ndarray, origin: np.ndarray, depth: np.ndarray,
                     image[v, u, ch] = 255.0 * col * shade
                 depth[v, u] = s
                 ids[v, u] = owner[p]
+
+
+@njit(cache=True)
+def expose(radiance: np.ndarray, gain: np.ndarray, noise: np.ndarray,
+           offset: int) -> np.ndarray:
+    """Camera response: ``clip(radiance * gain + noise, 0, 255)`` rounded to uint8.
+
+    Args:
+        radiance: (H, W, 3) float32 scene radiance 0..255.
+        gain: (3,) float32 channel gains (colour response x illumination).
+        noise: (M,) float32 Gaussian noise bank; pixels use ``noise[offset:offset + H*W*3]``.
+    Returns:
+        (H, W, 3) uint8 image.
+    """
+    h, w, _ = radiance.shape
+    out = np.empty((h, w, 3), dtype=np.uint8)
+    k = offset
+    for v in range(h):
+        for u in range(w):
+            for ch in range(3):
+                value = radiance[v, u, ch] * gain[ch] + noise[k] + 0.5
+                k += 1
+                if value < 0.0:
+                    value = 0.0
+                elif value > 255.0:
+                    value = 255.0
+                out[v, u, ch] = np.uint8(value)
+    return out

@@ -164,16 +164,26 @@ def _shade(room: Room, p: np.ndarray, normal: np.ndarray) -> np.ndarray:
     return room.ambient + room.diffuse * np.clip(np.sum(normal * light, axis=1), 0.0, None)
 
 
-def screen_radiance(uv: np.ndarray, time_s: float) -> np.ndarray:
-    """Emitted radiance (M, 3) 0..255 of screen points ``uv`` (M, 2) in [0, 1] at a time.
+SLIDE_SECONDS = 4.0
 
-    Slides change every 4 s (coloured blocks), a bright bar scrolls down continuously.
-    """
-    slide = int(time_s // 4.0)
+
+def screen_slide(uv: np.ndarray, slide: int) -> np.ndarray:
+    """Radiance (M, 3) 0..255 of slide number ``slide`` at screen points ``uv`` (M, 2)."""
     cells = hash01(np.floor(uv[:, 0] * 5), np.floor(uv[:, 1] * 4), slide, salt=5)
     base = np.stack([cells, hash01(np.floor(uv[:, 0] * 5), np.floor(uv[:, 1] * 4), slide,
                                    salt=6), 1.0 - cells], axis=1)
-    out = 60.0 + 170.0 * base
+    return 60.0 + 170.0 * base
+
+
+def screen_radiance(uv: np.ndarray, time_s: float,
+                    slide_image: np.ndarray | None = None) -> np.ndarray:
+    """Emitted radiance (M, 3) 0..255 of screen points ``uv`` (M, 2) in [0, 1] at a time.
+
+    Slides change every 4 s (coloured blocks), a bright bar scrolls down continuously.
+    ``slide_image`` is the precomputed :func:`screen_slide` of the current slide.
+    """
+    slide = int(time_s // SLIDE_SECONDS)
+    out = (screen_slide(uv, slide) if slide_image is None else slide_image).copy()
     bar = np.abs(((uv[:, 1] - 0.25 * time_s) % 1.0) - 0.5) < 0.05
     out[bar] = 235.0
     return out
@@ -212,6 +222,7 @@ class CameraView:
     corridor_radiance: np.ndarray = field(repr=False)
     corridor_depth: np.ndarray = field(repr=False)
     _door_cache: tuple[float, np.ndarray, np.ndarray] | None = field(default=None, repr=False)
+    _slide_cache: tuple[int, np.ndarray] | None = field(default=None, repr=False)
 
     @classmethod
     def build(cls, camera: Camera, room: Room) -> CameraView:
@@ -308,6 +319,13 @@ class CameraView:
             view.radiance.reshape(-1, 3)[door_index] = rad
             view.depth.reshape(-1)[door_index] = dep
         return view
+
+    def screen_update(self, time_s: float) -> np.ndarray:
+        """Radiance (M, 3) of the screen pixels at ``time_s`` (slide cached per camera)."""
+        slide = int(time_s // SLIDE_SECONDS)
+        if self._slide_cache is None or self._slide_cache[0] != slide:
+            self._slide_cache = (slide, screen_slide(self.screen_uv, slide))
+        return screen_radiance(self.screen_uv, time_s, self._slide_cache[1])
 
     def door_update(self, angle: float) -> tuple[np.ndarray, np.ndarray]:
         """Radiance (M, 3) and depth (M,) of the door pixels with the door open ``angle`` rad.
