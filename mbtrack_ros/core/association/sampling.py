@@ -77,7 +77,11 @@ def sample_states(mean: np.ndarray, cov: np.ndarray, n: int, rng: np.random.Gene
     sigma = scale ** 2 * cov[:2, :2] + min_std ** 2 * np.eye(2)
     sigma = 0.5 * (sigma + sigma.T)
     states = np.repeat(mean[None], n, axis=0)
-    states[:, [X, Y]] = rng.multivariate_normal(mean[:2], sigma, size=n, method='cholesky')
+    try:
+        states[:, [X, Y]] = rng.multivariate_normal(mean[:2], sigma, size=n, method='cholesky')
+    except np.linalg.LinAlgError as err:
+        raise AssociationError(f'sampling covariance is not positive definite: {sigma.tolist()}'
+                               ) from err
     speed = np.hypot(mean[VX], mean[VY])
     states[:, THETA] = np.arctan2(mean[VY], mean[VX]) if speed >= min_speed else mean[THETA]
     return states
