@@ -1,0 +1,123 @@
+"""mbtrack replay on a tiny synthetic recording: outputs, evaluation, errors."""
+from __future__ import annotations
+
+import csv
+
+import numpy as np
+import pytest
+
+from mbtrack_ros.cli import main
+from mbtrack_ros.recording.csvfiles import TRACK_COLUMNS, read_ground_truth, read_tracks
+
+
+@pytest.fixture(scope='module')
+def recording(tmp_path_factory):
+    out = tmp_path_factory.mktemp('rec') / 'seq1'
+    code = main(['synth', 'lanz-seq1-short', str(out), '--frames', '24', '--width', '160',
+                 '--height', '120'])
+    assert code == 0
+    return out
+
+
+def _one_error_line(capsys):
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    assert err[0].startswith('mbtrack replay: error: ')
+    return err[0]
+
+
+def test_replay_writes_tracks_and_particles(recording, tmp_path, capsys):
+    out = tmp_path / 'out'
+    gt = recording / 'ground_truth.csv'
+    code = main(['replay', str(recording), '--out', str(out), '--init-from', str(gt),
+                 '--eval', str(gt), '--save-particles', '--particles', '40', '--seed', '3'])
+    assert code == 0
+    captured = capsys.readouterr()
+    assert 'MOTA' in captured.out
+    with (out / 'tracks.csv').open() as handle:
+        header = next(csv.reader(handle))
+    assert tuple(header[:5]) == TRACK_COLUMNS
+    rows = read_tracks(out / 'tracks.csv')
+    truth = read_ground_truth(gt)
+    people = {r.person_id for r in truth}
+    assert {r.track_id for r in rows} == set(range(1, len(people) + 1))
+    assert len(rows) == len(truth)  # every person tracked at every frame
+    # tracks start at the ground truth and stay close on this short, easy sequence
+    by_stamp = {(r.stamp_ns, r.person_id): r for r in truth}
+    first = {r.track_id: r for r in sorted(rows, key=lambda r: r.stamp_ns)}
+    for row in first.values():
+        near = min(np.hypot(row.x - g.x, row.y - g.y) for (s, _), g in by_stamp.items()
+                   if s == row.stamp_ns)
+        assert near < 0.3
+    data = np.load(out / 'particles.npz')
+    assert data['xy'].shape == (len(rows), 40, 2)
+    np.testing.assert_allclose(data['weights'].sum(axis=1), 1.0, rtol=1e-5)
+
+
+def test_max_frames_and_config_default(recording, tmp_path, capsys):
+    out = tmp_path / 'out'
+    gt = recording / 'ground_truth.csv'
+    code = main(['replay', str(recording / 'bag'), '--config',
+                 str(recording / 'calibration.yaml'), '--out', str(out), '--init-from',
+                 str(gt), '--max-frames', '3', '--algorithm', 'separable', '--particles', '30'])
+    assert code == 0
+    rows = read_tracks(out / 'tracks.csv')
+    assert len({r.stamp_ns for r in rows}) == 3
+
+
+@pytest.mark.parametrize('argv, needle', [
+    (['--algorithm', 'magic'], 'unknown algorithm'),
+    (['--particles', '0'], 'particles'),
+    (['--particles', 'many'], 'invalid int'),
+    (['--max-frames', '0'], 'max-frames'),
+])
+def test_bad_arguments_exit_2_with_one_line(recording, tmp_path, capsys, argv, needle):
+    gt = recording / 'ground_truth.csv'
+    with pytest.raises(SystemExit) if needle == 'invalid int' else _nullcontext() as exc:
+        code = main(['replay', str(recording), '--out', str(tmp_path / 'o'), '--init-from',
+                     str(gt)] + argv)
+    if exc is not None and needle == 'invalid int':
+        code = exc.value.code
+    assert code == 2
+    assert needle in _one_error_line(capsys)
+
+
+class _nullcontext:
+    def __enter__(self):
+        return None
+
+    def __exit__(self, *exc):
+        return False
+
+
+def test_missing_inputs_exit_2(recording, tmp_path, capsys):
+    out = str(tmp_path / 'o')
+    assert main(['replay', str(tmp_path / 'nope'), '--out', out]) == 2
+    assert 'does not exist' in _one_error_line(capsys)
+    assert main(['replay', str(recording / 'bag'), '--out', out, '--init-from',
+                 str(recording / 'ground_truth.csv')]) == 2
+    assert '--config' in _one_error_line(capsys)
+    bad_gt = tmp_path / 'gt.csv'
+    bad_gt.write_text('a,b\n1,2\n')
+    assert main(['replay', str(recording), '--out', out, '--init-from', str(bad_gt)]) == 2
+    assert 'missing column' in _one_error_line(capsys)
+
+
+def test_corrupt_bag_keeps_tracks_so_far(recording, tmp_path, capsys):
+    import shutil
+
+    damaged = tmp_path / 'damaged'
+    shutil.copytree(recording, damaged)
+    mcap = next((damaged / 'bag').glob('*.mcap'))
+    data = mcap.read_bytes()
+    mcap.write_bytes(data[: int(len(data) * 0.75)])  # cut the file: last chunk damaged
+    out = tmp_path / 'out'
+    code = main(['replay', str(damaged), '--out', str(out), '--init-from',
+                 str(damaged / 'ground_truth.csv'), '--particles', '30'])
+    assert code == 1
+    err = capsys.readouterr().err
+    assert 'mbtrack replay: error:' in err and 'Traceback' not in err
+    rows = read_tracks(out / 'tracks.csv')
+    frames = {r.frame for r in rows}
+    assert 0 < len(frames) < 24
+    assert frames == set(range(len(frames)))  # every frame before the damage was tracked
