@@ -21,49 +21,56 @@ N_PARTS = 3
 
 # -- rasterisation ----------------------------------------------------------------------------
 @njit(cache=True)
-def _row_interval(y, qx, qy):
-    """Scanline ``y`` against the convex quad (4,) -> (xl, xr, hit).
+def _quad_edges(i, j, left, right, edges):
+    """Edges of the convex quad of segment j of particle i -> edges (4, 4) rows
+    ``(y_top, y_bottom, x_at_top, dx/dy)`` (horizontal edges get y_top == y_bottom) and
+    the quad's y range.
 
-    Edges are taken half-open in y (``ya <= y < yb`` after sorting the end points), and the
-    crossing of an edge is computed from its sorted end points, so that two quads sharing an
-    edge get bit-identical crossings: with the pixel rule ``ceil(xl) <= c < ceil(xr)`` the
-    quads then never claim the same pixel.
+    Each edge is parametrised from its sorted end points, so two quads sharing an edge get
+    bit-identical crossings: with the half-open rules ``y_top <= y < y_bottom`` and
+    ``ceil(xl) <= c < ceil(xr)`` neighbouring quads never claim the same pixel.
     """
+    ylo = np.inf
+    yhi = -np.inf
+    for e in range(4):
+        # vertices in order left[j], right[j], right[j + 1], left[j + 1]
+        if e == 0:
+            ax, ay, bx, by = left[i, j, 0], left[i, j, 1], right[i, j, 0], right[i, j, 1]
+        elif e == 1:
+            ax, ay = right[i, j, 0], right[i, j, 1]
+            bx, by = right[i, j + 1, 0], right[i, j + 1, 1]
+        elif e == 2:
+            ax, ay = right[i, j + 1, 0], right[i, j + 1, 1]
+            bx, by = left[i, j + 1, 0], left[i, j + 1, 1]
+        else:
+            ax, ay, bx, by = left[i, j + 1, 0], left[i, j + 1, 1], left[i, j, 0], left[i, j, 1]
+        if ay > by or (ay == by and ax > bx):
+            ax, bx = bx, ax
+            ay, by = by, ay
+        edges[e, 0] = ay
+        edges[e, 1] = by
+        edges[e, 2] = ax
+        edges[e, 3] = (bx - ax) / (by - ay) if by > ay else 0.0
+        ylo = min(ylo, ay)
+        yhi = max(yhi, by)
+    return ylo, yhi
+
+
+@njit(cache=True)
+def _row_interval(y, edges):
+    """Scanline ``y`` against a convex quad's edges -> (xl, xr, hit)."""
     xl = np.inf
     xr = -np.inf
     hit = False
     for e in range(4):
-        ax = qx[e]
-        ay = qy[e]
-        bx = qx[(e + 1) % 4]
-        by = qy[(e + 1) % 4]
-        if ay > by or (ay == by and ax > bx):
-            ax, bx = bx, ax
-            ay, by = by, ay
-        if ay <= y < by:
-            x = ax + (y - ay) * (bx - ax) / (by - ay)
+        if edges[e, 0] <= y < edges[e, 1]:
+            x = edges[e, 2] + (y - edges[e, 0]) * edges[e, 3]
             if x < xl:
                 xl = x
             if x > xr:
                 xr = x
             hit = True
     return xl, xr, hit
-
-
-@njit(cache=True)
-def _quad_rows(i, j, left, right, qx, qy):
-    """Vertices into qx, qy (4,) of the quad of segment j of particle i; its y range."""
-    qx[0] = left[i, j, 0]
-    qy[0] = left[i, j, 1]
-    qx[1] = right[i, j, 0]
-    qy[1] = right[i, j, 1]
-    qx[2] = right[i, j + 1, 0]
-    qy[2] = right[i, j + 1, 1]
-    qx[3] = left[i, j + 1, 0]
-    qy[3] = left[i, j + 1, 1]
-    ylo = min(min(qy[0], qy[1]), min(qy[2], qy[3]))
-    yhi = max(max(qy[0], qy[1]), max(qy[2], qy[3]))
-    return ylo, yhi
 
 
 @njit(cache=True)
@@ -92,8 +99,7 @@ def rasterize_quads(left, right, seg_part, valid, width, height, row_step, row_l
     """
     n = left.shape[0]
     nseg = left.shape[1] - 1
-    qx = np.empty(4)
-    qy = np.empty(4)
+    edges = np.empty((4, 4))
     ub = 0
     for i in range(n):
         if not valid[i]:
@@ -101,7 +107,7 @@ def rasterize_quads(left, right, seg_part, valid, width, height, row_step, row_l
         for j in range(nseg):
             if seg_part[i, j] == 0:
                 continue
-            ylo, yhi = _quad_rows(i, j, left, right, qx, qy)
+            ylo, yhi = _quad_edges(i, j, left, right, edges)
             r0 = max(int(np.ceil(ylo)), 0)
             r1 = min(int(np.ceil(yhi)), height)
             if r1 > r0:
@@ -128,13 +134,13 @@ def rasterize_quads(left, right, seg_part, valid, width, height, row_step, row_l
             q = seg_part[i, j]
             if q == 0:
                 continue
-            ylo, yhi = _quad_rows(i, j, left, right, qx, qy)
+            ylo, yhi = _quad_edges(i, j, left, right, edges)
             r0 = max(int(np.ceil(ylo)), -row_limit)
             r1 = min(int(np.ceil(yhi)), height + row_limit)
             if row_step > 1:
                 r0 = r0 + (-r0) % row_step
             for r in range(r0, r1, row_step):
-                xl, xr, hit = _row_interval(float(r), qx, qy)
+                xl, xr, hit = _row_interval(float(r), edges)
                 if not hit:
                     continue
                 c0 = int(np.ceil(xl))
@@ -192,57 +198,87 @@ def accumulate_spans(buf, row, x0, x1, offsets, values, oy, ox):
 
 # -- histograms (the one accumulation routine) ------------------------------------------------
 @njit(cache=True)
-def accumulate_histogram(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, use_w,
+def accumulate_histogram(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, nch,
                          hist, alpha, touched, nt, mark):
-    """Add the colours under spans [s0, s1) to the flat part histogram ``hist`` (1536,).
+    """Add the colours under spans [s0, s1) to flat part histograms ``hist`` (C, 1536).
 
-    Each pixel u adds ``w(u)`` (``wmap[row - oy, c - ox]`` when ``use_w``, else 1) to bin
-    ``part * 512 + bins[u]`` and to ``alpha[part]``. Touched bins are appended to
-    ``touched`` (flagged in ``mark``) starting at ``nt``; returns the new count.
+    With ``nch == 0`` every pixel adds 1 to channel 0; otherwise pixel u adds
+    ``wmap[row - oy, c - ox, ch]`` to channel ``ch < nch`` (several weightings of the same
+    pixels in one pass). The bin is ``part * 512 + bins[u]``; ``alpha`` (C, 3) receives the
+    part masses. Touched bins (shared by all channels) are appended to ``touched`` and
+    flagged in ``mark`` starting at ``nt``; returns the new count.
     """
     for s in range(s0, s1):
         r = row[s]
         q = part[s] - 1
         base = q * N_BINS
-        acc = 0.0
-        for c in range(x0[s], x1[s]):
-            w = wmap[r - oy, c - ox] if use_w else 1.0
-            idx = base + bins[r, c]
-            hist[idx] += w
-            acc += w
-            if not mark[idx]:
-                mark[idx] = True
-                touched[nt] = idx
-                nt += 1
-        alpha[q] += acc
+        if nch == 0:
+            for c in range(x0[s], x1[s]):
+                idx = base + bins[r, c]
+                hist[0, idx] += 1.0
+                if not mark[idx]:
+                    mark[idx] = True
+                    touched[nt] = idx
+                    nt += 1
+            alpha[0, q] += x1[s] - x0[s]
+        elif nch == 1:
+            rr = r - oy
+            acc = 0.0
+            for c in range(x0[s], x1[s]):
+                idx = base + bins[r, c]
+                w = wmap[rr, c - ox, 0]
+                hist[0, idx] += w
+                acc += w
+                if not mark[idx]:
+                    mark[idx] = True
+                    touched[nt] = idx
+                    nt += 1
+            alpha[0, q] += acc
+        else:
+            rr = r - oy
+            for c in range(x0[s], x1[s]):
+                idx = base + bins[r, c]
+                cc = c - ox
+                for ch in range(nch):
+                    w = wmap[rr, cc, ch]
+                    hist[ch, idx] += w
+                    alpha[ch, q] += w
+                if not mark[idx]:
+                    mark[idx] = True
+                    touched[nt] = idx
+                    nt += 1
     return nt
 
 
 @njit(cache=True)
-def part_distances(hist, alpha, sqrt_model, touched, nt, mark, d2):
-    """Bhattacharyya distances (003 Eq. 4) of the weighted part histograms to the model.
+def part_distances(hist, alpha, key, t, va, vb, wa, touched, nt, d2):
+    """Bhattacharyya distances (003 Eq. 4) of weighted part histograms to the model.
 
-    ``hist`` holds unnormalised weighted counts with part masses ``alpha`` (3,); the
-    normalised histogram is hist / alpha, so sum_c sqrt(h_c m_c) = sum_c sqrt(hist_c) *
-    sqrt_model_c / sqrt(alpha). Writes d2 (3,) (1 for a part with no mass) and clears the
-    touched bins of ``hist`` and ``mark``.
+    The model histogram is interpolated from key views on the touched bins only (003 Eq.
+    1): ``m = wa * key[t, va] + (1 - wa) * key[t, vb]``, key (T, V, 1536) normalised per
+    part. ``hist`` (1536,) holds unnormalised weighted counts with part masses ``alpha``
+    (3,); the normalised histogram is hist / alpha, so sum_c sqrt(h_c m_c) =
+    sum_c sqrt(hist_c m_c) / sqrt(alpha). Writes d2 (3,) (1 for a part with no mass) and
+    zeroes the touched bins of ``hist``.
     """
     bc0 = 0.0
     bc1 = 0.0
     bc2 = 0.0
+    wb = 1.0 - wa
     for j in range(nt):
         idx = touched[j]
         v = hist[idx]
         if v > 0.0:
-            t = np.sqrt(v) * sqrt_model[idx]
-            if idx < N_BINS:
-                bc0 += t
-            elif idx < 2 * N_BINS:
-                bc1 += t
-            else:
-                bc2 += t
+            m = wa * key[t, va, idx] + wb * key[t, vb, idx]
+            if m > 0.0:
+                x = np.sqrt(v * m)
+                if idx < N_BINS:
+                    bc0 += x
+                elif idx < 2 * N_BINS:
+                    bc1 += x
+                else:
+                    bc2 += x
         hist[idx] = 0.0
-        mark[idx] = False
     for q in range(3):
         bc = bc0 if q == 0 else (bc1 if q == 1 else bc2)
         if alpha[q] > 0.0:
@@ -253,33 +289,44 @@ def part_distances(hist, alpha, sqrt_model, touched, nt, mark, d2):
 
 
 @njit(cache=True)
-def occlusion_term(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, use_w, area, d_occ,
-                   sqrt_model, hist, touched, mark, d2):
-    """000 Eq. 26 with the soft map w of Eq. 33 on one silhouette -> (l, alpha).
+def occlusion_terms(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, nch, area, d_occ,
+                    key, t, va, vb, wa, hist, alpha, touched, mark, d2, out_l, out_vis):
+    """000 Eq. 26 with soft maps w (Eq. 33) on one silhouette, for max(nch, 1) channels.
 
-    alpha = sum of w over the silhouette (visible mass), beta = area - alpha the hidden
-    mass: l = (sum_parts alpha_part d2_part + beta d_occ) / area. With w = 1 this is the
+    Channel ch uses w = wmap[..., ch] (w = 1 when ``nch == 0``); alpha = sum of w (visible
+    mass), beta = area - alpha (hidden mass): l = (sum_parts alpha_part d2_part +
+    beta d_occ) / area -> out_l[ch], alpha -> out_vis[ch]. With w = 1 this is the
     area-weighted part distance of 003 Eq. 3.
     """
-    alpha = np.zeros(3)
-    nt = accumulate_histogram(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, use_w,
+    m = max(nch, 1)
+    for ch in range(m):
+        alpha[ch, 0] = 0.0
+        alpha[ch, 1] = 0.0
+        alpha[ch, 2] = 0.0
+    nt = accumulate_histogram(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, nch,
                               hist, alpha, touched, 0, mark)
-    part_distances(hist, alpha, sqrt_model, touched, nt, mark, d2)
-    vis = alpha[0] + alpha[1] + alpha[2]
-    if area <= 0:
-        return 0.0, 0.0
-    beta = area - vis
-    if beta < 0.0:
-        beta = 0.0
-    num = alpha[0] * d2[0] + alpha[1] * d2[1] + alpha[2] * d2[2] + beta * d_occ
-    return num / area, vis
+    for ch in range(m):
+        part_distances(hist[ch], alpha[ch], key, t, va, vb, wa, touched, nt, d2)
+        vis = alpha[ch, 0] + alpha[ch, 1] + alpha[ch, 2]
+        beta = area - vis
+        if beta < 0.0:
+            beta = 0.0
+        num = alpha[ch, 0] * d2[0] + alpha[ch, 1] * d2[1] + alpha[ch, 2] * d2[2]
+        out_l[ch] = (num + beta * d_occ) / area if area > 0 else 0.0
+        out_vis[ch] = vis
+    for j in range(nt):
+        mark[touched[j]] = False
 
 
 # -- HJS update (000 Algorithm 1, per camera) -------------------------------------------------
 @njit(cache=True)
 def hjs_camera(bins, row, x0, x1, part, offsets, area, bbox, order, target, prior,
-               sqrt_models, n_targets, d_occ, separable, record, pix_offsets):
+               key, va, vb, wa, n_targets, d_occ, separable, record, pix_offsets):
     """Visit all K*N particles of one camera from near to far (000 Algorithm 1 "update").
+
+    Buffers are (h, w, K) over the union bounding box of all silhouettes (pixel-interleaved
+    so the K factors of a pixel are contiguous); b_fg is kept as the accumulated prior mass
+    m_fg = 1 - b_fg, so that all buffers start at zero (cheap, lazily zeroed memory).
 
     Args:
         bins: (H, W) int16 colour bins of the image.
@@ -288,7 +335,8 @@ def hjs_camera(bins, row, x0, x1, part, offsets, area, bbox, order, target, prio
         order: (P,) particle indices sorted by increasing camera distance.
         target: (P,) target index k_p of each particle.
         prior: (P,) normalised prior weight pi_p of each particle within its target.
-        sqrt_models: (P, 1536) square roots of the interpolated model part histograms.
+        key: (K, V, 1536) key-view part histograms of the targets (normalised per part).
+        va, vb, wa: (P,) the two key views of each particle and the weight of ``va``.
         separable: if True, every target is scored alone (w* = 1, no background term).
         record: flat float64 array receiving w* at every span pixel (size 0: do not
             record); pixel ``pix_offsets[p]`` is the first pixel of particle p.
@@ -300,46 +348,65 @@ def hjs_camera(bins, row, x0, x1, part, offsets, area, bbox, order, target, prio
     fc = np.zeros(npart)
     bc = np.zeros(npart)
     vis = np.zeros(npart)
-    hist = np.zeros(3 * N_BINS)
+    nk = max(n_targets, 1)
+    hist = np.zeros((nk, 3 * N_BINS))
+    alpha = np.zeros((nk, 3))
     mark = np.zeros(3 * N_BINS, np.bool_)
     touched = np.empty(3 * N_BINS, np.int64)
     d2 = np.empty(3)
-    # union bounding boxes: of all particles (buffer extent) and per target
+    out_l = np.empty(nk)
+    out_v = np.empty(nk)
+    # union bounding box of all silhouettes (buffer extent); per target, the union boxes of
+    # its particles nearer than the current one (pre, grown while visiting) and of those
+    # farther than position oi (suf[oi], precomputed backwards)
     gx0 = 1 << 30
     gy0 = 1 << 30
     gx1 = -1
     gy1 = -1
-    tb = np.empty((n_targets, 4), np.int64)
-    for h in range(n_targets):
-        tb[h, 0] = 1 << 30
-        tb[h, 1] = 1 << 30
-        tb[h, 2] = -1
-        tb[h, 3] = -1
     for p in range(npart):
-        if area[p] <= 0:
-            continue
-        h = target[p]
-        tb[h, 0] = min(tb[h, 0], bbox[p, 0])
-        tb[h, 1] = min(tb[h, 1], bbox[p, 1])
-        tb[h, 2] = max(tb[h, 2], bbox[p, 2])
-        tb[h, 3] = max(tb[h, 3], bbox[p, 3])
-        gx0 = min(gx0, bbox[p, 0])
-        gy0 = min(gy0, bbox[p, 1])
-        gx1 = max(gx1, bbox[p, 2])
-        gy1 = max(gy1, bbox[p, 3])
+        if area[p] > 0:
+            gx0 = min(gx0, bbox[p, 0])
+            gy0 = min(gy0, bbox[p, 1])
+            gx1 = max(gx1, bbox[p, 2])
+            gy1 = max(gy1, bbox[p, 3])
     if gx1 < 0:
         return fc, bc, vis
     gw = gx1 - gx0
     gh = gy1 - gy0
+    pre = np.empty((nk, 4), np.int64)
+    pre[:, 0] = 1 << 30
+    pre[:, 1] = 1 << 30
+    pre[:, 2] = -1
+    pre[:, 3] = -1
     if separable:
-        bfg = np.ones((1, 1, 1))
+        suf = np.empty((1, nk, 4), np.int64)
+        mfg = np.zeros((1, 1, 1))
         bbg = np.zeros((1, 1, 1))
+        wmap = np.ones((1, 1, 1))
     else:
-        # 000 Algorithm 1: b_fg starts at "N" (here 1 with normalised priors), b_bg at 0
-        bfg = np.ones((n_targets, gh, gw))
-        bbg = np.zeros((n_targets, gh, gw))
-    wmap = np.ones((gh, gw))
-    rel = np.empty(n_targets, np.int64)
+        suf = np.empty((npart + 1, nk, 4), np.int64)
+        suf[npart, :, 0] = 1 << 30
+        suf[npart, :, 1] = 1 << 30
+        suf[npart, :, 2] = -1
+        suf[npart, :, 3] = -1
+        for oi in range(npart - 1, -1, -1):
+            suf[oi] = suf[oi + 1]
+            p = order[oi]
+            if area[p] > 0 and prior[p] > 0.0:
+                h = target[p]
+                suf[oi, h, 0] = min(suf[oi, h, 0], bbox[p, 0])
+                suf[oi, h, 1] = min(suf[oi, h, 1], bbox[p, 1])
+                suf[oi, h, 2] = max(suf[oi, h, 2], bbox[p, 2])
+                suf[oi, h, 3] = max(suf[oi, h, 3], bbox[p, 3])
+        # 000 Algorithm 1: b_fg starts at "N" (here 1 with normalised priors: m_fg = 0),
+        # b_bg at 0
+        mfg = np.zeros((gh, gw, nk))
+        bbg = np.zeros((gh, gw, nk))
+        wmap = np.empty((gh, gw, nk))
+    rel = np.empty(nk, np.int64)
+    need = np.empty(nk, np.int64)
+    skip = np.empty(nk, np.int64)
+    vals = np.empty(nk)
     do_record = record.shape[0] > 0
     for oi in range(npart):
         p = order[oi]
@@ -349,17 +416,33 @@ def hjs_camera(bins, row, x0, x1, part, offsets, area, bbox, order, target, prio
         s0 = offsets[p]
         s1 = offsets[p + 1]
         pi_p = prior[p]
-        # targets whose particles can overlap this silhouette (DBN shortcut, 000 IV-B.3):
-        # b_fg^h and b_bg^h are untouched outside the union bounding box of h's particles
+        ap = float(area[p])
+        bx0 = bbox[p, 0]
+        by0 = bbox[p, 1]
+        bx1 = bbox[p, 2]
+        by1 = bbox[p, 3]
+        # DBN shortcut (000 IV-B.3): only targets with a nearer particle whose box meets
+        # this silhouette can occlude it (m_fg^h is 0 elsewhere); only targets with such a
+        # farther particle can read what this particle writes.
         nrel = 0
+        nneed = 0
         if not separable:
             for h in range(n_targets):
-                if h == k or tb[h, 2] < 0:
+                if h == k:
                     continue
-                if (tb[h, 0] < bbox[p, 2] and bbox[p, 0] < tb[h, 2]
-                        and tb[h, 1] < bbox[p, 3] and bbox[p, 1] < tb[h, 3]):
+                if (pre[h, 0] < bx1 and bx0 < pre[h, 2]
+                        and pre[h, 1] < by1 and by0 < pre[h, 3]):
                     rel[nrel] = h
                     nrel += 1
+                if (suf[oi + 1, h, 0] < bx1 and bx0 < suf[oi + 1, h, 2]
+                        and suf[oi + 1, h, 1] < by1 and by0 < suf[oi + 1, h, 3]):
+                    need[nneed] = h
+                    nneed += 1
+            if pi_p > 0.0:
+                pre[k, 0] = min(pre[k, 0], bx0)
+                pre[k, 1] = min(pre[k, 1], by0)
+                pre[k, 2] = max(pre[k, 2], bx1)
+                pre[k, 3] = max(pre[k, 3], by1)
         # 000 Eq. 34: occlusion map w* = Delta(x_p) prod_{h != k} b_fg^h
         occluded = False
         if nrel > 0:
@@ -368,21 +451,23 @@ def hjs_camera(bins, row, x0, x1, part, offsets, area, bbox, order, target, prio
                 for c in range(x0[s] - gx0, x1[s] - gx0):
                     w = 1.0
                     for j in range(nrel):
-                        w *= bfg[rel[j], r, c]
-                    wmap[r, c] = w
+                        w *= 1.0 - mfg[r, c, rel[j]]
+                    wmap[r, c, 0] = w
                     if w != 1.0:
                         occluded = True
         # 000 Eq. 33 with Eq. 26: foreground term on the w*-weighted part histograms
-        f, a = occlusion_term(bins, row, x0, x1, part, s0, s1, wmap, gy0, gx0, occluded,
-                              float(area[p]), d_occ, sqrt_models[p], hist, touched, mark, d2)
-        fc[p] = f
-        vis[p] = a
+        occlusion_terms(bins, row, x0, x1, part, s0, s1, wmap, gy0, gx0,
+                        1 if occluded else 0, ap, d_occ, key, k, va[p], vb[p], wa[p],
+                        hist, alpha, touched, mark, d2, out_l, out_v)
+        fc[p] = out_l[0]
+        vis[p] = out_v[0]
+        f_free = out_l[0] if not occluded else -1.0   # the term with w = 1, lazily
         if do_record:
             q = pix_offsets[p]
             for s in range(s0, s1):
                 r = row[s] - gy0
                 for c in range(x0[s] - gx0, x1[s] - gx0):
-                    record[q] = wmap[r, c] if occluded else 1.0
+                    record[q] = wmap[r, c, 0] if occluded else 1.0
                     q += 1
         if separable:
             continue
@@ -393,68 +478,89 @@ def hjs_camera(bins, row, x0, x1, part, offsets, area, bbox, order, target, prio
             for s in range(s0, s1):
                 r = row[s] - gy0
                 for c in range(x0[s] - gx0, x1[s] - gx0):
-                    acc += bbg[k, r, c]
+                    acc += bbg[r, c, k]
             bc[p] = acc
+        if nneed == 0 or pi_p == 0.0:
+            continue
         # Algorithm 1: b_fg^{k_p} -= pi_p Delta(x_p). The listing's "b_fg = N, subtract
         # Delta, divide by N" is the uniform-weight case of subtracting the normalised prior
         # weight (000 Eq. 35), which is what the non-uniform BP weights need.
-        if pi_p != 0.0:
-            for s in range(s0, s1):
-                r = row[s] - gy0
-                for c in range(x0[s] - gx0, x1[s] - gx0):
-                    bfg[k, r, c] -= pi_p
-        if pi_p == 0.0:
-            continue
+        for s in range(s0, s1):
+            r = row[s] - gy0
+            for c in range(x0[s] - gx0, x1[s] - gx0):
+                mfg[r, c, k] += pi_p
         # reduced terms (000 Eq. 36-39): for every other target h, the foreground term of
-        # x_p ignoring h (and k_p) is spread over Delta(x_p) into b_bg^h. The listing writes
-        # b_bg^{k_p}, which contradicts Eq. 36-39: the receiving buffer is the one of the
-        # target h whose farther particles will read it (Eq. 40).
-        for j in range(nrel):
-            h = rel[j]
-            use = False
-            if nrel > 1:
-                for s in range(s0, s1):
-                    r = row[s] - gy0
-                    for c in range(x0[s] - gx0, x1[s] - gx0):
-                        w = 1.0
-                        for jj in range(nrel):
-                            if jj != j:
-                                w *= bfg[rel[jj], r, c]
-                        wmap[r, c] = w
-                        if w != 1.0:
-                            use = True
-            rf, _ = occlusion_term(bins, row, x0, x1, part, s0, s1, wmap, gy0, gx0, use,
-                                   float(area[p]), d_occ, sqrt_models[p], hist, touched,
-                                   mark, d2)
-            # 000 Eq. 39: intensity pi_p * rfc_p / area(x_p) on the silhouette
-            v = pi_p * rf / area[p]
+        # x_p ignoring h (and k_p), rfc, spread over Delta(x_p) into b_bg^h. The listing
+        # writes b_bg^{k_p}, which contradicts Eq. 36-39: the receiving buffer is the one of
+        # the target h whose farther particles will read it (Eq. 40).
+        reduced = False
+        if occluded:
+            for i in range(nneed):                 # position of h in rel, or -1
+                skip[i] = -1
+                for j in range(nrel):
+                    if rel[j] == need[i]:
+                        skip[i] = j
+                if skip[i] < 0 or nrel > 1:
+                    reduced = True
+        if reduced:
+            # reduced maps w^_h = prod_{m != h, k_p} b_fg^m for all needed h in one pass
             for s in range(s0, s1):
                 r = row[s] - gy0
                 for c in range(x0[s] - gx0, x1[s] - gx0):
-                    bbg[h, r, c] += v
+                    for j in range(nrel):
+                        vals[j] = 1.0 - mfg[r, c, rel[j]]
+                    for i in range(nneed):
+                        w = 1.0
+                        for j in range(nrel):
+                            if j != skip[i]:
+                                w *= vals[j]
+                        wmap[r, c, i] = w
+            occlusion_terms(bins, row, x0, x1, part, s0, s1, wmap, gy0, gx0, nneed, ap,
+                            d_occ, key, k, va[p], vb[p], wa[p], hist, alpha, touched, mark,
+                            d2, out_l, out_v)
+        else:                                       # every reduced map is 1 on Delta(x_p)
+            if f_free < 0.0:
+                occlusion_terms(bins, row, x0, x1, part, s0, s1, wmap, gy0, gx0, 0, ap,
+                                d_occ, key, k, va[p], vb[p], wa[p], hist, alpha, touched,
+                                mark, d2, out_l, out_v)
+                f_free = out_l[0]
+            for i in range(nneed):
+                out_l[i] = f_free
+        # 000 Eq. 39: intensity pi_p * rfc_p / area(x_p) on the silhouette
+        for i in range(nneed):
+            vals[i] = pi_p * out_l[i] / ap
+        for s in range(s0, s1):
+            r = row[s] - gy0
+            for c in range(x0[s] - gx0, x1[s] - gx0):
+                for i in range(nneed):
+                    bbg[r, c, need[i]] += vals[i]
     return fc, bc, vis
 
 
 # -- joint rendering (000 Eq. 20-21, 26 with binary masks) ------------------------------------
 @njit(cache=True)
 def joint_camera(bins, row, x0, x1, part, offsets, area, order, n_targets, d_occ,
-                 sqrt_models, min_pixels):
+                 key, va, vb, wa, min_pixels):
     """Eq. 26 per target with binary visibility masks, per joint sample.
 
     Particle ``n * K + k`` is target k of joint sample n; ``order`` (N, K) lists each
-    sample's targets front to back. Returns (N,) sum over targets of l (targets with
-    fewer than ``min_pixels`` silhouette pixels contribute 0).
+    sample's targets front to back; key, va, vb, wa as in :func:`hjs_camera`. Returns (N,)
+    sum over targets of l (targets with fewer than ``min_pixels`` silhouette pixels
+    contribute 0).
     """
     nsamp = order.shape[0]
     out = np.zeros(nsamp)
     height = bins.shape[0]
     width = bins.shape[1]
     owner = np.zeros((height, width), np.int64)
-    wmap = np.zeros((height, width))
-    hist = np.zeros(3 * N_BINS)
+    wmap = np.zeros((height, width, 1))
+    hist = np.zeros((1, 3 * N_BINS))
+    alpha = np.zeros((1, 3))
     mark = np.zeros(3 * N_BINS, np.bool_)
     touched = np.empty(3 * N_BINS, np.int64)
     d2 = np.empty(3)
+    out_l = np.empty(1)
+    out_v = np.empty(1)
     for n in range(nsamp):
         stamp = n + 1
         total = 0.0
@@ -469,26 +575,27 @@ def joint_camera(bins, row, x0, x1, part, offsets, area, order, n_targets, d_occ
                 for c in range(x0[s], x1[s]):
                     if owner[r, c] != stamp:
                         owner[r, c] = stamp
-                        wmap[r, c] = 1.0
+                        wmap[r, c, 0] = 1.0
                     else:
-                        wmap[r, c] = 0.0
+                        wmap[r, c, 0] = 0.0
             if area[p] < min_pixels or area[p] <= 0:
                 continue
-            f, _ = occlusion_term(bins, row, x0, x1, part, s0, s1, wmap, 0, 0, True,
-                                  float(area[p]), d_occ, sqrt_models[p], hist, touched,
-                                  mark, d2)
-            total += f
+            occlusion_terms(bins, row, x0, x1, part, s0, s1, wmap, 0, 0, 1, float(area[p]),
+                            d_occ, key, k, va[p], vb[p], wa[p], hist, alpha, touched, mark,
+                            d2, out_l, out_v)
+            total += out_l[0]
         out[n] = total
     return out
 
 
 @njit(cache=True)
-def histogram_of(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, use_w):
-    """Unnormalised part histograms (3, 512) and part masses (3,) of one silhouette."""
-    hist = np.zeros(3 * N_BINS)
-    alpha = np.zeros(3)
+def histogram_of(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, nch):
+    """Unnormalised part histograms (3, 512) of one silhouette (``wmap`` (H, W, 1) used
+    when ``nch == 1``)."""
+    hist = np.zeros((1, 3 * N_BINS))
+    alpha = np.zeros((1, 3))
     touched = np.empty(3 * N_BINS, np.int64)
     mark = np.zeros(3 * N_BINS, np.bool_)
-    accumulate_histogram(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, use_w, hist, alpha,
+    accumulate_histogram(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, nch, hist, alpha,
                          touched, 0, mark)
-    return hist.reshape(3, N_BINS), alpha
+    return hist.reshape(3, N_BINS)

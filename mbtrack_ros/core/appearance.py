@@ -120,19 +120,27 @@ class PersonModel:
         ``w ~ 2/pi acos<o, o_v>``, lost the ``1 -``: a view must weigh more the closer it
         is; for key views 90 degrees apart both forms coincide.) One key view -> itself.
         """
+        va, vb, wa = self.interpolation_weights(rel_angles)
+        return (wa[:, None, None] * self.histograms[va]
+                + (1.0 - wa)[:, None, None] * self.histograms[vb])
+
+    def interpolation_weights(self, rel_angles: np.ndarray
+                              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The two key views (N,) int64 ``va``, ``vb`` and the weight (N,) of ``va`` used by
+        :meth:`interpolate` (the likelihood kernels mix histograms lazily with them)."""
         if self.view_angles.size == 0:
             raise AppearanceError('person model has no key views')
         rel = np.atleast_1d(np.asarray(rel_angles, dtype=np.float64))
         if self.view_angles.size == 1:
-            return np.broadcast_to(self.histograms, (rel.size, N_PARTS, N_BINS)).copy()
+            zero = np.zeros(rel.size, np.int64)
+            return zero, zero.copy(), np.ones(rel.size)
         dist = np.abs(_wrap(rel[:, None] - self.view_angles[None, :]))  # (N, V)
         idx = np.argsort(dist, axis=1)[:, :2]
         da = np.take_along_axis(dist, idx[:, :1], axis=1)[:, 0]
         db = np.take_along_axis(dist, idx[:, 1:2], axis=1)[:, 0]
         total = da + db
         wa = np.where(total > 0, db / np.where(total > 0, total, 1.0), 1.0)
-        return (wa[:, None, None] * self.histograms[idx[:, 0]]
-                + (1.0 - wa)[:, None, None] * self.histograms[idx[:, 1]])
+        return idx[:, 0].astype(np.int64), idx[:, 1].astype(np.int64), wa
 
     def add_view(self, angle: float, hists: np.ndarray, *,
                  merge_angle: float = MERGE_ANGLE) -> None:
@@ -193,15 +201,16 @@ def part_histograms(bins: np.ndarray, silhouettes: Silhouettes, i: int,
         raise AppearanceError(f'particle index {i} out of range [0, {len(silhouettes)})')
     s0, s1 = int(silhouettes.offsets[i]), int(silhouettes.offsets[i + 1])
     if weights_map is None:
-        wmap = np.ones((1, 1))
-        use_w = False
+        wmap = np.ones((1, 1, 1))
+        nch = 0
     else:
-        wmap = np.ascontiguousarray(weights_map, dtype=np.float64)
+        wmap = np.asarray(weights_map, dtype=np.float64)
         if wmap.shape != bins.shape:
             raise AppearanceError(f'weights map {wmap.shape} does not match {bins.shape}')
-        use_w = True
-    hist, _ = _kernels.histogram_of(bins, silhouettes.row, silhouettes.x0, silhouettes.x1,
-                                    silhouettes.part, s0, s1, wmap, 0, 0, use_w)
+        wmap = np.ascontiguousarray(wmap[:, :, None])
+        nch = 1
+    hist = _kernels.histogram_of(bins, silhouettes.row, silhouettes.x0, silhouettes.x1,
+                                 silhouettes.part, s0, s1, wmap, 0, 0, nch)
     return _normalise(hist) if normalize else hist
 
 
@@ -220,11 +229,12 @@ def single_target_loglik(bins: np.ndarray, silhouettes: Silhouettes,
     model_hists = np.asarray(model_hists, dtype=np.float64)
     if model_hists.shape != (n, N_PARTS, N_BINS):
         raise AppearanceError(f'model_hists must be ({n}, 3, 512), got {model_hists.shape}')
-    sqrt_models = np.sqrt(model_hists.reshape(n, -1))
+    key = np.ascontiguousarray(model_hists.reshape(n, 1, -1))
+    zero = np.zeros(n, np.int64)
     fc, _, _ = _kernels.hjs_camera(
         bins, silhouettes.row, silhouettes.x0, silhouettes.x1, silhouettes.part,
         silhouettes.offsets, silhouettes.area, silhouettes.bbox, np.arange(n),
-        np.zeros(n, np.int64), np.ones(n), sqrt_models, 1, 0.0, True, np.zeros(0),
+        np.arange(n), np.ones(n), key, zero, zero, np.ones(n), n, 0.0, True, np.zeros(0),
         np.zeros(n + 1, np.int64))
     out = -fc / (2.0 * sigma ** 2)
     out[silhouettes.area < max(int(min_pixels), 1)] = 0.0

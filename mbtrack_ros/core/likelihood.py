@@ -240,16 +240,35 @@ class MeasurementModel:
         sil = rasterize(cam, states, BodyShape(chair_height=chair), heights=heights,
                         widths=widths, row_step=int(self.config.subsample))
         t1 = time.perf_counter()
-        sqrt_models = np.empty((states.shape[0], 3 * _kernels.N_BINS))
-        rel = relative_angle(states[:, THETA], cam.viewing_angle(states[:, [X, Y]]))
-        for k, m in enumerate(models):
-            sel = target == k
-            if np.any(sel):
-                sqrt_models[sel] = np.sqrt(m.interpolate(rel[sel]).reshape(int(sel.sum()), -1))
+        views = self._views(cam, states, target, models)
         t2 = time.perf_counter()
         timings['rasterize'] = timings.get('rasterize', 0.0) + t1 - t0
         timings['models'] = timings.get('models', 0.0) + t2 - t1
-        return sil, target, sqrt_models
+        return sil, target, views
+
+    @staticmethod
+    def _key_views(models: Sequence[PersonModel]) -> np.ndarray:
+        """(K, V_max, 1536) key-view histograms of the targets (zero padded)."""
+        vmax = max((m.view_angles.size for m in models), default=1)
+        key = np.zeros((len(models), max(vmax, 1), 3 * _kernels.N_BINS))
+        for k, m in enumerate(models):
+            key[k, :m.view_angles.size] = m.histograms.reshape(m.view_angles.size, -1)
+        return key
+
+    def _views(self, cam: Camera, states: np.ndarray, target: np.ndarray,
+               models: Sequence[PersonModel]) -> tuple[np.ndarray, ...]:
+        """Key views (K, V, 1536) and per-particle interpolation (va, vb, wa) (003 Eq. 1-2)
+        for the relative viewing angle of every particle in this camera."""
+        n = states.shape[0]
+        rel = relative_angle(states[:, THETA], cam.viewing_angle(states[:, [X, Y]]))
+        va = np.zeros(n, np.int64)
+        vb = np.zeros(n, np.int64)
+        wa = np.ones(n)
+        for k, m in enumerate(models):
+            sel = target == k
+            if np.any(sel):
+                va[sel], vb[sel], wa[sel] = m.interpolation_weights(rel[sel])
+        return self._key_views(models), va, vb, wa
 
     def _loglik(self, value: np.ndarray, sil: Silhouettes) -> np.ndarray:
         # the exponent of 000 Eq. 19 is negative; Algorithm 1 as printed lost the minus sign
@@ -262,7 +281,7 @@ class MeasurementModel:
     def _hjs_camera(self, camera: str, particles: list[np.ndarray], priors: list[np.ndarray],
                     models: Sequence[PersonModel], *, separable: bool, record: bool,
                     timings: dict[str, float]):
-        sil, target, sqrt_models = self._prepare(camera, particles, models, timings)
+        sil, target, (key, va, vb, wa) = self._prepare(camera, particles, models, timings)
         prior = (np.concatenate(priors) if priors else np.zeros(0))
         t0 = time.perf_counter()
         order = np.argsort(sil.distance, kind='stable')
@@ -278,7 +297,7 @@ class MeasurementModel:
             rec = np.zeros(0)
         fc, bc, vis = _kernels.hjs_camera(
             self.bins(camera), sil.row, sil.x0, sil.x1, sil.part, sil.offsets, sil.area,
-            sil.bbox, order, target, prior, sqrt_models, len(particles),
+            sil.bbox, order, target, prior, key, va, vb, wa, len(particles),
             float(self.config.d_occ), bool(separable), rec, pix_offsets)
         timings['kernel'] = timings.get('kernel', 0.0) + time.perf_counter() - t0
         return sil, target, prior, fc, bc, vis, rec, pix_offsets
@@ -412,10 +431,7 @@ class MeasurementModel:
                 continue
             cam = self._camera(name)
             sil = self.silhouettes(name, states, model_list)
-            rel = relative_angle(states[:, THETA], cam.viewing_angle(states[:, [X, Y]]))
-            sqrt_models = np.empty((n * k, 3 * _kernels.N_BINS))
-            for j, m in enumerate(models):
-                sqrt_models[j::k] = np.sqrt(m.interpolate(rel[j::k]).reshape(n, -1))
+            key, va, vb, wa = self._views(cam, states, np.tile(np.arange(k), n), models)
             if orders is None:
                 order = np.argsort(sil.distance.reshape(n, k), axis=1, kind='stable')
             else:
@@ -423,6 +439,7 @@ class MeasurementModel:
             order = np.ascontiguousarray(order, dtype=np.int64)
             total = _kernels.joint_camera(self.bins(name), sil.row, sil.x0, sil.x1, sil.part,
                                           sil.offsets, sil.area, order, k,
-                                          float(self.config.d_occ), sqrt_models, min_pix)
+                                          float(self.config.d_occ), key, va, vb, wa,
+                                          min_pix)
             out -= total / (2.0 * self.config.sigma ** 2)
         return out
