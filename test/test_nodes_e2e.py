@@ -227,6 +227,7 @@ def test_end_to_end_bag_player_tracker_subscriber(recording, context, tmp_path):
     node = start(context, '-p', f'calibration_file:={recording / "calibration.yaml"}',
                  '-p', f'init_ground_truth:={recording / "ground_truth.csv"}',
                  '-p', 'tracker.seed:=0', '-p', 'max_pending_sets:=100',
+                 '-p', 'image_reliability:=reliable',  # no frame lost on a loaded machine
                  '-p', f'output_bag:={tmp_path / "out"}')
     listener = rclpy.create_node('e2e_listener', context=context)
     qos = QoSProfile(depth=200, reliability=ReliabilityPolicy.RELIABLE)
@@ -256,7 +257,7 @@ def test_end_to_end_bag_player_tracker_subscriber(recording, context, tmp_path):
          '-p', 'start_delay:=1.0'],
         cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
-        out, _ = player.communicate(timeout=45)
+        out, _ = player.communicate(timeout=60)
         assert player.returncode == 0, out
         deadline = time.monotonic() + 10
         while time.monotonic() < deadline:  # let the last frame sets through

@@ -9,7 +9,7 @@ Parameters: ``bag`` (rosbag2 directory, or a recording directory with ``bag/`` i
 required), ``rate`` (playback speed factor, 1.0), ``loop`` (restart at the end, false),
 ``exit_when_done`` (true), ``publish_clock`` (true), ``topics`` (only these; default all),
 ``start_delay`` (s before the first message, 0.5), ``wait_for_subscribers`` (wait up to
-``start_delay + 10`` s until every image topic has a subscriber, false).
+``subscriber_timeout`` s, default 30, until every image topic has a subscriber, false).
 """
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ import rclpy
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosbags.highlevel import AnyReader
 from rosgraph_msgs.msg import Clock
 
@@ -84,6 +84,8 @@ class BagPlayer(Node):
                                          0.0, 3600.0))
         self.wait_for_subscribers = bool(declare(
             'wait_for_subscribers', False, 'wait until every image topic has a subscriber'))
+        self.subscriber_timeout = float(declare(
+            'subscriber_timeout', 30.0, 'longest wait for subscribers, s', 0.0, 3600.0))
         topics = [t for t in declare('topics', [''], 'topics to play (default all)') if t]
         try:
             self._reader = AnyReader([self.bag])
@@ -93,13 +95,15 @@ class BagPlayer(Node):
         self._conns = [c for c in self._reader.connections if not topics or c.topic in topics]
         if not self._conns:
             raise PlayerError(f'bag {self.bag} has none of the requested topics')
-        reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+        # reliable publishers match both best-effort (sensor data) and reliable subscribers;
+        # a reliable subscriber then gets every frame (bursts of large images overflow the
+        # best-effort shared-memory path of Fast DDS)
+        reliable = QoSProfile(depth=30, reliability=ReliabilityPolicy.RELIABLE)
         self._pubs = {}
         for c in self._conns:
             if c.topic not in self._pubs:
-                qos = qos_profile_sensor_data if c.msgtype in SENSOR_TYPES else reliable
                 self._pubs[c.topic] = self.create_publisher(message_class(c.msgtype),
-                                                            c.topic, qos)
+                                                            c.topic, reliable)
         self._clock = self.create_publisher(Clock, '/clock', 10) if self.publish_clock else None
         self.published = 0
         self.loops = 0
@@ -110,7 +114,7 @@ class BagPlayer(Node):
         self._stop.set()
 
     def _wait_subscribers(self) -> None:
-        deadline = time.monotonic() + self.start_delay + 10.0
+        deadline = time.monotonic() + self.subscriber_timeout
         images = [p for c, p in self._pubs.items()
                   if any(x.topic == c and x.msgtype in SENSOR_TYPES for x in self._conns)]
         while time.monotonic() < deadline and not self._stop.is_set():

@@ -9,6 +9,8 @@ name                            type       meaning (default)
 calibration_file                string     room calibration YAML (required)
 cameras                         string[]   cameras to use (default: all in the calibration)
 image_transport                 string     ``raw`` or ``compressed`` for every camera (raw)
+image_reliability               string     ``best_effort`` (sensor data QoS) or ``reliable``
+                                           (no frame lost when replaying a bag)
 camera.<name>.image_topic       string     (``/<name>/image_raw``, ``.../compressed``)
 camera.<name>.transport         string     per-camera override of ``image_transport``
 camera.<name>.camera_info_topic string     optional CameraInfo topic for a size check ('')
@@ -52,9 +54,10 @@ from rclpy.node import Node
 from mbtrack_ros.core.camera import CalibrationError, RoomCalibration
 from mbtrack_ros.core.tracker import TrackerConfig, TrackerError
 
-__all__ = ['TRANSPORTS', 'CameraInput', 'NodeParams', 'ParamsError', 'declare_and_read']
+__all__ = ['RELIABILITIES', 'TRANSPORTS', 'CameraInput', 'NodeParams', 'ParamsError', 'declare_and_read']
 
 TRANSPORTS = ('raw', 'compressed')
+RELIABILITIES = ('best_effort', 'reliable')
 
 
 class ParamsError(ValueError):
@@ -77,6 +80,7 @@ class NodeParams:
 
     calibration_file: str
     cameras: tuple[CameraInput, ...]
+    image_reliability: str
     tracker: TrackerConfig
     slop_ns: int
     timeout_ns: int
@@ -109,6 +113,8 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
     'calibration_file': ('', 'room calibration YAML (required)', {}),
     'cameras': ([''], 'camera names to use; empty = all cameras of the calibration', {}),
     'image_transport': ('raw', 'raw | compressed: default image transport', {}),
+    'image_reliability': ('best_effort', 'best_effort (sensor data QoS) | reliable: image '
+                          'subscriptions; reliable loses no frame of a replayed bag', {}),
     'sync.slop': (0.01, 'largest stamp spread within one frame set, s', _fr(0.0, 1.0)),
     'sync.timeout': (0.2, 'message-time wait for a late camera, s', _fr(0.001, 10.0)),
     'output_frame_id': ('', 'frame id of all outputs; empty = calibration frame', {}),
@@ -192,6 +198,10 @@ def declare_and_read(node: Node) -> tuple[NodeParams, RoomCalibration]:
         if not topic:
             raise ParamsError(f'parameter camera.{cam}.image_topic is empty')
         cameras.append(CameraInput(cam, topic, transport, info))
+    reliability = str(v['image_reliability'])
+    if reliability not in RELIABILITIES:
+        raise ParamsError(f'parameter image_reliability: {reliability!r} is not one of '
+                          f'{", ".join(RELIABILITIES)}')
     slop_ns = int(round(v['sync.slop'] * 1e9))
     timeout_ns = int(round(v['sync.timeout'] * 1e9))
     if timeout_ns <= slop_ns:
@@ -219,7 +229,8 @@ def declare_and_read(node: Node) -> tuple[NodeParams, RoomCalibration]:
         raise ParamsError(str(err)) from err
     _check_algorithm(tracker.algorithm)
     params = NodeParams(
-        calibration_file=calib_file, cameras=tuple(cameras), tracker=tracker,
+        calibration_file=calib_file, cameras=tuple(cameras), image_reliability=reliability,
+        tracker=tracker,
         slop_ns=slop_ns, timeout_ns=timeout_ns,
         output_frame_id=str(v['output_frame_id']) or calibration.frame_id,
         rescale_images=bool(v['rescale_images']), debug_images=bool(v['debug_images']),

@@ -205,12 +205,14 @@ class TrackerNode(Node):
         # inputs: cheap callbacks, one mutually exclusive group per camera (frames of one
         # camera stay in order, cameras do not wait for each other)
         self._subs = []
+        image_qos = qos_profile_sensor_data if p.image_reliability == 'best_effort' else \
+            QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         for cam in p.cameras:
             group = MutuallyExclusiveCallbackGroup()
             kind = CompressedImage if cam.transport == 'compressed' else Image
             self._subs.append(self.create_subscription(
                 kind, cam.image_topic, lambda msg, c=cam.name: self._on_image(c, msg),
-                qos_profile_sensor_data, callback_group=group))
+                image_qos, callback_group=group))
             if cam.camera_info_topic:
                 self._subs.append(self.create_subscription(
                     CameraInfo, cam.camera_info_topic,
@@ -424,7 +426,8 @@ def main(args: list[str] | None = None) -> int:
     code = 0
     try:
         node = TrackerNode()
-        executor = MultiThreadedExecutor(num_threads=3)
+        # one thread per camera input plus the tracker step and the middleware's callbacks
+        executor = MultiThreadedExecutor(num_threads=len(node.params.cameras) + 2)
         executor.add_node(node)
         executor.spin()
     except ParamsError as err:
