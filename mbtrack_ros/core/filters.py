@@ -47,7 +47,7 @@ from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 import numpy as np
 
 from mbtrack_ros.core.dynamics import MotionConfig, predict
-from mbtrack_ros.core.mrf import belief_propagation, exclusion_potential
+from mbtrack_ros.core.mrf import belief_propagation
 from mbtrack_ros.core.resampling import normalize_log_weights, systematic_resample
 from mbtrack_ros.core.state import STATE_DIM, THETA, VX, VY, X, Y
 
