@@ -255,10 +255,14 @@ def test_command_list_and_small_run(tmp_path, capsys):
     assert all(f'{name}-short' in PRESETS for name in PRESETS if not name.endswith('-short'))
     out = tmp_path / 'rec'
     assert _run(['empty-room-short', str(out), '--frames', '2', '--width', '64',
-                 '--height', '48', '--no-ceiling', '--compressed']) == 0
-    assert RoomCalibration.load(out / 'calibration.yaml').names == ['cam0', 'cam1', 'cam2',
-                                                                    'cam3']
-    assert (out / 'bag' / 'metadata.yaml').exists()
+                 '--height', '48', '--no-ceiling', '--compressed', '--storage', 'sqlite3']) == 0
+    names = ['cam0', 'cam1', 'cam2', 'cam3']
+    assert RoomCalibration.load(out / 'calibration.yaml').names == names
+    from mbtrack_ros.recording.bag import RecordingReader
+    with RecordingReader(out) as reader:
+        sets = list(reader.frames())
+    assert len(sets) == 2 and sorted(sets[1].images) == names
+    assert sets[1].images['cam2'].shape == (48, 64, 3)
 
 
 def test_contact_sheet(tmp_path):

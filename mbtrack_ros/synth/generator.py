@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 import threading
 from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from queue import Queue
@@ -159,6 +160,8 @@ class Synthesizer:
         self.noise_bank = (NOISE_SIGMA * rng.standard_normal(4 * pixels)).astype(np.float32)
         self.crowd = populate(self.preset, self.room, rng)
         self.threshold = visible_threshold(self.width, self.height)
+        self._pool = ThreadPoolExecutor(max_workers=min(2, len(self.views)),
+                                        thread_name_prefix='synth-render')
 
     def stamp_ns(self, index: int) -> int:
         """Exact integer stamp of frame ``index``."""
@@ -189,16 +192,22 @@ class Synthesizer:
                 tops[person.person_id] = top
             ellipsoids = Ellipsoids.concat(bodies)
             light = self.illumination(time_s)
-            images, id_buffers = {}, {}
-            counts = {}
             offsets = self.rng.integers(0, 3 * pixels, len(self.views))
-            for k, (name, view) in enumerate(self.views.items()):
+            door = self.crowd.door_angle
+
+            def shoot(k: int, view: CameraView) -> tuple[np.ndarray, np.ndarray]:
                 radiance, _, ids = render_view(view, ellipsoids, time_s=time_s,
-                                               door_angle=self.crowd.door_angle)
-                images[name] = expose(radiance, self.gains[k] * np.float32(light),
-                                      self.noise_bank, int(offsets[k]))
-                id_buffers[name] = ids
-                counts[name] = np.bincount(ids.ravel(), minlength=self.crowd.next_id)
+                                               door_angle=door)
+                return expose(radiance, self.gains[k] * np.float32(light), self.noise_bank,
+                              int(offsets[k])), ids
+
+            # cameras are independent: render them on two threads (compiled kernels release
+            # the GIL); all random numbers were drawn above, so the output is deterministic
+            shots = list(self._pool.map(shoot, range(len(self.views)), self.views.values()))
+            images = {n: shot[0] for n, shot in zip(self.views, shots)}
+            id_buffers = {n: shot[1] for n, shot in zip(self.views, shots)}
+            counts = {n: np.bincount(ids.ravel(), minlength=self.crowd.next_id)
+                      for n, ids in id_buffers.items()}
             stamp = self.stamp_ns(index)
             rows = []
             for person in people:
@@ -245,40 +254,39 @@ def generate(preset: str | Preset, outdir: str | Path, *, seed: int = 0,
                            desc=f'synth {synth.preset.name}')
     # The bag is written by a second thread so that serialising, JPEG encoding and disk
     # I/O overlap with rendering (frames are produced in order, so output is deterministic).
+    # The writer lives entirely in that thread (sqlite3 connections are thread-bound).
     queue: Queue = Queue(maxsize=8)
     failure: list[BaseException] = []
 
-    def consume(writer: RecordingWriter) -> None:
-        while True:
-            item = queue.get()
-            if item is None:
+    def consume() -> None:
+        try:
+            with RecordingWriter(outdir / 'bag', synth.calibration, storage=storage,
+                                 compressed=compressed) as writer:
+                while (item := queue.get()) is not None:
+                    writer.write_frame(item.stamp_ns, item.images)
+                    writer.write_ground_truth(item.stamp_ns, item.ground_truth)
                 return
-            if failure:
-                continue
-            try:
-                writer.write_frame(item.stamp_ns, item.images)
-                writer.write_ground_truth(item.stamp_ns, item.ground_truth)
-            except BaseException as err:  # reported in the main thread
-                failure.append(err)
+        except BaseException as err:  # reported in the main thread
+            failure.append(err)
+        while queue.get() is not None:  # drain so that the producer never blocks
+            pass
 
+    thread = threading.Thread(target=consume, name='synth-bag-writer', daemon=True)
+    thread.start()
     try:
-        with RecordingWriter(outdir / 'bag', synth.calibration, storage=storage,
-                             compressed=compressed) as writer:
-            thread = threading.Thread(target=consume, args=(writer,), daemon=True)
-            thread.start()
-            try:
-                for frame in frames_iter:
-                    if failure:
-                        break
-                    queue.put(frame)
-                    rows.extend(frame.ground_truth)
-            finally:
-                queue.put(None)
-                thread.join()
+        for frame in frames_iter:
             if failure:
-                raise failure[0]
-    except BagError as err:
-        raise SynthError(f'cannot write the bag: {err}') from err
+                break
+            queue.put(frame)
+            rows.extend(frame.ground_truth)
+    finally:
+        queue.put(None)
+        thread.join()
+    if failure:
+        err = failure[0]
+        if isinstance(err, (BagError, OSError)):
+            raise SynthError(f'cannot write the bag: {err}') from err
+        raise err
     write_ground_truth(outdir / 'ground_truth.csv', rows)
     meta = {'preset': synth.preset.name, 'description': synth.preset.description,
             'seed': synth.seed, 'frames': synth.frames, 'fps': synth.fps,

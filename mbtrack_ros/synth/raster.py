@@ -14,7 +14,7 @@ __all__ = ['TEX_NOISE', 'TEX_SOLID', 'TEX_STRIPES', 'draw_ellipsoids', 'expose',
 TEX_SOLID, TEX_STRIPES, TEX_NOISE = 0, 1, 2
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _hash_scalar(ix: int, iy: int, iz: int, salt: int) -> float:
     """Deterministic pseudo-random value in [0, 1) of an integer lattice cell."""
     h = (ix * 73856093) ^ (iy * 19349663) ^ (iz * 83492791) ^ (salt * 2654435761)
@@ -47,7 +47,7 @@ def hash01(ix: np.ndarray, iy: np.ndarray, iz: np.ndarray | None = None,
     return out.reshape(ix.shape)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def draw_ellipsoids(rays: np.ndarray, origin: np.ndarray, depth: np.ndarray,
                     image: np.ndarray, ids: np.ndarray, to_unit: np.ndarray,
                     axes: np.ndarray, radii: np.ndarray, centers: np.ndarray,
@@ -134,7 +134,7 @@ def draw_ellipsoids(rays: np.ndarray, origin: np.ndarray, depth: np.ndarray,
                 ids[v, u] = owner[p]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def expose(radiance: np.ndarray, gain: np.ndarray, noise: np.ndarray,
            offset: int) -> np.ndarray:
     """Camera response: ``clip(radiance * gain + noise, 0, 255)`` rounded to uint8.
