@@ -340,3 +340,24 @@ def test_subsample_uses_every_kth_row():
     b = half.separable([parts], [model]).loglik[0]
     assert not np.allclose(a, b)
     assert np.all(np.abs(a - b) < 0.5 * np.abs(a) + 1.0)    # an approximation, same scale
+
+
+def test_threads_and_joint_chunks_do_not_change_results():
+    rng = np.random.default_rng(14)
+    cams = _two_cameras()
+    images = {c.name: _random_image(rng, c.height, c.width) for c in cams}
+    models = [_random_model(rng, 1.7), _random_model(rng, 1.6)]
+    parts = [_random_particles(rng, (0.0, 0.0), 7), _random_particles(rng, (0.2, 0.4), 7)]
+    weights = [rng.random(7) + 0.1 for _ in range(2)]
+    out = []
+    for threads in (1, 2):
+        mm = MeasurementModel(_room(*cams), LikelihoodConfig(threads=threads))
+        mm.set_images(images)
+        out.append((mm.hjs(parts, weights, models), mm.joint(np.stack(parts, axis=1), models)))
+    for a, b in zip(out[0][0].loglik, out[1][0].loglik):
+        np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(out[0][0].visible_fraction, out[1][0].visible_fraction)
+    np.testing.assert_array_equal(out[0][1], out[1][1])
+    mm.JOINT_CHUNK = 4                                       # 2 joint samples per chunk
+    np.testing.assert_allclose(mm.joint(np.stack(parts, axis=1), models), out[0][1],
+                               atol=1e-12)

@@ -20,7 +20,7 @@ N_PARTS = 3
 
 
 # -- rasterisation ----------------------------------------------------------------------------
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _quad_edges(i, j, left, right, edges):
     """Edges of the convex quad of segment j of particle i -> edges (4, 4) rows
     ``(y_top, y_bottom, x_at_top, dx/dy)`` (horizontal edges get y_top == y_bottom) and
@@ -56,7 +56,7 @@ def _quad_edges(i, j, left, right, edges):
     return ylo, yhi
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _row_interval(y, edges):
     """Scanline ``y`` against a convex quad's edges -> (xl, xr, hit)."""
     xl = np.inf
@@ -73,7 +73,7 @@ def _row_interval(y, edges):
     return xl, xr, hit
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def rasterize_quads(left, right, seg_part, valid, width, height, row_step, row_limit):
     """Scan-convert per-particle outlines into clipped row spans.
 
@@ -174,7 +174,7 @@ def rasterize_quads(left, right, seg_part, valid, width, height, row_step, row_l
     return row[:m], x0[:m], x1[:m], part[:m], offsets, area, part_area, full_area, bbox
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def paint_spans(out, row, x0, x1, part, s0, s1, value, use_part):
     """Write ``value`` (or the span's part label when ``use_part``) into out (H, W)."""
     for s in range(s0, s1):
@@ -183,7 +183,7 @@ def paint_spans(out, row, x0, x1, part, s0, s1, value, use_part):
             out[row[s], c] = v
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def accumulate_spans(buf, row, x0, x1, offsets, values, oy, ox):
     """buf[row - oy, c - ox] += values[i] on the spans of every particle i."""
     for i in range(offsets.shape[0] - 1):
@@ -197,7 +197,7 @@ def accumulate_spans(buf, row, x0, x1, offsets, values, oy, ox):
 
 
 # -- histograms (the one accumulation routine) ------------------------------------------------
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def accumulate_histogram(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, nch,
                          hist, alpha, touched, nt, mark):
     """Add the colours under spans [s0, s1) to flat part histograms ``hist`` (C, 1536).
@@ -250,7 +250,7 @@ def accumulate_histogram(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, nch,
     return nt
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def part_distances(hist, alpha, key, t, va, vb, wa, touched, nt, d2):
     """Bhattacharyya distances (003 Eq. 4) of weighted part histograms to the model.
 
@@ -288,7 +288,7 @@ def part_distances(hist, alpha, key, t, va, vb, wa, touched, nt, d2):
             d2[q] = 1.0
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def occlusion_terms(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, nch, area, d_occ,
                     key, t, va, vb, wa, hist, alpha, touched, mark, d2, out_l, out_vis):
     """000 Eq. 26 with soft maps w (Eq. 33) on one silhouette, for max(nch, 1) channels.
@@ -319,7 +319,7 @@ def occlusion_terms(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, nch, area, d_
 
 
 # -- HJS update (000 Algorithm 1, per camera) -------------------------------------------------
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def hjs_camera(bins, row, x0, x1, part, offsets, area, bbox, order, target, prior,
                key, va, vb, wa, n_targets, d_occ, separable, record, pix_offsets):
     """Visit all K*N particles of one camera from near to far (000 Algorithm 1 "update").
@@ -538,7 +538,7 @@ def hjs_camera(bins, row, x0, x1, part, offsets, area, bbox, order, target, prio
 
 
 # -- joint rendering (000 Eq. 20-21, 26 with binary masks) ------------------------------------
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def joint_camera(bins, row, x0, x1, part, offsets, area, order, n_targets, d_occ,
                  key, va, vb, wa, min_pixels):
     """Eq. 26 per target with binary visibility masks, per joint sample.
@@ -588,7 +588,7 @@ def joint_camera(bins, row, x0, x1, part, offsets, area, order, n_targets, d_occ
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def histogram_of(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, nch):
     """Unnormalised part histograms (3, 512) of one silhouette (``wmap`` (H, W, 1) used
     when ``nch == 1``)."""

@@ -24,8 +24,10 @@ the part masses alpha_part = sum w* change.
 """
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -53,12 +55,14 @@ class LikelihoodConfig:
         d_occ: occlusion penalty of 000 Eq. 26 (000 §VI-B uses sigma 0.1, d_occ 0.15).
         min_visible_pixels: a camera seeing fewer pixels of a silhouette is neutral.
         subsample: use every k-th image row of the silhouettes (speed option).
+        threads: cameras evaluated in parallel threads (0: one per CPU core, 1: serial).
     """
 
     sigma: float = 0.12
     d_occ: float = 0.15
     min_visible_pixels: int = 20
     subsample: int = 1
+    threads: int = 0
 
     def __post_init__(self) -> None:
         if not (self.sigma > 0 and np.isfinite(self.sigma)):
@@ -67,6 +71,8 @@ class LikelihoodConfig:
             raise LikelihoodError(f'd_occ must be >= 0, got {self.d_occ}')
         if int(self.subsample) < 1:
             raise LikelihoodError(f'subsample must be >= 1, got {self.subsample}')
+        if int(self.threads) < 0:
+            raise LikelihoodError(f'threads must be >= 0, got {self.threads}')
 
 
 @dataclass
@@ -78,7 +84,8 @@ class LikelihoodResult:
         visible_fraction: (K, n_cameras) prior-expected visible fraction of each target's
             silhouette (weighted mean over its particles of sum(w*) / unclipped area); 0 for
             cameras without an image this frame.
-        timings: seconds per stage (``rasterize``, ``models``, ``kernel``).
+        timings: seconds per stage summed over cameras (``rasterize``, ``models``,
+            ``kernel``; cameras may run in parallel) and wall-clock ``total``.
     """
 
     loglik: list[np.ndarray]
@@ -129,12 +136,16 @@ class MeasurementModel:
         config: likelihood parameters.
     """
 
+    JOINT_CHUNK = 8192   # silhouettes rasterised at once by joint() (bounds memory)
+
     def __init__(self, calibration: RoomCalibration,
                  config: LikelihoodConfig = LikelihoodConfig()) -> None:
         self.calibration = calibration
         self.config = config
         self.camera_names: list[str] = list(calibration.cameras)
         self._bins: dict[str, np.ndarray] = {}
+        self._pool: ThreadPoolExecutor | None = None
+        self._pool_size = 0
 
     # -- images ---------------------------------------------------------------------------
     def set_images(self, images: Mapping[str, np.ndarray]) -> None:
@@ -318,21 +329,45 @@ class MeasurementModel:
         loglik = np.zeros(int(starts[-1]))
         visible = np.zeros((len(parts), len(self.camera_names)))
         timings: dict[str, float] = {}
-        for c, name in enumerate(self.camera_names):
-            if name not in self._bins or not parts:
-                continue
-            sil, target, prior, fc, bc, vis, _, _ = self._hjs_camera(
-                name, parts, priors, models, separable=separable, record=False,
-                timings=timings)
+        cams = [(c, name) for c, name in enumerate(self.camera_names)
+                if name in self._bins and parts]
+
+        def one(name: str):
+            own: dict[str, float] = {}
+            out = self._hjs_camera(name, parts, priors, models, separable=separable,
+                                   record=False, timings=own)
+            return out, own
+
+        t0 = time.perf_counter()
+        results = self._map(one, [name for _, name in cams])
+        for (c, name), ((sil, target, prior, fc, bc, vis, _, _), own) in zip(cams, results):
+            for key_, value in own.items():
+                timings[key_] = timings.get(key_, 0.0) + value
             loglik += self._loglik(fc + bc, sil)
             with np.errstate(invalid='ignore', divide='ignore'):
                 frac = np.where(sil.full_area > 0, vis / np.maximum(sil.full_area, 1), 0.0)
             frac = np.clip(frac, 0.0, 1.0)
             visible[:, c] = np.bincount(target, weights=prior * frac,
                                         minlength=len(parts))[:len(parts)]
+        timings['total'] = time.perf_counter() - t0
         return LikelihoodResult(
             loglik=[loglik[starts[k]:starts[k + 1]].copy() for k in range(len(parts))],
             visible_fraction=visible, timings=timings)
+
+    def _map(self, fn, items: list):
+        """fn over items, on a thread per camera when ``config.threads`` allows (the numba
+        kernels release the GIL); per-camera stage timings then overlap."""
+        workers = self.config.threads or (os.cpu_count() or 1)
+        workers = min(workers, len(items))
+        if workers <= 1:
+            return [fn(item) for item in items]
+        if self._pool is None or self._pool_size != workers:
+            if self._pool is not None:
+                self._pool.shutdown(wait=False)
+            self._pool = ThreadPoolExecutor(max_workers=workers,
+                                            thread_name_prefix='mbtrack-likelihood')
+            self._pool_size = workers
+        return list(self._pool.map(fn, items))
 
     def hjs(self, particles: Sequence[np.ndarray], weights: Sequence[np.ndarray],
             models: Sequence[PersonModel], *, log_weights: bool = False) -> LikelihoodResult:
@@ -424,22 +459,34 @@ class MeasurementModel:
         out = np.zeros(n)
         if n == 0 or k == 0:
             return out
-        model_list = [models[j] for j in range(k)] * n
+        target = np.tile(np.arange(k), n)
+        heights = np.array([m.height for m in models], dtype=np.float64)[target]
+        widths = np.array([m.width for m in models], dtype=np.float64)[target]
+        shape = BodyShape(chair_height=models[0].chair_height)
         min_pix = int(np.ceil(self.config.min_visible_pixels / self.config.subsample))
-        for c, name in enumerate(self.camera_names):
-            if name not in self._bins:
-                continue
+        chunk = max(1, self.JOINT_CHUNK // k)          # joint samples rasterised at once
+
+        def one(item: tuple[int, str]) -> np.ndarray:
+            c, name = item
             cam = self._camera(name)
-            sil = self.silhouettes(name, states, model_list)
-            key, va, vb, wa = self._views(cam, states, np.tile(np.arange(k), n), models)
-            if orders is None:
-                order = np.argsort(sil.distance.reshape(n, k), axis=1, kind='stable')
-            else:
-                order = orders[:, c, :]
-            order = np.ascontiguousarray(order, dtype=np.int64)
-            total = _kernels.joint_camera(self.bins(name), sil.row, sil.x0, sil.x1, sil.part,
-                                          sil.offsets, sil.area, order, k,
-                                          float(self.config.d_occ), key, va, vb, wa,
-                                          min_pix)
+            total = np.empty(n)
+            for a in range(0, n, chunk):
+                b = min(n, a + chunk)
+                sl = slice(a * k, b * k)
+                sil = rasterize(cam, states[sl], shape, heights=heights[sl],
+                                widths=widths[sl], row_step=int(self.config.subsample))
+                key, va, vb, wa = self._views(cam, states[sl], target[sl], models)
+                if orders is None:
+                    order = np.argsort(sil.distance.reshape(b - a, k), axis=1, kind='stable')
+                else:
+                    order = orders[a:b, c, :]
+                order = np.ascontiguousarray(order, dtype=np.int64)
+                total[a:b] = _kernels.joint_camera(
+                    self.bins(name), sil.row, sil.x0, sil.x1, sil.part, sil.offsets, sil.area,
+                    order, k, float(self.config.d_occ), key, va, vb, wa, min_pix)
+            return total
+
+        cams = [(c, name) for c, name in enumerate(self.camera_names) if name in self._bins]
+        for total in self._map(one, cams):
             out -= total / (2.0 * self.config.sigma ** 2)
         return out
