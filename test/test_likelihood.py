@@ -142,6 +142,16 @@ def test_hjs_loglik_combines_fc_bc_and_is_neutral_out_of_view():
     assert res.loglik[1][0] == 0.0
     assert res.visible_fraction.shape == (2, 1)
     assert np.all((res.visible_fraction >= 0) & (res.visible_fraction <= 1))
+    # visible fraction: prior-weighted mean of sum(w*) / silhouette area (0 out of view)
+    sil = dbg.silhouettes
+    frac = np.where(sil.full_area > 0, dbg.visible / np.maximum(sil.full_area, 1), 0.0)
+    for k in range(2):
+        sel = dbg.target == k
+        assert res.visible_fraction[k, 0] == pytest.approx(np.sum(dbg.prior[sel] * frac[sel]))
+    assert res.visible_fraction.min() < 0.99                 # the overlap is seen
+    # an empty particle set is allowed and yields an empty result
+    empty = mm.hjs([particles[0], np.zeros((0, 6))], [weights[0], np.zeros(0)], models)
+    assert empty.loglik[1].shape == (0,)
 
 
 def test_hjs_without_overlap_equals_separable():

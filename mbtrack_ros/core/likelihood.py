@@ -113,6 +113,8 @@ def _normalised_priors(weights: np.ndarray, n: int, k: int, log_weights: bool) -
     w = np.asarray(weights, dtype=np.float64).reshape(-1)
     if w.shape != (n,):
         raise LikelihoodError(f'target {k}: {w.size} weights for {n} particles')
+    if n == 0:
+        return w
     if log_weights:
         w = np.where(np.isnan(w), -np.inf, w)
         top = np.max(w) if w.size else -np.inf
