@@ -31,8 +31,7 @@ from mbtrack_ros.nodes.conversions import ns_to_stamp
 
 __all__ = ['BagPlayer', 'PlayerError', 'main', 'message_class']
 
-SENSOR_TYPES = {'sensor_msgs/msg/Image', 'sensor_msgs/msg/CompressedImage',
-                'sensor_msgs/msg/CameraInfo'}
+IMAGE_TYPES = {'sensor_msgs/msg/Image', 'sensor_msgs/msg/CompressedImage'}
 
 
 class PlayerError(RuntimeError):
@@ -116,7 +115,7 @@ class BagPlayer(Node):
     def _wait_subscribers(self) -> None:
         deadline = time.monotonic() + self.subscriber_timeout
         images = [p for c, p in self._pubs.items()
-                  if any(x.topic == c and x.msgtype in SENSOR_TYPES for x in self._conns)]
+                  if any(x.topic == c and x.msgtype in IMAGE_TYPES for x in self._conns)]
         while time.monotonic() < deadline and not self._stop.is_set():
             if all(p.get_subscription_count() > 0 for p in images):
                 return
