@@ -29,12 +29,15 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseArray
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
-from sensor_msgs.msg import CameraInfo, CompressedImage, Image
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image, PointCloud2
+from visualization_msgs.msg import MarkerArray
 
 from mbtrack_ros.core.appearance import AppearanceError, PersonModel, model_from_images
 from mbtrack_ros.core.camera import RoomCalibration
@@ -195,10 +198,10 @@ class TrackerNode(Node):
                 raise ParamsError(f'output_bag: {err}') from err
 
         # outputs
-        self.pub_people = self.create_publisher(messages.PoseArray, '~/people', OUTPUT_QOS)
-        self.pub_tracks = self.create_publisher(messages.PointCloud2, '~/tracks', OUTPUT_QOS)
-        self.pub_markers = self.create_publisher(messages.MarkerArray, '~/markers', OUTPUT_QOS)
-        self.pub_diag = self.create_publisher(messages.DiagnosticArray, '/diagnostics',
+        self.pub_people = self.create_publisher(PoseArray, '~/people', OUTPUT_QOS)
+        self.pub_tracks = self.create_publisher(PointCloud2, '~/tracks', OUTPUT_QOS)
+        self.pub_markers = self.create_publisher(MarkerArray, '~/markers', OUTPUT_QOS)
+        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics',
                                               OUTPUT_QOS)
         self.pub_debug = {c: self.create_publisher(Image, f'~/debug/{c}/occlusion', OUTPUT_QOS)
                           for c in p.camera_names}
