@@ -66,24 +66,29 @@ def visible_threshold(width: int, height: int) -> int:
 
 
 def _bboxes(view: CameraView, ell: Ellipsoids) -> np.ndarray:
-    """(P, 4) int pixel windows ``u0, v0, u1, v1`` covering each projected ellipsoid."""
+    """(P, 4) int pixel windows ``u0, v0, u1, v1`` covering each projected ellipsoid.
+
+    The window bounds the projected corners of the ellipsoid's oriented bounding box plus a
+    margin of 2 px + 5 % (lens distortion bends the box edges slightly).
+    """
     cam = view.camera
-    corners = ell.corners()
-    pix = cam.project(corners)  # (P, 8, 2), NaN behind the camera
+    pix = cam.project(ell.corners())  # (P, 8, 2), NaN behind the camera
     behind = np.isnan(pix[..., 0])
-    with np.errstate(invalid='ignore'):
-        lo = np.nanmin(np.where(behind[..., None], np.inf, pix), axis=1)
-        hi = np.nanmax(np.where(behind[..., None], -np.inf, pix), axis=1)
+    if behind.any():
+        lo = np.where(behind[..., None], np.inf, pix).min(axis=1)
+        hi = np.where(behind[..., None], -np.inf, pix).max(axis=1)
+    else:
+        lo, hi = pix.min(axis=1), pix.max(axis=1)
     margin = 2.0 + 0.05 * (hi - lo)
-    out = np.empty((len(pix), 4), dtype=np.int64)
+    box = np.concatenate([np.floor(lo - margin), np.ceil(hi + margin) + 1], axis=1)
+    limit = np.array([cam.width, cam.height, cam.width, cam.height], dtype=np.float64)
     with np.errstate(invalid='ignore'):
-        out[:, 0] = np.clip(np.floor(lo[:, 0] - margin[:, 0]), 0, cam.width)
-        out[:, 1] = np.clip(np.floor(lo[:, 1] - margin[:, 1]), 0, cam.height)
-        out[:, 2] = np.clip(np.ceil(hi[:, 0] + margin[:, 0]) + 1, 0, cam.width)
-        out[:, 3] = np.clip(np.ceil(hi[:, 1] + margin[:, 1]) + 1, 0, cam.height)
-    partly = behind.any(axis=1) & ~behind.all(axis=1)
-    out[partly] = (0, 0, cam.width, cam.height)   # straddles the camera plane: scan all
-    out[behind.all(axis=1)] = 0                     # entirely behind: skip
+        out = np.clip(np.nan_to_num(box, nan=0.0, posinf=0.0, neginf=0.0), 0, limit)
+    out = out.astype(np.int64)
+    if behind.any():
+        partly = behind.any(axis=1) & ~behind.all(axis=1)
+        out[partly] = (0, 0, cam.width, cam.height)  # straddles the camera plane: scan all
+        out[behind.all(axis=1)] = 0                    # entirely behind: skip
     return out
 
 
@@ -160,6 +165,7 @@ class Synthesizer:
         self.noise_bank = (NOISE_SIGMA * rng.standard_normal(4 * pixels)).astype(np.float32)
         self.crowd = populate(self.preset, self.room, rng)
         self.threshold = visible_threshold(self.width, self.height)
+        self._poses: dict[int, tuple] = {}
         self._pool = ThreadPoolExecutor(max_workers=min(2, len(self.views)),
                                         thread_name_prefix='synth-render')
 
@@ -182,14 +188,22 @@ class Synthesizer:
                 self.crowd.step(dt)
             time_s = index * dt
             people = self.crowd.people()
-            bodies, tops = [], {}
+            bodies, tops, poses = [], {}, {}
             for person in people:
-                ell, top = pose_ellipsoids(person.height, person.clothing, x=person.x,
-                                           y=person.y, theta=person.theta, phase=person.phase,
-                                           stride=person.stride, sit=person.sit,
-                                           owner=person.person_id)
+                key = (person.x, person.y, person.theta, person.phase, person.stride,
+                       person.sit)
+                cached = self._poses.get(person.person_id)
+                if cached is not None and cached[0] == key:  # standing still or seated
+                    ell, top = cached[1], cached[2]
+                else:
+                    ell, top = pose_ellipsoids(person.height, person.clothing, x=person.x,
+                                               y=person.y, theta=person.theta,
+                                               phase=person.phase, stride=person.stride,
+                                               sit=person.sit, owner=person.person_id)
+                poses[person.person_id] = (key, ell, top)
                 bodies.append(ell)
                 tops[person.person_id] = top
+            self._poses = poses
             ellipsoids = Ellipsoids.concat(bodies)
             light = self.illumination(time_s)
             offsets = self.rng.integers(0, 3 * pixels, len(self.views))
