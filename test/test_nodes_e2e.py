@@ -322,3 +322,48 @@ def test_end_to_end_bag_player_tracker_subscriber(recording, context, tmp_path):
     print(f'e2e: {len(people)} PoseArray for 30 frames, {tracked} poses, position error '
           f'mean {np.mean(errors):.3f} m max {np.max(errors):.3f} m, '
           f'{len(got["debug"])} debug images')
+
+
+def test_bag_player_loops_and_publishes_clock(recording, context):
+    """In-process player at 20x speed with loop: every message once per loop, /clock in bag
+    time going back to the start on each loop."""
+    from rosbags.highlevel import AnyReader
+    from rosgraph_msgs.msg import Clock
+
+    from mbtrack_ros.nodes.bag_player import BagPlayer
+
+    with AnyReader([recording / 'bag']) as reader:
+        count = sum(c.msgcount for c in reader.connections)
+        first, last = reader.start_time, reader.end_time - 1
+    player = BagPlayer(cli_args=['--ros-args', '-p', f'bag:={recording}', '-p', 'rate:=20.0',
+                                 '-p', 'loop:=true', '-p', 'start_delay:=0.0'],
+                       context=context)
+    listener = rclpy.create_node('clock_listener', context=context)
+    clocks = []
+    listener.create_subscription(Clock, '/clock', lambda m: clocks.append(
+        m.clock.sec * 1_000_000_000 + m.clock.nanosec), 1000)
+    executor = MultiThreadedExecutor(num_threads=2, context=context)
+    executor.add_node(listener)
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
+    time.sleep(1.0)  # discovery of the /clock subscription
+    thread = threading.Thread(target=player.play, daemon=True)
+    thread.start()
+    try:
+        deadline = time.monotonic() + 30
+        while player.loops < 2 and time.monotonic() < deadline:
+            time.sleep(0.02)
+        player.stop()
+        thread.join(timeout=5)
+        assert player.loops >= 2
+        assert count * player.loops <= player.published < count * (player.loops + 1)
+        time.sleep(0.3)
+    finally:
+        player.stop()
+        executor.shutdown()
+        spinner.join(timeout=5)
+        player.destroy_node()
+        listener.destroy_node()
+    assert clocks and min(clocks) == first and max(clocks) <= last
+    back = [b < a for a, b in zip(clocks, clocks[1:])]
+    assert sum(back) >= 1  # the clock restarted with the loop

@@ -130,29 +130,32 @@ class BagPlayer(Node):
             return
         try:
             while not self._stop.is_set():
-                self._play_once()
-                self.loops += 1
+                if not self._play_once():
+                    break
+                self.loops += 1  # completed passes through the bag
                 if not self.loop:
                     break
         finally:
             self.done.set()
 
-    def _play_once(self) -> None:
+    def _play_once(self) -> bool:
+        """One pass through the bag; False when stopped before the end."""
         wall0 = bag0 = None
         clock = Clock()
         for conn, stamp, raw in self._reader.messages(connections=self._conns):
             if self._stop.is_set():
-                return
+                return False
             if wall0 is None:
                 wall0, bag0 = time.monotonic(), stamp
             delay = wall0 + (stamp - bag0) / 1e9 / self.rate - time.monotonic()
             if delay > 0 and self._stop.wait(delay):
-                return
+                return False
             if self._clock is not None:
                 ns_to_stamp(stamp, clock.clock)
                 self._clock.publish(clock)
             self._pubs[conn.topic].publish(bytes(raw))
             self.published += 1
+        return True
 
     def destroy_node(self) -> None:
         self._stop.set()
