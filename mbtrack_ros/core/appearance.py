@@ -70,7 +70,7 @@ def bhattacharyya_distance_sq(h: np.ndarray, k: np.ndarray) -> np.ndarray:
     return np.clip(1.0 - np.sqrt(h * k).sum(axis=-1), 0.0, 1.0)
 
 
-@dataclass
+@dataclass(eq=False)
 class PersonModel:
     """Appearance and size of one person (003 §2.1-2.2).
 

@@ -356,6 +356,18 @@ class MeasurementModel:
             loglik=[loglik[starts[k]:starts[k + 1]].copy() for k in range(len(parts))],
             visible_fraction=visible, timings=timings)
 
+    def close(self) -> None:
+        """Stop the camera worker threads (also done when the model is garbage collected)."""
+        if self._pool is not None:
+            self._pool.shutdown(wait=False)
+            self._pool = None
+            self._pool_size = 0
+
+    def __del__(self) -> None:
+        pool = getattr(self, '_pool', None)
+        if pool is not None:
+            pool.shutdown(wait=False)
+
     def _map(self, fn, items: list):
         """fn over items, on a thread per camera when ``config.threads`` allows (the numba
         kernels release the GIL); per-camera stage timings then overlap."""
