@@ -36,7 +36,8 @@ tracker.use_mrf                 bool       spatial-exclusion MRF prior (true)
 tracker.seed                    int        random seed, -1 = fresh entropy (-1)
 tracker.release_time            double     placeholder (issue 4): s without support before
                                            a track is released (2.0)
-detection.enabled               bool       placeholder (issue 4): automatic detection (false)
+detection.enabled               bool       automatic detection, model acquisition and release
+                                           inside the tracker step (false)
 detection.threshold             double     placeholder (issue 4): acquisition threshold (0.5)
 ==============================  =========  =================================================
 """
@@ -136,7 +137,8 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
     'tracker.seed': (-1, 'random seed; -1 = fresh entropy', _ir(-1, 2 ** 31 - 1)),
     'tracker.release_time': (2.0, 'placeholder (detection): s before a lost track is released',
                              _fr(0.0, 3600.0)),
-    'detection.enabled': (False, 'placeholder: automatic detection of new people', {}),
+    'detection.enabled': (False, 'automatic detection, acquisition and release of people '
+                          '(TrackerConfig.detection)', {}),
     'detection.threshold': (0.5, 'placeholder: acquisition threshold', _fr(0.0, 1.0)),
 }
 
@@ -216,9 +218,10 @@ def declare_and_read(node: Node) -> tuple[NodeParams, RoomCalibration]:
         'sigma': float(v['tracker.sigma']), 'd_occ': float(v['tracker.d_occ']),
         'mrf_radius': float(v['tracker.mrf_radius']), 'use_mrf': bool(v['tracker.use_mrf']),
         'seed': None if v['tracker.seed'] < 0 else int(v['tracker.seed']),
-        # hooks for automatic detection (issue 4): passed on once TrackerConfig has them
+        # automatic detection (003 §4, 001) inside Tracker.step; the other detection values
+        # are passed on once TrackerConfig has fields of these names
+        'detection': bool(v['detection.enabled']),
         'release_time': float(v['tracker.release_time']),
-        'detection_enabled': bool(v['detection.enabled']),
         'detection_threshold': float(v['detection.threshold']),
     }
     known = {f.name for f in fields(TrackerConfig)}

@@ -14,9 +14,10 @@ timed-out) frame sets are queued and the tracker step runs in its own mutually e
 callback group (a steady-clock timer draining the queue), under a
 :class:`~rclpy.executors.MultiThreadedExecutor`. Time is message time only.
 
-Track start: until automatic detection (issue 4) is part of :meth:`Tracker.step`, tracks are
-started and ended from the ``init_ground_truth`` CSV (oracle initialisation, for
-experiments); :meth:`TrackerNode.start_track` is the hook for other sources.
+Track start: with ``detection.enabled`` the tracker step detects, acquires and releases
+people itself (``TrackerConfig.detection``); with ``init_ground_truth`` tracks are started and
+ended from a ground-truth CSV (oracle initialisation, for experiments). Both may be combined;
+:meth:`TrackerNode.start_track` is the hook for other sources.
 """
 from __future__ import annotations
 
@@ -235,8 +236,8 @@ class TrackerNode(Node):
     def start_track(self, model: PersonModel, state: np.ndarray, stamp_ns: int) -> int | None:
         """Start a track with appearance ``model`` at ``state`` (6,); None if refused.
 
-        The hook for track sources outside :meth:`Tracker.step` (ground truth for now;
-        automatic detection, issue 4, will start tracks inside the step).
+        The hook for track sources outside :meth:`Tracker.step` (ground truth; automatic
+        detection starts its tracks inside the step).
         """
         try:
             track_id = self.tracker.add_track(model, state, stamp_ns)
@@ -341,7 +342,7 @@ class TrackerNode(Node):
         ended = []
         if self._ground_truth is not None:
             ended = self._ground_truth.update(self, fs.stamp_ns, fs.images)
-        # (issue 4) automatic detection will run inside tracker.step and report new tracks
+        # with detection enabled, Tracker.step also starts and releases tracks (003 §4)
         t0 = time.perf_counter()
         try:
             result = self.tracker.step(fs.stamp_ns, fs.images)
@@ -382,8 +383,10 @@ class TrackerNode(Node):
 
     def debug_image(self, camera: str, rgb: np.ndarray, result: FrameResult) -> Image:
         """``~/debug/<camera>/occlusion``: occlusion maps and silhouettes (000 Fig. 4)."""
+        models = dict(getattr(self.tracker, 'models', None) or {})  # tracks born in step
+        models.update(self._models)
         occ, sil = occlusion_layers(self.tracker.measurement, self.calibration.cameras[camera],
-                                    result, self._models)
+                                    result, models)
         out = messages.debug_overlay(rgb, occlusion=occ, silhouettes=sil)
         return rgb_to_image(out, messages.make_header(
             result.stamp_ns, self.calibration.cameras[camera].frame_id))
