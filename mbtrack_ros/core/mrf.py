@@ -21,6 +21,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.distance import cdist
 
 __all__ = ['BeliefPropagationResult', 'MRFError', 'belief_propagation',
            'exclusion_potential']
@@ -44,9 +45,18 @@ def exclusion_potential(xy_a: np.ndarray, xy_b: np.ndarray, *, radius: float = 0
         (N, M) float64: 1 where the positions are farther apart than ``radius``, else
         ``epsilon``.
     """
-    d2 = ((xy_a[:, None, :] - xy_b[None, :, :]) ** 2).sum(axis=-1)
+    d2 = cdist(np.asarray(xy_a, dtype=np.float64), np.asarray(xy_b, dtype=np.float64),
+               'sqeuclidean')
     # 000 §VI-A: p(x^h, x^k) = delta(|x^h - x^k| > r), soft-floored at epsilon
     return np.where(d2 > radius * radius, 1.0, epsilon)
+
+
+def _clouds_apart(xy_a: np.ndarray, xy_b: np.ndarray, radius: float) -> bool:
+    """True if the bounding boxes of two particle clouds are farther apart than ``radius``
+    (then every pair is, the potential is constant and the edge carries no information)."""
+    gap = np.maximum(xy_a.min(axis=0) - xy_b.max(axis=0), xy_b.min(axis=0) - xy_a.max(axis=0))
+    gap = np.maximum(gap, 0.0)
+    return float(gap @ gap) > radius * radius
 
 
 @dataclass
@@ -129,8 +139,10 @@ def belief_propagation(xy: Sequence[np.ndarray], prior_weights: Sequence[np.ndar
         if mat is None and (k, h) in potentials:
             mat = potentials[(k, h)].T
         if mat is None:
-            mat = exclusion_potential(np.asarray(xy[h])[:, :2], np.asarray(xy[k])[:, :2],
-                                      radius=radius, epsilon=epsilon)
+            a, b = np.asarray(xy[h])[:, :2], np.asarray(xy[k])[:, :2]
+            if _clouds_apart(a, b, radius):
+                continue  # constant potential: its messages are uniform, drop the edge
+            mat = exclusion_potential(a, b, radius=radius, epsilon=epsilon)
         psi[(h, k)] = np.asarray(mat, dtype=np.float64)
     neighbours: list[list[int]] = [[] for _ in range(k_count)]
     for h, k in psi:
