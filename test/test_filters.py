@@ -297,3 +297,13 @@ def test_hjs_keeps_identities_through_an_occlusion_where_separable_fails():
     # measured when written: HJS 7/8, separable 2/8
     assert hjs >= 6, (hjs, separable)
     assert hjs - separable >= 3, (hjs, separable)
+
+
+def test_velocity_damping_decays_velocity():
+    rng = np.random.default_rng(10)
+    cfg = MotionConfig(velocity_noise=0.0, position_noise=0.0, orientation_noise=0.0,
+                       sit_flip_rate=0.0, velocity_damping=0.5)
+    p = np.array([[0.0, 0.0, 1.0, -0.5, 0.0, 0.0]])
+    out = predict(p, 2.0, cfg, rng)
+    np.testing.assert_allclose(out[0, 2:4], p[0, 2:4] * np.exp(-1.0))
+    np.testing.assert_allclose(out[0, :2], out[0, 2:4] * 2.0)

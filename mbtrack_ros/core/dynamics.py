@@ -6,7 +6,9 @@ Over a time step ``dt`` (seconds, from image stamps) every particle row
 * velocity random walk: ``v += N(0, (velocity_noise * sqrt(dt))^2)`` per axis;
   ``velocity_noise`` is in m/s per sqrt(second) so that the spread does not depend on the
   frame rate (000 §VI-A uses 0.6 m/s at 15 Hz; here 0.6 m/s/sqrt(s) gives 0.155 m/s per
-  15 Hz frame);
+  15 Hz frame); with ``velocity_damping`` lambda > 0 (1/s) the velocity is a mean-reverting
+  AR(1) process instead, ``v <- exp(-lambda dt) v + noise`` (same noise), which keeps
+  hypotheses from building up large velocities while their target is unobserved;
 * constant-velocity position: ``p += v * dt + N(0, (position_noise * sqrt(dt))^2)``;
 * orientation: when the speed exceeds ``orientation_speed`` (m/s) the body faces the walking
   direction, ``theta = atan2(vy, vx) + N(0, orientation_noise^2 dt)``; slower people turn by
@@ -42,6 +44,7 @@ class MotionConfig:
         orientation_speed: m/s; above it the orientation follows the velocity.
         sit_flip_rate: 1/s, rate of sitting <-> standing label flips.
         max_speed: m/s, velocities are clipped to this norm.
+        velocity_damping: 1/s, decay rate of the velocity (0 = random walk).
     """
 
     velocity_noise: float = 0.6
@@ -50,10 +53,11 @@ class MotionConfig:
     orientation_speed: float = 0.2
     sit_flip_rate: float = 0.05
     max_speed: float = 3.0
+    velocity_damping: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ('velocity_noise', 'position_noise', 'orientation_noise',
-                     'orientation_speed', 'sit_flip_rate'):
+                     'orientation_speed', 'sit_flip_rate', 'velocity_damping'):
             value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0):
                 raise DynamicsError(f'motion {name} must be a finite number >= 0, got {value}')
@@ -97,6 +101,8 @@ def predict(particles: np.ndarray, dt: float, config: MotionConfig,
     if n == 0:
         return out
     sq = np.sqrt(dt)
+    if config.velocity_damping > 0:
+        out[:, [VX, VY]] *= np.exp(-config.velocity_damping * dt)
     if config.velocity_noise > 0:
         out[:, [VX, VY]] += rng.normal(0.0, config.velocity_noise * sq, size=(n, 2))
     speed = np.hypot(out[:, VX], out[:, VY])
