@@ -27,7 +27,7 @@ def test_bootstrap_is_median_and_noise_is_background():
     rng = np.random.default_rng(0)
     bg = scene(rng)
     frames = [noisy(bg, rng) for _ in range(5)]
-    model = BackgroundModel(BackgroundConfig(bootstrap_frames=5))
+    model = BackgroundModel(BackgroundConfig(bootstrap_frames=5, bootstrap_stride=1))
     for f in frames:
         assert model.apply(f) is None          # still collecting bootstrap frames
     assert model.ready
@@ -37,6 +37,37 @@ def test_bootstrap_is_median_and_noise_is_background():
         fg = model.apply(noisy(bg, rng))
         assert fg.dtype == bool and fg.shape == (H, W)
         assert fg.mean() < 0.002
+
+
+def test_strided_bootstrap_removes_a_walking_person():
+    rng = np.random.default_rng(6)
+    bg = scene(rng)
+    model = BackgroundModel(BackgroundConfig(bootstrap_frames=7, bootstrap_stride=3))
+    for k in range(19):                        # a person walking across while bootstrapping
+        frame = noisy(bg, rng)
+        x = 5 + 7 * k
+        frame[30:100, x:x + 20] = (200, 30, 40)
+        assert model.apply(frame) is None
+    assert model.ready
+    assert model.foreground(noisy(bg, rng)).mean() < 0.002
+
+
+def test_ghost_of_a_static_untracked_blob_is_absorbed():
+    rng = np.random.default_rng(7)
+    bg = scene(rng)
+    ghost = bg.copy()
+    ghost[30:100, 60:85] = (200, 30, 40)       # in the bootstrap frames, then gone
+    cfg = BackgroundConfig(alpha=0.99, static_frames=10, static_alpha=0.7)
+    fast, slow = BackgroundModel(cfg), BackgroundModel(
+        BackgroundConfig(alpha=0.99, static_frames=0))
+    fast.bootstrap([ghost])
+    slow.bootstrap([ghost])
+    for _ in range(30):
+        f = noisy(bg, rng)
+        fg_fast = fast.apply(f)
+        fg_slow = slow.apply(f)
+    assert fg_fast[30:100, 60:85].mean() < 0.05
+    assert fg_slow[30:100, 60:85].mean() > 0.9
 
 
 def test_temporal_filter_matches_formula_and_converges():
@@ -125,7 +156,7 @@ def test_clean_mask_drops_small_blobs_and_keeps_large():
 def test_bank_and_errors():
     rng = np.random.default_rng(5)
     bg = scene(rng)
-    bank = BackgroundBank(BackgroundConfig(bootstrap_frames=2))
+    bank = BackgroundBank(BackgroundConfig(bootstrap_frames=2, bootstrap_stride=1))
     assert bank.apply({'a': bg, 'b': bg}) == {}
     out = bank.apply({'a': bg, 'b': bg})
     assert out == {} or set(out) == {'a', 'b'}

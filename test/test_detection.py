@@ -8,7 +8,7 @@ import pytest
 from mbtrack_ros.core.camera import Camera, RoomCalibration, look_at
 from mbtrack_ros.core.detection import DetectionError
 from mbtrack_ros.core.detection.acquisition import acquire
-from mbtrack_ros.core.detection.background import BackgroundBank
+from mbtrack_ros.core.detection.background import BackgroundBank, BackgroundConfig
 from mbtrack_ros.core.detection.detector import (
     Detection, Detector, DetectorConfig, FrameEvidence, is_ceiling)
 from mbtrack_ros.core.detection.features import (
@@ -186,16 +186,22 @@ def test_colour_symmetry_symmetric_vs_asymmetric_torso():
 
 
 # -- detector -----------------------------------------------------------------------------
-def run_detector(calib, frames, *, config=None, bootstrap=5, track_xy=None):
-    """Feed frames through background + detector; returns (frame index, detections)."""
+def run_detector(calib, frames, *, config=None, track_xy=None, empty=None):
+    """Feed frames through background + detector; returns (frame index, detections).
+
+    The background is bootstrapped from the first 5 frames, or from ``empty`` frames.
+    """
     det = Detector(calib, config or DetectorConfig())
-    bank = BackgroundBank()
+    bank = BackgroundBank(BackgroundConfig(bootstrap_frames=5, bootstrap_stride=1))
+    if empty is not None:
+        bank.bootstrap({n: [f[n] for f in empty] for n in calib.cameras})
     found = []
     for k, images in enumerate(frames):
         fg = bank.apply(images)
         if not fg:
             continue
-        ev = {n: FrameEvidence(images[n], fg[n]) for n in fg}
+        ev = {n: FrameEvidence(images[n], fg[n], motion=bank.models[n].recent_motion())
+              for n in fg}
         for d in det.step(ev, track_xy=track_xy):
             found.append((k, d))
     return found
@@ -230,6 +236,23 @@ def test_detector_excludes_tracked_neighbourhood():
     frames = [paint(calib, bgs, [], rng) for _ in range(5)]
     frames += [paint(calib, bgs, [a], rng) for _ in range(6)]
     assert run_detector(calib, frames, track_xy=np.array([[2.25, 3.0]])) == []
+
+
+def test_detector_ignores_a_motionless_ghost():
+    """Someone present while the background was bootstrapped leaves a person-shaped
+    foreground "ghost" in every camera; it never moves and is not detected."""
+    rng = np.random.default_rng(7)
+    calib = make_room()
+    bgs = backgrounds(calib)
+    a = person(2.2, 3.1)
+    boot = [paint(calib, bgs, [a], rng) for _ in range(3)]
+    boot += [paint(calib, bgs, [], rng) for _ in range(2)]
+    frames = [paint(calib, bgs, [], rng) for _ in range(8)]
+    assert run_detector(calib, frames, empty=boot) == []
+    # without the motion requirement the ghost would be taken for a person
+    cfg = DetectorConfig(min_motion=0.0)
+    found = run_detector(calib, frames, empty=boot, config=cfg)
+    assert found and np.linalg.norm(found[0][1].xy - a[0][:2]) < 0.2
 
 
 def test_detector_ignores_flickering_screen_and_empty_room():

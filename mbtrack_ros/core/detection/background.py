@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from numba import njit
 
 from mbtrack_ros.core.detection import DetectionError
 
@@ -38,6 +39,8 @@ class BackgroundConfig:
     Attributes:
         alpha: temporal filter memory of 003 §4.2 (``B = alpha B + (1 - alpha) I``).
         bootstrap_frames: frames whose median initialises the model when none is given.
+        bootstrap_stride: take every n-th frame for that median (people walking through the
+            first seconds of a recording then drop out of the median).
         luma_threshold: |Y - g B_Y| above which a pixel is foreground (0..255 scale).
         chroma_threshold: Euclidean Cb-Cr distance above which a pixel is foreground.
         shadow_ratio: (lo, hi) luminance ratio I_Y / (g B_Y) of a shadow (chroma unchanged);
@@ -49,10 +52,15 @@ class BackgroundConfig:
         open_size, close_size: morphological cleaning kernels (pixels, 0 disables).
         min_blob_area: smallest connected foreground component kept, in pixels at 320x240
             (scaled with the image area).
+        static_frames, static_alpha: a pixel that has been foreground without motion and
+            outside every track for ``static_frames`` frames is updated with the faster
+            ``static_alpha`` (absorbs "ghosts" left by people in the bootstrap frames and
+            moved objects; 0 disables).
     """
 
     alpha: float = 0.97
-    bootstrap_frames: int = 5
+    bootstrap_frames: int = 10
+    bootstrap_stride: int = 4
     luma_threshold: float = 28.0
     chroma_threshold: float = 10.0
     shadow_ratio: tuple[float, float] | None = (0.55, 0.92)
@@ -62,13 +70,17 @@ class BackgroundConfig:
     mask_dilation: int = 5
     open_size: int = 3
     close_size: int = 5
-    min_blob_area: int = 40
+    min_blob_area: int = 0
+    static_frames: int = 20
+    static_alpha: float = 0.8
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.alpha < 1.0:
             raise DetectionError(f'background alpha must be in [0, 1), got {self.alpha}')
-        if self.bootstrap_frames < 1:
-            raise DetectionError('bootstrap_frames must be >= 1')
+        if self.bootstrap_frames < 1 or self.bootstrap_stride < 1:
+            raise DetectionError('bootstrap_frames and bootstrap_stride must be >= 1')
+        if not 0.0 <= self.static_alpha < 1.0:
+            raise DetectionError(f'static_alpha must be in [0, 1), got {self.static_alpha}')
         if self.luma_threshold <= 0 or self.chroma_threshold <= 0:
             raise DetectionError('background thresholds must be positive')
         if not 0.0 <= self.motion_decay < 1.0:
@@ -103,6 +115,72 @@ def clean_mask(mask: np.ndarray, *, open_size: int = 3, close_size: int = 5,
     return m.astype(bool)
 
 
+@njit(cache=True)
+def _foreground_kernel(ycc: np.ndarray, bg: np.ndarray, gain: float, luma: float,
+                       chroma: float, shadow_lo: float, shadow_hi: float
+                       ) -> np.ndarray:  # pragma: no cover - compiled
+    """Y-Cb-Cr test per pixel: (H, W) uint8 foreground (before morphology)."""
+    h, w = ycc.shape[:2]
+    out = np.zeros((h, w), np.uint8)
+    for i in range(h):
+        for j in range(w):
+            by = max(bg[i, j, 0], 1.0)
+            gy = gain * by
+            y = ycc[i, j, 0]
+            d1 = ycc[i, j, 1] - 128.0 - gain * (bg[i, j, 1] - 128.0)
+            d2 = ycc[i, j, 2] - 128.0 - gain * (bg[i, j, 2] - 128.0)
+            dc = np.sqrt(d1 * d1 + d2 * d2)
+            if abs(y - gy) > luma or dc > chroma:
+                r = y / gy
+                if shadow_lo < shadow_hi and shadow_lo <= r <= shadow_hi \
+                        and dc <= 0.5 * chroma:
+                    continue  # a shadow: darker, same chroma
+                out[i, j] = 1
+    return out
+
+
+@njit(cache=True)
+def _motion_kernel(y: np.ndarray, prev: np.ndarray, motion: np.ndarray, decay: float,
+                   threshold: float, persistent: float) -> np.ndarray:  # pragma: no cover
+    """Decaying accumulation of thresholded frame differences (in place); (H, W) uint8
+    persistent-motion mask."""
+    h, w = y.shape
+    out = np.zeros((h, w), np.uint8)
+    for i in range(h):
+        for j in range(w):
+            m = motion[i, j] * decay
+            if abs(y[i, j] - prev[i, j]) > threshold:
+                m += 1.0
+            motion[i, j] = m
+            if m >= persistent:
+                out[i, j] = 1
+    return out
+
+
+@njit(cache=True)
+def _blend_kernel(bg: np.ndarray, ycc: np.ndarray, frozen: np.ndarray, fg: np.ndarray,
+                  static: np.ndarray, use_fg: bool, alpha: float, static_alpha: float,
+                  static_frames: int) -> None:  # pragma: no cover - compiled
+    """003 §4.2 temporal filter on the unfrozen pixels, in place."""
+    h, w = frozen.shape
+    for i in range(h):
+        for j in range(w):
+            if frozen[i, j]:
+                static[i, j] = 0
+                continue
+            a = alpha
+            if use_fg:
+                if fg[i, j]:
+                    if static[i, j] < 32000:
+                        static[i, j] += 1
+                    if static_frames > 0 and static[i, j] >= static_frames:
+                        a = static_alpha
+                else:
+                    static[i, j] = 0
+            for c in range(3):
+                bg[i, j, c] = a * bg[i, j, c] + (1.0 - a) * ycc[i, j, c]
+
+
 def _to_ycc(image: np.ndarray) -> np.ndarray:
     """RGB uint8 (H, W, 3) -> float32 (H, W, 3) with channels Y, Cb, Cr."""
     ycrcb = cv2.cvtColor(image, cv2.COLOR_RGB2YCrCb).astype(np.float32)
@@ -135,6 +213,8 @@ class BackgroundModel:
         self._pending: list[np.ndarray] = []         # bootstrap frames
         self._prev_y: np.ndarray | None = None
         self._motion: np.ndarray | None = None       # accumulated motion, float32
+        self._static: np.ndarray | None = None       # frames of motionless foreground
+        self._seen = 0                               # frames offered for bootstrapping
         self.gain: float = 1.0                       # luminance gain of the last frame
 
     # -- state ----------------------------------------------------------------------------
@@ -161,6 +241,13 @@ class BackgroundModel:
             return np.zeros(self.shape or (0, 0), bool)
         return self._motion >= self.config.motion_persistent
 
+    def recent_motion(self, level: float = 0.3) -> np.ndarray | None:
+        """(H, W) bool pixels that moved in the last few frames (accumulated motion above
+        ``level``), or None before the model exists."""
+        if self._motion is None:
+            return None
+        return self._motion >= level
+
     def bootstrap(self, frames: Sequence[np.ndarray]) -> None:
         """Initialise the model as the per-pixel median of empty-room RGB frames."""
         frames = list(frames)
@@ -183,24 +270,14 @@ class BackgroundModel:
     def _foreground(self, ycc: np.ndarray) -> np.ndarray:
         cfg = self.config
         bg = self.background_ycc
-        by = np.maximum(bg[..., 0], 1.0)
-        y = ycc[..., 0]
         # Global gain, robust to slow illumination changes: median I/B luminance ratio
         # (the foreground is assumed to cover less than half of the image). A gain scales
         # RGB, hence Y and the chroma offsets C - 128 alike.
-        ratio = y / by
-        sub = ratio[::4, ::4]
-        self.gain = float(np.clip(np.median(sub), 0.5, 2.0)) if sub.size > 16 else 1.0
-        g = self.gain
-        gy = g * by
-        dc = np.hypot(ycc[..., 1] - 128.0 - g * (bg[..., 1] - 128.0),
-                      ycc[..., 2] - 128.0 - g * (bg[..., 2] - 128.0))
-        fg = (np.abs(y - gy) > cfg.luma_threshold) | (dc > cfg.chroma_threshold)
-        if cfg.shadow_ratio is not None:
-            lo, hi = cfg.shadow_ratio
-            r = y / gy
-            shadow = (r >= lo) & (r <= hi) & (dc <= 0.5 * cfg.chroma_threshold)
-            fg &= ~shadow
+        ratio = ycc[::4, ::4, 0] / np.maximum(bg[::4, ::4, 0], 1.0)
+        self.gain = float(np.clip(np.median(ratio), 0.5, 2.0)) if ratio.size > 16 else 1.0
+        lo, hi = cfg.shadow_ratio if cfg.shadow_ratio is not None else (1.0, 0.0)
+        fg = _foreground_kernel(ycc, bg, self.gain, float(cfg.luma_threshold),
+                                float(cfg.chroma_threshold), float(lo), float(hi))
         h, w = fg.shape
         min_area = int(round(cfg.min_blob_area * (h * w) / (320.0 * 240.0)))
         return clean_mask(fg, open_size=cfg.open_size, close_size=cfg.close_size,
@@ -217,40 +294,44 @@ class BackgroundModel:
         _check_image(image, self.shape, f'camera {self.name!r}')
         self._update(_to_ycc(image), exclude)
 
-    def _update(self, ycc: np.ndarray, exclude: np.ndarray | None) -> None:
+    def _update(self, ycc: np.ndarray, exclude: np.ndarray | None,
+                fg: np.ndarray | None = None) -> None:
         cfg = self.config
         y = ycc[..., 0]
         if self._bg is None:
-            self._pending.append(ycc)
+            if self._seen % cfg.bootstrap_stride == 0:
+                self._pending.append(ycc)
+            self._seen += 1
             if len(self._pending) >= cfg.bootstrap_frames:
-                stack = np.stack(self._pending)
-                self._bg = np.median(stack, axis=0).astype(np.float32)
+                self._bg = np.median(np.stack(self._pending), axis=0).astype(np.float32)
                 self._pending = []
                 self._motion = np.zeros(y.shape, np.float32)
             self._prev_y = y
             return
+        if self._motion is None or self._prev_y is None:
+            self._motion = np.zeros(y.shape, np.float32)
+            self._prev_y = y
         # Persistent motion: decaying accumulation of thresholded frame differences.
-        moved = np.abs(y - self._prev_y) > cfg.motion_threshold if self._prev_y is not None \
-            else np.zeros(y.shape, bool)
-        self._motion *= cfg.motion_decay
-        self._motion += moved.astype(np.float32)
+        frozen = _motion_kernel(y, self._prev_y, self._motion, float(cfg.motion_decay),
+                                float(cfg.motion_threshold), float(cfg.motion_persistent))
         self._prev_y = y
-        frozen = (self._motion >= cfg.motion_persistent).astype(np.uint8)
         if exclude is not None:
             exclude = np.asarray(exclude, dtype=bool)
             if exclude.shape != y.shape:
                 raise DetectionError(
                     f'camera {self.name!r}: exclusion mask shape {exclude.shape} differs '
                     f'from the image {y.shape}')
-            frozen |= exclude.astype(np.uint8)
+            frozen |= exclude.view(np.uint8)
         k = _kernel(2 * cfg.mask_dilation + 1)
         if k is not None and frozen.any():
             frozen = cv2.dilate(frozen, k)
+        if self._static is None or self._static.shape != y.shape:
+            self._static = np.zeros(y.shape, np.int16)
+        use_fg = fg is not None
+        fgu = fg.view(np.uint8) if use_fg else frozen
         # 003 §4.2: B_t = alpha B_{t-1} + (1 - alpha) I_t on the stable pixels only.
-        blended = cv2.addWeighted(self._bg, cfg.alpha, ycc, 1.0 - cfg.alpha, 0.0)
-        keep = frozen.astype(bool)
-        blended[keep] = self._bg[keep]
-        self._bg = blended
+        _blend_kernel(self._bg, ycc, frozen, fgu, self._static, use_fg, float(cfg.alpha),
+                      float(cfg.static_alpha), int(cfg.static_frames))
 
     def apply(self, image: np.ndarray, *, exclude: np.ndarray | None = None
               ) -> np.ndarray | None:
@@ -261,7 +342,7 @@ class BackgroundModel:
         _check_image(image, self.shape, f'camera {self.name!r}')
         ycc = _to_ycc(image)
         fg = self._foreground(ycc) if self._bg is not None else None
-        self._update(ycc, exclude)
+        self._update(ycc, exclude, fg)
         return fg
 
 

@@ -81,6 +81,8 @@ class DetectorConfig:
         exclusion_radius: hypotheses this close to a track are not tested.
         nms_radius: non-maximum-suppression radius between detections.
         max_candidates: coarse neighbourhoods refined per frame.
+        min_motion: fraction of recently moving pixels of the silhouette (in every side
+            camera that sees it, in one of the confirming frames) to confirm a detection.
     """
 
     coarse_spacing: float = 0.3
@@ -114,6 +116,7 @@ class DetectorConfig:
     exclusion_radius: float = 0.5
     nms_radius: float = 0.6
     max_candidates: int = 6
+    min_motion: float = 0.05
 
     def __post_init__(self) -> None:
         for name in ('coarse_spacing', 'fine_spacing', 'nms_radius', 'confirm_radius'):
@@ -139,6 +142,9 @@ class Detection:
         score: combined log response.
         coverage: per seeing camera, the foreground coverage of the silhouette.
         frames: consecutive frames the detection was found in.
+        motion: smallest fraction of recently moving pixels in the silhouette over the side
+            cameras that see it (largest over the confirming frames); ``inf`` when motion
+            is not known.
     """
 
     state: np.ndarray
@@ -147,6 +153,7 @@ class Detection:
     score: float
     coverage: dict[str, float] = field(default_factory=dict)
     frames: int = 1
+    motion: float = float('inf')
 
     @property
     def xy(self) -> np.ndarray:
@@ -161,11 +168,14 @@ class FrameEvidence:
         image: (H, W, 3) uint8 RGB.
         foreground: (H, W) bool foreground mask.
         tracks: (H, W) bool pixels covered by the rendered silhouettes of current tracks.
+        motion: (H, W) bool pixels that moved recently (None: not checked).
     """
 
     image: np.ndarray
     foreground: np.ndarray
     tracks: np.ndarray | None = None
+    motion: np.ndarray | None = None
+    _motion_integral: ForegroundIntegral | None = field(default=None, repr=False)
     _integral: ForegroundIntegral | None = field(default=None, repr=False)
     _plain: ForegroundIntegral | None = field(default=None, repr=False)
     _edges: EdgeMap | None = field(default=None, repr=False)
@@ -183,6 +193,14 @@ class FrameEvidence:
         if self._plain is None:
             self._plain = ForegroundIntegral(self.foreground)
         return self._plain
+
+    @property
+    def motion_integral(self) -> ForegroundIntegral | None:
+        if self.motion is None:
+            return None
+        if self._motion_integral is None:
+            self._motion_integral = ForegroundIntegral(self.motion)
+        return self._motion_integral
 
     @property
     def edges(self) -> EdgeMap:
@@ -426,8 +444,19 @@ class Detector:
         names = [nm for nm in evidence if nm in self.calibration.cameras]
         coverage = {nm: float(covs[k, b]) for k, nm in enumerate(names)
                     if np.isfinite(covs[k, b])}
+        # recent motion inside the silhouette, in the side cameras that see it (a top-down
+        # camera sees little of a person's motion near the image border)
+        motion = []
+        side = [nm for nm in coverage if not self.ceiling[nm]] or list(coverage)
+        for nm in side:
+            mi = evidence[nm].motion_integral
+            if mi is not None:
+                sil = rasterize(self.calibration.cameras[nm], states2[b:b + 1], self.shape,
+                                heights=H[b:b + 1], widths=W[b:b + 1])
+                motion.append(float(mi.coverage(sil)[0][0]))
         return Detection(state=states2[b].copy(), height=float(H[b]), width=float(W[b]),
-                         score=float(score2[b]), coverage=coverage)
+                         score=float(score2[b]), coverage=coverage,
+                         motion=min(motion) if motion else float('inf'))
 
     def _bounds(self) -> tuple[float, float, float, float]:
         z = np.asarray(self.zones, dtype=np.float64)
@@ -454,7 +483,10 @@ class Detector:
             det.frames = 1 if match is None else self._candidates[match].frames + 1
             if match is not None:
                 used.add(match)
-            if det.frames >= cfg.confirm_frames:
+                det.motion = max(det.motion, self._candidates[match].motion)
+            # a ghost (background change left by someone who was there while the model was
+            # bootstrapped) never moves; people who appear do
+            if det.frames >= cfg.confirm_frames and det.motion >= cfg.min_motion:
                 confirmed.append(det)
             else:
                 survivors.append(det)

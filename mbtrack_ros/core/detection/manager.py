@@ -1,0 +1,256 @@
+"""Automatic detection, acquisition, release and visibility/existence around a tracker.
+
+:class:`AutoDetection` is what :class:`~mbtrack_ros.core.tracker.Tracker` calls after each
+filter step when automatic detection is enabled:
+
+1. render the current tracks (posterior means) in every camera; the union is excluded from
+   the background update and treated as *unknown* by the detector;
+2. update the background models and extract the foreground (003 §4.2);
+3. per track: foreground support and the visibility/existence processes (001 §3), from
+   the appearance likelihood of a few posterior particles per camera against a clutter
+   likelihood, and the coverage of the rendered silhouette;
+4. release tracks without support (003 §4.3);
+5. search new people away from the remaining tracks (003 §4.1), confirm them over a few
+   frames and acquire their appearance models; the tracker then adds them.
+"""
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from mbtrack_ros.core.appearance import (
+    PersonModel, quantize, relative_angle, single_target_loglik)
+from mbtrack_ros.core.camera import RoomCalibration
+from mbtrack_ros.core.detection import DetectionError
+from mbtrack_ros.core.detection.acquisition import AcquisitionConfig, acquire
+from mbtrack_ros.core.detection.background import BackgroundBank, BackgroundConfig
+from mbtrack_ros.core.detection.detector import (
+    Detection, Detector, DetectorConfig, FrameEvidence, is_ceiling)
+from mbtrack_ros.core.detection.release import ReleaseConfig, Releaser
+from mbtrack_ros.core.existence import AuxiliaryConfig, TrackAuxiliary, predictive_loglik
+from mbtrack_ros.core.shape import BodyShape, rasterize
+from mbtrack_ros.core.state import THETA, X, Y, TrackEstimate
+
+__all__ = ['AutoDetection', 'AutoDetectionConfig', 'Birth']
+
+
+@dataclass(frozen=True)
+class AutoDetectionConfig:
+    """All parameters of the automatic detection pipeline.
+
+    Attributes:
+        background, detector, release, acquisition, existence: per-stage parameters.
+        sigma: appearance likelihood width (003 Eq. 3), as the tracker's.
+        clutter_distance: Bhattacharyya distance whose likelihood is the "not visible"
+            clutter likelihood ``p_0`` (001 Eq. 23).
+        visibility_particles: posterior particles used per track for ``p_1`` (001 Eq. 18).
+        report_hidden: also report tracks whose existence is below the report threshold.
+    """
+
+    background: BackgroundConfig = field(default_factory=BackgroundConfig)
+    detector: DetectorConfig = field(default_factory=DetectorConfig)
+    release: ReleaseConfig = field(default_factory=ReleaseConfig)
+    acquisition: AcquisitionConfig = field(default_factory=AcquisitionConfig)
+    existence: AuxiliaryConfig = field(default_factory=AuxiliaryConfig)
+    sigma: float = 0.12
+    clutter_distance: float = 0.5
+    visibility_particles: int = 8
+    report_hidden: bool = False
+
+    def __post_init__(self) -> None:
+        if not self.sigma > 0 or not self.clutter_distance > 0:
+            raise DetectionError('sigma and clutter_distance must be > 0')
+        if self.visibility_particles < 1:
+            raise DetectionError('visibility_particles must be >= 1')
+
+
+@dataclass
+class Birth:
+    """A new person to add to the tracker."""
+
+    model: PersonModel
+    state: np.ndarray
+    detection: Detection
+
+
+class AutoDetection:
+    """Per-frame background, detection, acquisition, release and existence bookkeeping.
+
+    Args:
+        calibration: the room.
+        config: pipeline parameters.
+        rng: random generator (particle subsampling for the visibility likelihood).
+    """
+
+    def __init__(self, calibration: RoomCalibration, config: AutoDetectionConfig | None = None,
+                 *, rng: np.random.Generator | None = None) -> None:
+        self.calibration = calibration
+        self.config = cfg = config or AutoDetectionConfig()
+        self.rng = rng if rng is not None else np.random.default_rng(0)
+        self.background = BackgroundBank(cfg.background)
+        self.detector = Detector(calibration, cfg.detector)
+        self.releaser = Releaser(calibration, cfg.release)
+        self.aux: dict[int, TrackAuxiliary] = {}
+        self._last_stamp: int | None = None
+        self.timings: dict[str, float] = {}
+        self.side = [n for n, c in calibration.cameras.items() if not is_ceiling(c)]
+
+    def bootstrap(self, frames: Mapping[str, Sequence[np.ndarray]]) -> None:
+        """Initialise the background models from empty-room frames per camera."""
+        self.background.bootstrap(frames)
+
+    def reset(self) -> None:
+        """Forget per-track state and unconfirmed candidates (keeps the background)."""
+        self.aux.clear()
+        self.detector.reset()
+        self._last_stamp = None
+
+    # -- per frame ------------------------------------------------------------------------
+    def step(self, stamp_ns: int, images: Mapping[str, np.ndarray],
+             tracks: Sequence[TrackEstimate], models: Mapping[int, PersonModel]
+             ) -> tuple[list[int], list[Birth]]:
+        """Process one frame set after the tracker's filter step.
+
+        Fills ``visibility`` and ``existence`` of ``tracks`` in place.
+
+        Args:
+            stamp_ns: the frame stamp.
+            images: camera -> (H, W, 3) uint8 RGB.
+            tracks: the tracker's estimates of this frame.
+            models: track id -> person model (for shapes and appearance).
+
+        Returns:
+            (ids of tracks to release now, people to add).
+        """
+        cfg = self.config
+        t0 = time.perf_counter()
+        dt = 0.0 if self._last_stamp is None else max(stamp_ns - self._last_stamp, 0) / 1e9
+        self._last_stamp = int(stamp_ns)
+        names = [n for n in images if n in self.calibration.cameras]
+        means = np.array([t.mean for t in tracks]).reshape(-1, 6)
+        shapes = [self._shape(models.get(t.track_id), t) for t in tracks]
+        # 1. rendered tracks per camera
+        sils, masks = {}, {}
+        for n in names:
+            cam = self.calibration.cameras[n]
+            mask = np.zeros((cam.height, cam.width), bool)
+            if len(tracks):
+                sil = rasterize(cam, means, shapes)
+                sils[n] = sil
+                for k in range(len(tracks)):
+                    mask |= sil.mask(k) > 0
+            masks[n] = mask
+        t1 = time.perf_counter()
+        # 2. background and foreground
+        fg = self.background.apply({n: images[n] for n in names}, exclude=masks)
+        evidence = {n: FrameEvidence(images[n], fg[n], masks[n],
+                                     motion=self.background.models[n].recent_motion())
+                    for n in fg}
+        t2 = time.perf_counter()
+        # 3. support, visibility and existence
+        ended: list[int] = []
+        if tracks:
+            if evidence:
+                supported, coverage = self.releaser.support(evidence, sils)
+            else:
+                supported = np.ones(len(tracks), bool)
+                coverage = {}
+            self._auxiliary(dt, images, tracks, models, shapes, coverage)
+            existence = [self.aux[t.track_id].existence for t in tracks]
+            if evidence:  # 4. release (only once the background exists)
+                ended = self.releaser.update(stamp_ns, [t.track_id for t in tracks],
+                                             supported, existence)
+        for tid in ended:
+            self.aux.pop(tid, None)
+        t3 = time.perf_counter()
+        # 5. detection and acquisition
+        births: list[Birth] = []
+        if evidence:
+            keep = [k for k, t in enumerate(tracks) if t.track_id not in ended]
+            confirmed = self.detector.step(evidence, track_xy=means[keep][:, [X, Y]])
+            for det in confirmed:
+                model = acquire(det, images, self.calibration, others=means[keep],
+                                other_shapes=[shapes[k] for k in keep],
+                                config=cfg.acquisition)
+                if model is None:
+                    self.detector.requeue(det)
+                    continue
+                births.append(Birth(model=model, state=det.state.copy(), detection=det))
+        t4 = time.perf_counter()
+        self.timings = {'detect_render': t1 - t0, 'detect_background': t2 - t1,
+                        'detect_existence': t3 - t2, 'detect_search': t4 - t3,
+                        'detect': t4 - t0}
+        return ended, births
+
+    def register(self, track_id: int) -> None:
+        """Start the auxiliary processes of a new track."""
+        self.aux[int(track_id)] = TrackAuxiliary(self.config.existence)
+
+    def reported(self, track_id: int) -> bool:
+        aux = self.aux.get(int(track_id))
+        return aux is None or aux.reported or self.config.report_hidden
+
+    # -- helpers --------------------------------------------------------------------------
+    @staticmethod
+    def _shape(model: PersonModel | None, track: TrackEstimate) -> BodyShape:
+        if model is not None:
+            return model.shape
+        h = track.height if np.isfinite(track.height) and track.height > 0 else 1.75
+        return BodyShape(height=float(h))
+
+    def _auxiliary(self, dt: float, images: Mapping[str, np.ndarray],
+                   tracks: Sequence[TrackEstimate], models: Mapping[int, PersonModel],
+                   shapes: Sequence[BodyShape], coverage: Mapping[str, np.ndarray]) -> None:
+        cfg = self.config
+        hidden = -cfg.clutter_distance ** 2 / (2.0 * cfg.sigma ** 2)    # 001 Eq. 23
+        # a few posterior particles per track with a model (001 Eq. 18: particle average)
+        rows, owner, hyp_shapes = [], [], []
+        for k, t in enumerate(tracks):
+            model = models.get(t.track_id)
+            if model is None or not getattr(model, 'view_angles', np.zeros(0)).size:
+                continue
+            if t.particles is not None and len(t.particles):
+                p = t.particles
+                w = t.weights if t.weights is not None else np.full(len(p), 1.0 / len(p))
+                idx = self.rng.choice(len(p), size=min(cfg.visibility_particles, len(p)),
+                                      p=w / w.sum())
+                rows.append(p[idx])
+            else:
+                rows.append(t.mean[None])
+            owner.extend([k] * len(rows[-1]))
+            hyp_shapes.extend([shapes[k]] * len(rows[-1]))
+        loglik: dict[str, np.ndarray] = {}
+        if rows:
+            parts = np.concatenate(rows)
+            owner_arr = np.asarray(owner)
+            for n in self.side:
+                if n not in images:
+                    continue
+                cam = self.calibration.cameras[n]
+                sil = rasterize(cam, parts, hyp_shapes)
+                rel = relative_angle(parts[:, THETA], cam.viewing_angle(parts[:, [X, Y]]))
+                hists = np.empty((len(parts), 3, 512))
+                for k in np.unique(owner_arr):
+                    sel = owner_arr == k
+                    hists[sel] = models[tracks[k].track_id].interpolate(rel[sel])
+                ll = single_target_loglik(quantize(images[n]), sil, hists, sigma=cfg.sigma)
+                loglik[n] = np.where(sil.area > 0, ll, -np.inf)
+        for k, t in enumerate(tracks):
+            aux = self.aux.setdefault(t.track_id, TrackAuxiliary(cfg.existence))
+            vis: dict[str, float] = {}
+            hid: dict[str, float] = {}
+            if rows:
+                sel = owner_arr == k
+                if sel.any():
+                    for n, ll in loglik.items():
+                        if np.isfinite(ll[sel]).any():
+                            vis[n] = predictive_loglik(ll[sel])              # 001 Eq. 18
+                            hid[n] = hidden
+            cov = {n: float(c[k]) for n, c in coverage.items() if np.isfinite(c[k])}
+            aux.update(dt, loglik_visible=vis, loglik_hidden=hid, coverage=cov,
+                       visible_fraction=t.visible_fraction or None)
+            t.visibility = dict(aux.visibility)
+            t.existence = float(aux.existence)
