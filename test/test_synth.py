@@ -274,3 +274,28 @@ def test_contact_sheet(tmp_path):
     assert sheet.shape == (2 * 2 * H, 3 * 2 * W, 3)
     with pytest.raises(SynthError):
         contact_sheet(out, 5, tmp_path / 'x.png')
+
+
+def test_screen_and_door_are_dynamic():
+    from mbtrack_ros.synth.room import DOOR, SCREEN
+
+    synth = Synthesizer('clear-room-short', seed=1, frames=45, width=W, height=H)
+    frames = list(synth)
+    stamp, images, rows = frames[0]  # a frame unpacks as (stamp_ns, images, ground_truth)
+    assert stamp == EPOCH_NS and images is frames[0].images and rows == frames[0].ground_truth
+    view = synth.views['cam1']
+    screen = view.surface == SCREEN
+    door = view.surface == DOOR
+    assert screen.sum() > 20 and door.sum() > 20
+    a, b = (frames[i].images['cam1'].astype(float) for i in (0, 8))
+    change = np.abs(a - b).mean(axis=2)
+    still = ~(screen | door) & (frames[0].id_buffers['cam1'] == 0) & (
+        frames[8].id_buffers['cam1'] == 0)
+    assert change[screen].mean() > 4 * change[still].mean()  # the scrolling bar moved
+    opened = [f for f in frames if f.door_angle > 1.0]
+    assert opened and frames[0].door_angle == 0.0  # somebody arrives: the door opens
+    c = opened[-1].images['cam1'].astype(float)
+    free = door & (opened[-1].id_buffers['cam1'] == 0)
+    assert np.abs(c - a).mean(axis=2)[free].mean() > 4 * change[still].mean()
+    with pytest.raises(SynthError):
+        iter(synth)  # frames are rendered once

@@ -58,6 +58,11 @@ class SynthFrame:
     ground_truth: list[GroundTruthRow]
     id_buffers: dict[str, np.ndarray] = field(repr=False)
     people: list[PersonState] = field(default_factory=list, repr=False)
+    door_angle: float = 0.0
+
+    def __iter__(self) -> Iterator:
+        """Unpacks as ``stamp_ns, images, ground_truth``."""
+        return iter((self.stamp_ns, self.images, self.ground_truth))
 
 
 def visible_threshold(width: int, height: int) -> int:
@@ -166,6 +171,7 @@ class Synthesizer:
         self.crowd = populate(self.preset, self.room, rng)
         self.threshold = visible_threshold(self.width, self.height)
         self._poses: dict[int, tuple] = {}
+        self._started = False
         self._pool = ThreadPoolExecutor(max_workers=min(2, len(self.views)),
                                         thread_name_prefix='synth-render')
 
@@ -181,6 +187,13 @@ class Synthesizer:
                                      + self.drift_phase[1]))
 
     def __iter__(self) -> Iterator[SynthFrame]:
+        """Render the frames in order (a Synthesizer can be iterated once)."""
+        if self._started:
+            raise SynthError('a Synthesizer renders its frames once; make a new one')
+        self._started = True
+        return self._frames()
+
+    def _frames(self) -> Iterator[SynthFrame]:
         dt = 1.0 / self.fps
         pixels = self.width * self.height * 3
         for index in range(self.frames):
@@ -231,7 +244,7 @@ class Synthesizer:
                              >= self.threshold)
                 rows.append(GroundTruthRow(stamp, index, person.person_id, person.x, person.y,
                                            tops[person.person_id], person.sit > 0.5, cams))
-            yield SynthFrame(index, stamp, images, rows, id_buffers, people)
+            yield SynthFrame(index, stamp, images, rows, id_buffers, people, door)
 
 
 def iter_frames(preset: str | Preset, *, seed: int = 0, frames: int | None = None,
