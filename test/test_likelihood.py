@@ -77,8 +77,9 @@ def _brute_w_star(masks, dist, prior, target, p, exclude):
     return w
 
 
-@pytest.mark.parametrize('n_targets,n_particles,seed', [(2, 4, 0), (3, 3, 1), (3, 5, 2)])
-def test_hjs_incremental_equals_brute_force(n_targets, n_particles, seed):
+@pytest.mark.parametrize('n_targets,n_particles,seed,zeros', [
+    (2, 4, 0, 0), (3, 3, 1, 0), (3, 5, 2, 0), (3, 5, 4, 3)])
+def test_hjs_incremental_equals_brute_force(n_targets, n_particles, seed, zeros):
     rng = np.random.default_rng(seed)
     cam = _camera('cam', (0.0, -3.5, 1.2))
     mm = MeasurementModel(_room(cam), LikelihoodConfig(d_occ=D_OCC))
@@ -89,6 +90,8 @@ def test_hjs_incremental_equals_brute_force(n_targets, n_particles, seed):
     particles = [_random_particles(rng, (0.3 * k - 0.3, 0.4 * k), n_particles)
                  for k in range(n_targets)]
     weights = [rng.random(n_particles) + 0.05 for _ in range(n_targets)]
+    for j in range(zeros):                                   # particles with zero prior
+        weights[j % n_targets][j // n_targets] = 0.0
     dbg = mm.hjs_debug('cam', particles, weights, models)
     sil = dbg.silhouettes
     labels = [sil.mask(p) for p in range(len(sil))]

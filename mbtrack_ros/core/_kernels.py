@@ -392,7 +392,7 @@ def hjs_camera(bins, row, x0, x1, part, offsets, area, bbox, order, target, prio
         for oi in range(npart - 1, -1, -1):
             suf[oi] = suf[oi + 1]
             p = order[oi]
-            if area[p] > 0 and prior[p] > 0.0:
+            if area[p] > 0:                         # readers, whatever their prior
                 h = target[p]
                 suf[oi, h, 0] = min(suf[oi, h, 0], bbox[p, 0])
                 suf[oi, h, 1] = min(suf[oi, h, 1], bbox[p, 1])
