@@ -1,9 +1,10 @@
-"""Articulated bodies of smooth volumes: 17 ellipsoids per person.
+"""Articulated bodies of smooth volumes: 18 ellipsoids per person.
 
 A pose is built in the body frame (x forward, y left, z up, origin on the floor under the
 pelvis) from the person's height ``H`` and a gait phase, then rotated by the body
-orientation and moved to its floor position. Parts: head, hair, neck, torso, pelvis, upper
-arms, forearms, hands, thighs, shins, feet. Limbs are ellipsoids spanning two joints.
+orientation and moved to its floor position. Parts: head, hair, neck, chest, abdomen,
+pelvis, upper arms, forearms, hands, thighs, shins, feet. Limbs are ellipsoids spanning
+two joints.
 
 Walking: thighs swing ``+-0.45 rad`` (scaled by speed), knees flex in the swing phase,
 arms swing opposite to the legs; the body drops so that the lower ankle stays at ankle
@@ -23,7 +24,7 @@ __all__ = ['Clothing', 'Ellipsoids', 'N_PARTS', 'PART_NAMES', 'pose_ellipsoids',
            'random_clothing']
 
 PART_NAMES = ('thigh_l', 'shin_l', 'foot_l', 'thigh_r', 'shin_r', 'foot_r', 'pelvis', 'torso',
-              'neck', 'head', 'hair', 'upper_arm_l', 'forearm_l', 'hand_l', 'upper_arm_r',
+              'chest', 'neck', 'head', 'hair', 'upper_arm_l', 'forearm_l', 'hand_l', 'upper_arm_r',
               'forearm_r', 'hand_r')
 N_PARTS = len(PART_NAMES)
 
@@ -142,7 +143,7 @@ def _limb_axes(direction: np.ndarray, side: np.ndarray) -> np.ndarray:
 def pose_ellipsoids(height: float, clothing: Clothing, *, x: float, y: float, theta: float,
                     phase: float = 0.0, stride: float = 0.0, sit: float = 0.0,
                     owner: int = 1) -> tuple[Ellipsoids, float]:
-    """The person's 17 ellipsoids (order PART_NAMES) in world coordinates and the top of the head.
+    """The person's 18 ellipsoids (order PART_NAMES) in world coordinates and the top of the head.
 
     Args:
         height: standing height ``H``, metres (1.0 .. 2.5).
@@ -199,12 +200,12 @@ def pose_ellipsoids(height: float, clothing: Clothing, *, x: float, y: float, th
         limb(hip, kn, 0.068, 0.072, cl.trousers, cl.trousers2, cl.trousers_texture,
              cl.trousers_frequency)
         limb(kn, an, 0.05, 0.055, cl.trousers, cl.trousers2, cl.trousers_texture,
-             cl.trousers_frequency)
+             cl.trousers_frequency, overlap=0.035)
         foot_dir = np.array([np.cos(0.3 * (alpha - kappa) * (1 - sit)), 0.0,
                              np.sin(0.3 * (alpha - kappa) * (1 - sit))])
-        add(an + 0.06 * s * foot_dir - np.array([0, 0, 0.02 * H]),
+        add(an + 0.045 * s * foot_dir - np.array([0, 0, 0.017 * H]),
             np.column_stack((foot_dir, ey, _cross(foot_dir, ey))),
-            (0.13, 0.045, 0.035), cl.shoes)
+            (0.125, 0.048, 0.04), cl.shoes)
     lean = 0.08 * sit
     up = np.array([np.sin(lean), 0.0, np.cos(lean)])
     pelvis_c = np.array([0.0, 0.0, hip_z + 0.02 * H])
@@ -215,8 +216,10 @@ def pose_ellipsoids(height: float, clothing: Clothing, *, x: float, y: float, th
     upright = _limb_axes(up, ey)
     add(pelvis_c, upright, (0.1, 0.17, 0.1), cl.trousers, cl.trousers2, cl.trousers_texture,
         cl.trousers_frequency)
-    add(trunk(0.70), upright, (0.12, 0.19, 0.17), cl.shirt, cl.shirt2, cl.shirt_texture,
-        cl.shirt_frequency)
+    add(trunk(0.665), upright, (0.11, 0.16, 0.15), cl.shirt, cl.shirt2, cl.shirt_texture,
+        cl.shirt_frequency)  # abdomen
+    add(trunk(0.765), upright, (0.115, 0.195, 0.12), cl.shirt, cl.shirt2, cl.shirt_texture,
+        cl.shirt_frequency)  # chest and shoulders
     add(trunk(0.855), upright, (0.05, 0.05, 0.06), cl.skin)
     head_c = trunk(1.0) - 0.12 * s * up
     head_index = len(centers)
