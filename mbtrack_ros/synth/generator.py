@@ -245,6 +245,7 @@ class Synthesizer:
                 rows.append(GroundTruthRow(stamp, index, person.person_id, person.x, person.y,
                                            tops[person.person_id], person.sit > 0.5, cams))
             yield SynthFrame(index, stamp, images, rows, id_buffers, people, door)
+        self._pool.shutdown(wait=False)
 
 
 def iter_frames(preset: str | Preset, *, seed: int = 0, frames: int | None = None,
@@ -318,9 +319,10 @@ def generate(preset: str | Preset, outdir: str | Path, *, seed: int = 0,
     meta = {'preset': synth.preset.name, 'description': synth.preset.description,
             'seed': synth.seed, 'frames': synth.frames, 'fps': synth.fps,
             'width': synth.width, 'height': synth.height,
+            'size': {n: [synth.width, synth.height] for n in synth.calibration.cameras},
             'cameras': list(synth.calibration.cameras), 'compressed': bool(compressed),
             'storage': storage, 'people': int(synth.crowd.next_id - 1),
-            'epoch_ns': EPOCH_NS}
+            'epoch_ns': EPOCH_NS, 'period_ns': synth.period_ns}
     (outdir / 'recording.yaml').write_text(yaml.safe_dump(meta, sort_keys=False),
                                            encoding='utf-8')
     return outdir
