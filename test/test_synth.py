@@ -299,3 +299,34 @@ def test_screen_and_door_are_dynamic():
     assert np.abs(c - a).mean(axis=2)[free].mean() > 4 * change[still].mean()
     with pytest.raises(SynthError):
         iter(synth)  # frames are rendered once
+
+
+def test_clear_room_crowd_sits_enters_and_leaves():
+    """Two simulated minutes of the clear-room crowd (no rendering)."""
+    from mbtrack_ros.synth.presets import get_preset, populate
+
+    room = default_room()
+    crowd = populate(get_preset('clear-room'), room, np.random.default_rng(0))
+    seats = np.array([c[:2] for c in room.chairs])
+    present, sat, counts = {}, set(), []
+    for _ in range(120 * 15):
+        crowd.step(1.0 / 15)
+        people = crowd.people()
+        inside = [p for p in people if room.inside(np.array([p.x, p.y]))]
+        counts.append(len(inside))
+        for p in people:
+            present.setdefault(p.person_id, 0)
+            present[p.person_id] += 1
+            if p.sit >= 1.0:  # fully seated: pelvis above a chair's seat
+                assert np.min(np.linalg.norm(seats - [p.x, p.y], axis=1)) < 1e-6
+                sat.add(p.person_id)
+        xy = np.array([[p.x, p.y] for p in people if p.sit == 0.0])
+        if len(xy) > 1:
+            d = np.linalg.norm(xy[:, None] - xy[None], axis=2) + 9 * np.eye(len(xy))
+            assert d.min() > 0.3  # avoidance keeps walking people apart
+    ids = sorted(present)
+    assert ids == list(range(1, len(ids) + 1)) and len(ids) >= 5  # arrivals, fresh ids
+    assert len(sat) >= 2
+    assert 2 <= max(counts) <= 5 and min(counts[15 * 20:]) >= 1
+    gone = [i for i in ids if i not in {p.person_id for p in crowd.people()}]
+    assert gone  # somebody left through the door

@@ -79,7 +79,7 @@ class Walker:
     area: tuple[float, float, float, float] | None = None
     patrol: list[np.ndarray] = field(default_factory=list)
     patrol_pause: tuple[float, float] = (0.5, 2.0)
-    speed_range: tuple[float, float] = (0.5, 1.3)
+    speed_range: tuple[float, float] = (0.5, 1.5)
     leave_time: float = np.inf
     speed: float = 0.0
     phase: float = 0.0
