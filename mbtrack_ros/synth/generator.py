@@ -266,7 +266,9 @@ def generate(preset: str | Preset, outdir: str | Path, *, seed: int = 0,
     from mbtrack_ros.recording.bag import BagError, RecordingWriter
 
     outdir = Path(outdir)
-    if outdir.exists() and (not outdir.is_dir() or any(outdir.iterdir())):
+    if outdir.exists() and not outdir.is_dir():
+        raise SynthError(f'output directory {outdir} exists and is not a directory')
+    if outdir.exists() and any(outdir.iterdir()):
         raise SynthError(f'output directory {outdir} exists and is not empty')
     if storage not in ('mcap', 'sqlite3'):
         raise SynthError(f'unknown storage {storage!r} (mcap or sqlite3)')
