@@ -36,6 +36,15 @@ def test_same_seed_same_recording_and_different_seed_differs():
             np.testing.assert_array_equal(fa.images[name], fb.images[name])
     assert a[0].ground_truth != c[0].ground_truth
     assert not np.array_equal(a[0].images['cam0'], c[0].images['cam0'])
+    # five cameras rendered on two threads: still identical
+    d = list(iter_frames('clear-room-short', seed=2, frames=3, width=64, height=48))
+    e = list(iter_frames('clear-room-short', seed=2, frames=3, width=64, height=48))
+    for fd, fe in zip(d, e):
+        assert list(fd.images) == ['cam0', 'cam1', 'cam2', 'cam3', 'cam4']
+        assert fd.ground_truth == fe.ground_truth
+        for name in fd.images:
+            np.testing.assert_array_equal(fd.images[name], fe.images[name])
+            np.testing.assert_array_equal(fd.id_buffers[name], fe.id_buffers[name])
 
 
 def test_stamps_advance_by_a_constant_integer_period():
