@@ -199,13 +199,13 @@ def accumulate_spans(buf, row, x0, x1, offsets, values, oy, ox):
 # -- histograms (the one accumulation routine) ------------------------------------------------
 @njit(cache=True, nogil=True)
 def accumulate_histogram(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, nch,
-                         hist, alpha, touched, nt, mark):
+                         hist, touched, nt, mark):
     """Add the colours under spans [s0, s1) to flat part histograms ``hist`` (C, 1536).
 
     With ``nch == 0`` every pixel adds 1 to channel 0; otherwise pixel u adds
     ``wmap[row - oy, c - ox, ch]`` to channel ``ch < nch`` (several weightings of the same
-    pixels in one pass). The bin is ``part * 512 + bins[u]``; ``alpha`` (C, 3) receives the
-    part masses. Touched bins (shared by all channels) are appended to ``touched`` and
+    pixels in one pass). The bin is ``part * 512 + bins[u]`` (part masses are summed from
+    the touched bins afterwards, cheaper than per pixel). Touched bins (shared by all channels) are appended to ``touched`` and
     flagged in ``mark`` starting at ``nt``; returns the new count.
     """
     for s in range(s0, s1):
@@ -220,29 +220,22 @@ def accumulate_histogram(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, nch,
                     mark[idx] = True
                     touched[nt] = idx
                     nt += 1
-            alpha[0, q] += x1[s] - x0[s]
         elif nch == 1:
             rr = r - oy
-            acc = 0.0
             for c in range(x0[s], x1[s]):
                 idx = base + bins[r, c]
-                w = wmap[rr, c - ox, 0]
-                hist[0, idx] += w
-                acc += w
+                hist[0, idx] += wmap[rr, c - ox, 0]
                 if not mark[idx]:
                     mark[idx] = True
                     touched[nt] = idx
                     nt += 1
-            alpha[0, q] += acc
         else:
             rr = r - oy
             for c in range(x0[s], x1[s]):
                 idx = base + bins[r, c]
                 cc = c - ox
                 for ch in range(nch):
-                    w = wmap[rr, cc, ch]
-                    hist[ch, idx] += w
-                    alpha[ch, q] += w
+                    hist[ch, idx] += wmap[rr, cc, ch]
                 if not mark[idx]:
                     mark[idx] = True
                     touched[nt] = idx
@@ -251,46 +244,60 @@ def accumulate_histogram(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, nch,
 
 
 @njit(cache=True, nogil=True)
-def part_distances(hist, alpha, key, t, va, vb, wa, touched, nt, d2):
-    """Bhattacharyya distances (003 Eq. 4) of weighted part histograms to the model.
+def model_values(key, t, va, vb, wa, touched, nt, mt):
+    """mt[j] = model histogram at touched bin j, interpolated from two key views (003 Eq.
+    1): ``wa * key[t, va] + (1 - wa) * key[t, vb]``, key (T, V, 1536) normalised per part.
+    Only the touched bins are ever needed, so the full histogram is never built."""
+    wb = 1.0 - wa
+    for j in range(nt):
+        idx = touched[j]
+        mt[j] = wa * key[t, va, idx] + wb * key[t, vb, idx]
 
-    The model histogram is interpolated from key views on the touched bins only (003 Eq.
-    1): ``m = wa * key[t, va] + (1 - wa) * key[t, vb]``, key (T, V, 1536) normalised per
-    part. ``hist`` (1536,) holds unnormalised weighted counts with part masses ``alpha``
-    (3,); the normalised histogram is hist / alpha, so sum_c sqrt(h_c m_c) =
-    sum_c sqrt(hist_c m_c) / sqrt(alpha). Writes d2 (3,) (1 for a part with no mass) and
-    zeroes the touched bins of ``hist``.
+
+@njit(cache=True, nogil=True)
+def part_distances(hist, mt, touched, nt, d2):
+    """Bhattacharyya distances (003 Eq. 4) of a weighted part histogram to the model.
+
+    ``hist`` (1536,) holds unnormalised weighted counts, ``mt`` the model values at the
+    touched bins. With part mass alpha, the normalised histogram is hist / alpha, so
+    sum_c sqrt(h_c m_c) = sum_c sqrt(hist_c m_c) / sqrt(alpha). Writes d2 (3,) (1 for a
+    part with no mass), zeroes the touched bins of ``hist`` and returns the part masses.
     """
     bc0 = 0.0
     bc1 = 0.0
     bc2 = 0.0
-    wb = 1.0 - wa
+    a0 = 0.0
+    a1 = 0.0
+    a2 = 0.0
     for j in range(nt):
         idx = touched[j]
         v = hist[idx]
         if v > 0.0:
-            m = wa * key[t, va, idx] + wb * key[t, vb, idx]
-            if m > 0.0:
-                x = np.sqrt(v * m)
-                if idx < N_BINS:
-                    bc0 += x
-                elif idx < 2 * N_BINS:
-                    bc1 += x
-                else:
-                    bc2 += x
+            x = np.sqrt(v * mt[j])
+            if idx < N_BINS:
+                bc0 += x
+                a0 += v
+            elif idx < 2 * N_BINS:
+                bc1 += x
+                a1 += v
+            else:
+                bc2 += x
+                a2 += v
         hist[idx] = 0.0
     for q in range(3):
         bc = bc0 if q == 0 else (bc1 if q == 1 else bc2)
-        if alpha[q] > 0.0:
-            d = 1.0 - bc / np.sqrt(alpha[q])
+        a = a0 if q == 0 else (a1 if q == 1 else a2)
+        if a > 0.0:
+            d = 1.0 - bc / np.sqrt(a)
             d2[q] = d if d > 0.0 else 0.0
         else:
             d2[q] = 1.0
+    return a0, a1, a2
 
 
 @njit(cache=True, nogil=True)
 def occlusion_terms(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, nch, area, d_occ,
-                    key, t, va, vb, wa, hist, alpha, touched, mark, d2, out_l, out_vis):
+                    key, t, va, vb, wa, hist, touched, mark, d2, out_l, out_vis):
     """000 Eq. 26 with soft maps w (Eq. 33) on one silhouette, for max(nch, 1) channels.
 
     Channel ch uses w = wmap[..., ch] (w = 1 when ``nch == 0``); alpha = sum of w (visible
@@ -299,19 +306,17 @@ def occlusion_terms(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, nch, area, d_
     area-weighted part distance of 003 Eq. 3.
     """
     m = max(nch, 1)
-    for ch in range(m):
-        alpha[ch, 0] = 0.0
-        alpha[ch, 1] = 0.0
-        alpha[ch, 2] = 0.0
     nt = accumulate_histogram(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, nch,
-                              hist, alpha, touched, 0, mark)
+                              hist, touched, 0, mark)
+    mt = np.empty(nt)
+    model_values(key, t, va, vb, wa, touched, nt, mt)
     for ch in range(m):
-        part_distances(hist[ch], alpha[ch], key, t, va, vb, wa, touched, nt, d2)
-        vis = alpha[ch, 0] + alpha[ch, 1] + alpha[ch, 2]
+        a0, a1, a2 = part_distances(hist[ch], mt, touched, nt, d2)
+        vis = a0 + a1 + a2
         beta = area - vis
         if beta < 0.0:
             beta = 0.0
-        num = alpha[ch, 0] * d2[0] + alpha[ch, 1] * d2[1] + alpha[ch, 2] * d2[2]
+        num = a0 * d2[0] + a1 * d2[1] + a2 * d2[2]
         out_l[ch] = (num + beta * d_occ) / area if area > 0 else 0.0
         out_vis[ch] = vis
     for j in range(nt):
@@ -350,7 +355,6 @@ def hjs_camera(bins, row, x0, x1, part, offsets, area, bbox, order, target, prio
     vis = np.zeros(npart)
     nk = max(n_targets, 1)
     hist = np.zeros((nk, 3 * N_BINS))
-    alpha = np.zeros((nk, 3))
     mark = np.zeros(3 * N_BINS, np.bool_)
     touched = np.empty(3 * N_BINS, np.int64)
     d2 = np.empty(3)
@@ -451,14 +455,14 @@ def hjs_camera(bins, row, x0, x1, part, offsets, area, bbox, order, target, prio
                 for c in range(x0[s] - gx0, x1[s] - gx0):
                     w = 1.0
                     for j in range(nrel):
-                        w *= 1.0 - mfg[r, c, rel[j]]
+                        w *= max(1.0 - mfg[r, c, rel[j]], 0.0)   # >= 0 despite rounding
                     wmap[r, c, 0] = w
                     if w != 1.0:
                         occluded = True
         # 000 Eq. 33 with Eq. 26: foreground term on the w*-weighted part histograms
         occlusion_terms(bins, row, x0, x1, part, s0, s1, wmap, gy0, gx0,
                         1 if occluded else 0, ap, d_occ, key, k, va[p], vb[p], wa[p],
-                        hist, alpha, touched, mark, d2, out_l, out_v)
+                        hist, touched, mark, d2, out_l, out_v)
         fc[p] = out_l[0]
         vis[p] = out_v[0]
         f_free = out_l[0] if not occluded else -1.0   # the term with w = 1, lazily
@@ -508,7 +512,7 @@ def hjs_camera(bins, row, x0, x1, part, offsets, area, bbox, order, target, prio
                 r = row[s] - gy0
                 for c in range(x0[s] - gx0, x1[s] - gx0):
                     for j in range(nrel):
-                        vals[j] = 1.0 - mfg[r, c, rel[j]]
+                        vals[j] = max(1.0 - mfg[r, c, rel[j]], 0.0)
                     for i in range(nneed):
                         w = 1.0
                         for j in range(nrel):
@@ -516,13 +520,13 @@ def hjs_camera(bins, row, x0, x1, part, offsets, area, bbox, order, target, prio
                                 w *= vals[j]
                         wmap[r, c, i] = w
             occlusion_terms(bins, row, x0, x1, part, s0, s1, wmap, gy0, gx0, nneed, ap,
-                            d_occ, key, k, va[p], vb[p], wa[p], hist, alpha, touched, mark,
-                            d2, out_l, out_v)
+                            d_occ, key, k, va[p], vb[p], wa[p], hist, touched, mark, d2,
+                            out_l, out_v)
         else:                                       # every reduced map is 1 on Delta(x_p)
             if f_free < 0.0:
                 occlusion_terms(bins, row, x0, x1, part, s0, s1, wmap, gy0, gx0, 0, ap,
-                                d_occ, key, k, va[p], vb[p], wa[p], hist, alpha, touched,
-                                mark, d2, out_l, out_v)
+                                d_occ, key, k, va[p], vb[p], wa[p], hist, touched, mark,
+                                d2, out_l, out_v)
                 f_free = out_l[0]
             for i in range(nneed):
                 out_l[i] = f_free
@@ -555,7 +559,6 @@ def joint_camera(bins, row, x0, x1, part, offsets, area, order, n_targets, d_occ
     owner = np.zeros((height, width), np.int64)
     wmap = np.zeros((height, width, 1))
     hist = np.zeros((1, 3 * N_BINS))
-    alpha = np.zeros((1, 3))
     mark = np.zeros(3 * N_BINS, np.bool_)
     touched = np.empty(3 * N_BINS, np.int64)
     d2 = np.empty(3)
@@ -581,8 +584,8 @@ def joint_camera(bins, row, x0, x1, part, offsets, area, order, n_targets, d_occ
             if area[p] < min_pixels or area[p] <= 0:
                 continue
             occlusion_terms(bins, row, x0, x1, part, s0, s1, wmap, 0, 0, 1, float(area[p]),
-                            d_occ, key, k, va[p], vb[p], wa[p], hist, alpha, touched, mark,
-                            d2, out_l, out_v)
+                            d_occ, key, k, va[p], vb[p], wa[p], hist, touched, mark, d2,
+                            out_l, out_v)
             total += out_l[0]
         out[n] = total
     return out
@@ -593,9 +596,8 @@ def histogram_of(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, nch):
     """Unnormalised part histograms (3, 512) of one silhouette (``wmap`` (H, W, 1) used
     when ``nch == 1``)."""
     hist = np.zeros((1, 3 * N_BINS))
-    alpha = np.zeros((1, 3))
     touched = np.empty(3 * N_BINS, np.int64)
     mark = np.zeros(3 * N_BINS, np.bool_)
-    accumulate_histogram(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, nch, hist, alpha,
-                         touched, 0, mark)
+    accumulate_histogram(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, nch, hist, touched,
+                         0, mark)
     return hist.reshape(3, N_BINS)
