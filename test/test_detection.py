@@ -331,3 +331,38 @@ def test_release_after_the_configured_time():
     assert ended_at[1] == 10 + int(np.ceil(1.0 * FPS))  # exactly after 1 s unsupported
     with pytest.raises(DetectionError):
         rel.update(0, [1], [True, False])
+
+
+# -- tracker integration -----------------------------------------------------------------
+def test_tracker_detects_tracks_and_releases_a_painted_person():
+    """End to end with the real tracker: born within 0.5 s, released within 1.5 s."""
+    from mbtrack_ros.core.tracker import Tracker, TrackerConfig
+
+    rng = np.random.default_rng(8)
+    calib = make_room()
+    bgs = backgrounds(calib)
+    tracker = Tracker(calib, TrackerConfig(detection=True, particles=50, seed=1),
+                      rng=np.random.default_rng(1))
+    tracker.detection.bootstrap({n: [bgs[n]] for n in calib.cameras})
+    enter, leave, total = 3, 30, 60
+    born = ended = None
+    existence = []
+    for k in range(total):
+        x = 2.0 + 0.05 * k                       # walking at 0.75 m/s
+        people = [person(x, 2.8, theta=0.0)] if enter <= k < leave else []
+        stamp = int(round(k * 1e9 / FPS))
+        res = tracker.step(stamp, paint(calib, bgs, people, rng))
+        if born is None and res.tracks:
+            born = k
+            assert len(res.tracks) == 1
+            assert abs(res.tracks[0].mean[0] - x) < 0.3
+        if res.tracks:
+            t = res.tracks[0]
+            existence.append(t.existence)
+            assert set(t.visibility) <= set(calib.cameras)
+        if res.ended and ended is None:
+            ended = k
+    assert born is not None and (born - enter) / FPS <= 0.5
+    assert ended is not None and 0 < (ended - leave) / FPS <= 1.5
+    assert max(existence) > 0.9
+    assert tracker.track_ids == []
