@@ -167,3 +167,40 @@ def test_bad_state_rejected():
         tr.add_track(Model(), [1.0, 2.0], 0)
     with pytest.raises(TrackerError):
         tr.add_track(Model(), [np.inf, 2.0, 0, 0, 0, 0], 0)
+
+
+# -- ground-truth initiation -------------------------------------------------------------------
+def test_initial_state_and_height():
+    from mbtrack_ros.core.initiation import PersonTruth, body_height, initial_state
+
+    rows = [PersonTruth(f, f * 100_000_000, 7, 1.0 + 0.05 * f, 2.0, 1.7) for f in range(5)]
+    s = initial_state(rows, 0)
+    np.testing.assert_allclose(s[:4], [1.0, 2.0, 0.5, 0.0])
+    assert s[4] == pytest.approx(0.0)  # walking along +x
+    s_last = initial_state(rows, 4)  # the last row looks back
+    np.testing.assert_allclose(s_last[2:4], [0.5, 0.0])
+    assert body_height(rows) == pytest.approx(1.7)
+    sitting = [PersonTruth(0, 0, 1, 0.0, 0.0, 0.45 + 0.53 * 1.8, True)]
+    assert body_height(sitting) == pytest.approx(1.8)
+
+
+def test_key_views_skip_occluded_frames():
+    from mbtrack_ros.core.initiation import PersonTruth, plan_key_views
+
+    cal = room()
+    cam0 = cal.cameras['cam0'].center
+    ray = np.array([2.0, 2.0]) - cam0[:2]
+    ray /= np.linalg.norm(ray)
+    rows = []
+    for f in range(6):
+        far = cam0[:2] + 3.2 * ray
+        # person 2 stands in front of person 1 (on the same cam0 ray) in frames 0-2 only
+        near = cam0[:2] + (2.0 if f < 3 else 1.0) * ray + (0 if f < 3 else 1.2) * np.array(
+            [-ray[1], ray[0]])
+        rows.append(PersonTruth(f, f * 66_666_667, 1, far[0], far[1], 1.7))
+        rows.append(PersonTruth(f, f * 66_666_667, 2, near[0], near[1], 1.8))
+    plan = plan_key_views(cal, rows, min_area=20)
+    views1 = [(v.frame, v.camera) for v in plan[1]]
+    assert views1, 'person 1 is visible in frames 3-5'
+    assert all(f >= 3 for f, cam in views1 if cam == 'cam0')
+    assert any(f < 3 for f, cam in [(v.frame, v.camera) for v in plan[2]])
