@@ -21,6 +21,59 @@ N_PARTS = 3
 
 # -- rasterisation ----------------------------------------------------------------------------
 @njit(cache=True, nogil=True)
+def outline_points(end_px, end_depth, f, half, width, scale, focal, valid):
+    """Outline points left/right of the body axis at the profile heights (003 §2.1).
+
+    Args:
+        end_px: (N, 2, 2) projected bottom and top axis points; end_depth (N, 2) their
+            optical depths, metres.
+        f: (N, P) height fraction of each profile point between bottom and top.
+        half: (P,) half-width fractions; width (N,) body widths, metres; scale (N,) s(o).
+        focal: focal length, pixels; valid: (N,) bool (others get zeros).
+
+    The image position of the axis point at fraction f is placed on the segment with the
+    perspective-correct fraction ``f d1 / ((1 - f) d0 + f d1)`` (exact for a pinhole
+    camera, depth being linear along the axis); offsets are half-width * focal / depth * s,
+    perpendicular to the bottom -> top image direction.
+
+    Returns:
+        left, right: (N, P, 2) image points.
+    """
+    n = f.shape[0]
+    npts = f.shape[1]
+    left = np.zeros((n, npts, 2))
+    right = np.zeros((n, npts, 2))
+    for i in range(n):
+        if not valid[i]:
+            continue
+        bx = end_px[i, 0, 0]
+        by = end_px[i, 0, 1]
+        dx = end_px[i, 1, 0] - bx
+        dy = end_px[i, 1, 1] - by
+        norm = np.sqrt(dx * dx + dy * dy)
+        if norm > 1e-9:
+            nx = -dy / norm
+            ny = dx / norm
+        else:                                   # camera looking straight down the axis
+            nx = 1.0
+            ny = 0.0
+        d0 = end_depth[i, 0]
+        d1 = end_depth[i, 1]
+        for j in range(npts):
+            fj = f[i, j]
+            dep = (1.0 - fj) * d0 + fj * d1
+            g = fj * d1 / dep
+            ax = bx + g * dx
+            ay = by + g * dy
+            off = half[j] * width[i] * focal / dep * scale[i]
+            left[i, j, 0] = ax - nx * off
+            left[i, j, 1] = ay - ny * off
+            right[i, j, 0] = ax + nx * off
+            right[i, j, 1] = ay + ny * off
+    return left, right
+
+
+@njit(cache=True, nogil=True)
 def _quad_edges(i, j, left, right, edges):
     """Edges of the convex quad of segment j of particle i -> edges (4, 4) rows
     ``(y_top, y_bottom, x_at_top, dx/dy)`` (horizontal edges get y_top == y_bottom) and

@@ -208,58 +208,32 @@ def silhouette_outline(camera: Camera, states: np.ndarray, shape: BodyShape, *,
     h = _per_particle(heights, shape.height, n, 'heights')
     w = _per_particle(widths, shape.width, n, 'widths')
     frac = shape.fractions
-    half = shape.half_widths
+    hip = shape.hip_fraction
     sitting = states[:, SIT] >= 0.5
-    # standing: z = f h; sitting: hip at chair height, upper body unchanged, legs dropped
-    z = frac[None, :] * h[:, None]
-    z_sit = shape.chair_height + (frac[None, :] - shape.hip_fraction) * h[:, None]
-    z = np.where(sitting[:, None], z_sit, z)
+    # axis end points: feet (z = 0) and head top (z = h) standing; sitting, the hip at chair
+    # height and the head top at chair height + upper body height; legs dropped
+    zb = np.where(sitting, shape.chair_height, 0.0)
+    zt = np.where(sitting, shape.chair_height + (1.0 - hip) * h, h)
+    f = np.where(sitting[:, None], np.clip((frac[None, :] - hip) / (1.0 - hip), 0.0, None),
+                 frac[None, :])                               # (N, P) height fraction on axis
     seg_part = np.broadcast_to(shape.segment_parts, (n, frac.size - 1)).copy()
-    below_hip = frac[:-1] < shape.hip_fraction - 1e-12
+    below_hip = frac[:-1] < hip - 1e-12
     seg_part[np.ix_(sitting, below_hip)] = 0
-    pts = np.empty((n, frac.size, 3))
-    pts[:, :, 0] = states[:, None, X]
-    pts[:, :, 1] = states[:, None, Y]
-    pts[:, :, 2] = z
-    if np.any(sitting):  # the lowest kept point must be the hip: move dropped points onto it
-        hip = int(np.argmin(np.abs(frac - shape.hip_fraction)))
-        pts[sitting, :hip, 2] = z[sitting, hip][:, None]
-    # 003 §2.1: project the bottom (feet, or hip when sitting) and head-top points; the
-    # axis points in between lie on the image segment joining them, placed with
-    # perspective-correct interpolation (exact for the pinhole part of the camera).
-    ends = np.stack([pts[:, 0], pts[:, -1]], axis=1)          # (N, 2, 3)
+    ends = np.empty((n, 2, 3))
+    ends[:, :, 0] = states[:, None, X]
+    ends[:, :, 1] = states[:, None, Y]
+    ends[:, 0, 2] = zb
+    ends[:, 1, 2] = zt
+    # 003 §2.1: project the bottom and top points; the axis points in between lie on the
+    # image segment joining them (perspective-correct placement in the kernel)
     end_px = camera.project(ends)                              # (N, 2, 2)
-    depth = camera.depth(pts)                                  # (N, P)
-    valid = np.all(depth > 1e-3, axis=1) & np.all(np.isfinite(end_px), axis=(1, 2))
-    zb = pts[:, :1, 2]
-    zt = pts[:, -1:, 2]
-    with np.errstate(invalid='ignore', divide='ignore'):
-        f = (pts[:, :, 2] - zb) / (zt - zb)                    # (N, P) in [0, 1]
-        d0 = depth[:, :1]
-        d1 = depth[:, -1:]
-        g = f * d1 / ((1.0 - f) * d0 + f * d1)                 # image-space fraction
-    g = np.where(valid[:, None], g, 0.0)
-    bottom = end_px[:, 0]
-    top = end_px[:, 1]
-    d = top - bottom
-    axis = bottom[:, None, :] + g[:, :, None] * d[:, None, :]  # (N, P, 2)
-    norm = np.linalg.norm(d, axis=1)
-    with np.errstate(invalid='ignore', divide='ignore'):
-        normal = np.stack([-d[:, 1], d[:, 0]], axis=1) / norm[:, None]
-    normal[~(norm > 1e-9)] = (1.0, 0.0)                        # camera looking straight down
+    end_depth = camera.depth(ends)                             # (N, 2), linear in z
+    valid = np.all(end_depth > 1e-3, axis=1) & np.all(np.isfinite(end_px), axis=(1, 2))
     rel = states[:, THETA] - camera.viewing_angle(states[:, :2])
-    scale = width_scale(rel)
-    with np.errstate(invalid='ignore', divide='ignore'):
-        off = (half[None, :] * w[:, None]) * camera.focal / depth * scale[:, None]  # pixels
-    off = np.where(valid[:, None], off, 0.0)
-    left = axis - normal[:, None, :] * off[:, :, None]
-    right = axis + normal[:, None, :] * off[:, :, None]
-    left[~valid] = 0.0
-    right[~valid] = 0.0
-    centre = np.stack([states[:, X], states[:, Y], 0.5 * (z[:, 0] + z[:, -1])], axis=1)
-    if np.any(sitting):
-        hip_z = shape.chair_height
-        centre[sitting, 2] = 0.5 * (hip_z + z[sitting, -1])
+    left, right = _kernels.outline_points(
+        np.ascontiguousarray(end_px), end_depth, np.ascontiguousarray(f), shape.half_widths,
+        np.ascontiguousarray(w), width_scale(rel), camera.focal, valid)
+    centre = np.stack([states[:, X], states[:, Y], 0.5 * (zb + zt)], axis=1)
     distance = np.where(valid, camera.distance(centre), np.inf)
     return left, right, seg_part, valid, distance
 
