@@ -258,8 +258,9 @@ def accumulate_histogram(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, nch,
     With ``nch == 0`` every pixel adds 1 to channel 0; otherwise pixel u adds
     ``wmap[row - oy, c - ox, ch]`` to channel ``ch < nch`` (several weightings of the same
     pixels in one pass). The bin is ``part * 512 + bins[u]`` (part masses are summed from
-    the touched bins afterwards, cheaper than per pixel). Touched bins (shared by all channels) are appended to ``touched`` and
-    flagged in ``mark`` starting at ``nt``; returns the new count.
+    the touched bins afterwards, cheaper than per pixel). Touched bins (shared by all
+    channels) are appended to ``touched`` and flagged in ``mark`` starting at ``nt``;
+    returns the new count.
     """
     for s in range(s0, s1):
         r = row[s]
