@@ -185,12 +185,21 @@ def test_motion_is_smooth_and_bodies_face_the_walking_direction():
     assert all(1.5 <= w.height <= 2.0 for w in crowd.walkers)
 
 
-def test_lanz_seq4_twins_are_dressed_identically():
-    synth = Synthesizer('lanz-seq4-short', seed=0, frames=2, width=W, height=H)
+def test_lanz_seq4_twins_are_dressed_identically_and_fully_hidden():
+    synth = Synthesizer('lanz-seq4-short', seed=0, width=W, height=H)
     guard, a, b = synth.crowd.walkers
     assert a.clothing == b.clothing and a.clothing != guard.clothing
     assert 0.0 < abs(a.height - b.height) <= 0.05
     assert guard.height > max(a.height, b.height)
+    hidden = {a.person_id: 0, b.person_id: 0}
+    for frame in synth:
+        assert len(frame.ground_truth) == 3  # everybody is in the room from frame 0
+        for row in frame.ground_truth:
+            if row.person_id == guard.person_id:
+                assert row.visible_cameras == ('cam0',)
+            elif not row.visible_cameras:
+                hidden[row.person_id] += 1
+    assert min(hidden.values()) >= 3  # each twin disappears behind the guard
 
 
 def test_sitting_pose_lowers_the_head():

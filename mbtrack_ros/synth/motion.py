@@ -5,9 +5,9 @@ heading ``theta`` (= body orientation, so the body always faces the walking dire
 speed ``v``. Each person executes a list of tasks:
 
 * ``goto(point, v_des)``: turn towards the point (at most 3 rad/s) and walk; the target
-  speed is ``min(v_des, sqrt(2 a d))`` (smooth stop at the waypoint, ``a = 0.8 m/s^2``) and
-  is reduced while the heading error is large; the speed itself follows the target with
-  acceleration at most ``a`` (smooth speed changes, 0 .. 1.5 m/s);
+  speed is ``min(v_des, sqrt(2 a (d - 0.02)))`` (smooth stop at the waypoint,
+  ``a = 0.8 m/s^2``) and is reduced while the heading error is large; the speed itself
+  follows the target with acceleration at most ``a`` (smooth speed changes, 0 .. 1.5 m/s);
 * ``pause(seconds)``: stand still;
 * ``sit(chair, seconds)``: walk in front of a free chair, turn round, sit down (1.2 s blend of
   the pose, pelvis moving back over the seat), stay, stand up;
@@ -21,7 +21,8 @@ When a person's task list is empty a new task is drawn from the person's behavio
 Avoidance: other people within 1.2 m push a walking person away (``(1/d - 1/1.2)``
 repulsion plus a sideways term so that people pass each other on the right); a person
 waits (target speed 0, at most 2.5 s) while another *moving* person is less than 0.75 m
-ahead within +-60 deg. A hard constraint keeps walking people 0.42 m apart. People still
+ahead within +-60 deg. A hard constraint keeps walking people 0.42 m apart (``patrol``
+walkers follow their lines and only keep this hard gap). People still
 pass close enough to occlude each other in the cameras. Furniture footprints (inflated by
 0.25 m) push people out, except the chair a person is using.
 
@@ -79,6 +80,7 @@ class Walker:
     area: tuple[float, float, float, float] | None = None
     patrol: list[np.ndarray] = field(default_factory=list)
     patrol_pause: tuple[float, float] = (0.5, 2.0)
+    patrol_pauses: list[tuple[float, float]] | None = None  # per patrol point, if given
     speed_range: tuple[float, float] = (0.5, 1.5)
     leave_time: float = np.inf
     speed: float = 0.0
@@ -176,8 +178,10 @@ class Crowd:
         lo, hi = w.speed_range
         if w.behaviour == 'patrol':
             w.patrol_index = (w.patrol_index + 1) % len(w.patrol)
+            pause = (w.patrol_pauses[w.patrol_index] if w.patrol_pauses is not None
+                     else w.patrol_pause)
             w.tasks = [['goto', w.patrol[w.patrol_index], float(rng.uniform(lo, hi))],
-                       ['pause', float(rng.uniform(*w.patrol_pause))]]
+                       ['pause', float(rng.uniform(*pause))]]
             return
         if w.behaviour == 'area':
             if rng.random() < 0.25:
@@ -257,17 +261,19 @@ class Crowd:
             target, v_des = task[1], min(task[2], MAX_SPEED)
             delta = target - w.pos
             dist = float(np.linalg.norm(delta))
-            if dist < 0.08 or (dist < 0.3 and w.speed < 0.05 and w.stuck > 1.0):
+            if dist < 0.05 or (dist < 0.3 and w.speed < 0.05 and w.stuck > 1.0):
                 w.tasks.pop(0)
                 w.stuck = 0.0
                 if len(task) > 3 and task[3] == 'door':
                     w.in_door = False
             else:
                 direction = delta / dist
-                push = self._repulsion(w, alive, direction)
+                # patrol walkers follow their lines (a choreography): no soft repulsion
+                push = (np.zeros(2) if w.behaviour == 'patrol'
+                        else self._repulsion(w, alive, direction))
                 desired = direction + push
                 heading_goal = float(np.arctan2(desired[1], desired[0]))
-                v_target = min(v_des, np.sqrt(2 * ACCEL * max(dist - 0.05, 0.0)))
+                v_target = min(v_des, np.sqrt(2 * ACCEL * max(dist - 0.02, 0.0)))
                 if self._blocked(w, alive):
                     w.waited += dt
                     if w.waited < 2.5:

@@ -46,21 +46,24 @@ def _lanz_seq4(crowd: Crowd) -> None:
     def at(dist: float, lateral: float) -> np.ndarray:
         return _CAM_XY + dist * _VIEW + lateral * _ACROSS
 
-    # The occluder: tall (2.0 m), close to the camera, mostly standing. The camera looks
-    # down from 2.6 m, so a person at distance d2 behind him is fully hidden only while
+    # The occluder: tall (2.0 m), close to the camera, standing half turned away from it
+    # (his legs overlap in the view, no gap between them). The camera
+    # looks down from 2.6 m, so a person at distance d2 behind him is fully hidden only while
     # (2.6 - h2) / (2.6 - h1) >= d2 / d1: the twins stay within about 1.45 d1.
     crowd.add(tuple(at(1.9, 0.0)), behaviour='patrol', height=2.0,
-              patrol=[at(1.9, -0.08), at(1.9, 0.08)], patrol_pause=(2.0, 5.0),
-              speed_range=(0.25, 0.35))
+              theta=float(np.arctan2(-_VIEW[1], -_VIEW[0])) + 0.8,
+              patrol=[at(1.9, -0.04), at(1.9, 0.04)], patrol_pause=(2.0, 5.0),
+              speed_range=(0.2, 0.3))
     twins = random_clothing(crowd.rng)
-    base = float(crowd.rng.uniform(1.6, 1.65))
-    # the twins walk back and forth behind him, pausing right behind him now and then
-    for k, (dist, h) in enumerate(((2.45, base), (2.75, base + 0.03))):
+    base = float(crowd.rng.uniform(1.6, 1.63))
+    # the twins walk back and forth behind him and stand right behind him for a while
+    for k, (dist, h) in enumerate(((2.5, base), (2.92, base + 0.03))):
         ends = [at(dist, -0.6), at(dist, 0.0), at(dist, 1.1), at(dist, 0.0)]
-        start = 2 * k
+        pauses = [(0.3, 1.0), (1.5, 4.0), (0.3, 1.0), (1.5, 4.0)]
+        start = 2 * k + 1
         crowd.add(tuple(ends[start]), behaviour='patrol', height=h, clothing=twins,
-                  patrol=ends[start:] + ends[:start], patrol_pause=(0.5, 3.0),
-                  speed_range=(0.7, 1.0))
+                  patrol=ends[start:] + ends[:start],
+                  patrol_pauses=pauses[start:] + pauses[:start], speed_range=(0.7, 1.0))
 
 
 def _clear_room(crowd: Crowd) -> None:
