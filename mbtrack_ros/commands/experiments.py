@@ -15,6 +15,8 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 __all__ = ['add_parser', 'run']
 
 _PROG = 'mbtrack experiments'
@@ -40,7 +42,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                         help='recording for the MRF ablation (HJS N=100 with/without MRF)')
     parser.add_argument('--seeds', default='0,1,2,3,4', help='seeds of the ablation')
     parser.add_argument('--max-frames', type=int, default=None, metavar='N')
-    parser.add_argument('--seed', type=int, default=0, help='seed of the comparison runs')
+    parser.add_argument('--run-seeds', default='0',
+                        help='comma-separated seeds of the comparison runs (results are '
+                             'averaged; curves are the mean over seeds)')
+    parser.add_argument('--d-occ', type=float, default=0.15, help='occlusion penalty d_occ')
+    parser.add_argument('--sigma', type=float, default=0.12, help='likelihood width sigma')
+    parser.add_argument('--tag', default='', help='suffix of the PNG names')
 
     def error(message: str) -> None:
         print(f'{_PROG}: error: {message}', file=sys.stderr)
@@ -67,7 +74,7 @@ def _parse_runs(text: str) -> list[tuple[str, int]]:
 
 
 def _replay(recording: Path, out: Path, alg: str, n: int, seed: int, max_frames: int | None,
-            *, mrf: bool = True) -> dict:
+            *, mrf: bool = True, d_occ: float = 0.15, sigma: float = 0.12) -> dict:
     from mbtrack_ros.cli import main
     from mbtrack_ros.evaluation.clear_mot import clear_mot
     from mbtrack_ros.evaluation.posterior import posterior_mass
@@ -75,7 +82,8 @@ def _replay(recording: Path, out: Path, alg: str, n: int, seed: int, max_frames:
 
     gt = recording / 'ground_truth.csv'
     argv = ['replay', str(recording), '--out', str(out), '--init-from', str(gt),
-            '--algorithm', alg, '--seed', str(seed), '--save-particles']
+            '--algorithm', alg, '--seed', str(seed), '--save-particles',
+            '--d-occ', str(d_occ), '--sigma', str(sigma)]
     argv += ['--joint-particles', str(n)] if alg == 'joint' else ['--particles', str(n)]
     if not mrf:
         argv.append('--no-mrf')
@@ -94,13 +102,30 @@ def _replay(recording: Path, out: Path, alg: str, n: int, seed: int, max_frames:
     result = clear_mot(tracks, truth, name=f'{recording.name} {alg} {n}')
     mass = posterior_mass(out / 'particles.npz', truth, tracks, matching=result)
     return {'recording': recording.name, 'algorithm': alg, 'particles': n, 'seed': seed,
-            'mrf': mrf, 'exit_code': code, 'frames': frames, 'wall_s': wall,
+            'mrf': mrf, 'd_occ': d_occ, 'sigma': sigma, 'exit_code': code, 'frames': frames, 'wall_s': wall,
             'frames_per_s': frames / max(wall, 1e-9), 'mota': result.mota,
             'motp_mm': result.motp_mm, 'miss_rate': result.miss_rate,
             'false_positive_rate': result.false_positive_rate,
             'mismatches': result.mismatches, 'mass_0_5': mass.at(0.5),
             'mass_0_25': mass.at(0.25), 'curve': [mass.distances.tolist(),
                                                   mass.fraction.tolist()]}
+
+
+def _aggregate(group: list[dict]) -> dict:
+    """Mean +- std over seeds of one (recording, run), as formatted strings."""
+    def ms(key: str, scale: float = 1.0, digits: int = 3, unit: str = '') -> str:
+        v = np.array([g[key] for g in group], np.float64) * scale
+        if len(v) == 1:
+            return f'{v[0]:.{digits}f}{unit}'
+        return f'{v.mean():.{digits}f} +- {v.std(ddof=1):.{digits}f}{unit}'
+
+    first = group[0]
+    return {'recording': first['recording'], 'algorithm': first['algorithm'],
+            'particles': first['particles'], 'seeds': [g['seed'] for g in group],
+            'frames_per_s': float(np.mean([g['frames_per_s'] for g in group])),
+            'mota': ms('mota', 100, 1, ' %'), 'motp_mm': ms('motp_mm', 1, 0, ' mm'),
+            'miss_rate': ms('miss_rate', 100, 1, ' %'), 'mismatches': ms('mismatches', 1, 1),
+            'mass_0_25': ms('mass_0_25'), 'mass_0_5': ms('mass_0_5')}
 
 
 def _fmt(x: float, pct: bool = False) -> str:
@@ -114,8 +139,11 @@ def run(args: argparse.Namespace) -> int:
     try:
         runs = _parse_runs(args.runs)
         seeds = [int(s) for s in args.seeds.split(',') if s.strip()]
+        run_seeds = [int(s) for s in args.run_seeds.split(',') if s.strip()]
     except ValueError as err:
         return _error(str(err))
+    if not run_seeds:
+        return _error('--run-seeds is empty')
     for rec in list(args.recordings) + ([args.ablation] if args.ablation else []):
         if not (rec / 'ground_truth.csv').exists() or not (rec / 'bag').exists():
             return _error(f'{rec} is not a recording directory made by mbtrack synth')
@@ -128,16 +156,27 @@ def run(args: argparse.Namespace) -> int:
     from mbtrack_ros.evaluation.plots import plot_posterior_curves
 
     rows: list[dict] = []
+    summary: list[dict] = []
+    lik = {'d_occ': args.d_occ, 'sigma': args.sigma}
     for rec in args.recordings:
         curves = {}
         for alg, n in runs:
             name = f'{alg}_{n}'
-            print(f'{_PROG}: {rec.name} {name}', file=sys.stderr)
-            r = _replay(rec, out / rec.name / name, alg, n, args.seed, args.max_frames)
-            rows.append(r)
-            curves[f'{"HJS" if alg == "hjs" else alg[0].upper()}_{n}p'] = tuple(r['curve'])
-        plot_posterior_curves(curves, img / f'posterior_{rec.name}.png',
-                              title=f'{rec.name}: posterior mass around the truth')
+            group = []
+            for seed in run_seeds:
+                print(f'{_PROG}: {rec.name} {name} seed {seed}', file=sys.stderr)
+                r = _replay(rec, out / rec.name / f'{name}_s{seed}', alg, n, seed,
+                            args.max_frames, **lik)
+                rows.append(r)
+                group.append(r)
+            summary.append(_aggregate(group))
+            d = np.array(group[0]['curve'][0])
+            frac = np.mean([g['curve'][1] for g in group], axis=0)
+            curves[f'{"HJS" if alg == "hjs" else alg[0].upper()}_{n}p'] = (d, frac)
+        plot_posterior_curves(curves, img / f'posterior_{rec.name}{args.tag}.png',
+                              title=f'{rec.name}: posterior mass around the truth'
+                                    + (f' ({len(run_seeds)} seeds)' if len(run_seeds) > 1
+                                       else ''))
     ablation: list[dict] = []
     if args.ablation is not None:
         for mrf in (True, False):
@@ -145,16 +184,17 @@ def run(args: argparse.Namespace) -> int:
                 tag = f'hjs_100_{"mrf" if mrf else "nomrf"}_s{seed}'
                 print(f'{_PROG}: ablation {args.ablation.name} {tag}', file=sys.stderr)
                 ablation.append(_replay(args.ablation, out / 'ablation' / tag, 'hjs', 100,
-                                        seed, args.max_frames, mrf=mrf))
-    lines = ['| recording | run | frames | frames/s | MOTA | MOTP | miss | false pos | '
-             'ID switches | mass@0.25m | mass@0.5m |',
-             '| --- | --- |' + ' ---: |' * 9]
-    for r in rows:
+                                        seed, args.max_frames, mrf=mrf, **lik))
+    lines = [f'd_occ = {args.d_occ}, sigma = {args.sigma}, seeds {args.run_seeds}; '
+             'mean +- standard deviation over seeds', '',
+             '| recording | run | frames/s | MOTA | MOTP | miss | ID switches | '
+             'mass@0.25m | mass@0.5m |',
+             '| --- | --- |' + ' ---: |' * 7]
+    for r in summary:
         lines.append(f'| {r["recording"]} | {r["algorithm"]} N={r["particles"]} | '
-                     f'{r["frames"]} | {r["frames_per_s"]:.1f} | {_fmt(r["mota"], True)} | '
-                     f'{r["motp_mm"]:.0f} mm | {_fmt(r["miss_rate"], True)} | '
-                     f'{_fmt(r["false_positive_rate"], True)} | {r["mismatches"]} | '
-                     f'{_fmt(r["mass_0_25"])} | {_fmt(r["mass_0_5"])} |')
+                     f'{r["frames_per_s"]:.1f} | {r["mota"]} | {r["motp_mm"]} | '
+                     f'{r["miss_rate"]} | {r["mismatches"]} | {r["mass_0_25"]} | '
+                     f'{r["mass_0_5"]} |')
     if ablation:
         lines += ['', '| MRF | seed | MOTA | ID switches | mass@0.5m |',
                   '| --- | ---: | ---: | ---: | ---: |']
@@ -162,9 +202,14 @@ def run(args: argparse.Namespace) -> int:
             lines.append(f'| {"on" if r["mrf"] else "off"} | {r["seed"]} | '
                          f'{_fmt(r["mota"], True)} | {r["mismatches"]} | '
                          f'{_fmt(r["mass_0_5"])} |')
+        for mrf in (True, False):
+            agg = _aggregate([r for r in ablation if r['mrf'] == mrf])
+            lines.append(f'| {"on" if mrf else "off"} | mean | {agg["mota"]} | '
+                         f'{agg["mismatches"]} | {agg["mass_0_5"]} |')
     table = '\n'.join(lines)
     (out / 'results.md').write_text(table + '\n', encoding='utf-8')
-    (out / 'results.json').write_text(json.dumps({'runs': rows, 'ablation': ablation},
+    (out / 'results.json').write_text(json.dumps({'runs': rows, 'summary': summary,
+                                                  'ablation': ablation},
                                                  indent=1), encoding='utf-8')
     print(table)
     return 0
