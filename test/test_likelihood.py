@@ -135,14 +135,15 @@ def test_hjs_loglik_combines_fc_bc_and_is_neutral_out_of_view():
     mm.set_images({'cam': _random_image(rng, cam.height, cam.width)})
     models = [_random_model(rng, 1.7) for _ in range(2)]
     particles = [_random_particles(rng, (0.0, 0.0), 4), _random_particles(rng, (0.2, 0.5), 4)]
-    particles[1][0, X] = 50.0                                # far outside the view
+    particles[1][[0, -1], X] = 50.0                          # far outside the view
     weights = [np.ones(4), np.ones(4)]
     res = mm.hjs(particles, weights, models)
     dbg = mm.hjs_debug('cam', particles, weights, models)
     expect = -(dbg.fc + dbg.bc) / (2 * 0.1 ** 2)
     expect[dbg.silhouettes.area == 0] = 0.0
     np.testing.assert_allclose(np.concatenate(res.loglik), expect, atol=1e-12)
-    assert res.loglik[1][0] == 0.0
+    assert res.loglik[1][0] == 0.0 and res.loglik[1][-1] == 0.0
+    assert np.all(dbg.w_star[dbg.silhouettes.area == 0] == 0.0)
     assert res.visible_fraction.shape == (2, 1)
     assert np.all((res.visible_fraction >= 0) & (res.visible_fraction <= 1))
     # visible fraction: prior-weighted mean of sum(w*) / silhouette area (0 out of view)

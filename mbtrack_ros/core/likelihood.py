@@ -239,7 +239,8 @@ class MeasurementModel:
     def _prepare(self, camera: str, particles: list[np.ndarray],
                  models: Sequence[PersonModel], timings: dict[str, float]
                  ) -> tuple[Silhouettes, np.ndarray, np.ndarray]:
-        """Silhouettes, target index (P,) and sqrt model histograms (P, 1536) of K targets."""
+        """Silhouettes of the K targets' particles in one camera, target index (P,) and the
+        key views with per-particle interpolation weights (see :meth:`_views`)."""
         cam = self._camera(camera)
         t0 = time.perf_counter()
         states = (np.concatenate(particles, axis=0) if particles
@@ -298,11 +299,9 @@ class MeasurementModel:
         prior = (np.concatenate(priors) if priors else np.zeros(0))
         t0 = time.perf_counter()
         order = np.argsort(sil.distance, kind='stable')
-        widths = (sil.x1 - sil.x0).astype(np.int64)
         if record:
-            per = np.add.reduceat(widths, sil.offsets[:-1]) if widths.size else None
-            counts = np.where(np.diff(sil.offsets) > 0, per, 0) if per is not None else \
-                np.zeros(len(sil), np.int64)
+            owner = np.repeat(np.arange(len(sil)), np.diff(sil.offsets))
+            counts = np.bincount(owner, weights=sil.x1 - sil.x0, minlength=len(sil))
             pix_offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
             rec = np.zeros(int(pix_offsets[-1]))
         else:
