@@ -14,7 +14,7 @@ from mbtrack_ros.core.detection.detector import (
 from mbtrack_ros.core.detection.features import (
     EdgeMap, ForegroundIntegral, Spans, colour_symmetry, contour_loglik, contour_loglik_spans,
     outline)
-from mbtrack_ros.core.detection.release import ReleaseConfig, Releaser
+from mbtrack_ros.core.detection.release import ReleaseConfig, Releaser, blob_coverage
 from mbtrack_ros.core.shape import TORSO, BodyShape, rasterize, render_labels
 
 W, H = 160, 120
@@ -60,6 +60,16 @@ def paint(calib, bgs, people, rng, screen=None):
                 img[tmp > 0] = screen
         order = sorted(people, key=lambda p: -cam.distance(np.r_[p[0][:2], 0.9]))
         for state, shape, colours in order:
+            if is_ceiling(cam):  # seen from above: a blob (head, shoulders) around the feet
+                ring = np.linspace(0, 2 * np.pi, 16, endpoint=False)
+                pts = [np.c_[state[0] + 0.25 * np.cos(ring), state[1] + 0.25 * np.sin(ring),
+                             np.full(16, z)] for z in (0.0, shape.height)]
+                hull = cv2.convexHull(np.round(cam.project(np.concatenate(pts))).astype(
+                    np.int32))
+                tmp = np.zeros((H, W), np.uint8)
+                cv2.fillConvexPoly(tmp, hull, 1)
+                img[tmp > 0] = colours[1]
+                continue
             lab = render_labels(cam, state, shape)
             for part in (1, 2, 3):
                 img[lab == part] = colours[part - 1]
@@ -331,6 +341,28 @@ def test_release_after_the_configured_time():
     assert ended_at[1] == 10 + int(np.ceil(1.0 * FPS))  # exactly after 1 s unsupported
     with pytest.raises(DetectionError):
         rel.update(0, [1], [True, False])
+
+
+def test_blob_coverage_supports_a_person_right_below_the_ceiling_camera():
+    calib = make_room()
+    cam = calib.cameras['cam4']
+    below = cam.center[:2]
+    xy = np.array([below, below + [1.0, 0.5]])
+    # the body outline degenerates right below the camera, the cylinder blob does not
+    assert rasterize(cam, np.r_[below, 0, 0, 0, 0][None], BodyShape()).area[0] < 20
+    full = np.ones((H, W), bool)
+    cov, area = blob_coverage(cam, full, xy, np.array([1.75, 1.75]))
+    assert np.all(area > 50) and np.allclose(cov, 1.0)
+    half = np.zeros((H, W), bool)
+    half[:, :int(round(cam.project(np.r_[below, 0.0])[0]))] = True
+    cov, _ = blob_coverage(cam, half, xy[:1], np.array([1.75]))
+    assert 0.35 < cov[0] < 0.65
+    rel = Releaser(calib)
+    sil = rasterize(cam, np.c_[xy, np.zeros((2, 4))], BodyShape())
+    ev = {'cam4': FrameEvidence(np.zeros((H, W, 3), np.uint8), full)}
+    supported, _ = rel.support(ev, {'cam4': sil}, np.c_[xy, np.zeros((2, 4))],
+                               np.array([1.75, 1.75]))
+    assert supported.all()
 
 
 # -- tracker integration -----------------------------------------------------------------

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from mbtrack_ros.core import _kernels
 from mbtrack_ros.core.appearance import (
     PersonModel, quantize, relative_angle, single_target_loglik)
 from mbtrack_ros.core.camera import RoomCalibration
@@ -32,7 +33,7 @@ from mbtrack_ros.core.detection.detector import (
 from mbtrack_ros.core.detection.release import ReleaseConfig, Releaser
 from mbtrack_ros.core.existence import AuxiliaryConfig, TrackAuxiliary, predictive_loglik
 from mbtrack_ros.core.shape import BodyShape, rasterize
-from mbtrack_ros.core.state import THETA, X, Y, TrackEstimate
+from mbtrack_ros.core.state import SIT, THETA, X, Y, TrackEstimate
 
 __all__ = ['AutoDetection', 'AutoDetectionConfig', 'Birth']
 
@@ -140,8 +141,9 @@ class AutoDetection:
             if len(tracks):
                 sil = rasterize(cam, means, shapes)
                 sils[n] = sil
-                for k in range(len(tracks)):
-                    mask |= sil.mask(k) > 0
+                paint = mask.view(np.uint8)
+                _kernels.paint_spans(paint, sil.row, sil.x0, sil.x1, sil.part, 0,
+                                     int(sil.offsets[-1]), 1, False)
             masks[n] = mask
         t1 = time.perf_counter()
         # 2. background and foreground
@@ -154,7 +156,11 @@ class AutoDetection:
         ended: list[int] = []
         if tracks:
             if evidence:
-                supported, coverage = self.releaser.support(evidence, sils)
+                # head height: sitting keeps the upper body above the chair (003 §2.1)
+                tops = np.array([sh.chair_height + (1.0 - sh.hip_fraction) * sh.height
+                                 if m[SIT] >= 0.5 else sh.height
+                                 for sh, m in zip(shapes, means)])
+                supported, coverage = self.releaser.support(evidence, sils, means, tops)
             else:
                 supported = np.ones(len(tracks), bool)
                 coverage = {}

@@ -13,13 +13,62 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
-from mbtrack_ros.core.camera import RoomCalibration
+from mbtrack_ros.core.camera import Camera, RoomCalibration
 from mbtrack_ros.core.detection import DetectionError
 from mbtrack_ros.core.detection.detector import FrameEvidence, is_ceiling
 
-__all__ = ['ReleaseConfig', 'Releaser']
+__all__ = ['ReleaseConfig', 'Releaser', 'blob_coverage']
+
+
+def blob_coverage(camera: Camera, foreground: np.ndarray, xy: np.ndarray,
+                  heights: np.ndarray, *, radius: float = 0.25, sides: int = 12
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Foreground coverage of the image of upright cylinders (a top-down camera's view of
+    people: a blob around the floor point, 003 §4.3).
+
+    The body-outline silhouette degenerates to a line or a point for a person right below
+    a ceiling camera; the convex hull of the projected floor and head circles does not.
+
+    Args:
+        camera: the (top-down) camera; foreground: (H, W) bool mask.
+        xy: (K, 2) floor positions, metres; heights: (K,) cylinder heights, metres.
+
+    Returns:
+        coverage: (K,) foreground fraction of the blob (0 where it is empty);
+        area: (K,) blob pixels inside the image.
+    """
+    fg = np.asarray(foreground, dtype=bool)
+    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    k = xy.shape[0]
+    a = np.linspace(0.0, 2.0 * np.pi, sides, endpoint=False)
+    ring = np.stack([np.cos(a), np.sin(a)], axis=1) * radius            # (S, 2)
+    pts = np.zeros((k, 2, sides, 3))
+    pts[:, :, :, :2] = xy[:, None, None, :] + ring[None, None]
+    pts[:, 1, :, 2] = np.asarray(heights, dtype=np.float64).reshape(-1)[:, None]
+    pix = camera.project(pts.reshape(k, 2 * sides, 3))                    # (K, 2S, 2)
+    cov = np.zeros(k)
+    area = np.zeros(k)
+    h, w = fg.shape
+    for i in range(k):
+        p = pix[i][np.all(np.isfinite(pix[i]), axis=1)]
+        if len(p) < 3:
+            continue
+        x0, y0 = np.floor(p.min(axis=0)).astype(int)
+        x1, y1 = np.ceil(p.max(axis=0)).astype(int) + 1
+        cx0, cy0, cx1, cy1 = max(x0, 0), max(y0, 0), min(x1, w), min(y1, h)
+        if cx1 <= cx0 or cy1 <= cy0:
+            continue
+        hull = cv2.convexHull(np.round(p - [cx0, cy0]).astype(np.int32))
+        roi = np.zeros((cy1 - cy0, cx1 - cx0), np.uint8)
+        cv2.fillConvexPoly(roi, hull, 1)
+        inside = roi.astype(bool)
+        area[i] = inside.sum()
+        if area[i] > 0:
+            cov[i] = fg[cy0:cy1, cx0:cx1][inside].mean()
+    return cov, area
 
 
 @dataclass(frozen=True)
@@ -59,13 +108,17 @@ class Releaser:
             else [n for n in calibration.cameras if n not in ceiling] or ceiling
         self._since: dict[int, int] = {}
 
-    def support(self, evidence: Mapping[str, FrameEvidence], silhouettes: Mapping[str, object]
+    def support(self, evidence: Mapping[str, FrameEvidence], silhouettes: Mapping[str, object],
+                states: np.ndarray | None = None, heights: np.ndarray | None = None
                 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """Support of K tracks from their rendered silhouettes.
 
         Args:
             evidence: per camera the frame's foreground.
             silhouettes: per camera the K tracks' silhouettes (``shape.rasterize`` output).
+            states, heights: (K, 6) states and (K,) body heights; when given, top-down
+                cameras use the cylinder blob of :func:`blob_coverage` instead of the
+                silhouettes.
 
         Returns:
             supported: (K,) bool.
@@ -79,7 +132,11 @@ class Releaser:
             if name not in evidence:
                 continue
             cam = self.calibration.cameras[name]
-            cov, _, area = evidence[name].plain.coverage(sil)
+            if states is not None and heights is not None and is_ceiling(cam):
+                cov, area = blob_coverage(cam, evidence[name].foreground, states[:, :2],
+                                          heights)
+            else:
+                cov, _, area = evidence[name].plain.coverage(sil)
             sees = area >= cfg.min_area * cam.width * cam.height / (320.0 * 240.0)
             coverage[name] = np.where(sees, cov, np.nan)
             if supported is None:
