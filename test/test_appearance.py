@@ -102,6 +102,21 @@ def test_interpolation_hand_weights():
     np.testing.assert_allclose(single.interpolate(np.array([2.0, -1.0])), norm[[0, 0]])
 
 
+def test_missing_part_is_completed_from_nearest_view():
+    rng = np.random.default_rng(2)
+    hists = rng.random((3, 3, 512))
+    hists[0, 2] = 0.0                                    # legs never seen in view 0
+    model = PersonModel(1.7, 0.5, [0.0, np.deg2rad(80.0), np.deg2rad(200.0)], hists)
+    norm = hists / np.maximum(hists.sum(axis=2, keepdims=True), 1e-300)
+    done = model.completed_histograms()
+    np.testing.assert_allclose(done[0, 2], norm[1, 2])   # 80 deg is nearer than 200 deg
+    np.testing.assert_allclose(done[1:], norm[1:])
+    np.testing.assert_array_equal(model.histograms[0, 2], 0.0)   # stored model unchanged
+    out = model.interpolate(np.array([np.deg2rad(20.0)]))
+    np.testing.assert_allclose(out.sum(axis=2), 1.0)
+    np.testing.assert_allclose(out[0, 2], norm[1, 2])
+
+
 def test_add_view_merges_close_views():
     h0 = np.zeros((3, 512))
     h0[:, 1] = 1.0

@@ -121,8 +121,23 @@ class PersonModel:
         is; for key views 90 degrees apart both forms coincide.) One key view -> itself.
         """
         va, vb, wa = self.interpolation_weights(rel_angles)
-        return (wa[:, None, None] * self.histograms[va]
-                + (1.0 - wa)[:, None, None] * self.histograms[vb])
+        hists = self.completed_histograms()
+        return (wa[:, None, None] * hists[va] + (1.0 - wa)[:, None, None] * hists[vb])
+
+    def completed_histograms(self) -> np.ndarray:
+        """Key views (V, 3, 512) with parts never seen in a view (e.g. the legs of a view
+        acquired while sitting) taken from the angularly nearest view that has them, so
+        that interpolated part histograms stay normalised."""
+        hists = self.histograms.copy()
+        seen = hists.sum(axis=2) > 0                               # (V, 3)
+        if seen.all() or self.view_angles.size < 2:
+            return hists
+        dist = np.abs(_wrap(self.view_angles[:, None] - self.view_angles[None, :]))
+        for v, q in zip(*np.nonzero(~seen)):
+            donors = np.flatnonzero(seen[:, q])
+            if donors.size:
+                hists[v, q] = self.histograms[donors[np.argmin(dist[v, donors])], q]
+        return hists
 
     def interpolation_weights(self, rel_angles: np.ndarray
                               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

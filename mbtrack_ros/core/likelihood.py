@@ -266,7 +266,8 @@ class MeasurementModel:
         vmax = max((m.view_angles.size for m in models), default=1)
         key = np.zeros((len(models), max(vmax, 1), 3 * _kernels.N_BINS))
         for k, m in enumerate(models):
-            key[k, :m.view_angles.size] = m.histograms.reshape(m.view_angles.size, -1)
+            key[k, :m.view_angles.size] = m.completed_histograms().reshape(
+                m.view_angles.size, -1)
         return key
 
     def _views(self, cam: Camera, states: np.ndarray, target: np.ndarray,
