@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import itertools
 
+import cv2
 import numpy as np
 import pytest
 
@@ -10,6 +11,7 @@ from mbtrack_ros.core.appearance import (PersonModel, bhattacharyya_distance_sq,
                                          relative_angle)
 from mbtrack_ros.core.camera import Camera, RoomCalibration, look_at
 from mbtrack_ros.core.likelihood import LikelihoodConfig, LikelihoodError, MeasurementModel
+from mbtrack_ros.core.shape import BodyShape, silhouette_outline
 from mbtrack_ros.core.state import THETA, X, Y
 
 D_OCC = 0.15
@@ -241,17 +243,23 @@ def test_joint_explicit_order_swaps_occluder():
         mm.joint(sample, models, orders=np.array([[[0, 0]]]))
 
 
-def _paint(mm: MeasurementModel, cams, states, models, colours, background=(90, 90, 90)):
-    """Synthetic images: each person's parts painted in flat colours, near over far."""
+def _paint(cams, states, models, colours, background=(90, 90, 90)):
+    """Synthetic images: each person's part quads filled with cv2.fillPoly in flat colours
+    (independent of the span rasteriser), far to near."""
     images = {}
     for cam in cams:
         img = np.empty((cam.height, cam.width, 3), np.uint8)
         img[:] = background
         order = np.argsort([-cam.distance(np.array([s[X], s[Y], 0.9])) for s in states])
         for k in order:
-            lab = mm.render_labels(cam.name, states[k], models[k])
-            for q in range(3):
-                img[lab == q + 1] = colours[k][q]
+            left, right, seg_part, _, _ = silhouette_outline(
+                cam, states[k:k + 1], BodyShape(height=models[k].height,
+                                                width=models[k].width))
+            for j in range(seg_part.shape[1]):
+                if seg_part[0, j]:
+                    quad = np.array([left[0, j], right[0, j], right[0, j + 1], left[0, j + 1]])
+                    cv2.fillPoly(img, [np.round(quad * 16).astype(np.int32)],
+                                 colours[k][seg_part[0, j] - 1], shift=4)
         images[cam.name] = img
     return images
 
@@ -272,7 +280,7 @@ def test_correct_particle_scores_higher_than_displaced():
     truth = np.zeros((2, 6))
     truth[0, [X, Y]] = (0.0, 0.0)
     truth[1, [X, Y]] = (0.2, 0.9)
-    mm.set_images(_paint(mm, cams, truth, models, colours))
+    mm.set_images(_paint(cams, truth, models, colours))
     shifts = np.array([[0, 0], [0.3, 0], [-0.3, 0], [0, 0.3], [0.2, -0.2]])
     parts = []
     for k in range(2):
