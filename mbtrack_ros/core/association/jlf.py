@@ -186,6 +186,7 @@ def best_orders(joint_states: np.ndarray, joint_score: JointScoreFn,
                 mask = pair_masks[i]
                 ref_sig = table.signature(ref[i, c], mask)
                 for p in table.distinct(mask):
+                    # 004 §5.2.1: one representative per visually distinct order class
                     if np.array_equal(table.front[p][mask], ref_sig):
                         continue  # same masks as the reference order
                     orders = ref[i].copy()
@@ -270,7 +271,7 @@ def jlf_measurement(means: np.ndarray, covs: np.ndarray, joint_score: JointScore
         js[0, :, [X, Y]] = means[:, [X, Y]].T
     orders, loglik, evaluations = best_orders(js, joint_score, cameras, heights, widths,
                                               active=active)
-    i = int(np.argmax(loglik))
+    i = int(np.argmax(loglik))  # 004 §5.2.1: the most probable joint sample
     states, value = js[i].copy(), float(loglik[i])
     if refine and np.isfinite(value):
         states, value = refine_joint(states, orders[i], joint_score, max_evals=refine_evals)

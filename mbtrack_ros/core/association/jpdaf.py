@@ -81,7 +81,7 @@ def enumerate_events(gated: np.ndarray, *, max_events: int = 200_000) -> np.ndar
         parts_e = [np.hstack([events, np.full((events.shape[0], 1), MISSED, np.intp)])]
         parts_u = [used]
         for j in np.flatnonzero(gated[t]):
-            free = ~used[:, j]
+            free = ~used[:, j]  # 004 §5.1: no measurement for two targets
             if not free.any():
                 continue
             ext = np.hstack([events[free], np.full((int(free.sum()), 1), j, np.intp)])
@@ -153,7 +153,7 @@ def jpdaf_probabilities(nu: np.ndarray, S: np.ndarray, *, p_detect: float, p_gat
     log_miss = np.full(n_targets, miss_log_weight(
         p_detect=p_detect, p_gate=p_gate, clutter_density=clutter_density))
     events = enumerate_events(gated, max_events=max_events)
-    logw = event_log_weights(events, log_assoc, log_miss)
+    logw = event_log_weights(events, log_assoc, log_miss)  # 004 §5.1: P(Theta)
     if not np.any(np.isfinite(logw)):
         # lambda = 0 and no event explains every target: in the limit lambda -> 0 only the
         # events with the most detections keep weight (each miss costs a factor lambda).
@@ -228,5 +228,5 @@ def joint_measurements(means: np.ndarray, covs: np.ndarray, scores: list[ScoreFn
               for t in range(means.shape[0])]
     states = np.vstack([m.states for m in pooled]) if pooled else np.zeros((0, 6))
     loglik = np.concatenate([m.loglik for m in pooled]) if pooled else np.zeros(0)
-    keep = suppress(states[:, :2], loglik, radius=separation)
+    keep = suppress(states[:, :2], loglik, radius=separation)  # 004 §5.1.1: minimum separation
     return Measurements(states[keep], loglik[keep])

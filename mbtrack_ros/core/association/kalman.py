@@ -88,7 +88,7 @@ def predict(mean: np.ndarray, cov: np.ndarray, dt: float, *, accel_std: float,
     mean, cov = _check_state(mean, cov)
     F = transition_matrix(dt)
     Q = process_noise(dt, accel_std=accel_std, position_std=position_std)
-    return mean @ F.T, F @ cov @ F.T + Q
+    return mean @ F.T, F @ cov @ F.T + Q  # 004 Appendix: X^ = F X, P^ = F P F' + Q
 
 
 def innovation_covariance(cov: np.ndarray, R: np.ndarray) -> np.ndarray:
@@ -135,8 +135,8 @@ def update(mean: np.ndarray, cov: np.ndarray, z: np.ndarray,
     S = innovation_covariance(cov, R)
     W = gain(cov, S)
     nu = innovation(mean, z)
-    new_mean = mean + np.einsum('...ij,...j->...i', W, nu)
-    IKH = np.eye(4) - W @ H
+    new_mean = mean + np.einsum('...ij,...j->...i', W, nu)  # 004 Appendix: X = X^ + W nu
+    IKH = np.eye(4) - W @ H  # 004 Appendix: P = (I - W H) P^, here in Joseph form
     new_cov = IKH @ cov @ np.swapaxes(IKH, -1, -2) + W @ np.asarray(R) @ np.swapaxes(W, -1, -2)
     return new_mean, 0.5 * (new_cov + np.swapaxes(new_cov, -1, -2))
 

@@ -84,11 +84,13 @@ def association_probabilities(nu: np.ndarray, S: np.ndarray, *, p_detect: float,
     """
     _check_probabilities(p_detect, p_gate, clutter_density)
     nu = np.asarray(nu, dtype=np.float64).reshape(-1, 2)
-    gated = mahalanobis2(nu, S) <= gate_threshold(p_gate, 2)
+    gated = mahalanobis2(nu, S) <= gate_threshold(p_gate, 2)  # 004 §4.2 validation gate
     logw = np.full(nu.shape[0] + 1, -np.inf)
+    # 004 §4.2: beta_0, no measurement is the target's
     logw[0] = miss_log_weight(p_detect=p_detect, p_gate=p_gate,
                               clutter_density=clutter_density)
     if nu.shape[0]:
+        # 004 §4.2: beta_i, measurement i is the target's
         logw[1:] = np.where(gated, np.log(p_detect) + log_gaussian(nu, S), -np.inf)
     logw = np.where(np.isnan(logw), -np.inf, logw)
     if not np.any(np.isfinite(logw)):  # no clutter and nothing gated: the target is missed
@@ -112,7 +114,7 @@ def combine_update(mean: np.ndarray, cov: np.ndarray, nu: np.ndarray, beta: np.n
     W = gain(cov, S)
     nu = np.asarray(nu, dtype=np.float64).reshape(-1, 2)
     beta = np.asarray(beta, dtype=np.float64)
-    nu_c = beta @ nu
+    nu_c = beta @ nu  # 004 §4.2: combined innovation sum_i beta_i nu_i
     new_mean = mean + W @ nu_c
     P_c = cov - W @ S @ W.T  # covariance of the Kalman update with the right measurement
     spread = (nu * beta[:, None]).T @ nu - np.outer(nu_c, nu_c)  # spread of innovations

@@ -168,8 +168,8 @@ def measurement_sampling(mean: np.ndarray, cov: np.ndarray, score: ScoreFn,
         raise AssociationError(f'n_keep must be >= 1, got {n_keep}')
     states = sample_states(mean, cov, n_samples, rng, scale=scale, min_std=min_std,
                            min_speed=min_speed)
-    loglik = clean_loglik(score(states), n_samples)
-    keep = suppress(states[:, :2], loglik, radius=radius, max_keep=n_keep)
+    loglik = clean_loglik(score(states), n_samples)  # 004 §4.1: p(I|X) of every sample
+    keep = suppress(states[:, :2], loglik, radius=radius, max_keep=n_keep)  # 004 §4.1: n best
     states, loglik = states[keep], loglik[keep]
     if refine and keep.size:
         for i in range(states.shape[0]):
