@@ -238,6 +238,30 @@ def test_detector_finds_painted_people_within_the_bound():
         assert len(d.coverage) >= 2 and min(d.coverage.values()) > 0.5
 
 
+def test_confirmed_detection_gets_the_walking_velocity_and_direction():
+    rng = np.random.default_rng(9)
+    calib = make_room()
+    bgs = backgrounds(calib)
+    bank = BackgroundBank()
+    bank.bootstrap({n: [bgs[n]] for n in calib.cameras})
+    det = Detector(calib, DetectorConfig(confirm_frames=5))
+    found = []
+    for k in range(8):
+        p = person(1.8 - 0.08 * k, 1.5 + 0.04 * k, theta=0.0)   # 1.34 m/s at 153 degrees
+        images = paint(calib, bgs, [p], rng)
+        fg = bank.apply(images)
+        ev = {n: FrameEvidence(images[n], fg[n]) for n in fg}
+        found += det.step(ev, stamp_ns=int(round(k * 1e9 / FPS)))
+        if found:
+            break
+    assert found
+    d = found[0]
+    v = d.state[2:4]
+    assert np.hypot(*v) == pytest.approx(np.hypot(1.2, 0.6), abs=0.4)
+    expected = np.arctan2(0.6, -1.2)
+    assert abs(np.angle(np.exp(1j * (d.state[4] - expected)))) < 0.4
+
+
 def test_detector_excludes_tracked_neighbourhood():
     rng = np.random.default_rng(3)
     calib = make_room()

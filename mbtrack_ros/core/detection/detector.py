@@ -41,7 +41,7 @@ from mbtrack_ros.core.detection import DetectionError
 from mbtrack_ros.core.detection.features import (
     EdgeMap, ForegroundIntegral, colour_symmetry, contour_loglik_spans, span_count)
 from mbtrack_ros.core.shape import BodyShape, rasterize
-from mbtrack_ros.core.state import SIT, STATE_DIM, THETA, X, Y
+from mbtrack_ros.core.state import SIT, STATE_DIM, THETA, VX, VY, X, Y
 
 __all__ = ['Detection', 'Detector', 'DetectorConfig', 'FrameEvidence', 'is_ceiling']
 
@@ -83,6 +83,9 @@ class DetectorConfig:
         max_candidates: coarse neighbourhoods refined per frame.
         min_motion: fraction of recently moving pixels of the silhouette (in every side
             camera that sees it, in one of the confirming frames) to confirm a detection.
+        min_speed, max_speed: m/s; a confirmed detection faster than ``min_speed`` over
+            its confirming frames gets its walking direction as body orientation; its
+            velocity is clipped to ``max_speed``.
     """
 
     coarse_spacing: float = 0.3
@@ -117,6 +120,8 @@ class DetectorConfig:
     nms_radius: float = 0.6
     max_candidates: int = 6
     min_motion: float = 0.05
+    min_speed: float = 0.3
+    max_speed: float = 2.0
 
     def __post_init__(self) -> None:
         for name in ('coarse_spacing', 'fine_spacing', 'nms_radius', 'confirm_radius'):
@@ -137,7 +142,7 @@ class Detection:
     """One detected person.
 
     Attributes:
-        state: (6,) state ``x, y, 0, 0, theta, sitting`` (metres, radians).
+        state: (6,) state ``x, y, vx, vy, theta, sitting`` (metres, m/s, radians).
         height, width: body size of the best hypothesis, metres.
         score: combined log response.
         coverage: per seeing camera, the foreground coverage of the silhouette.
@@ -154,6 +159,7 @@ class Detection:
     coverage: dict[str, float] = field(default_factory=dict)
     frames: int = 1
     motion: float = float('inf')
+    history: list[tuple[int, float, float]] = field(default_factory=list, repr=False)
 
     @property
     def xy(self) -> np.ndarray:
@@ -465,8 +471,14 @@ class Detector:
 
     # -- over time ------------------------------------------------------------------------
     def step(self, evidence: Mapping[str, FrameEvidence], *,
-             track_xy: np.ndarray | None = None) -> list[Detection]:
-        """Detections confirmed in ``confirm_frames`` consecutive frames (then forgotten)."""
+             track_xy: np.ndarray | None = None, stamp_ns: int | None = None
+             ) -> list[Detection]:
+        """Detections confirmed in ``confirm_frames`` consecutive frames (then forgotten).
+
+        With ``stamp_ns`` the positions of the confirming frames give the velocity of a
+        confirmed detection (state ``vx, vy``) and, when faster than ``min_speed``, its
+        body orientation (walking direction), which annotates the acquired key views.
+        """
         cfg = self.config
         found = self.detect(evidence, track_xy=track_xy)
         confirmed: list[Detection] = []
@@ -481,17 +493,39 @@ class Detector:
                     match = k
                     break
             det.frames = 1 if match is None else self._candidates[match].frames + 1
+            det.history = [] if match is None else list(self._candidates[match].history)
+            if stamp_ns is not None:
+                det.history.append((int(stamp_ns), float(det.xy[0]), float(det.xy[1])))
             if match is not None:
                 used.add(match)
                 det.motion = max(det.motion, self._candidates[match].motion)
             # a ghost (background change left by someone who was there while the model was
             # bootstrapped) never moves; people who appear do
             if det.frames >= cfg.confirm_frames and det.motion >= cfg.min_motion:
+                self._velocity(det)
                 confirmed.append(det)
             else:
                 survivors.append(det)
         self._candidates = survivors
         return confirmed
+
+    def _velocity(self, det: Detection) -> None:
+        """Least-squares floor velocity over the confirming frames -> state vx, vy, theta."""
+        if len(det.history) < 2:
+            return
+        h = np.asarray(det.history, dtype=np.float64)
+        t = (h[:, 0] - h[0, 0]) / 1e9
+        if np.ptp(t) <= 0:
+            return
+        tc = t - t.mean()
+        v = (tc[:, None] * (h[:, 1:] - h[:, 1:].mean(axis=0))).sum(axis=0) / (tc ** 2).sum()
+        speed = float(np.hypot(*v))
+        if speed > self.config.max_speed:
+            v *= self.config.max_speed / speed
+            speed = self.config.max_speed
+        det.state[[VX, VY]] = v
+        if speed >= self.config.min_speed:
+            det.state[THETA] = float(np.arctan2(v[1], v[0]))
 
     def requeue(self, detection: Detection) -> None:
         """Keep a confirmed detection that could not be acquired: it is emitted again as

@@ -176,7 +176,8 @@ class AutoDetection:
         births: list[Birth] = []
         if evidence:
             keep = [k for k, t in enumerate(tracks) if t.track_id not in ended]
-            confirmed = self.detector.step(evidence, track_xy=means[keep][:, [X, Y]])
+            confirmed = self.detector.step(evidence, track_xy=means[keep][:, [X, Y]],
+                                           stamp_ns=stamp_ns)
             for det in confirmed:
                 model = acquire(det, images, self.calibration, others=means[keep],
                                 other_shapes=[shapes[k] for k in keep],
