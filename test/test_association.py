@@ -529,3 +529,16 @@ def test_jlf_with_the_measurement_model_picks_the_painted_occluder(room, front) 
     other = res.orders.copy()
     other[0] = other[0][::-1]
     assert res.loglik > joint_score(res.states[None], other[None])[0]
+
+
+def test_association_config_validation_and_tracker_defaults() -> None:
+    from mbtrack_ros.core.association.filters import AssociationConfig
+    from mbtrack_ros.core.tracker import TrackerConfig
+    for bad in (dict(p_gate=1.0), dict(p_detect=0.0), dict(samples=0), dict(kept=True),
+                dict(clutter_density=-1.0), dict(measurement_std=0.0)):
+        with pytest.raises(AssociationError):
+            AssociationConfig(**bad)
+    cfg = AssociationConfig.from_tracker(TrackerConfig(particles=37), kept=2)
+    assert (cfg.samples, cfg.kept) == (37, 2)
+    assert cfg.accel_std == TrackerConfig().motion.velocity_noise
+    np.testing.assert_allclose(cfg.R, cfg.measurement_std ** 2 * np.eye(2))
