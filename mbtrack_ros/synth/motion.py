@@ -18,8 +18,9 @@ When a person's task list is empty a new task is drawn from the person's behavio
 ``area`` (random waypoints and pauses inside a rectangle, never leaves) or ``patrol``
 (back and forth between given points with pauses).
 
-Avoidance: other people within 1.2 m push a walking person away (``(1/d - 1/1.2)``
-repulsion plus a sideways term so that people pass each other on the right); a person
+Avoidance: other people within 1.2 m (0.8 m in the lanz presets) push a walking person
+away (``(1/d - 1/1.2)`` repulsion plus a sideways term so that people pass each other on
+the right); a person
 waits (target speed 0, at most 2.5 s) while another *moving* person is less than 0.75 m
 ahead within +-60 deg. A hard constraint keeps walking people 0.42 m apart (``patrol``
 walkers follow their lines and only keep this hard gap). People still
@@ -77,11 +78,12 @@ class Walker:
     pos: np.ndarray
     theta: float
     behaviour: str
-    area: tuple[float, float, float, float] | None = None
+    area: tuple[float, ...] | None = None
     patrol: list[np.ndarray] = field(default_factory=list)
     patrol_pause: tuple[float, float] = (0.5, 2.0)
     patrol_pauses: list[tuple[float, float]] | None = None  # per patrol point, if given
     speed_range: tuple[float, float] = (0.5, 1.5)
+    personal_space: float = 1.2  # m, range of the soft repulsion
     leave_time: float = np.inf
     speed: float = 0.0
     phase: float = 0.0
@@ -144,12 +146,25 @@ class Crowd:
         self.walkers.append(w)
         return w
 
-    def random_free_point(self, area: tuple[float, float, float, float] | None = None,
+    def random_free_point(self, area: tuple[float, ...] | None = None,
                           min_gap: float = 0.0) -> np.ndarray:
-        """A uniform point of ``area`` (default the room's free area) away from people."""
-        x0, y0, x1, y1 = area or self.room.free_area
+        """A uniform point of ``area`` (default the room's free area) away from people.
+
+        ``area`` is ``(x0, y0, x1, y1)`` or a rotated rectangle
+        ``(cx, cy, half_length, half_width, angle)`` (length along ``angle``).
+        """
+        area = tuple(area or self.room.free_area)
         for _ in range(50):
-            p = np.array([self.rng.uniform(x0, x1), self.rng.uniform(y0, y1)])
+            if len(area) == 5:
+                cx, cy, hl, hw, angle = area
+                u, v = self.rng.uniform(-hl, hl), self.rng.uniform(-hw, hw)
+                c, s = np.cos(angle), np.sin(angle)
+                p = np.array([cx + u * c - v * s, cy + u * s + v * c])
+            elif len(area) == 4:
+                x0, y0, x1, y1 = area
+                p = np.array([self.rng.uniform(x0, x1), self.rng.uniform(y0, y1)])
+            else:
+                raise SynthError(f'an area has 4 or 5 numbers, got {area}')
             if all(np.linalg.norm(p - w.pos) >= min_gap for w in self.walkers if not w.gone):
                 return p
         return p
@@ -328,8 +343,9 @@ class Crowd:
                 continue
             d = w.pos - o.pos
             dist = float(np.linalg.norm(d))
-            if 1e-6 < dist < 1.2:
-                strength = 0.6 * (1.0 / dist - 1.0 / 1.2)
+            reach = w.personal_space
+            if 1e-6 < dist < reach:
+                strength = 0.6 * (1.0 / dist - 1.0 / reach)
                 away = d / dist
                 right = np.array([direction[1], -direction[0]])
                 ahead = float(-away @ direction) > 0.0

@@ -38,7 +38,7 @@ def _lanz_area(n_people: int, area: tuple[float, float, float, float]) -> Callab
     def populate(crowd: Crowd) -> None:
         for _ in range(n_people):
             crowd.add(tuple(crowd.random_free_point(area, min_gap=0.7)), behaviour='area',
-                      area=area, speed_range=(0.4, 1.2))
+                      area=area, speed_range=(0.4, 1.2), personal_space=0.8)
     return populate
 
 
@@ -78,8 +78,12 @@ def _empty(crowd: Crowd) -> None:
     pass
 
 
-_AREA_SMALL = (1.0, 1.2, 2.8, 2.8)
-_AREA_WIDE = (0.95, 1.2, 3.2, 3.1)
+# Lanz areas: rectangles elongated along the camera's line of sight (so that people often
+# line up in depth and occlude each other), 1.5-3.7 m from the camera.
+_ANGLE = float(np.arctan2(_VIEW[1], _VIEW[0]))
+_MID = _CAM_XY + 2.6 * _VIEW + 0.05 * _ACROSS
+_AREA_SMALL = (float(_MID[0]), float(_MID[1]), 1.1, 0.45, _ANGLE)
+_AREA_WIDE = (float(_MID[0]), float(_MID[1]), 1.2, 0.75, _ANGLE)
 
 _BASE = (
     Preset('lanz-seq1', '3 people walking randomly in a small area in front of one corner '
