@@ -351,18 +351,17 @@ def part_distances(hist, mt, touched, nt, d2):
 
 @njit(cache=True, nogil=True)
 def occlusion_terms(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, nch, area, d_occ,
-                    key, t, va, vb, wa, hist, touched, mark, d2, out_l, out_vis):
+                    key, t, va, vb, wa, hist, touched, mark, mt, d2, out_l, out_vis):
     """000 Eq. 26 with soft maps w (Eq. 33) on one silhouette, for max(nch, 1) channels.
 
     Channel ch uses w = wmap[..., ch] (w = 1 when ``nch == 0``); alpha = sum of w (visible
     mass), beta = area - alpha (hidden mass): l = (sum_parts alpha_part d2_part +
     beta d_occ) / area -> out_l[ch], alpha -> out_vis[ch]. With w = 1 this is the
-    area-weighted part distance of 003 Eq. 3.
+    area-weighted part distance of 003 Eq. 3. ``mt`` (1536,) is scratch for model values.
     """
     m = max(nch, 1)
     nt = accumulate_histogram(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, nch,
                               hist, touched, 0, mark)
-    mt = np.empty(nt)
     model_values(key, t, va, vb, wa, touched, nt, mt)
     for ch in range(m):
         a0, a1, a2 = part_distances(hist[ch], mt, touched, nt, d2)
@@ -411,6 +410,7 @@ def hjs_camera(bins, row, x0, x1, part, offsets, area, bbox, order, target, prio
     hist = np.zeros((nk, 3 * N_BINS))
     mark = np.zeros(3 * N_BINS, np.bool_)
     touched = np.empty(3 * N_BINS, np.int64)
+    mt = np.empty(3 * N_BINS)
     d2 = np.empty(3)
     out_l = np.empty(nk)
     out_v = np.empty(nk)
@@ -431,6 +431,10 @@ def hjs_camera(bins, row, x0, x1, part, offsets, area, bbox, order, target, prio
         return fc, bc, vis
     gw = gx1 - gx0
     gh = gy1 - gy0
+    # plain int64 (not literal) arguments: one compiled version of the helpers
+    oy = np.int64(gy0)
+    ox = np.int64(gx0)
+    zero = np.int64(0)
     pre = np.empty((nk, 4), np.int64)
     pre[:, 0] = 1 << 30
     pre[:, 1] = 1 << 30
@@ -514,9 +518,9 @@ def hjs_camera(bins, row, x0, x1, part, offsets, area, bbox, order, target, prio
                     if w != 1.0:
                         occluded = True
         # 000 Eq. 33 with Eq. 26: foreground term on the w*-weighted part histograms
-        occlusion_terms(bins, row, x0, x1, part, s0, s1, wmap, gy0, gx0,
-                        1 if occluded else 0, ap, d_occ, key, k, va[p], vb[p], wa[p],
-                        hist, touched, mark, d2, out_l, out_v)
+        nch = np.int64(1 if occluded else 0)
+        occlusion_terms(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, nch, ap, d_occ, key,
+                        k, va[p], vb[p], wa[p], hist, touched, mark, mt, d2, out_l, out_v)
         fc[p] = out_l[0]
         vis[p] = out_v[0]
         f_free = out_l[0] if not occluded else -1.0   # the term with w = 1, lazily
@@ -573,14 +577,14 @@ def hjs_camera(bins, row, x0, x1, part, offsets, area, bbox, order, target, prio
                             if j != skip[i]:
                                 w *= vals[j]
                         wmap[r, c, i] = w
-            occlusion_terms(bins, row, x0, x1, part, s0, s1, wmap, gy0, gx0, nneed, ap,
-                            d_occ, key, k, va[p], vb[p], wa[p], hist, touched, mark, d2,
-                            out_l, out_v)
+            occlusion_terms(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, np.int64(nneed),
+                            ap, d_occ, key, k, va[p], vb[p], wa[p], hist, touched, mark, mt,
+                            d2, out_l, out_v)
         else:                                       # every reduced map is 1 on Delta(x_p)
             if f_free < 0.0:
-                occlusion_terms(bins, row, x0, x1, part, s0, s1, wmap, gy0, gx0, 0, ap,
+                occlusion_terms(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, zero, ap,
                                 d_occ, key, k, va[p], vb[p], wa[p], hist, touched, mark,
-                                d2, out_l, out_v)
+                                mt, d2, out_l, out_v)
                 f_free = out_l[0]
             for i in range(nneed):
                 out_l[i] = f_free
@@ -612,9 +616,12 @@ def joint_camera(bins, row, x0, x1, part, offsets, area, order, n_targets, d_occ
     width = bins.shape[1]
     owner = np.zeros((height, width), np.int64)
     wmap = np.zeros((height, width, 1))
+    zero = np.int64(0)
+    one = np.int64(1)
     hist = np.zeros((1, 3 * N_BINS))
     mark = np.zeros(3 * N_BINS, np.bool_)
     touched = np.empty(3 * N_BINS, np.int64)
+    mt = np.empty(3 * N_BINS)
     d2 = np.empty(3)
     out_l = np.empty(1)
     out_v = np.empty(1)
@@ -637,9 +644,9 @@ def joint_camera(bins, row, x0, x1, part, offsets, area, order, n_targets, d_occ
                         wmap[r, c, 0] = 0.0
             if area[p] < min_pixels or area[p] <= 0:
                 continue
-            occlusion_terms(bins, row, x0, x1, part, s0, s1, wmap, 0, 0, 1, float(area[p]),
-                            d_occ, key, k, va[p], vb[p], wa[p], hist, touched, mark, d2,
-                            out_l, out_v)
+            occlusion_terms(bins, row, x0, x1, part, s0, s1, wmap, zero, zero, one,
+                            float(area[p]), d_occ, key, k, va[p], vb[p], wa[p], hist, touched,
+                            mark, mt, d2, out_l, out_v)
             total += out_l[0]
         out[n] = total
     return out

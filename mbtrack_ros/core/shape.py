@@ -178,7 +178,8 @@ def _check_states(states: np.ndarray) -> np.ndarray:
 
 def _per_particle(value: float | np.ndarray | None, default: float, n: int,
                   what: str) -> np.ndarray:
-    arr = np.broadcast_to(np.asarray(default if value is None else value, np.float64), (n,))
+    arr = np.array(np.broadcast_to(np.asarray(default if value is None else value,
+                                              np.float64), (n,)))     # writable, contiguous
     if not np.all(np.isfinite(arr) & (arr > 0)):
         raise ShapeError(f'{what} must be positive and finite')
     return arr
@@ -232,7 +233,7 @@ def silhouette_outline(camera: Camera, states: np.ndarray, shape: BodyShape, *,
     rel = states[:, THETA] - camera.viewing_angle(states[:, :2])
     left, right = _kernels.outline_points(
         np.ascontiguousarray(end_px), end_depth, np.ascontiguousarray(f), shape.half_widths,
-        np.ascontiguousarray(w), width_scale(rel), camera.focal, valid)
+        w, width_scale(rel), camera.focal, valid)
     centre = np.stack([states[:, X], states[:, Y], 0.5 * (zb + zt)], axis=1)
     distance = np.where(valid, camera.distance(centre), np.inf)
     return left, right, seg_part, valid, distance
