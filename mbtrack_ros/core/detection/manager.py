@@ -192,6 +192,12 @@ class AutoDetection:
                         'detect': t4 - t0}
         return ended, births
 
+    def tracking_images(self, images: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """The images the tracking filter should use: the side cameras only (003 §5: the
+        top-down view triggers detection and release, tracking uses the corner cameras)."""
+        side = {n: im for n, im in images.items() if n in self.side}
+        return side or dict(images)
+
     def register(self, track_id: int) -> None:
         """Start the auxiliary processes of a new track."""
         self.aux[int(track_id)] = TrackAuxiliary(self.config.existence)

@@ -78,6 +78,9 @@ class ReleaseConfig:
     Attributes:
         timeout: seconds without support before a track ends (003 §4.3: 1 s).
         min_coverage: foreground coverage of the silhouette that counts as support.
+        min_blob_coverage: the same for the cylinder blob of a top-down camera (the hull of
+            the floor and head circles is about twice a person's image; an empty floor
+            region gives ~0).
         min_area: pixels (at 320x240, scaled with the image) for a camera to see a track.
         use_ceiling: let top-down cameras alone decide when the room has one.
         existence_threshold: existence below this also counts as unsupported (0 disables).
@@ -85,6 +88,7 @@ class ReleaseConfig:
 
     timeout: float = 1.0
     min_coverage: float = 0.3
+    min_blob_coverage: float = 0.12
     min_area: int = 30
     use_ceiling: bool = True
     existence_threshold: float = 0.1
@@ -123,7 +127,8 @@ class Releaser:
         Returns:
             supported: (K,) bool.
             coverage: camera -> (K,) coverage (NaN where the camera does not see the track);
-                all cameras with evidence, not only the deciding ones.
+                all cameras with evidence, not only the deciding ones; blob coverages are
+                doubled (clipped to 1) to be comparable with silhouette coverages.
         """
         cfg = self.config
         coverage: dict[str, np.ndarray] = {}
@@ -132,17 +137,21 @@ class Releaser:
             if name not in evidence:
                 continue
             cam = self.calibration.cameras[name]
-            if states is not None and heights is not None and is_ceiling(cam):
+            threshold = cfg.min_coverage
+            blob = states is not None and heights is not None and is_ceiling(cam)
+            if blob:
                 cov, area = blob_coverage(cam, evidence[name].foreground, states[:, :2],
                                           heights)
+                threshold = cfg.min_blob_coverage
             else:
                 cov, _, area = evidence[name].plain.coverage(sil)
             sees = area >= cfg.min_area * cam.width * cam.height / (320.0 * 240.0)
-            coverage[name] = np.where(sees, cov, np.nan)
+            scale = 2.0 if blob else 1.0
+            coverage[name] = np.where(sees, np.minimum(scale * cov, 1.0), np.nan)
             if supported is None:
                 supported = np.zeros(cov.shape, bool)
             if name in self.deciding:
-                supported |= sees & (cov >= cfg.min_coverage)
+                supported |= sees & (cov >= threshold)
         if supported is None:
             k = len(next(iter(silhouettes.values())).offsets) - 1 if silhouettes else 0
             supported = np.zeros(k, bool)
