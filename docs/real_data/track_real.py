@@ -1,7 +1,7 @@
 """Track a recording with automatic detection, optionally with a clip-median background.
 
 Usage: python docs/real_data/track_real.py RECORDING OUT_TRACKS.csv [--background first|median]
-       [--seed S] [--algorithm hjs]
+       [--seed S] [--algorithm hjs] [--report-hidden]
 
 ``first`` is what ``mbtrack replay`` does (the background model bootstraps from the first
 frames of the recording); ``median`` bootstraps it from the per-pixel median of every frame of
@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -28,6 +29,8 @@ def main() -> None:
     parser.add_argument('--background', choices=('first', 'median'), default='first')
     parser.add_argument('--seed', type=int, default=0)
     parser.add_argument('--algorithm', default='hjs')
+    parser.add_argument('--report-hidden', action='store_true',
+                        help='also write tracks whose existence is below the report level')
     args = parser.parse_args()
     room = RoomCalibration.load(f'{args.recording}/calibration.yaml')
     with RecordingReader(args.recording) as reader:
@@ -35,6 +38,8 @@ def main() -> None:
     tracker = Tracker(room, TrackerConfig(algorithm=args.algorithm, detection=True,
                                           seed=args.seed),
                       rng=np.random.default_rng(args.seed))
+    if args.report_hidden:
+        tracker.detection.config = replace(tracker.detection.config, report_hidden=True)
     if args.background == 'median':
         tracker.detection.bootstrap({c: [im[c] for _, im in sets] for c in room.names})
     rows, births = [], {}
