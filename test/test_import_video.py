@@ -186,6 +186,16 @@ def test_bad_inputs_exit_2_with_one_line(tmp_path, capsys):
     assert_one_line_error(code, err, 'not an empty directory')
 
 
+def test_bad_arguments_are_one_line(tmp_path, capsys):
+    with pytest.raises(SystemExit) as info:
+        main(['import-video', str(tmp_path / 'rec'), '--width', 'wide', *VIDEOS])
+    assert info.value.code == 2
+    assert_one_line_error(2, capsys.readouterr().err, '--width')
+    with pytest.raises(SystemExit) as info:
+        main(['import-video', str(tmp_path / 'rec'), *VIDEOS])
+    assert_one_line_error(info.value.code, capsys.readouterr().err, '--calibration')
+
+
 def test_import_videos_refuses_before_writing(tmp_path):
     room = read_opencv_calibration(CALIB)
     with pytest.raises(VideoImportError, match='--frames 11'):
