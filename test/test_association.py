@@ -414,6 +414,7 @@ class _StandIn:
 
     def __init__(self, n_cameras: int) -> None:
         self.truth = np.zeros((0, 2))
+        self.sitting = np.zeros(2)
         self.n_cameras = n_cameras
         self.joint_orders_seen = False
 
@@ -422,7 +423,8 @@ class _StandIn:
 
     def _ll(self, states, model):
         d2 = ((states[..., :2] - self.truth[model.index]) ** 2).sum(axis=-1)
-        return -0.5 * d2 / 0.15 ** 2
+        wrong_posture = np.round(states[..., 5]) != self.sitting[model.index]
+        return -0.5 * d2 / 0.15 ** 2 - 4.0 * wrong_posture
 
     def separable(self, particles, models):
         return _Result([self._ll(p, m) for p, m in zip(particles, models)],
@@ -463,6 +465,15 @@ def test_association_filters_track_through_the_tracker(room, algorithm) -> None:
         assert est.covariance.shape == (4, 4) and est.particles is None
         assert set(est.visible_fraction.values()) == {0.5}
     assert standin.joint_orders_seen == (algorithm == 'jlf')
+    for est in result.tracks:
+        assert est.mean[5] < 0.2  # standing
+    # person 1 stops and sits down: the sitting probability follows within 10 frames
+    standin.sitting[1] = 1.0
+    for frame in range(31, 41):
+        standin.truth[0] += vel[0] * 0.1
+        result = tracker.step(int(frame * 1e8), {})
+    assert result.tracks[1].mean[5] > 0.8 and result.tracks[0].mean[5] < 0.2
+    assert np.linalg.norm(result.tracks[1].mean[:2] - standin.truth[1]) < 0.15
     tracker.remove_track(ids[0])
     assert tracker.track_ids == ids[1:]
 
@@ -542,3 +553,19 @@ def test_association_config_validation_and_tracker_defaults() -> None:
     assert (cfg.samples, cfg.kept) == (37, 2)
     assert cfg.accel_std == TrackerConfig().motion.velocity_noise
     np.testing.assert_allclose(cfg.R, cfg.measurement_std ** 2 * np.eye(2))
+
+
+def test_sampling_explores_both_postures() -> None:
+    mean = np.array([1.0, 1.0, 0.0, 0.0, 0.0, 0.0])
+    cov = np.diag([0.01, 0.01, 0.1, 0.1])
+    rng = np.random.default_rng(8)
+    copied = sampling.sample_states(mean, cov, 2000, rng)
+    assert np.all(copied[:, 5] == 0.0)
+    explored = sampling.sample_states(mean, cov, 2000, rng, sit_explore=0.1)
+    assert set(np.unique(explored[:, 5])) == {0.0, 1.0}
+    assert abs(explored[:, 5].mean() - 0.1) < 0.03
+    mean[5] = 0.7
+    assert abs(sampling.sample_states(mean, cov, 2000, rng, sit_explore=0.1)[:, 5].mean()
+               - 0.7) < 0.04
+    with pytest.raises(AssociationError):
+        sampling.sample_states(mean, cov, 10, rng, sit_explore=0.6)

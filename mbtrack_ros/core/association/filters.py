@@ -1,8 +1,12 @@
 """PDAF, JPDAF and JLF trackers behind the tracker's filter interface (004 §4-5, Fig. 16).
 
 Each track is a constant-velocity Kalman filter on ``(x, y, vx, vy)`` (:mod:`.kalman`); the
-orientation follows the velocity above ``orientation_speed`` and the sitting column is kept
-as given (these baselines do not estimate posture). Measurements come from the same
+orientation follows the velocity above ``orientation_speed``. The sitting column is a
+probability: predicted with the flip rate of the particle filters' dynamics, sampled as 0/1
+in the measurement samples (at least ``sit_explore`` of them in the less likely posture) and
+updated with the same association weights as the position (PDAF/JPDAF: beta_0 p + sum_i
+beta_i sit_i; JLF: the best joint sample's posture). An extension of 004, which has no
+discrete state. Measurements come from the same
 appearance likelihood as the particle filters (``MeasurementModel.separable`` for PDAF and
 JPDAF, ``MeasurementModel.joint(..., orders=...)`` for the JLF). No particles are reported.
 
@@ -24,7 +28,7 @@ from mbtrack_ros.core.association.kalman import AssociationError
 from mbtrack_ros.core.association.pdaf import pdaf_update
 from mbtrack_ros.core.association.sampling import measurement_sampling
 from mbtrack_ros.core.filters import FilterError, TrackUpdate, register_filter
-from mbtrack_ros.core.state import STATE_DIM, THETA, VX, VY, X, Y
+from mbtrack_ros.core.state import SIT, STATE_DIM, THETA, VX, VY, X, Y
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
     from mbtrack_ros.core.appearance import PersonModel
@@ -60,6 +64,9 @@ class AssociationConfig:
         init_velocity_std: m/s, initial velocity std of a new track.
         visibility: report the visible fraction per camera from an HJS evaluation at the
             track means (cheap: one particle per track); False reports 1.0.
+        sit_flip_rate: 1/s, rate of sitting <-> standing changes (= MotionConfig's).
+        sit_explore: minimum fraction of samples in the less probable posture (0 = keep the
+            posture the track was started with).
     """
 
     samples: int = 100
@@ -80,6 +87,8 @@ class AssociationConfig:
     init_position_std: float = 0.1
     init_velocity_std: float = 0.3
     visibility: bool = True
+    sit_flip_rate: float = 0.05
+    sit_explore: float = 0.1
 
     def __post_init__(self) -> None:
         def bad(msg: str) -> None:
@@ -101,6 +110,10 @@ class AssociationConfig:
                 bad(f'{name} must be a finite number >= 0, got {value}')
         if not (np.isfinite(self.measurement_std) and self.measurement_std > 0):
             bad(f'measurement_std must be > 0, got {self.measurement_std}')
+        if not (np.isfinite(self.sit_flip_rate) and self.sit_flip_rate >= 0):
+            bad(f'sit_flip_rate must be a finite number >= 0, got {self.sit_flip_rate}')
+        if not 0.0 <= self.sit_explore <= 0.5:
+            bad(f'sit_explore must be in [0, 0.5], got {self.sit_explore}')
 
     @classmethod
     def from_tracker(cls, config: TrackerConfig, **overrides: Any) -> AssociationConfig:
@@ -112,7 +125,8 @@ class AssociationConfig:
         values = dict(samples=int(config.particles),
                       accel_std=float(config.motion.velocity_noise),
                       position_std=float(config.motion.position_noise),
-                      orientation_speed=float(config.motion.orientation_speed))
+                      orientation_speed=float(config.motion.orientation_speed),
+                      sit_flip_rate=float(config.motion.sit_flip_rate))
         values.update(overrides)
         return cls(**values)
 
@@ -178,6 +192,8 @@ class _KalmanTracks:
             raise FilterError(str(err)) from err
         means = means.copy()
         means[:, :4] = m4
+        flip = -np.expm1(-self.config.sit_flip_rate * dt)  # two-state Markov chain
+        means[:, SIT] = means[:, SIT] * (1.0 - flip) + (1.0 - means[:, SIT]) * flip
         return self._orient(means), covs
 
     def _orient(self, means: np.ndarray) -> np.ndarray:
@@ -243,7 +259,8 @@ class PDAFFilter(_KalmanTracks):
             means[k], covs[k], self._separable_score(measurement, self._models[t]), rng,
             n_samples=c.samples, n_keep=c.kept, radius=c.nms_radius, refine=c.refine,
             refine_evals=c.refine_evals, min_std=c.min_sampling_std, scale=c.sampling_scale,
-            min_speed=c.orientation_speed) for k, t in enumerate(ids)]
+            min_speed=c.orientation_speed, sit_explore=c.sit_explore)
+            for k, t in enumerate(ids)]
         t2 = time.perf_counter()
         beta0 = []
         for k in range(len(ids)):
@@ -251,6 +268,7 @@ class PDAFFilter(_KalmanTracks):
                               p_detect=c.p_detect, p_gate=c.p_gate,
                               clutter_density=c.clutter_density)
             means[k, :4], covs[k] = res.mean, res.cov
+            means[k, SIT] = res.beta0 * means[k, SIT] + res.beta @ found[k].states[:, SIT]
             beta0.append(res.beta0)
         self._store(ids, means, covs)
         t3 = time.perf_counter()
@@ -280,7 +298,7 @@ class JPDAFFilter(_KalmanTracks):
                                   n_keep=c.kept, radius=c.nms_radius, separation=c.separation,
                                   refine=c.refine, refine_evals=c.refine_evals,
                                   scale=c.sampling_scale, min_std=c.min_sampling_std,
-                                  min_speed=c.orientation_speed)
+                                  min_speed=c.orientation_speed, sit_explore=c.sit_explore)
         t2 = time.perf_counter()
         try:
             res = jpdaf_update(means[:, :4], covs, pool.positions, c.R, p_detect=c.p_detect,
@@ -288,6 +306,7 @@ class JPDAFFilter(_KalmanTracks):
         except AssociationError as err:
             raise FilterError(str(err)) from err
         means[:, :4] = res.means
+        means[:, SIT] = res.beta0 * means[:, SIT] + res.beta @ pool.states[:, SIT]
         self._store(ids, means, res.covs)
         t3 = time.perf_counter()
         self.stats = {'measurements': float(len(pool.loglik)),
@@ -327,11 +346,13 @@ class JLFFilter(_KalmanTracks):
                               active=[n in seen for n in self.camera_names],
                               n_samples=c.samples, refine=c.refine,
                               refine_evals=c.refine_evals, scale=c.sampling_scale,
-                              min_std=c.min_sampling_std, min_speed=c.orientation_speed)
+                              min_std=c.min_sampling_std, min_speed=c.orientation_speed,
+                              sit_explore=c.sit_explore)
         t2 = time.perf_counter()
         if np.isfinite(res.loglik):  # 004 §5.2.1: component measurements -> Kalman filters
             m4, covs = kalman.update(means[:, :4], covs, res.states[:, :2], c.R)
             means[:, :4] = m4
+            means[:, SIT] = res.states[:, SIT]
         self._store(ids, means, covs)
         t3 = time.perf_counter()
         self.stats = {'evaluations': float(res.evaluations), 'loglik': float(res.loglik)}

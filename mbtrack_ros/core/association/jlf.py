@@ -25,7 +25,7 @@ from scipy.optimize import minimize
 from mbtrack_ros.core.association.kalman import AssociationError
 from mbtrack_ros.core.association.sampling import clean_loglik, sample_states
 from mbtrack_ros.core.camera import Camera
-from mbtrack_ros.core.state import STATE_DIM, X, Y
+from mbtrack_ros.core.state import SIT, STATE_DIM, X, Y
 
 __all__ = ['JLFResult', 'JointScoreFn', 'best_orders', 'distinct_orders', 'geometric_orders',
            'jlf_measurement', 'overlaps', 'refine_joint', 'silhouette_boxes']
@@ -246,7 +246,8 @@ def jlf_measurement(means: np.ndarray, covs: np.ndarray, joint_score: JointScore
                     rng: np.random.Generator, *, n_samples: int = 50, include_mean: bool = True,
                     active: Sequence[bool] | None = None,
                     refine: bool = False, refine_evals: int = 80, scale: float = 1.0,
-                    min_std: float = 0.05, min_speed: float = 0.2) -> JLFResult:
+                    min_std: float = 0.05, min_speed: float = 0.2,
+                    sit_explore: float = 0.0) -> JLFResult:
     """One JLF joint measurement (004 §5.2.1, Fig. 16): sample, order, evaluate, pick best.
 
     Args:
@@ -265,10 +266,13 @@ def jlf_measurement(means: np.ndarray, covs: np.ndarray, joint_score: JointScore
         raise AssociationError(f'need means (K, 6) and K covariances, got {means.shape}')
     k = means.shape[0]
     js = np.stack([sample_states(means[t], covs[t], n_samples, rng, scale=scale,
-                                 min_std=min_std, min_speed=min_speed) for t in range(k)],
+                                 min_std=min_std, min_speed=min_speed,
+                                 sit_explore=sit_explore) for t in range(k)],
                   axis=1)  # (N, K, 6), components independent (004 §5.2.1)
-    if include_mean:  # orientation and sitting are the same in every sample
+    if include_mean:  # the orientation is the same in every sample
         js[0, :, [X, Y]] = means[:, [X, Y]].T
+        if sit_explore > 0.0:  # the more probable posture
+            js[0, :, SIT] = np.round(means[:, SIT])
     orders, loglik, evaluations = best_orders(js, joint_score, cameras, heights, widths,
                                               active=active)
     i = int(np.argmax(loglik))  # 004 §5.2.1: the most probable joint sample

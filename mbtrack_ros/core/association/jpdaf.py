@@ -202,7 +202,7 @@ def joint_measurements(means: np.ndarray, covs: np.ndarray, scores: list[ScoreFn
                        rng: np.random.Generator, *, n_samples: int = 50, n_keep: int = 10,
                        radius: float = 0.05, separation: float = 0.3, refine: bool = True,
                        refine_evals: int = 40, scale: float = 1.0, min_std: float = 0.05,
-                       min_speed: float = 0.2) -> Measurements:
+                       min_speed: float = 0.2, sit_explore: float = 0.0) -> Measurements:
     """Joint measurement generation for K targets (004 §5.1.1, Fig. 16 'JPDAF' column).
 
     Each target samples ``n_samples`` states around its prediction, keeps its ``n_keep``
@@ -224,7 +224,7 @@ def joint_measurements(means: np.ndarray, covs: np.ndarray, scores: list[ScoreFn
     pooled = [measurement_sampling(means[t], covs[t], scores[t], rng, n_samples=n_samples,
                                    n_keep=n_keep, radius=radius, refine=refine,
                                    refine_evals=refine_evals, scale=scale, min_std=min_std,
-                                   min_speed=min_speed)
+                                   min_speed=min_speed, sit_explore=sit_explore)
               for t in range(means.shape[0])]
     states = np.vstack([m.states for m in pooled]) if pooled else np.zeros((0, 6))
     loglik = np.concatenate([m.loglik for m in pooled]) if pooled else np.zeros(0)

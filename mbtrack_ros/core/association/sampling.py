@@ -15,7 +15,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from mbtrack_ros.core.association.kalman import AssociationError
-from mbtrack_ros.core.state import STATE_DIM, THETA, VX, VY, X, Y
+from mbtrack_ros.core.state import SIT, STATE_DIM, THETA, VX, VY, X, Y
 
 __all__ = ['Measurements', 'ScoreFn', 'clean_loglik', 'measurement_sampling', 'refine_state',
            'sample_states', 'suppress']
@@ -51,13 +51,16 @@ def clean_loglik(values: np.ndarray, n: int) -> np.ndarray:
 
 
 def sample_states(mean: np.ndarray, cov: np.ndarray, n: int, rng: np.random.Generator, *,
-                  scale: float = 1.0, min_std: float = 0.05,
-                  min_speed: float = 0.2) -> np.ndarray:
+                  scale: float = 1.0, min_std: float = 0.05, min_speed: float = 0.2,
+                  sit_explore: float = 0.0) -> np.ndarray:
     """N states around a prediction (004 §4.1: samples from N(X^, Sigma_X)).
 
     Positions are drawn from ``scale^2 * cov[:2, :2] + min_std^2 I`` around ``mean[:2]``;
-    velocity and sitting are copied from ``mean``; the orientation is the heading of the
-    predicted velocity when its speed is at least ``min_speed`` (m/s), else ``mean[THETA]``.
+    velocity is copied from ``mean``; the orientation is the heading of the predicted
+    velocity when its speed is at least ``min_speed`` (m/s), else ``mean[THETA]``. With
+    ``sit_explore`` = 0 the sitting column is copied; with ``sit_explore`` in (0, 0.5] each
+    sample sits with probability ``clip(mean[SIT], sit_explore, 1 - sit_explore)`` (0 or 1),
+    so both postures are always tried.
 
     Args:
         mean: (6,) predicted state.
@@ -72,6 +75,8 @@ def sample_states(mean: np.ndarray, cov: np.ndarray, n: int, rng: np.random.Gene
         raise AssociationError(f'need mean (6,) and cov (4, 4), got {mean.shape}, {cov.shape}')
     if n < 1:
         raise AssociationError(f'number of samples must be >= 1, got {n}')
+    if not 0.0 <= sit_explore <= 0.5:
+        raise AssociationError(f'sit_explore must be in [0, 0.5], got {sit_explore}')
     if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(cov))):
         raise AssociationError('prediction is not finite')
     sigma = scale ** 2 * cov[:2, :2] + min_std ** 2 * np.eye(2)
@@ -84,6 +89,9 @@ def sample_states(mean: np.ndarray, cov: np.ndarray, n: int, rng: np.random.Gene
                                ) from err
     speed = np.hypot(mean[VX], mean[VY])
     states[:, THETA] = np.arctan2(mean[VY], mean[VX]) if speed >= min_speed else mean[THETA]
+    if sit_explore > 0.0:
+        p_sit = float(np.clip(mean[SIT], sit_explore, 1.0 - sit_explore))
+        states[:, SIT] = (rng.random(n) < p_sit).astype(np.float64)
     return states
 
 
@@ -154,7 +162,7 @@ def measurement_sampling(mean: np.ndarray, cov: np.ndarray, score: ScoreFn,
                          rng: np.random.Generator, *, n_samples: int = 100,
                          n_keep: int = 5, radius: float = 0.1, refine: bool = False,
                          refine_evals: int = 40, scale: float = 1.0, min_std: float = 0.05,
-                         min_speed: float = 0.2) -> Measurements:
+                         min_speed: float = 0.2, sit_explore: float = 0.0) -> Measurements:
     """Measurement sampling for one target (004 §4.1, Fig. 16 'PDAF' column).
 
     ``n_samples`` states from :func:`sample_states` are scored, thinned with
@@ -167,7 +175,7 @@ def measurement_sampling(mean: np.ndarray, cov: np.ndarray, score: ScoreFn,
     if n_keep < 1:
         raise AssociationError(f'n_keep must be >= 1, got {n_keep}')
     states = sample_states(mean, cov, n_samples, rng, scale=scale, min_std=min_std,
-                           min_speed=min_speed)
+                           min_speed=min_speed, sit_explore=sit_explore)
     loglik = clean_loglik(score(states), n_samples)  # 004 §4.1: p(I|X) of every sample
     keep = suppress(states[:, :2], loglik, radius=radius, max_keep=n_keep)  # 004 §4.1: n best
     states, loglik = states[keep], loglik[keep]
