@@ -157,6 +157,9 @@ class AuxiliaryConfig:
         initial_visibility, initial_existence: values at track creation.
         support_gain: ``k`` of the coverage evidence ``k (2 f - 1)`` per camera.
         appearance_weight: tempering of the visibility evidence in the existence update.
+        visibility_cap: largest visibility prior used in that evidence: a wrong appearance
+            model in every camera at once then costs at most ``log(1 - cap)`` per camera
+            instead of killing an existing, well-supported track.
         report_threshold: a track is reported while its existence is at least this.
     """
 
@@ -168,6 +171,7 @@ class AuxiliaryConfig:
     initial_existence: float = 0.9
     support_gain: float = 4.0
     appearance_weight: float = 0.3
+    visibility_cap: float = 0.7
     report_threshold: float = 0.5
 
     def __post_init__(self) -> None:
@@ -175,7 +179,8 @@ class AuxiliaryConfig:
             v = getattr(self, name)
             if not 0.0 <= v < 1.0:
                 raise ExistenceError(f'{name} probability must be in [0, 1), got {v}')
-        for name in ('initial_visibility', 'initial_existence', 'report_threshold'):
+        for name in ('initial_visibility', 'initial_existence', 'report_threshold',
+                     'visibility_cap'):
             v = getattr(self, name)
             if not 0.0 <= v <= 1.0:
                 raise ExistenceError(f'{name} must be in [0, 1], got {v}')
@@ -247,8 +252,9 @@ class TrackAuxiliary:
             w = float(np.clip(visible_fraction.get(cam, 1.0), 0.0, 1.0))
             # e = 1: visibility mixture xi p_1 + (1 - xi) p_0 against p_0 for e = 0
             if np.isfinite(l0):
+                pv = min(prior, cfg.visibility_cap)
                 with np.errstate(divide='ignore'):
-                    mix = np.logaddexp(np.log(prior) + l1 - l0, np.log1p(-prior))
+                    mix = np.logaddexp(np.log(pv) + l1 - l0, np.log1p(-pv))
                 log_ratio_e += cfg.appearance_weight * w * float(mix)
         for cam, f in coverage.items():
             w = float(np.clip(visible_fraction.get(cam, 1.0), 0.0, 1.0))
