@@ -151,6 +151,7 @@ class BenchResult:
     frames: int
     bp_iterations: float
     visible_fraction: float
+    stage_ms: dict
 
 
 def run_config(algorithm: str, k: int, n: int, n_cameras: int, size: tuple[int, int], *,
@@ -173,15 +174,19 @@ def run_config(algorithm: str, k: int, n: int, n_cameras: int, size: tuple[int, 
     period = 66_666_667
     tracker.step(period, images)  # warm-up: numba compilation, caches
     times, bp, vis = [], [], []
+    stages: dict[str, list[float]] = {}
     for f in range(frames):
         res = tracker.step((f + 2) * period, images)
         times.append(res.timings['total'])
+        for stage, sec in res.timings.items():
+            stages.setdefault(stage, []).append(1e3 * sec)
         bp.append(tracker.filter.stats.get('bp_iterations', 0.0))
         vis.extend(v for t in res.tracks for v in t.visible_fraction.values() if v > 0)
     spf = float(np.median(times))
     return BenchResult(algorithm, k, n, n_cameras, size[0], size[1], occluded, spf,
                        1.0 / spf, frames, float(np.mean(bp)),
-                       float(np.mean(vis)) if vis else float('nan'))
+                       float(np.mean(vis)) if vis else float('nan'),
+                       {k: float(np.median(v)) for k, v in stages.items()})
 
 
 def fit_exponent(x: Sequence[float], t: Sequence[float]) -> float:
@@ -323,6 +328,10 @@ def _report(seen: dict, results: list[tuple[str, BenchResult]], frames: int) -> 
                                                         [p[1] for p in pts])
     main = get('hjs', 5, 100, 4, big, False)
     sep = get('separable', 5, 100, 4, big, False)
+    for r in (main, sep):
+        if r is not None:
+            print(f'{r.algorithm} K=5 N=100 4x320x240 stages (median ms): '
+                  + ', '.join(f'{k} {v:.1f}' for k, v in r.stage_ms.items()))
     if main is not None:
         summary['hjs_k5_n100_4x320x240_fps'] = main.frames_per_second
     if main is not None and sep is not None:
