@@ -125,6 +125,17 @@ def test_opencv_filestorage_and_pose2sim_toml_variants(tmp_path):
                                        ref.cameras[name].project(points), atol=1e-6)
 
 
+def test_camera_info_with_extrinsics_mapping():
+    ref = read_opencv_calibration(DATA / 'calibration_opencv.json')
+    poses = {n: (c.R, c.t) for n, c in ref.cameras.items()}
+    room = read_camera_info_calibration(list(CAMERA_INFO.values()), poses)  # named by file
+    for name in CAMS:
+        np.testing.assert_allclose(room.cameras[name].K, ref.cameras[name].K)
+        np.testing.assert_allclose(room.cameras[name].t, ref.cameras[name].t)
+    assert 'pair' in _one_line_error(lambda: read_camera_info_calibration(
+        CAMERA_INFO, {n: (c.R,) for n, c in ref.cameras.items()}))
+
+
 def test_auto_format_detection():
     assert read_calibration(DATA / 'Calib.qca.txt').names == list(CAMS)
     room = read_calibration(DATA / 'calibration_opencv.json', 'camera-info',

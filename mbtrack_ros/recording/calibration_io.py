@@ -391,8 +391,15 @@ def read_camera_info_calibration(
     if not infos:
         raise CalibrationError('no camera_info files given')
     if isinstance(extrinsics, Mapping):
-        poses = {str(n): (_matrix(R, (3, 3), f'{n}.R'), _matrix(t, (3,), f'{n}.t'))
-                 for n, (R, t) in extrinsics.items()}
+        try:
+            pairs = {str(n): tuple(pose) for n, pose in extrinsics.items()}
+        except TypeError as err:
+            raise CalibrationError('extrinsics must map camera names to (R, t)') from err
+        bad = [n for n, pose in pairs.items() if len(pose) != 2]
+        if bad:
+            raise CalibrationError(f'extrinsics of camera {bad[0]} must be a pair (R, t)')
+        poses = {n: (_matrix(R, (3, 3), f'{n}.R'), _matrix(t, (3,), f'{n}.t'))
+                 for n, (R, t) in pairs.items()}
         ext_source = 'the extrinsics'
     else:
         ext_path = Path(extrinsics)
