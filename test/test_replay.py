@@ -59,10 +59,14 @@ def test_max_frames_and_config_default(recording, tmp_path, capsys):
     gt = recording / 'ground_truth.csv'
     code = main(['replay', str(recording / 'bag'), '--config',
                  str(recording / 'calibration.yaml'), '--out', str(out), '--init-from',
-                 str(gt), '--max-frames', '3', '--algorithm', 'separable', '--particles', '30'])
+                 str(gt), '--max-frames', '3', '--algorithm', 'separable', '--particles', '30',
+                 '--eval', str(gt)])
     assert code == 0
     rows = read_tracks(out / 'tracks.csv')
     assert len({r.stamp_ns for r in rows}) == 3
+    # the evaluation scores only the replayed frames
+    table = capsys.readouterr().out.strip().splitlines()
+    assert table[-1].split()[-4] == '3'
 
 
 @pytest.mark.parametrize('argv, needle', [
