@@ -569,3 +569,16 @@ def test_sampling_explores_both_postures() -> None:
                - 0.7) < 0.04
     with pytest.raises(AssociationError):
         sampling.sample_states(mean, cov, 10, rng, sit_explore=0.6)
+
+
+def test_posture_update_is_a_two_state_bayes_filter() -> None:
+    ll = sampling.posture_loglik(np.array([0.0, 1.0, 0.0, 1.0]), np.array([-3.0, -2.0, -1.0,
+                                                                           np.nan]))
+    np.testing.assert_allclose(ll, [-1.0, -2.0])
+    assert sampling.posture_update(0.5, np.array([0.0, np.log(3.0)])) == pytest.approx(0.75)
+    assert sampling.posture_update(0.2, np.array([np.log(2.0), 0.0])) == pytest.approx(
+        0.2 / (0.2 + 0.8 * 2.0))
+    # a posture that was not sampled carries no evidence
+    assert sampling.posture_update(0.3, np.array([-1.0, -np.inf])) == pytest.approx(0.3)
+    np.testing.assert_allclose(sampling.posture_update(np.array([0.0, 1.0]), np.zeros((2, 2))),
+                               [1e-4, 1 - 1e-4])

@@ -2,10 +2,10 @@
 
 Each track is a constant-velocity Kalman filter on ``(x, y, vx, vy)`` (:mod:`.kalman`); the
 orientation follows the velocity above ``orientation_speed``. The sitting column is a
-probability: predicted with the flip rate of the particle filters' dynamics, sampled as 0/1
-in the measurement samples (at least ``sit_explore`` of them in the less likely posture) and
-updated with the same association weights as the position (PDAF/JPDAF: beta_0 p + sum_i
-beta_i sit_i; JLF: the best joint sample's posture). An extension of 004, which has no
+probability of a two-state filter: predicted with the flip rate of the particle filters'
+dynamics, sampled as 0/1 in the measurement samples (at least ``sit_explore`` of them in the
+less likely posture) and updated with the likelihood ratio of the best sitting and the best
+standing sample (:func:`.sampling.posture_update`). An extension of 004, which has no
 discrete state. Measurements come from the same
 appearance likelihood as the particle filters (``MeasurementModel.separable`` for PDAF and
 JPDAF, ``MeasurementModel.joint(..., orders=...)`` for the JLF). No particles are reported.
@@ -26,7 +26,7 @@ from mbtrack_ros.core.association.jlf import jlf_measurement
 from mbtrack_ros.core.association.jpdaf import joint_measurements, jpdaf_update
 from mbtrack_ros.core.association.kalman import AssociationError
 from mbtrack_ros.core.association.pdaf import pdaf_update
-from mbtrack_ros.core.association.sampling import measurement_sampling
+from mbtrack_ros.core.association.sampling import measurement_sampling, posture_update
 from mbtrack_ros.core.filters import FilterError, TrackUpdate, register_filter
 from mbtrack_ros.core.state import SIT, STATE_DIM, THETA, VX, VY, X, Y
 
@@ -268,7 +268,7 @@ class PDAFFilter(_KalmanTracks):
                               p_detect=c.p_detect, p_gate=c.p_gate,
                               clutter_density=c.clutter_density)
             means[k, :4], covs[k] = res.mean, res.cov
-            means[k, SIT] = res.beta0 * means[k, SIT] + res.beta @ found[k].states[:, SIT]
+            means[k, SIT] = posture_update(means[k, SIT], found[k].posture_loglik)
             beta0.append(res.beta0)
         self._store(ids, means, covs)
         t3 = time.perf_counter()
@@ -306,7 +306,7 @@ class JPDAFFilter(_KalmanTracks):
         except AssociationError as err:
             raise FilterError(str(err)) from err
         means[:, :4] = res.means
-        means[:, SIT] = res.beta0 * means[:, SIT] + res.beta @ pool.states[:, SIT]
+        means[:, SIT] = posture_update(means[:, SIT], pool.posture_loglik)
         self._store(ids, means, res.covs)
         t3 = time.perf_counter()
         self.stats = {'measurements': float(len(pool.loglik)),
@@ -352,7 +352,7 @@ class JLFFilter(_KalmanTracks):
         if np.isfinite(res.loglik):  # 004 §5.2.1: component measurements -> Kalman filters
             m4, covs = kalman.update(means[:, :4], covs, res.states[:, :2], c.R)
             means[:, :4] = m4
-            means[:, SIT] = res.states[:, SIT]
+            means[:, SIT] = posture_update(means[:, SIT], res.posture_loglik)
         self._store(ids, means, covs)
         t3 = time.perf_counter()
         self.stats = {'evaluations': float(res.evaluations), 'loglik': float(res.loglik)}

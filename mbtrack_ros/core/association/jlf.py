@@ -23,7 +23,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from mbtrack_ros.core.association.kalman import AssociationError
-from mbtrack_ros.core.association.sampling import clean_loglik, sample_states
+from mbtrack_ros.core.association.sampling import clean_loglik, posture_loglik, sample_states
 from mbtrack_ros.core.camera import Camera
 from mbtrack_ros.core.state import SIT, STATE_DIM, X, Y
 
@@ -45,12 +45,15 @@ class JLFResult:
         orders: (C, K) its best front-to-back order per camera.
         loglik: joint log-likelihood of ``states`` under ``orders``.
         evaluations: number of joint likelihood evaluations (rows) spent.
+        posture_loglik: (K, 2) per target, the best joint log-likelihood of a joint sample
+            with that target standing / sitting (-inf if not sampled).
     """
 
     states: np.ndarray
     orders: np.ndarray
     loglik: float
     evaluations: int
+    posture_loglik: np.ndarray
 
 
 def silhouette_boxes(joint_states: np.ndarray, camera: Camera, heights: np.ndarray,
@@ -276,8 +279,9 @@ def jlf_measurement(means: np.ndarray, covs: np.ndarray, joint_score: JointScore
     orders, loglik, evaluations = best_orders(js, joint_score, cameras, heights, widths,
                                               active=active)
     i = int(np.argmax(loglik))  # 004 §5.2.1: the most probable joint sample
+    posture = np.array([posture_loglik(js[:, t, SIT], loglik) for t in range(k)])
     states, value = js[i].copy(), float(loglik[i])
     if refine and np.isfinite(value):
         states, value = refine_joint(states, orders[i], joint_score, max_evals=refine_evals)
         evaluations += refine_evals
-    return JLFResult(states, orders[i], value, evaluations)
+    return JLFResult(states, orders[i], value, evaluations, posture)

@@ -216,7 +216,8 @@ def joint_measurements(means: np.ndarray, covs: np.ndarray, scores: list[ScoreFn
         means: (K, 6) predicted states; covs: (K, 4, 4).
         scores: K log-likelihood callables, one per target.
     Returns:
-        :class:`Measurements` of the pool, best first.
+        :class:`Measurements` of the pool, best first; ``posture_loglik`` is (K, 2), each
+        target's best standing / sitting score.
     """
     means = np.asarray(means, dtype=np.float64)
     if len(scores) != means.shape[0]:
@@ -229,4 +230,5 @@ def joint_measurements(means: np.ndarray, covs: np.ndarray, scores: list[ScoreFn
     states = np.vstack([m.states for m in pooled]) if pooled else np.zeros((0, 6))
     loglik = np.concatenate([m.loglik for m in pooled]) if pooled else np.zeros(0)
     keep = suppress(states[:, :2], loglik, radius=separation)  # 004 §5.1.1: minimum separation
-    return Measurements(states[keep], loglik[keep])
+    posture = np.array([m.posture_loglik for m in pooled]).reshape(-1, 2)
+    return Measurements(states[keep], loglik[keep], posture)

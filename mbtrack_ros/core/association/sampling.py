@@ -9,7 +9,7 @@ cameras), the best kept after non-maximum suppression, and optionally hill-climb
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import minimize
@@ -17,8 +17,8 @@ from scipy.optimize import minimize
 from mbtrack_ros.core.association.kalman import AssociationError
 from mbtrack_ros.core.state import SIT, STATE_DIM, THETA, VX, VY, X, Y
 
-__all__ = ['Measurements', 'ScoreFn', 'clean_loglik', 'measurement_sampling', 'refine_state',
-           'sample_states', 'suppress']
+__all__ = ['Measurements', 'ScoreFn', 'clean_loglik', 'measurement_sampling', 'posture_loglik',
+           'posture_update', 'refine_state', 'sample_states', 'suppress']
 
 ScoreFn = Callable[[np.ndarray], np.ndarray]
 """``score(states (N, 6)) -> (N,)`` log-likelihood of single-person states."""
@@ -31,10 +31,13 @@ class Measurements:
     Attributes:
         states: (n, 6) full states of the kept samples (positions are the measurements).
         loglik: (n,) their log-likelihoods.
+        posture_loglik: (2,) best log-likelihood of any standing / sitting sample (-inf if
+            none was drawn); (K, 2), one row per target, for a joint pool.
     """
 
     states: np.ndarray
     loglik: np.ndarray
+    posture_loglik: np.ndarray = field(default_factory=lambda: np.full(2, -np.inf))
 
     @property
     def positions(self) -> np.ndarray:
@@ -93,6 +96,30 @@ def sample_states(mean: np.ndarray, cov: np.ndarray, n: int, rng: np.random.Gene
         p_sit = float(np.clip(mean[SIT], sit_explore, 1.0 - sit_explore))
         states[:, SIT] = (rng.random(n) < p_sit).astype(np.float64)
     return states
+
+
+def posture_loglik(sitting: np.ndarray, loglik: np.ndarray) -> np.ndarray:
+    """(2,) best log-likelihood among standing (sitting < 0.5) and sitting samples."""
+    sit = np.asarray(sitting) >= 0.5
+    ll = np.asarray(loglik, dtype=np.float64)
+    return np.array([ll[~sit].max(initial=-np.inf), ll[sit].max(initial=-np.inf)])
+
+
+def posture_update(p_sit: np.ndarray, posture_ll: np.ndarray, *,
+                   floor: float = 1e-4) -> np.ndarray:
+    """Posterior sitting probability of a two-state filter (an extension of 004).
+
+    logit p' = logit p + (L_sit - L_stand), the likelihood of each posture approximated by
+    its best sample (``posture_ll`` (..., 2) from :func:`posture_loglik`); if a posture was
+    not sampled, or neither has finite evidence, the prior is kept. Result clipped to
+    [floor, 1 - floor].
+    """
+    p = np.clip(np.asarray(p_sit, dtype=np.float64), floor, 1.0 - floor)
+    ll = np.asarray(posture_ll, dtype=np.float64)
+    delta = ll[..., 1] - ll[..., 0]
+    delta = np.where(np.isfinite(delta), delta, 0.0)
+    logit = np.log(p) - np.log1p(-p) + delta
+    return np.clip(1.0 / (1.0 + np.exp(-logit)), floor, 1.0 - floor)
 
 
 def suppress(positions: np.ndarray, loglik: np.ndarray, *, radius: float,
@@ -177,11 +204,13 @@ def measurement_sampling(mean: np.ndarray, cov: np.ndarray, score: ScoreFn,
     states = sample_states(mean, cov, n_samples, rng, scale=scale, min_std=min_std,
                            min_speed=min_speed, sit_explore=sit_explore)
     loglik = clean_loglik(score(states), n_samples)  # 004 §4.1: p(I|X) of every sample
+    posture = posture_loglik(states[:, SIT], loglik)
     keep = suppress(states[:, :2], loglik, radius=radius, max_keep=n_keep)  # 004 §4.1: n best
     states, loglik = states[keep], loglik[keep]
     if refine and keep.size:
         for i in range(states.shape[0]):
             states[i], loglik[i] = refine_state(states[i], score, max_evals=refine_evals)
+        posture = np.maximum(posture, posture_loglik(states[:, SIT], loglik))
         keep = suppress(states[:, :2], loglik, radius=radius, max_keep=n_keep)
         states, loglik = states[keep], loglik[keep]
-    return Measurements(states, loglik)
+    return Measurements(states, loglik, posture)
