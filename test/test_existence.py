@@ -105,6 +105,21 @@ def test_existence_ignores_cameras_where_the_track_is_hidden():
     assert aux.existence > 0.9
 
 
+def test_supported_track_survives_a_wrong_appearance_model():
+    """All cameras rejecting the appearance model must not kill a track with foreground
+    support (visibility cap); without the cap it dies within a few frames."""
+    cams = ('cam0', 'cam1', 'cam2', 'cam3')
+    lv = {c: -30.0 for c in cams}
+    lh = {c: -8.7 for c in cams}
+    cov = {c: 0.55 for c in cams}
+    for cap, survives in ((0.7, True), (1.0, False)):
+        aux = TrackAuxiliary(AuxiliaryConfig(initial_existence=0.99,
+                                             initial_visibility=0.99, visibility_cap=cap))
+        for _ in range(15):
+            aux.update(1 / 15, loglik_visible=lv, loglik_hidden=lh, coverage=cov)
+        assert (aux.existence > 0.9) == survives
+
+
 # -- visibility on rendered images ------------------------------------------------------
 def _room() -> RoomCalibration:
     cams = {}

@@ -48,6 +48,8 @@ class AutoDetectionConfig:
         clutter_distance: Bhattacharyya distance whose likelihood is the "not visible"
             clutter likelihood ``p_0`` (001 Eq. 23).
         visibility_particles: posterior particles used per track for ``p_1`` (001 Eq. 18).
+        side_weight: weight of the side cameras' evidence in the existence update when a
+            top-down camera exists.
         report_hidden: also report tracks whose existence is below the report threshold.
     """
 
@@ -59,6 +61,7 @@ class AutoDetectionConfig:
     sigma: float = 0.12
     clutter_distance: float = 0.5
     visibility_particles: int = 8
+    side_weight: float = 0.3
     report_hidden: bool = False
 
     def __post_init__(self) -> None:
@@ -98,6 +101,7 @@ class AutoDetection:
         self._last_stamp: int | None = None
         self.timings: dict[str, float] = {}
         self.side = [n for n, c in calibration.cameras.items() if not is_ceiling(c)]
+        self.ceiling = [n for n in calibration.cameras if n not in self.side]
 
     def bootstrap(self, frames: Mapping[str, Sequence[np.ndarray]]) -> None:
         """Initialise the background models from empty-room frames per camera."""
@@ -263,7 +267,14 @@ class AutoDetection:
                             vis[n] = predictive_loglik(ll[sel])              # 001 Eq. 18
                             hid[n] = hidden
             cov = {n: float(c[k]) for n, c in coverage.items() if np.isfinite(c[k])}
+            # evidence weights: w* of the tracking cameras (top-down cameras are not used by
+            # the filter and weigh 1); with a top-down camera, which decides the release,
+            # the side cameras' support counts less (their silhouettes are more sensitive
+            # to position errors and occlusion)
+            side_w = cfg.side_weight if self.ceiling else 1.0
+            weights = {n: (float(t.visible_fraction.get(n, 1.0)) * side_w
+                           if n in self.side else 1.0) for n in set(cov) | set(vis)}
             aux.update(dt, loglik_visible=vis, loglik_hidden=hid, coverage=cov,
-                       visible_fraction=t.visible_fraction or None)
+                       visible_fraction=weights)
             t.visibility = dict(aux.visibility)
             t.existence = float(aux.existence)
