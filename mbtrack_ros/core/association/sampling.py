@@ -102,6 +102,7 @@ def posture_loglik(sitting: np.ndarray, loglik: np.ndarray) -> np.ndarray:
     """(2,) best log-likelihood among standing (sitting < 0.5) and sitting samples."""
     sit = np.asarray(sitting) >= 0.5
     ll = np.asarray(loglik, dtype=np.float64)
+    ll = np.where(np.isnan(ll), -np.inf, ll)
     return np.array([ll[~sit].max(initial=-np.inf), ll[sit].max(initial=-np.inf)])
 
 
