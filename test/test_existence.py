@@ -105,19 +105,21 @@ def test_existence_ignores_cameras_where_the_track_is_hidden():
     assert aux.existence > 0.9
 
 
-def test_supported_track_survives_a_wrong_appearance_model():
-    """All cameras rejecting the appearance model must not kill a track with foreground
-    support (visibility cap); without the cap it dies within a few frames."""
+def test_visibility_cap_bounds_the_appearance_evidence_against_existence():
+    """All cameras rejecting the appearance model of a track believed visible: with the
+    cap the existence log-odds drop by exactly n * weight * log(1 - cap)."""
     cams = ('cam0', 'cam1', 'cam2', 'cam3')
-    lv = {c: -30.0 for c in cams}
+    lv = {c: -40.0 for c in cams}
     lh = {c: -8.7 for c in cams}
-    cov = {c: 0.55 for c in cams}
-    for cap, survives in ((0.7, True), (1.0, False)):
-        aux = TrackAuxiliary(AuxiliaryConfig(initial_existence=0.99,
-                                             initial_visibility=0.99, visibility_cap=cap))
-        for _ in range(15):
-            aux.update(1 / 15, loglik_visible=lv, loglik_hidden=lh, coverage=cov)
-        assert (aux.existence > 0.9) == survives
+    drops = {}
+    for cap in (0.7, 1.0):
+        cfg = AuxiliaryConfig(initial_existence=0.5, initial_visibility=0.999,
+                              visibility_cap=cap)
+        aux = TrackAuxiliary(cfg)
+        aux.update(0.0, loglik_visible=lv, loglik_hidden=lh)
+        drops[cap] = np.log(aux.existence / (1 - aux.existence))
+    assert drops[0.7] == pytest.approx(4 * 0.3 * np.log(0.3), rel=1e-6)
+    assert drops[1.0] == pytest.approx(4 * 0.3 * np.log(0.001), rel=1e-3)
 
 
 # -- visibility on rendered images ------------------------------------------------------
