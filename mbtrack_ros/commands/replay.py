@@ -16,6 +16,7 @@ to there is kept on disk and the exit code is 1.
 from __future__ import annotations
 
 import argparse
+import shutil
 import sys
 import time
 from collections.abc import Iterator
@@ -182,7 +183,8 @@ def _collect_key_images(reader: RecordingReader, index: _FrameIndex,
 
 
 def _track_rows(tracker: Tracker, reader: RecordingReader, index: _FrameIndex, starts: list,
-                args: argparse.Namespace, recorder, status: dict) -> Iterator[TrackRow]:
+                args: argparse.Namespace, recorder, status: dict,
+                outputs=None) -> Iterator[TrackRow]:
     """Tracking pass: yields the rows of tracks.csv frame by frame."""
     from tqdm import tqdm
 
@@ -219,6 +221,8 @@ def _track_rows(tracker: Tracker, reader: RecordingReader, index: _FrameIndex, s
             status['last_frame'] = fs.index
             if recorder is not None:
                 recorder.add_frame(result)
+            if outputs is not None:  # the tracker_node messages, for offline replay
+                outputs.write(result)
             for t in result.tracks:
                 vis = max(t.visible_fraction.values()) if t.visible_fraction else float('nan')
                 yield TrackRow(stamp_ns=fs.stamp_ns, frame=fs.index, track_id=t.track_id,
@@ -232,6 +236,22 @@ def _track_rows(tracker: Tracker, reader: RecordingReader, index: _FrameIndex, s
     finally:
         bar.close()
         status['wall_s'] = time.perf_counter() - t_start
+
+
+def _output_bag(out: Path, calibration: RoomCalibration):
+    """Writer of OUTDIR/tracks.mcap: every tracker_node output topic (None without rclpy)."""
+    try:
+        from mbtrack_ros.nodes.output_bag import OutputBagError, OutputBagWriter
+    except ImportError:
+        print(f'{_PROG}: note: no rclpy, so no {out / "tracks.mcap"}', file=sys.stderr)
+        return None
+    path = out / 'tracks.mcap'
+    if (path / 'metadata.yaml').exists():
+        shutil.rmtree(path)  # replaced like tracks.csv
+    try:
+        return OutputBagWriter(path, calibration)
+    except OutputBagError as err:
+        raise _UserError(str(err)) from err
 
 
 def run(args: argparse.Namespace) -> int:
@@ -293,13 +313,19 @@ def run(args: argparse.Namespace) -> int:
                 tracks_path = out / 'tracks.csv'
                 rows: list[TrackRow] = []
 
+                outputs = _output_bag(out, calibration)
+
                 def collect() -> Iterator[TrackRow]:
                     for row in _track_rows(tracker, reader, index, starts, args, recorder,
-                                           status):
+                                           status, outputs):
                         rows.append(row)
                         yield row
 
-                write_tracks(tracks_path, collect())
+                try:
+                    write_tracks(tracks_path, collect())
+                finally:
+                    if outputs is not None:
+                        outputs.close()
         except BagError as err:
             return _error(str(err), 1)
         except (InitiationError, FilterError, CalibrationError) as err:
