@@ -65,8 +65,8 @@ class AssociationConfig:
         visibility: report the visible fraction per camera from an HJS evaluation at the
             track means (cheap: one particle per track); False reports 1.0.
         sit_flip_rate: 1/s, rate of sitting <-> standing changes (= MotionConfig's).
-        sit_explore: minimum fraction of samples in the less probable posture (0 = keep the
-            posture the track was started with).
+        sit_explore: minimum fraction of samples in the less probable posture (0 = the
+            posture stays as the track was started, as in 004).
     """
 
     samples: int = 100
@@ -192,8 +192,9 @@ class _KalmanTracks:
             raise FilterError(str(err)) from err
         means = means.copy()
         means[:, :4] = m4
-        flip = -np.expm1(-self.config.sit_flip_rate * dt)  # two-state Markov chain
-        means[:, SIT] = means[:, SIT] * (1.0 - flip) + (1.0 - means[:, SIT]) * flip
+        if self.config.sit_explore > 0.0:  # two-state Markov chain of the posture
+            flip = -np.expm1(-self.config.sit_flip_rate * dt)
+            means[:, SIT] = means[:, SIT] * (1.0 - flip) + (1.0 - means[:, SIT]) * flip
         return self._orient(means), covs
 
     def _orient(self, means: np.ndarray) -> np.ndarray:
@@ -268,7 +269,8 @@ class PDAFFilter(_KalmanTracks):
                               p_detect=c.p_detect, p_gate=c.p_gate,
                               clutter_density=c.clutter_density)
             means[k, :4], covs[k] = res.mean, res.cov
-            means[k, SIT] = posture_update(means[k, SIT], found[k].posture_loglik)
+            if c.sit_explore > 0.0:
+                means[k, SIT] = posture_update(means[k, SIT], found[k].posture_loglik)
             beta0.append(res.beta0)
         self._store(ids, means, covs)
         t3 = time.perf_counter()
@@ -306,7 +308,8 @@ class JPDAFFilter(_KalmanTracks):
         except AssociationError as err:
             raise FilterError(str(err)) from err
         means[:, :4] = res.means
-        means[:, SIT] = posture_update(means[:, SIT], pool.posture_loglik)
+        if c.sit_explore > 0.0:
+            means[:, SIT] = posture_update(means[:, SIT], pool.posture_loglik)
         self._store(ids, means, res.covs)
         t3 = time.perf_counter()
         self.stats = {'measurements': float(len(pool.loglik)),
@@ -352,7 +355,8 @@ class JLFFilter(_KalmanTracks):
         if np.isfinite(res.loglik):  # 004 §5.2.1: component measurements -> Kalman filters
             m4, covs = kalman.update(means[:, :4], covs, res.states[:, :2], c.R)
             means[:, :4] = m4
-            means[:, SIT] = posture_update(means[:, SIT], res.posture_loglik)
+            if c.sit_explore > 0.0:
+                means[:, SIT] = posture_update(means[:, SIT], res.posture_loglik)
         self._store(ids, means, covs)
         t3 = time.perf_counter()
         self.stats = {'evaluations': float(res.evaluations), 'loglik': float(res.loglik)}
