@@ -60,7 +60,7 @@ class AutoDetectionConfig:
     existence: AuxiliaryConfig = field(default_factory=AuxiliaryConfig)
     sigma: float = 0.12
     clutter_distance: float = 0.5
-    visibility_particles: int = 8
+    visibility_particles: int = 6
     side_weight: float = 0.3
     report_hidden: bool = False
 
@@ -243,17 +243,20 @@ class AutoDetection:
         if rows:
             parts = np.concatenate(rows)
             owner_arr = np.asarray(owner)
-            for n in self.side:
-                if n not in images:
-                    continue
-                cam = self.calibration.cameras[n]
-                sil = rasterize(cam, parts, hyp_shapes)
-                rel = relative_angle(parts[:, THETA], cam.viewing_angle(parts[:, [X, Y]]))
-                hists = np.empty((len(parts), 3, 512))
-                for k in np.unique(owner_arr):
-                    sel = owner_arr == k
-                    hists[sel] = models[tracks[k].track_id].interpolate(rel[sel])
-                ll = single_target_loglik(quantize(images[n]), sil, hists, sigma=cfg.sigma)
+            cams = [n for n in self.side if n in images]
+            # relative viewing angles of every particle in every camera, then one key-view
+            # interpolation per track (003 Eq. 1-2) for all cameras at once
+            rel = np.stack([relative_angle(parts[:, THETA],
+                                           self.calibration.cameras[n].viewing_angle(
+                                               parts[:, [X, Y]])) for n in cams])
+            hists = np.empty((len(cams), len(parts), 3, 512))
+            for k in np.unique(owner_arr):
+                sel = owner_arr == k
+                h = models[tracks[k].track_id].interpolate(rel[:, sel].ravel())
+                hists[:, sel] = h.reshape(len(cams), int(sel.sum()), 3, 512)
+            for c, n in enumerate(cams):
+                sil = rasterize(self.calibration.cameras[n], parts, hyp_shapes)
+                ll = single_target_loglik(quantize(images[n]), sil, hists[c], sigma=cfg.sigma)
                 loglik[n] = np.where(sil.area > 0, ll, -np.inf)
         for k, t in enumerate(tracks):
             aux = self.aux.setdefault(t.track_id, TrackAuxiliary(cfg.existence))
