@@ -55,7 +55,8 @@ from rclpy.node import Node
 from mbtrack_ros.core.camera import CalibrationError, RoomCalibration
 from mbtrack_ros.core.tracker import TrackerConfig, TrackerError
 
-__all__ = ['RELIABILITIES', 'TRANSPORTS', 'CameraInput', 'NodeParams', 'ParamsError', 'declare_and_read']
+__all__ = ['RELIABILITIES', 'TRANSPORTS', 'CameraInput', 'NodeParams', 'ParamsError',
+           'declare_and_read']
 
 TRANSPORTS = ('raw', 'compressed')
 RELIABILITIES = ('best_effort', 'reliable')

@@ -160,8 +160,11 @@ class TrackerNode(Node):
         self.params: NodeParams
         self.params, self.calibration = declare_and_read(self)
         p = self.params
-        self.tracker = tracker or Tracker(self.calibration, p.tracker,
-                                          rng=np.random.default_rng(p.tracker.seed))
+        try:
+            self.tracker = tracker or Tracker(self.calibration, p.tracker,
+                                              rng=np.random.default_rng(p.tracker.seed))
+        except TrackerError as err:
+            raise ParamsError(str(err)) from err
         self.sync = FrameSetSynchronizer(p.camera_names, p.slop_ns, p.timeout_ns)
         self._lock = threading.Lock()  # synchroniser and frame-set queue
         self._step_lock = threading.Lock()  # one tracker step at a time; held while closing
@@ -263,11 +266,15 @@ class TrackerNode(Node):
             self._warned[cause] = now
             self.get_logger().warning(text)
 
+    def _count_drop(self) -> None:
+        with self._lock:
+            self._dropped += 1
+
     def _on_camera_info(self, camera: str, msg: CameraInfo) -> None:
         cam = self.calibration.cameras[camera]
         if (msg.width, msg.height) != (cam.width, cam.height):
-            self.warn_once(f'{camera}:info', f'{camera}: CameraInfo says {msg.width}x{msg.height}'
-                       f', the calibration {cam.width}x{cam.height}')
+            self.warn_once(f'{camera}:info', f'{camera}: CameraInfo says '
+                           f'{msg.width}x{msg.height}, the calibration {cam.width}x{cam.height}')
 
     def _on_image(self, camera: str, msg: Image | CompressedImage) -> None:
         stamp = stamp_to_ns(msg.header.stamp)
@@ -275,21 +282,21 @@ class TrackerNode(Node):
             rgb = (compressed_to_rgb(msg) if isinstance(msg, CompressedImage)
                    else image_to_rgb(msg))
         except ImageConversionError as err:
-            self._dropped += 1
+            self._count_drop()
             self.warn_once(f'{camera}:convert', f'{camera}: dropping bad image: {err}')
             return
         cam = self.calibration.cameras[camera]
         if rgb.shape[:2] != (cam.height, cam.width):
             if not self.params.rescale_images:
-                self._dropped += 1
+                self._count_drop()
                 self.warn_once(f'{camera}:size', f'{camera}: image is {rgb.shape[1]}x'
-                           f'{rgb.shape[0]}, calibration {cam.width}x{cam.height}: dropped '
-                           '(set rescale_images to resize)')
+                               f'{rgb.shape[0]}, calibration {cam.width}x{cam.height}: '
+                               'dropped (set rescale_images to resize)')
                 return
             rgb = cv2.resize(rgb, (cam.width, cam.height), interpolation=cv2.INTER_AREA)
         if msg.header.frame_id and msg.header.frame_id != cam.frame_id:
             self.warn_once(f'{camera}:frame', f'{camera}: unexpected frame id '
-                       f'{msg.header.frame_id!r} (calibration: {cam.frame_id!r})')
+                           f'{msg.header.frame_id!r} (calibration: {cam.frame_id!r})')
         with self._lock:
             self._rate_window[camera].append(stamp)
             ready = self.sync.add(camera, stamp, rgb)
@@ -313,10 +320,11 @@ class TrackerNode(Node):
                         return
                     self.process(fs)
             except Exception as err:  # noqa: BLE001 - a bad frame must not kill the node
-                self._dropped_sets += 1
+                with self._lock:
+                    self._dropped_sets += 1
                 self.warn_once(f'step:{type(err).__name__}',
-                           f'frame set at {fs.stamp_ns} ns dropped: '
-                           f'{type(err).__name__}: {err}')
+                               f'frame set at {fs.stamp_ns} ns dropped: '
+                               f'{type(err).__name__}: {err}')
 
     # -- processing -----------------------------------------------------------------------
     def reset(self, stamp_ns: int, reason: str) -> None:
