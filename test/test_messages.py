@@ -107,6 +107,11 @@ def test_markers_add_and_delete_ended():
     # colours are stable per id and differ between consecutive ids
     assert track_color(5) == track_color(5)
     assert np.linalg.norm(np.subtract(track_color(5), track_color(6))) > 0.2
+    # tracks no longer reported are deleted too, live ones never
+    live = result.tracks[0].track_id
+    msg2 = markers_message(result, also_delete=[7, 11, live])
+    gone = {(m.ns, m.id) for m in msg2.markers if m.action == Marker.DELETE}
+    assert gone == {(ns, i) for ns in ('people', 'labels', 'heading') for i in (7, 9, 11)}
     clear = delete_all_markers(STAMP)
     assert [m.action for m in clear.markers] == [Marker.DELETEALL]
 

@@ -149,9 +149,11 @@ def _marker(header: Header, ns: str, track_id: int, action: int) -> Marker:
     return m
 
 
-def markers_message(result: FrameResult, frame_id: str = 'room') -> MarkerArray:
+def markers_message(result: FrameResult, frame_id: str = 'room', *,
+                    also_delete: Sequence[int] = ()) -> MarkerArray:
     """``~/markers``: per track a cylinder of the person's height, a label with id and
-    existence and a heading arrow; DELETE markers for the tracks that ended this frame."""
+    existence and a heading arrow; DELETE markers for the tracks that ended this frame and for
+    ``also_delete`` (e.g. tracks shown before that are not reported any more)."""
     header = make_header(result.stamp_ns, frame_id)
     out = MarkerArray()
     for t in result.tracks:
@@ -177,7 +179,9 @@ def markers_message(result: FrameResult, frame_id: str = 'room') -> MarkerArray:
         arrow.scale.x, arrow.scale.y, arrow.scale.z = 0.5, 0.08, 0.08
         arrow.color.r, arrow.color.g, arrow.color.b, arrow.color.a = r, g, b, 0.9
         out.markers += [body, label, arrow]
-    for track_id in result.ended:
+    shown = {t.track_id for t in result.tracks}
+    gone = list(dict.fromkeys([*result.ended, *also_delete]))
+    for track_id in (i for i in gone if i not in shown):
         out.markers += [_marker(header, ns, track_id, Marker.DELETE)
                         for ns in ('people', 'labels', 'heading')]
     return out

@@ -170,6 +170,7 @@ class TrackerNode(Node):
         self._step_lock = threading.Lock()  # one tracker step at a time; held while closing
         self._closing = False
         self._models: dict[int, PersonModel] = {}  # track id -> appearance model
+        self._shown: set[int] = set()  # track ids with markers on screen
         self._pending: deque[FrameSet] = deque()
         self._warned: dict[str, float] = {}
         self._dropped = 0
@@ -335,6 +336,7 @@ class TrackerNode(Node):
         self._models.clear()
         if self._ground_truth is not None:
             self._ground_truth.reset()
+        self._shown = set()
         clear = messages.delete_all_markers(stamp_ns, self.params.output_frame_id)
         self.pub_markers.publish(clear)
         if self._output_bag is not None:
@@ -369,7 +371,10 @@ class TrackerNode(Node):
         cams = self.params.camera_names
         people = messages.people_message(result, frame)
         cloud = messages.tracks_cloud(result, cams, frame)
-        markers = messages.markers_message(result, frame)
+        current = {t.track_id for t in result.tracks}
+        markers = messages.markers_message(result, frame,
+                                           also_delete=sorted(self._shown - current))
+        self._shown = current
         self.pub_people.publish(people)
         self.pub_tracks.publish(cloud)
         self.pub_markers.publish(markers)
