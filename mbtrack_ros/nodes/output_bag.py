@@ -84,6 +84,7 @@ class OutputBagWriter:
         except (WriterError, OSError) as err:
             raise OutputBagError(f'cannot create output bag {self.path}: {err}') from err
         self._debug_conn: dict[str, object] = {}
+        self._shown: set[int] = set()
         self.frames_written = 0
         self._closed = False
 
@@ -105,9 +106,12 @@ class OutputBagWriter:
         self._put(self._conn['tracks'], stamp,
                   cloud if cloud is not None
                   else messages.tracks_cloud(result, self.camera_names, self.frame_id))
-        self._put(self._conn['markers'], stamp,
-                  markers if markers is not None
-                  else messages.markers_message(result, self.frame_id))
+        current = {t.track_id for t in result.tracks}
+        if markers is None:  # also remove tracks that stopped being reported
+            markers = messages.markers_message(result, self.frame_id,
+                                               also_delete=sorted(self._shown - current))
+        self._shown = current
+        self._put(self._conn['markers'], stamp, markers)
         if diagnostics is not None:
             self._put(self._conn['diagnostics'], stamp, diagnostics)
         for cam, image in (debug or {}).items():
