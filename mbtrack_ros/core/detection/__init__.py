@@ -7,7 +7,9 @@ visibility/existence auxiliary processes (001 §3) in :mod:`mbtrack_ros.core.exi
 * :mod:`.detector` - coarse-to-fine grid search over the floor, multi-camera fusion,
   non-maximum suppression and confirmation over consecutive frames;
 * :mod:`.acquisition` - key-view appearance model of a newly detected person;
-* :mod:`.release` - termination of tracks without foreground support.
+* :mod:`.release` - termination of tracks without foreground support;
+* :mod:`.manager` - :class:`~.manager.AutoDetection`, the per-frame pipeline the tracker
+  calls when ``TrackerConfig.detection`` is set (docs/detection.md).
 """
 from __future__ import annotations
 
