@@ -88,7 +88,7 @@ class AssociationConfig:
     init_velocity_std: float = 0.3
     visibility: bool = True
     sit_flip_rate: float = 0.05
-    sit_explore: float = 0.1
+    sit_explore: float = 0.05
 
     def __post_init__(self) -> None:
         def bad(msg: str) -> None:
