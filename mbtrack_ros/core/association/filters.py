@@ -226,8 +226,11 @@ class _KalmanTracks:
         ones = [{name: 1.0 for name in self.camera_names} for _ in ids]
         if not self.config.visibility:
             return ones
-        result = measurement.hjs([self._means[t][None] for t in ids],
-                                 [np.ones(1) for _ in ids], [self._models[t] for t in ids])
+        states = [self._means[t][None].copy() for t in ids]
+        for st in states:  # the more probable posture, as a 0/1 state
+            st[:, SIT] = np.round(st[:, SIT])
+        result = measurement.hjs(states, [np.ones(1) for _ in ids],
+                                 [self._models[t] for t in ids])
         vf = np.asarray(result.visible_fraction, dtype=np.float64)
         if vf.shape != (len(ids), len(self.camera_names)):
             raise FilterError(f'visible_fraction has shape {vf.shape}, expected '
