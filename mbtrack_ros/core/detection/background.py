@@ -71,8 +71,8 @@ class BackgroundConfig:
     open_size: int = 3
     close_size: int = 5
     min_blob_area: int = 0
-    static_frames: int = 20
-    static_alpha: float = 0.8
+    static_frames: int = 45
+    static_alpha: float = 0.9
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.alpha < 1.0:
