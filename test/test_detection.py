@@ -389,6 +389,18 @@ def test_blob_coverage_supports_a_person_right_below_the_ceiling_camera():
     assert supported.all()
 
 
+def test_duplicate_tracks_release_the_younger_after_the_merge_time():
+    rel = Releaser(make_room(), ReleaseConfig(merge_radius=0.35, merge_time=0.5))
+    out = {}
+    for k in range(20):
+        stamp = int(round(k * 1e9 / FPS))
+        xy = np.array([[2.0, 2.0], [2.2 if k >= 3 else 3.0, 2.0], [4.0, 4.0]])
+        for tid in rel.duplicates(stamp, [1, 7, 3], xy):
+            out.setdefault(tid, k)
+    assert out == {7: 3 + int(np.ceil(0.5 * FPS))}     # shadowing since frame 3
+    assert rel.duplicates(0, [1, 2], np.array([[0.0, 0.0], [1.0, 0.0]])) == []
+
+
 # -- tracker integration -----------------------------------------------------------------
 def test_tracker_detects_tracks_and_releases_a_painted_person():
     """End to end with the real tracker: born within 0.5 s, released within 1.5 s."""

@@ -171,8 +171,10 @@ class AutoDetection:
             self._auxiliary(dt, images, tracks, models, shapes, coverage)
             existence = [self.aux[t.track_id].existence for t in tracks]
             if evidence:  # 4. release (only once the background exists)
-                ended = self.releaser.update(stamp_ns, [t.track_id for t in tracks],
-                                             supported, existence)
+                ids = [t.track_id for t in tracks]
+                ended = self.releaser.update(stamp_ns, ids, supported, existence)
+                ended += [i for i in self.releaser.duplicates(stamp_ns, ids, means[:, [X, Y]])
+                          if i not in ended]
         for tid in ended:
             self.aux.pop(tid, None)
         t3 = time.perf_counter()

@@ -84,6 +84,9 @@ class ReleaseConfig:
         min_area: pixels (at 320x240, scaled with the image) for a camera to see a track.
         use_ceiling: let top-down cameras alone decide when the room has one.
         existence_threshold: existence below this also counts as unsupported (0 disables).
+        merge_radius, merge_time: two tracks closer than ``merge_radius`` metres for
+            ``merge_time`` seconds follow the same person; the younger one (larger id) is
+            released (a person re-detected next to a lagging track).
     """
 
     timeout: float = 1.0
@@ -92,6 +95,8 @@ class ReleaseConfig:
     min_area: int = 30
     use_ceiling: bool = True
     existence_threshold: float = 0.1
+    merge_radius: float = 0.35
+    merge_time: float = 0.5
 
     def __post_init__(self) -> None:
         if not self.timeout >= 0:
@@ -111,6 +116,7 @@ class Releaser:
         self.deciding = ceiling if (ceiling and self.config.use_ceiling) \
             else [n for n in calibration.cameras if n not in ceiling] or ceiling
         self._since: dict[int, int] = {}
+        self._close: dict[tuple[int, int], int] = {}
 
     def support(self, evidence: Mapping[str, FrameEvidence], silhouettes: Mapping[str, object],
                 states: np.ndarray | None = None, heights: np.ndarray | None = None
@@ -181,6 +187,32 @@ class Releaser:
                 ended.append(tid)
                 del self._since[tid]
         return ended
+
+    def duplicates(self, stamp_ns: int, ids: Sequence[int], xy: np.ndarray) -> list[int]:
+        """Ids of younger tracks that shadowed an older one for ``merge_time`` seconds.
+
+        Args:
+            stamp_ns: frame stamp; ids: K track ids; xy: (K, 2) floor positions, metres.
+        """
+        cfg = self.config
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        if len(ids) != len(xy):
+            raise DetectionError('ids and positions must have the same length')
+        close = set()
+        if len(ids) > 1:
+            d = np.linalg.norm(xy[:, None] - xy[None], axis=2)
+            for a, b in zip(*np.nonzero(np.triu(d < cfg.merge_radius, 1))):
+                close.add((min(int(ids[a]), int(ids[b])), max(int(ids[a]), int(ids[b]))))
+        self._close = {p: t for p, t in self._close.items() if p in close}
+        out = set()
+        for p in close:
+            since = self._close.setdefault(p, int(stamp_ns))
+            if (int(stamp_ns) - since) / 1e9 >= cfg.merge_time:
+                out.add(p[1])
+        for p in list(self._close):
+            if p[1] in out:
+                del self._close[p]
+        return sorted(out)
 
     def forget(self, track_id: int) -> None:
         self._since.pop(int(track_id), None)
