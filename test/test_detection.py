@@ -401,6 +401,22 @@ def test_duplicate_tracks_release_the_younger_after_the_merge_time():
     assert rel.duplicates(0, [1, 2], np.array([[0.0, 0.0], [1.0, 0.0]])) == []
 
 
+def test_auto_detection_tracks_with_side_cameras_and_rejects_bad_images():
+    from mbtrack_ros.core.detection.manager import AutoDetection
+
+    calib = make_room()
+    auto = AutoDetection(calib)
+    bgs = backgrounds(calib)
+    assert set(auto.tracking_images(bgs)) == {'cam0', 'cam1', 'cam2', 'cam3'}
+    only_ceiling = {'cam4': bgs['cam4']}
+    assert set(auto.tracking_images(only_ceiling)) == {'cam4'}
+    auto.bootstrap({n: [bgs[n]] for n in calib.cameras})
+    bad = dict(bgs)
+    bad['cam1'] = bgs['cam1'][:60]
+    with pytest.raises(DetectionError, match='cam1'):
+        auto.step(0, bad, [], {})
+
+
 # -- tracker integration -----------------------------------------------------------------
 def test_tracker_detects_tracks_and_releases_a_painted_person():
     """End to end with the real tracker: born within 0.5 s, released within 1.5 s."""
