@@ -10,6 +10,8 @@ with :class:`~mbtrack_ros.recording.bag.RecordingReader` and fed to the
 
 Tracks are initialised from ground truth (``--init-from``, :mod:`mbtrack_ros.core.initiation`):
 each person's track starts at its first ground-truth frame and ends after its last one.
+Without ``--init-from`` people are detected, acquired and released automatically
+(:mod:`mbtrack_ros.core.detection`).
 A damaged bag stops the run with a message naming the last good frame; what was tracked up
 to there is kept on disk and the exit code is 1.
 """
@@ -27,6 +29,7 @@ import numpy as np
 from mbtrack_ros.core.camera import CalibrationError, RoomCalibration
 from mbtrack_ros.core.filters import FilterError
 from mbtrack_ros.core.initiation import InitiationError, initial_tracks, plan_key_views
+from mbtrack_ros.core.likelihood import LikelihoodError
 from mbtrack_ros.core.tracker import Tracker, TrackerConfig, TrackerError
 from mbtrack_ros.recording.bag import BagError, RecordingReader
 from mbtrack_ros.recording.csvfiles import (
@@ -111,7 +114,8 @@ def _config(args: argparse.Namespace) -> TrackerConfig:
     try:
         return TrackerConfig(algorithm=args.algorithm, particles=args.particles,
                              joint_particles=args.joint_particles, sigma=args.sigma,
-                             d_occ=args.d_occ, use_mrf=not args.no_mrf, seed=args.seed)
+                             d_occ=args.d_occ, use_mrf=not args.no_mrf, seed=args.seed,
+                             detection=args.init_from is None)
     except TrackerError as err:
         raise _UserError(str(err)) from err
 
@@ -195,6 +199,7 @@ def _track_rows(tracker: Tracker, reader: RecordingReader, index: _FrameIndex, s
     live: dict[int, object] = {}  # track id -> InitialTrack
     bar = tqdm(total=total or None, unit='frame', desc='replay', file=sys.stderr,
                disable=not sys.stderr.isatty())
+    known = set(tracker.calibration.cameras)
     t_start = time.perf_counter()
     try:
         for fs in reader.frames():
@@ -215,10 +220,18 @@ def _track_rows(tracker: Tracker, reader: RecordingReader, index: _FrameIndex, s
                 tid = tracker.add_track(init.model, init.state, init.stamp_ns)
                 live[tid] = init
                 status['tracks'] += 1
-            result = tracker.step(fs.stamp_ns, fs.images)
+            images = {c: im for c, im in fs.images.items() if c in known}
+            try:
+                result = tracker.step(fs.stamp_ns, images)
+            except (LikelihoodError, TrackerError) as err:
+                status['bag_error'] = f'frame set {fs.index}: {err}'
+                break
             status['frames'] += 1
+            if not starts:  # automatic detection: ids 1, 2, ... count the births
+                status['tracks'] = max([status['tracks']] + [t.track_id for t in result.tracks])
             status['tracker_s'] += result.timings.get('total', 0.0)
             status['last_frame'] = fs.index
+            status['last_stamp'] = fs.stamp_ns
             if recorder is not None:
                 recorder.add_frame(result)
             if outputs is not None:  # the tracker_node messages, for offline replay
@@ -259,22 +272,20 @@ def run(args: argparse.Namespace) -> int:
     try:
         bag, calibration = _resolve_inputs(args)
         config = _config(args)
-        if args.init_from is None:
-            raise _UserError('automatic detection is not available yet; start the tracks '
-                             'from ground truth with --init-from GROUND_TRUTH.csv')
+        auto = args.init_from is None  # automatic detection instead of ground-truth starts
         try:
-            truth = read_ground_truth(args.init_from)
+            truth = read_ground_truth(args.init_from) if not auto else []
             eval_truth = read_ground_truth(args.eval) if args.eval is not None else None
         except CsvFormatError as err:
             raise _UserError(str(err)) from err
-        if not truth:
+        if not truth and not auto:
             raise _UserError(f'{args.init_from}: ground truth is empty')
         out = Path(args.out)
         try:
             out.mkdir(parents=True, exist_ok=True)
         except OSError as err:
             raise _UserError(f'cannot create {out}: {err.strerror or err}') from err
-        index = _FrameIndex(truth)
+        index = _FrameIndex(truth or eval_truth or [])
         if not ((bag / 'metadata.yaml').exists() or (bag / 'bag' / 'metadata.yaml').exists()):
             raise _UserError(f'{bag} is not a rosbag2 directory nor a recording directory '
                              '(no metadata.yaml)')
@@ -288,17 +299,20 @@ def run(args: argparse.Namespace) -> int:
                 except BagError:
                     pass
                 calibration = _match_calibration(calibration, reader, first)
-            plan = plan_key_views(calibration, truth)
-            needed = {v.frame for views in plan.values() for v in views}
-            with RecordingReader(bag) as reader:
-                key_images = _collect_key_images(reader, index, needed)
-            starts = initial_tracks(calibration, truth, key_images, plan, skip_missing=True)
-            skipped = sorted(set(plan) - {s.person_id for s in starts})
-            if skipped:
-                print(f'{_PROG}: note: no unoccluded key view of person(s) '
-                      f'{", ".join(map(str, skipped))}; not tracked', file=sys.stderr)
-            if not starts:
-                raise _UserError('no person could be initialised from the ground truth')
+            starts = []
+            if not auto:
+                plan = plan_key_views(calibration, truth)
+                needed = {v.frame for views in plan.values() for v in views}
+                with RecordingReader(bag) as reader:
+                    key_images = _collect_key_images(reader, index, needed)
+                starts = initial_tracks(calibration, truth, key_images, plan,
+                                        skip_missing=True)
+                skipped = sorted(set(plan) - {s.person_id for s in starts})
+                if skipped:
+                    print(f'{_PROG}: note: no unoccluded key view of person(s) '
+                          f'{", ".join(map(str, skipped))}; not tracked', file=sys.stderr)
+                if not starts:
+                    raise _UserError('no person could be initialised from the ground truth')
             try:
                 tracker = Tracker(calibration, config, rng=np.random.default_rng(args.seed))
             except TrackerError as err:
@@ -332,17 +346,21 @@ def run(args: argparse.Namespace) -> int:
             raise _UserError(str(err)) from err
         if recorder is not None:
             recorder.save(out / 'particles.npz')
+        shown_n = config.joint_particles if config.algorithm == 'joint' else config.particles
         fps = status['frames'] / max(status['wall_s'], 1e-9)
         tracker_fps = status['frames'] / max(status['tracker_s'], 1e-9)
         print(f'{_PROG}: {status["frames"]} frames, {status["tracks"]} tracks, '
               f'{fps:.1f} frames/s overall, {tracker_fps:.1f} frames/s in the tracker '
-              f'({config.algorithm}, N={config.particles}); wrote {tracks_path}'
+              f'({config.algorithm}, N={shown_n}); wrote {tracks_path}'
               + (f' and {out / "particles.npz"}' if recorder is not None else ''),
               file=sys.stderr)
         if status['skipped']:
             print(f'{_PROG}: note: skipped {status["skipped"]} frame set(s) whose stamps went '
                   'backwards', file=sys.stderr)
         if eval_truth is not None:
+            last = status.get('last_stamp')
+            if last is not None:  # --max-frames or a damaged bag: score the replayed part
+                eval_truth = [r for r in eval_truth if r.stamp_ns <= last]
             _evaluate(rows, eval_truth, out, bag, recorder)
         if status['bag_error']:
             return _error(f'{status["bag_error"]} (kept {status["frames"]} tracked frames, '

@@ -50,6 +50,9 @@ class TrackerConfig:
         init_position_spread: m, spread of a new track's particles.
         init_velocity_spread: m/s, spread of a new track's velocities.
         seed: seed of the default random generator (None = fresh entropy).
+        detection: automatic detection, model acquisition and release of people (003 §4)
+            with visibility/existence probabilities (001), see
+            :mod:`mbtrack_ros.core.detection.manager`.
     """
 
     algorithm: str = 'hjs'
@@ -66,6 +69,7 @@ class TrackerConfig:
     init_position_spread: float = 0.05
     init_velocity_spread: float = 0.1
     seed: int | None = None
+    detection: bool = False
 
     def __post_init__(self) -> None:
         def bad(msg: str) -> None:
@@ -89,6 +93,8 @@ class TrackerConfig:
             bad(f'mrf_epsilon must be in (0, 1], got {self.mrf_epsilon!r}')
         if not isinstance(self.motion, MotionConfig):
             bad('motion must be a MotionConfig')
+        if not isinstance(self.detection, (bool, np.bool_)):
+            bad(f'detection must be true or false, got {self.detection!r}')
         if self.seed is not None and (isinstance(self.seed, bool)
                                       or not isinstance(self.seed, (int, np.integer))):
             bad(f'seed must be an integer or None, got {self.seed!r}')
@@ -148,6 +154,11 @@ class Tracker:
         self._next_id = 1
         self._last_stamp: int | None = None
         self._heights: dict[int, float] = {}
+        self._models: dict[int, object] = {}
+        self.detection = None
+        if self.config.detection:
+            from mbtrack_ros.core.detection.manager import AutoDetection
+            self.detection = AutoDetection(calibration, rng=self.rng)
 
     @property
     def track_ids(self) -> list[int]:
@@ -184,6 +195,9 @@ class Tracker:
             raise TrackerError(str(err)) from err
         self._next_id += 1
         self._heights[track_id] = float(getattr(model, 'height', float('nan')))
+        self._models[track_id] = model
+        if self.detection is not None:
+            self.detection.register(track_id)
         return track_id
 
     def remove_track(self, track_id: int) -> None:
@@ -193,11 +207,15 @@ class Tracker:
         except FilterError as err:
             raise TrackerError(str(err)) from err
         self._heights.pop(track_id, None)
+        self._models.pop(track_id, None)
 
     def reset(self) -> None:
         """Forget all tracks and the time base (ids keep increasing)."""
         self.filter.reset()
         self._heights.clear()
+        self._models.clear()
+        if self.detection is not None:
+            self.detection.reset()
         self._last_stamp = None
 
     def step(self, stamp_ns: int, images: dict[str, np.ndarray]) -> FrameResult:
@@ -216,9 +234,10 @@ class Tracker:
                                f'{self._last_stamp} ns; reset the tracker')
         dt = 0.0 if self._last_stamp is None else (stamp_ns - self._last_stamp) / 1e9
         t0 = time.perf_counter()
-        self.measurement.set_images(images)
+        seen = images if self.detection is None else self.detection.tracking_images(images)
+        self.measurement.set_images(seen)
         t1 = time.perf_counter()
-        updates = self.filter.step(dt, self.measurement, images, self.rng)
+        updates = self.filter.step(dt, self.measurement, seen, self.rng)
         t2 = time.perf_counter()
         self._last_stamp = stamp_ns
         tracks = []
@@ -232,5 +251,15 @@ class Tracker:
         timings = {'prepare': t1 - t0}
         timings.update(self.filter.timings)
         timings['filter'] = t2 - t1
+        ended: list[int] = []
+        if self.detection is not None:  # 003 §4: release, detect, acquire; 001: existence
+            ended, births = self.detection.step(stamp_ns, images, tracks, self._models)
+            for tid in ended:
+                self.remove_track(tid)
+            tracks = [t for t in tracks
+                      if t.track_id not in ended and self.detection.reported(t.track_id)]
+            for birth in births:
+                self.add_track(birth.model, birth.state, stamp_ns)
+            timings.update(self.detection.timings)
         timings['total'] = time.perf_counter() - t0
-        return FrameResult(stamp_ns=stamp_ns, tracks=tracks, timings=timings)
+        return FrameResult(stamp_ns=stamp_ns, tracks=tracks, ended=ended, timings=timings)
