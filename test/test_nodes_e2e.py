@@ -86,6 +86,22 @@ def test_every_example_config_loads(config, room_calibration, context):
         node.destroy_node()
 
 
+def test_detection_parameter_reaches_the_tracker(room_calibration, context):
+    node = start(context, '-p', f'calibration_file:={room_calibration}',
+                 '-p', 'detection.enabled:=true', '-p', 'tracker.particles:=50')
+    try:
+        assert node.params.tracker.detection is True
+        assert node.tracker.config.detection is True and node.tracker.config.particles == 50
+        assert node.tracker.detection is not None  # the automatic detection is running
+    finally:
+        node.destroy_node()
+    node = start(context, '-p', f'calibration_file:={room_calibration}')
+    try:
+        assert node.params.tracker.detection is False and node.tracker.detection is None
+    finally:
+        node.destroy_node()
+
+
 BAD = [
     (['-p', 'tracker.particles:=0'], "'tracker.particles': value out of range"),
     (['-p', 'image_transport:=udp'], "image_transport: 'udp' is not one of raw, compressed"),
