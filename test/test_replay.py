@@ -125,3 +125,27 @@ def test_corrupt_bag_keeps_tracks_so_far(recording, tmp_path, capsys):
     frames = {r.frame for r in rows}
     assert 0 < len(frames) < 24
     assert frames == set(range(len(frames)))  # every frame before the damage was tracked
+
+
+def test_wrong_image_size_mid_bag_is_one_line_error(recording, tmp_path, capsys, monkeypatch):
+    import cv2
+
+    from mbtrack_ros.recording import bag
+
+    original = bag.RecordingReader.frames
+
+    def frames(self):  # the reader yields one frame set with half-size images
+        for fs in original(self):
+            if fs.index == 6:
+                fs.images = {c: cv2.resize(im, (im.shape[1] // 2, im.shape[0] // 2))
+                             for c, im in fs.images.items()}
+            yield fs
+
+    monkeypatch.setattr(bag.RecordingReader, 'frames', frames)
+    out = tmp_path / 'out'
+    code = main(['replay', str(recording), '--out', str(out), '--init-from',
+                 str(recording / 'ground_truth.csv'), '--particles', '30'])
+    assert code == 1
+    err = capsys.readouterr().err
+    assert 'Traceback' not in err and 'frame set 6' in err
+    assert {r.frame for r in read_tracks(out / 'tracks.csv')} == set(range(6))
