@@ -147,6 +147,8 @@ def _run_live(args: argparse.Namespace, rec: Path, info: dict, truth) -> list:
     tracker_params = {
         'calibration_file': rec / 'calibration.yaml', 'use_sim_time': True,
         'output_bag': args.out / 'tracks.mcap', 'tracker.seed': args.seed,
+        # a replay may not lose frames: the player publishes reliably, so ask for it
+        'image_reliability': 'reliable',
     }
     if args.init_from_ground_truth:
         tracker_params['init_ground_truth'] = rec / 'ground_truth.csv'
