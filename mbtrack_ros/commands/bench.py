@@ -209,6 +209,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument('--frames', type=int, default=None,
                         help='timed frames per configuration (default 3 quick, 8 full)')
     parser.add_argument('--seed', type=int, default=0, help='scene seed')
+    # -- live benchmark (mbtrack_ros.commands.bench_live) --
+    from mbtrack_ros.commands.bench_live import add_arguments as _live_arguments
+    _live_arguments(parser)
 
     def error(message: str) -> None:
         print(f'{_PROG}: error: {message}', file=sys.stderr)
@@ -247,6 +250,9 @@ def _grid(quick: bool) -> list[dict]:
 
 def run(args: argparse.Namespace) -> int:
     """Run the benchmark grid, print tables and fits; 0 on success, 2 on bad arguments."""
+    if getattr(args, 'live', False):  # live benchmark over DDS (bench_live)
+        from mbtrack_ros.commands.bench_live import main_live
+        return main_live(args)
     frames = args.frames if args.frames is not None else (3 if args.quick else 8)
     if frames < 1:
         print(f'{_PROG}: error: --frames must be >= 1, got {frames}', file=sys.stderr)

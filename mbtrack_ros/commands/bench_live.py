@@ -1,0 +1,340 @@
+"""``mbtrack bench --live``: the tracker as it runs live, over DDS, and offline replay speed.
+
+A ``clear-room`` recording (four corner cameras, no ceiling camera, 320x240, 15 Hz) is played
+in real time by ``bag_player`` (own process, with ``/clock``) to ``tracker_node`` (own
+process, automatic detection, ``use_sim_time``). A listener in this process records, with its
+own monotonic clock, when each frame of ``/cam0/image_raw`` arrives and when the
+``/tracker_node/people`` message with that stamp arrives; the difference is the end-to-end
+latency (image published -> people published, both seen by the same subscriber). It also
+reads the node's counters from ``/diagnostics`` and the CPU time of the tracker process from
+``/proc/<pid>/stat``. Then ``mbtrack replay`` runs over the same recording, timed, for the
+offline speed.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ['LatencyError', 'LatencyStats', 'LiveResult', 'add_arguments', 'cpu_seconds',
+           'latency_stats', 'make_recording', 'match_latencies', 'nearest_rank',
+           'run_live', 'run_offline', 'main_live']
+
+_PROG = 'mbtrack bench'
+FPS = 15.0
+REPO = Path(__file__).resolve().parents[2]
+
+
+class LatencyError(ValueError):
+    """Arrival times that cannot give a latency (no common frame, answer before image)."""
+
+
+@dataclass
+class LatencyStats:
+    """End-to-end latencies, seconds; ``matched`` frames answered, ``missing`` not."""
+
+    matched: int
+    missing: int
+    p50: float
+    p95: float
+    max: float
+    mean: float
+
+
+def match_latencies(image_arrival: Mapping[int, float], people_arrival: Mapping[int, float]
+                    ) -> tuple[np.ndarray, np.ndarray, int]:
+    """Pair arrivals by frame stamp.
+
+    Args:
+        image_arrival: stamp (ns) -> arrival time of the image, seconds (one clock).
+        people_arrival: stamp (ns) -> arrival time of the output with that stamp, seconds.
+
+    Returns:
+        ``(stamps (M,) int64 sorted, latency (M,) float64 s, missing)``, where ``missing``
+        counts images without an output (outputs without an image are ignored).
+    """
+    stamps = np.array(sorted(set(image_arrival) & set(people_arrival)), dtype=np.int64)
+    lat = np.array([people_arrival[int(s)] - image_arrival[int(s)] for s in stamps],
+                   dtype=np.float64)
+    return stamps, lat, len(image_arrival) - stamps.size
+
+
+def nearest_rank(values: np.ndarray, q: float) -> float:
+    """Nearest-rank percentile ``q`` in (0, 1] of a non-empty (M,) array."""
+    v = np.sort(np.asarray(values, np.float64))
+    return float(v[max(int(np.ceil(q * v.size)) - 1, 0)])
+
+
+def latency_stats(image_arrival: Mapping[int, float],
+                  people_arrival: Mapping[int, float]) -> LatencyStats:
+    """p50 / p95 / max / mean latency (s) of the frames with both arrivals.
+
+    Raises :class:`LatencyError` when no frame has both, or an output arrived before its
+    image (the two times were not taken on one clock).
+    """
+    _, lat, missing = match_latencies(image_arrival, people_arrival)
+    if lat.size == 0:
+        raise LatencyError('no frame has both an image and an output arrival')
+    if np.any(lat < 0):
+        raise LatencyError(f'{int(np.sum(lat < 0))} output(s) arrived before their image')
+    return LatencyStats(int(lat.size), int(missing), nearest_rank(lat, 0.5),
+                        nearest_rank(lat, 0.95), float(lat.max()), float(lat.mean()))
+
+
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU time of process ``pid`` so far, seconds (``/proc/<pid>/stat``)."""
+    text = Path(f'/proc/{pid}/stat').read_text()
+    fields = text[text.rindex(')') + 2:].split()  # after "pid (comm) "
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+
+
+def make_recording(path: Path, *, frames: int, seed: int = 0) -> Path:
+    """The benchmark recording: clear-room, 4 corner cameras, 320x240, 15 Hz."""
+    from mbtrack_ros.synth.generator import generate
+    return generate('clear-room', path, seed=seed, frames=frames, width=320, height=240,
+                    fps=FPS, ceiling=False)
+
+
+@dataclass
+class LiveResult:
+    """What one live run measured."""
+
+    frames: int
+    people_messages: int
+    latency_all: LatencyStats
+    latency_after_1s: LatencyStats
+    diagnostics: dict
+    cpu_seconds: float
+    wall_seconds: float
+    cpu_percent: float
+    mean_people_truth: float
+    mean_tracks: float
+
+
+def _diag_values(msg) -> dict:
+    main = next(s for s in msg.status if s.name == 'mbtrack_ros: tracker')
+    return {kv.key: kv.value for kv in main.values}
+
+
+def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
+             max_pending_sets: int = 2, timeout: float = 600.0) -> LiveResult:
+    """Play ``recording`` to a tracker_node process and measure (see the module docstring)."""
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from geometry_msgs.msg import PoseArray
+    from rclpy.callback_groups import ReentrantCallbackGroup
+    from rclpy.context import Context
+    from rclpy.executors import MultiThreadedExecutor
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import Image
+
+    from mbtrack_ros.nodes.conversions import stamp_to_ns
+    from mbtrack_ros.recording.bag import RecordingReader
+    from mbtrack_ros.recording.csvfiles import read_ground_truth
+
+    with RecordingReader(recording / 'bag') as reader:
+        frames = reader.frame_count
+    truth_count: dict[int, int] = {}
+    for r in read_ground_truth(recording / 'ground_truth.csv'):
+        truth_count[r.stamp_ns] = truth_count.get(r.stamp_ns, 0) + 1
+    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get('PYTHONPATH', ''),
+               ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+    env.setdefault('ROS_DOMAIN_ID', str(100 + os.getpid() % 100))
+    os.environ['ROS_DOMAIN_ID'] = env['ROS_DOMAIN_ID']
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    images: dict[int, float] = {}
+    people: dict[int, float] = {}
+    tracks: dict[int, int] = {}
+    diags: list[dict] = []
+    lock = threading.Lock()
+    context = Context()
+    rclpy.init(context=context)
+    listener = rclpy.create_node('bench_live_listener', context=context)
+    group = ReentrantCallbackGroup()  # an image callback never delays a people callback
+    qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+
+    def on_image(msg) -> None:
+        t = time.monotonic()
+        with lock:
+            images.setdefault(stamp_to_ns(msg.header.stamp), t)
+
+    def on_people(msg) -> None:
+        t = time.monotonic()
+        s = stamp_to_ns(msg.header.stamp)
+        with lock:
+            people.setdefault(s, t)
+            tracks[s] = len(msg.poses)
+
+    def on_diag(msg) -> None:
+        with lock:
+            diags.append(_diag_values(msg))
+
+    listener.create_subscription(Image, '/cam0/image_raw', on_image, qos, callback_group=group)
+    listener.create_subscription(PoseArray, '/tracker_node/people', on_people, qos,
+                                 callback_group=group)
+    listener.create_subscription(DiagnosticArray, '/diagnostics', on_diag, qos,
+                                 callback_group=group)
+    executor = MultiThreadedExecutor(num_threads=3, context=context)
+    executor.add_node(listener)
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
+    log = tempfile.TemporaryFile(mode='w+')
+    node = subprocess.Popen(
+        [sys.executable, '-m', 'mbtrack_ros.nodes.tracker_node', '--ros-args',
+         '-p', f'calibration_file:={recording / "calibration.yaml"}',
+         '-p', 'cameras:=[cam0,cam1,cam2,cam3]', '-p', 'detection.enabled:=true',
+         '-p', f'tracker.seed:={seed}', '-p', 'image_reliability:=reliable',
+         '-p', f'max_pending_sets:={max_pending_sets}', '-p', 'use_sim_time:=true'],
+        cwd=REPO, env=env, stdout=log, stderr=subprocess.STDOUT, text=True)
+    player = None
+    try:
+        # the listener's subscriptions must be matched too: start the player once the
+        # tracker's people publisher sees us (the node is up), then it waits for the cameras
+        deadline = time.monotonic() + 60
+        while listener.count_publishers('/tracker_node/people') == 0:
+            if node.poll() is not None or time.monotonic() > deadline:
+                log.seek(0)
+                raise RuntimeError(f'tracker_node did not start: {log.read()[-500:]}')
+            time.sleep(0.1)
+        player = subprocess.Popen(
+            [sys.executable, '-m', 'mbtrack_ros.nodes.bag_player', '--ros-args',
+             '-p', f'bag:={recording}', '-p', f'rate:={rate}',
+             '-p', 'wait_for_subscribers:=true', '-p', 'start_delay:=1.0'],
+            cwd=REPO, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT)
+        cpu0, wall0 = cpu_seconds(node.pid), time.monotonic()
+        player.wait(timeout=timeout)
+        # the last frame sets: wait until the outputs stop coming (at most 5 s)
+        last_n, quiet = -1, time.monotonic()
+        while time.monotonic() - quiet < 1.0 and time.monotonic() - wall0 < timeout + 5:
+            with lock:
+                n = len(people)
+            if n != last_n:
+                last_n, quiet = n, time.monotonic()
+            time.sleep(0.1)
+        cpu1, wall1 = cpu_seconds(node.pid), time.monotonic()
+    finally:
+        for proc in (player, node):
+            if proc is not None and proc.poll() is None:
+                proc.terminate()
+                try:
+                    proc.wait(timeout=10)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+        executor.shutdown()
+        spinner.join(timeout=5)
+        listener.destroy_node()
+        rclpy.try_shutdown(context=context)
+        log.close()
+    with lock:
+        images_c, people_c, diag = dict(images), dict(people), (diags[-1] if diags else {})
+    first = min(images_c) if images_c else 0
+    later = {s: t for s, t in images_c.items() if s >= first + 1_000_000_000}
+    cpu = cpu1 - cpu0
+    wall = wall1 - wall0
+    return LiveResult(
+        frames=frames, people_messages=len(people_c),
+        latency_all=latency_stats(images_c, people_c),
+        latency_after_1s=latency_stats(later, people_c),
+        diagnostics=diag, cpu_seconds=cpu, wall_seconds=wall,
+        cpu_percent=100.0 * cpu / max(wall, 1e-9),
+        mean_people_truth=float(np.mean([truth_count.get(s, 0) for s in images_c]))
+        if images_c else 0.0,
+        mean_tracks=float(np.mean(list(tracks.values()))) if tracks else 0.0)
+
+
+def run_offline(recording: Path, *, seed: int = 0) -> dict:
+    """Time ``mbtrack replay`` (automatic detection) over the recording: frames/s, x real time."""
+    from mbtrack_ros.cli import main
+    from mbtrack_ros.recording.bag import RecordingReader
+
+    with RecordingReader(recording / 'bag') as reader:
+        frames = reader.frame_count
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        code = main(['replay', str(recording), '--out', tmp, '--seed', str(seed)])
+        wall = time.perf_counter() - t0
+    if code != 0:
+        raise RuntimeError(f'mbtrack replay exited with {code}')
+    return {'frames': frames, 'wall_seconds': wall, 'frames_per_second': frames / wall,
+            'x_real_time': frames / wall / FPS}
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The ``--live`` options of ``mbtrack bench``."""
+    parser.add_argument('--live', action='store_true',
+                        help='instead of the filter grid: bag_player -> tracker_node over DDS '
+                             'in real time (latency, dropped sets, CPU) and offline replay '
+                             'speed, on clear-room with 4 corner cameras at 320x240')
+    parser.add_argument('--live-frames', type=int, default=1800, metavar='N',
+                        help='frames of the live recording (default 1800 = 2 minutes)')
+    parser.add_argument('--live-recording', type=Path, default=None, metavar='DIR',
+                        help='keep the generated recording here (reused if it exists)')
+
+
+def _error(message: str) -> int:
+    print(f'{_PROG}: error: {message}', file=sys.stderr)
+    return 2
+
+
+def main_live(args: argparse.Namespace) -> int:
+    """``mbtrack bench --live``: run, print a summary, optionally write JSON."""
+    if args.live_frames < 30:
+        return _error(f'--live-frames must be >= 30, got {args.live_frames}')
+    seed = args.seed
+    tmp = None
+    try:
+        if args.live_recording is not None and (args.live_recording / 'bag').exists():
+            recording = args.live_recording
+        else:
+            if args.live_recording is None:
+                tmp = Path(tempfile.mkdtemp(prefix='mbtrack_live_'))
+                recording = tmp / 'clear-room'
+            else:
+                recording = args.live_recording
+            print(f'{_PROG}: generating {args.live_frames} frames of clear-room into '
+                  f'{recording}', file=sys.stderr)
+            make_recording(recording, frames=args.live_frames, seed=seed)
+        load0 = os.getloadavg()
+        live = run_live(recording, seed=seed)
+        load1 = os.getloadavg()
+        offline = run_offline(recording, seed=seed)
+    except (LatencyError, RuntimeError, OSError) as err:
+        return _error(str(err))
+    finally:
+        if tmp is not None:
+            shutil.rmtree(tmp, ignore_errors=True)
+    d = live.diagnostics
+    a, b = live.latency_all, live.latency_after_1s
+    print(f'live: {live.frames} frames, {live.people_messages} PoseArrays, '
+          f'{live.mean_people_truth:.2f} people / {live.mean_tracks:.2f} tracks on average')
+    print(f'latency image -> people: p50 {1e3 * a.p50:.1f} ms, p95 {1e3 * a.p95:.1f} ms, '
+          f'max {1e3 * a.max:.1f} ms ({a.matched} frames, {a.missing} unanswered); after the '
+          f'first second: p50 {1e3 * b.p50:.1f} ms, p95 {1e3 * b.p95:.1f} ms')
+    print(f'node counters (last /diagnostics): frame sets {d.get("frame sets")}, incomplete '
+          f'{d.get("incomplete frame sets")}, dropped frames/sets {d.get("dropped frames")}, '
+          f'step time {d.get("step time [ms]")} ms')
+    print(f'tracker_node CPU: {live.cpu_seconds:.1f} s over {live.wall_seconds:.1f} s '
+          f'= {live.cpu_percent:.0f} % of one core')
+    print(f'offline replay: {offline["frames"]} frames in {offline["wall_seconds"]:.1f} s = '
+          f'{offline["frames_per_second"]:.1f} frames/s = {offline["x_real_time"]:.2f}x real '
+          f'time')
+    print(f'load average before / after the live run: {load0[0]:.2f} / {load1[0]:.2f}')
+    if args.json is not None:
+        doc = {'live': asdict(live), 'offline': offline, 'loadavg_before': load0,
+               'loadavg_after': load1, 'seed': seed}
+        try:
+            args.json.write_text(json.dumps(doc, indent=1), encoding='utf-8')
+        except OSError as err:
+            return _error(f'cannot write {args.json}: {err.strerror or err}')
+    return 0

@@ -1,0 +1,193 @@
+"""Live replay over DDS and offline replay of the same bag give the same tracks; the live
+benchmark's latency helper."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+# a domain of our own, before any rclpy context creates a participant
+os.environ['ROS_DOMAIN_ID'] = str(150 + os.getpid() % 70)
+os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+
+from mbtrack_ros.commands.bench_live import (  # noqa: E402
+    LatencyError, latency_stats, match_latencies)
+
+REPO = Path(__file__).resolve().parents[1]
+SEED = 5
+FRAMES = 60  # clear-room at 160x120: the automatic detection starts tracks from frame ~40
+
+
+# -- latency helper (pure) ---------------------------------------------------------------
+def test_match_latencies_pairs_by_stamp_and_counts_missing():
+    images = {10: 1.000, 20: 1.100, 30: 1.200, 40: 1.300}
+    people = {20: 1.130, 10: 1.020, 40: 1.390, 99: 5.0}  # 30 never answered, 99 not an image
+    stamps, lat, missing = match_latencies(images, people)
+    assert stamps.tolist() == [10, 20, 40]
+    np.testing.assert_allclose(lat, [0.020, 0.030, 0.090])
+    assert missing == 1
+
+
+def test_latency_stats_against_sorted_brute_force():
+    rng = np.random.default_rng(3)
+    stamps = np.arange(200) * 66_666_667
+    t_img = 100.0 + stamps / 1e9 + rng.uniform(0, 0.003, 200)
+    lat = rng.gamma(2.0, 0.01, 200)
+    images = dict(zip(stamps.tolist(), t_img.tolist()))
+    people = {int(s): float(t + d) for s, t, d in zip(stamps[5:], t_img[5:], lat[5:])}
+    stats = latency_stats(images, people)
+    ref = np.sort(lat[5:])
+    n = ref.size
+    # nearest-rank percentiles, computed by hand on the sorted list
+    assert stats.p50 == pytest.approx(ref[int(np.ceil(0.50 * n)) - 1])
+    assert stats.p95 == pytest.approx(ref[int(np.ceil(0.95 * n)) - 1])
+    assert stats.max == pytest.approx(ref[-1]) and stats.mean == pytest.approx(ref.mean())
+    assert stats.matched == n and stats.missing == 5
+
+
+def test_latency_stats_refuses_no_overlap_and_negative_latency():
+    with pytest.raises(LatencyError, match='no frame'):
+        latency_stats({1: 0.0}, {2: 0.1})
+    with pytest.raises(LatencyError, match='before'):
+        latency_stats({1: 1.0, 2: 2.0}, {1: 1.1, 2: 1.5})
+
+
+# -- live vs offline ---------------------------------------------------------------------
+@pytest.fixture(scope='module')
+def recording(tmp_path_factory) -> Path:
+    from mbtrack_ros.synth.generator import generate
+    return generate('clear-room', tmp_path_factory.mktemp('rec') / 'room', seed=1,
+                    frames=FRAMES, width=160, height=120)
+
+
+def offline_tracks(recording: Path, out: Path, seed: int) -> dict[int, dict[int, tuple]]:
+    """stamp -> {track id: (x, y)} from `mbtrack replay` (automatic detection)."""
+    from mbtrack_ros.cli import main
+    from mbtrack_ros.recording.csvfiles import read_tracks
+
+    assert main(['replay', str(recording), '--out', str(out), '--seed', str(seed)]) == 0
+    tracks: dict[int, dict[int, tuple]] = {}
+    for r in read_tracks(out / 'tracks.csv'):
+        tracks.setdefault(r.stamp_ns, {})[r.track_id] = (r.x, r.y)
+    return tracks
+
+
+def live_tracks(recording: Path, seed: int, *, sync_timeout: float = 5.0
+                ) -> tuple[dict[int, dict[int, tuple]], dict]:
+    """bag_player (own process) -> DDS -> tracker_node (in process) -> DDS -> ~/tracks."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import MultiThreadedExecutor
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import PointCloud2
+
+    from mbtrack_ros.nodes.conversions import stamp_to_ns
+    from mbtrack_ros.nodes.messages import tracks_dtype
+    from mbtrack_ros.nodes.tracker_node import TrackerNode
+    from mbtrack_ros.recording.bag import RecordingReader
+
+    with RecordingReader(recording / 'bag') as reader:
+        last = max(fs.stamp_ns for fs in reader.frames())
+        cameras = list(reader.cameras)
+    context = Context()
+    rclpy.init(context=context)
+    got: dict[int, dict[int, tuple]] = {}
+    lock = threading.Lock()
+    try:
+        node = TrackerNode(context=context, cli_args=[
+            '--ros-args', '-p', f'calibration_file:={recording / "calibration.yaml"}',
+            '-p', f'tracker.seed:={seed}', '-p', 'detection.enabled:=true',
+            # reliable images, no queue overflow, and a long sync timeout: sync.timeout is
+            # message time, but a callback thread of this process can stall for a moment
+            # (GIL, first numba compilation) while another camera runs 3 frames ahead; the
+            # set would then go out incomplete and the tracks differ from the offline replay
+            '-p', 'image_reliability:=reliable', '-p', 'max_pending_sets:=100',
+            '-p', 'use_sim_time:=true', '-p', f'sync.timeout:={sync_timeout}'])
+    except Exception:
+        rclpy.try_shutdown(context=context)
+        raise
+    dtype = tracks_dtype(node.params.camera_names)
+    listener = rclpy.create_node('live_offline_listener', context=context)
+
+    def on_tracks(msg: PointCloud2) -> None:
+        pts = np.frombuffer(bytes(msg.data), dtype=dtype)
+        with lock:
+            got[stamp_to_ns(msg.header.stamp)] = {
+                int(p['id']): (float(p['x']), float(p['y'])) for p in pts}
+
+    listener.create_subscription(PointCloud2, '/tracker_node/tracks', on_tracks,
+                                 QoSProfile(depth=500, reliability=ReliabilityPolicy.RELIABLE))
+    executor = MultiThreadedExecutor(num_threads=len(cameras) + 3, context=context)
+    executor.add_node(node)
+    executor.add_node(listener)
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    player = subprocess.Popen(
+        [sys.executable, '-m', 'mbtrack_ros.nodes.bag_player', '--ros-args',
+         '-p', f'bag:={recording}', '-p', 'rate:=0.5', '-p', 'wait_for_subscribers:=true',
+         '-p', 'start_delay:=1.0'],
+        cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        out, _ = player.communicate(timeout=90)
+        assert player.returncode == 0, out
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline:
+            with lock:
+                if last in got:
+                    break
+            time.sleep(0.1)
+        counters = {'dropped_sets': node._dropped_sets, 'missing': dict(node.sync.counters.missing), 'dropped_frames': node._dropped,
+                    'incomplete': node.sync.counters.incomplete, 'resets': node._resets}
+    finally:
+        if player.poll() is None:
+            player.kill()
+        executor.shutdown()
+        spinner.join(timeout=5)
+        node.destroy_node()
+        listener.destroy_node()
+        rclpy.try_shutdown(context=context)
+    return got, counters
+
+
+@pytest.mark.ros
+def test_live_replay_equals_offline_replay(recording, tmp_path):
+    """Same bag, same seed: every frame set arrives live, and per stamp the live ~/tracks
+    have the same ids as `mbtrack replay` with positions within 1 cm."""
+    offline = offline_tracks(recording, tmp_path / 'offline', SEED)
+    live, counters = live_tracks(recording, SEED)
+    # every frame set complete and tracked: nothing dropped, nothing timed out, no reset
+    assert (counters['dropped_sets'], counters['dropped_frames'], counters['incomplete'],
+            counters['resets']) == (0, 0, 0, 0), counters
+    assert len(live) == FRAMES, f'{len(live)} ~/tracks messages for {FRAMES} frame sets'
+    n_tracked = sum(len(v) for v in offline.values())
+    assert n_tracked >= 20, 'the comparison needs tracks (automatic detection found none)'
+    worst = 0.0
+    for stamp, tracks in live.items():
+        want = offline.get(stamp, {})
+        assert sorted(tracks) == sorted(want), f'ids at {stamp}: live {sorted(tracks)}, ' \
+                                               f'offline {sorted(want)}'
+        for tid, (x, y) in tracks.items():
+            d = float(np.hypot(x - want[tid][0], y - want[tid][1]))
+            worst = max(worst, d)
+            assert d < 0.01, f'track {tid} at {stamp}: live and offline {d:.3f} m apart'
+    assert set(offline) <= set(live)
+    print(f'live == offline: {len(live)} frame sets, {n_tracked} track points, '
+          f'largest position difference {worst * 1e3:.2f} mm')
+
+
+@pytest.mark.ros
+def test_live_replay_differs_with_another_seed(recording, tmp_path):
+    """The comparison above can fail: another offline seed moves the tracks by more than
+    1 cm somewhere (so equal seeds, not luck, make them agree)."""
+    a = offline_tracks(recording, tmp_path / 'a', SEED)
+    b = offline_tracks(recording, tmp_path / 'b', SEED + 1)
+    diffs = [np.hypot(a[s][t][0] - b[s][t][0], a[s][t][1] - b[s][t][1])
+             for s in a if s in b for t in a[s] if t in b[s]]
+    assert diffs and max(diffs) > 0.01
