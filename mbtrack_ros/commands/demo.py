@@ -90,6 +90,7 @@ class _TrackListener:
         self.rows = []
         self.messages = 0
         self.stamps: set[int] = set()
+        self.heights: dict[tuple[int, int], float] = {}
         self.last_stamp = 0
         self.last_arrival = time.monotonic()
         self.tracks_now = 0
@@ -115,6 +116,7 @@ class _TrackListener:
             self.rows.extend(TrackRow(stamp, frame, int(p['id']), float(p['x']), float(p['y']),
                                       float(p['visibility']), float(p['existence']))
                              for p in points)
+            self.heights.update({(stamp, int(p['id'])): float(p['height']) for p in points})
             self.messages += 1
             self.stamps.add(stamp)
             self.last_stamp = stamp
@@ -141,7 +143,9 @@ def _warm_up(rec: Path, calibration_path: Path) -> None:
               '--init-from', str(rec / 'ground_truth.csv')])
 
 
-def _run_live(args: argparse.Namespace, rec: Path, info: dict, truth) -> list:
+def _run_live(args: argparse.Namespace, rec: Path, info: dict
+              ) -> tuple[list, list[int], dict[tuple[int, int], float]]:
+    """Play the recording through bag_player and tracker_node; collect ``~/tracks``."""
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from tqdm import tqdm
@@ -232,7 +236,7 @@ def _run_live(args: argparse.Namespace, rec: Path, info: dict, truth) -> list:
         executor.shutdown()
         listener.node.destroy_node()
         rclpy.try_shutdown()
-    return listener.rows, sorted(listener.stamps)
+    return listener.rows, sorted(listener.stamps), listener.heights
 
 
 def _run_offline(args: argparse.Namespace, rec: Path) -> list:
@@ -264,10 +268,11 @@ def run(args: argparse.Namespace) -> int:
     truth = read_ground_truth(rec / 'ground_truth.csv')
     try:
         if args.offline:
-            rows, processed_stamps = _run_offline(args, rec), []
+            rows, processed_stamps, heights = _run_offline(args, rec), [], {}
         else:
             _warm_up(rec, rec / 'calibration.yaml')
-            rows, processed_stamps = _run_live(args, rec, info, truth)
+            # heights: (stamp, track id) -> the body height the node published
+            rows, processed_stamps, heights = _run_live(args, rec, info)
     except RuntimeError as err:
         print(f'mbtrack demo: error: {err}', file=sys.stderr)
         return 1
@@ -287,7 +292,8 @@ def run(args: argparse.Namespace) -> int:
     counts = np.bincount([r.frame for r in truth])
     frame = int(np.argmax(counts))
     stamp = next(r.stamp_ns for r in truth if r.frame == frame)
-    drawn = [(r.track_id, r.x, r.y, 1.75) for r in rows if r.stamp_ns == stamp]
+    drawn = [(r.track_id, r.x, r.y, heights.get((stamp, r.track_id), 1.75))
+             for r in rows if r.stamp_ns == stamp]
     images.append(contact_sheet(rec, frame, args.out / 'views.png', tracks=drawn))
     write_report(args.out, [result], images=images,
                  inputs={'recording': str(rec), 'tracks': str(args.out / 'tracks.csv')})
