@@ -86,18 +86,32 @@ def test_every_example_config_loads(config, room_calibration, context):
         node.destroy_node()
 
 
-def test_detection_parameter_reaches_the_tracker(room_calibration, context):
+def test_detection_parameter_reaches_the_tracker(room_calibration, context, tmp_path):
+    # automatic detection is the default, with the release time and threshold passed on
     node = start(context, '-p', f'calibration_file:={room_calibration}',
-                 '-p', 'detection.enabled:=true', '-p', 'tracker.particles:=50')
+                 '-p', 'tracker.particles:=50', '-p', 'tracker.release_time:=1.5',
+                 '-p', 'detection.threshold:=2.5')
     try:
         assert node.params.tracker.detection is True
         assert node.tracker.config.detection is True and node.tracker.config.particles == 50
         assert node.tracker.detection is not None  # the automatic detection is running
+        cfg = node.tracker.config.detection_config()
+        assert cfg.release.timeout == 1.5 and cfg.detector.threshold == 2.5
     finally:
         node.destroy_node()
-    node = start(context, '-p', f'calibration_file:={room_calibration}')
+    node = start(context, '-p', f'calibration_file:={room_calibration}',
+                 '-p', 'detection.enabled:=false')
     try:
         assert node.params.tracker.detection is False and node.tracker.detection is None
+    finally:
+        node.destroy_node()
+    # tracks started from ground truth: no detection on top
+    gt = tmp_path / 'gt.csv'
+    gt.write_text('stamp_ns,frame,person_id,x,y,z_head,sitting,visible_cameras\n')
+    node = start(context, '-p', f'calibration_file:={room_calibration}',
+                 '-p', f'init_ground_truth:={gt}')
+    try:
+        assert node.tracker.detection is None
     finally:
         node.destroy_node()
 

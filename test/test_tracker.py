@@ -143,6 +143,8 @@ def test_same_seed_same_result():
     ({'mrf_radius': float('nan')}, 'mrf_radius'),
     ({'seed': 'x'}, 'seed'),
     ({'motion': 3}, 'motion'),
+    ({'release_time': 0.0}, 'release_time'),
+    ({'detection_threshold': float('inf')}, 'detection_threshold'),
 ])
 def test_config_validation(kw, msg):
     with pytest.raises(TrackerError, match=msg):

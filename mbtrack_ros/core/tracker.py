@@ -15,7 +15,7 @@ is picked by name from the filter registry (:mod:`mbtrack_ros.core.filters`): ``
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, replace, fields
 
 import numpy as np
 
@@ -50,6 +50,9 @@ class TrackerConfig:
         init_position_spread: m, spread of a new track's particles.
         init_velocity_spread: m/s, spread of a new track's velocities.
         seed: seed of the default random generator (None = fresh entropy).
+        release_time: s without foreground support before a track is released (003 §4.3).
+        detection_threshold: smallest combined log response of a detection (None: the
+            detector's default).
         detection: automatic detection, model acquisition and release of people (003 §4)
             with visibility/existence probabilities (001), see
             :mod:`mbtrack_ros.core.detection.manager`.
@@ -70,6 +73,8 @@ class TrackerConfig:
     init_velocity_spread: float = 0.1
     seed: int | None = None
     detection: bool = False
+    release_time: float = 1.0
+    detection_threshold: float | None = None
 
     def __post_init__(self) -> None:
         def bad(msg: str) -> None:
@@ -95,9 +100,29 @@ class TrackerConfig:
             bad('motion must be a MotionConfig')
         if not isinstance(self.detection, (bool, np.bool_)):
             bad(f'detection must be true or false, got {self.detection!r}')
+        if not (isinstance(self.release_time, (int, float)) and np.isfinite(self.release_time)
+                and self.release_time > 0):
+            bad(f'release_time must be a finite number of seconds > 0, '
+                f'got {self.release_time!r}')
+        if self.detection_threshold is not None and not (
+                isinstance(self.detection_threshold, (int, float))
+                and np.isfinite(self.detection_threshold)):
+            bad(f'detection_threshold must be a finite number, got {self.detection_threshold!r}')
         if self.seed is not None and (isinstance(self.seed, bool)
                                       or not isinstance(self.seed, (int, np.integer))):
             bad(f'seed must be an integer or None, got {self.seed!r}')
+
+    def detection_config(self):
+        """The automatic-detection parameters this configuration sets (003 §4)."""
+        from mbtrack_ros.core.detection.detector import DetectorConfig
+        from mbtrack_ros.core.detection.manager import AutoDetectionConfig
+        from mbtrack_ros.core.detection.release import ReleaseConfig
+
+        detector = DetectorConfig() if self.detection_threshold is None else \
+            replace(DetectorConfig(), threshold=float(self.detection_threshold))
+        return AutoDetectionConfig(
+            detector=detector, release=replace(ReleaseConfig(), timeout=float(self.release_time)),
+            sigma=float(self.sigma))
 
     def filter_config(self) -> FilterConfig:
         """The particle-filter parameters of this configuration."""
@@ -158,7 +183,8 @@ class Tracker:
         self.detection = None
         if self.config.detection:
             from mbtrack_ros.core.detection.manager import AutoDetection
-            self.detection = AutoDetection(calibration, rng=self.rng)
+            self.detection = AutoDetection(calibration, self.config.detection_config(),
+                                           rng=self.rng)
 
     @property
     def track_ids(self) -> list[int]:

@@ -34,11 +34,13 @@ tracker.d_occ                   double     occlusion penalty, 000 Eq. 26 (0.15)
 tracker.mrf_radius              double     exclusion radius, m, 000 §VI-A (0.4)
 tracker.use_mrf                 bool       spatial-exclusion MRF prior (true)
 tracker.seed                    int        random seed, -1 = fresh entropy (-1)
-tracker.release_time            double     placeholder (issue 4): s without support before
-                                           a track is released (2.0)
+tracker.release_time            double     s without foreground support before a track is
+                                           released, 003 §4.3 (1.0)
 detection.enabled               bool       automatic detection, model acquisition and release
-                                           inside the tracker step (false)
-detection.threshold             double     placeholder (issue 4): acquisition threshold (0.5)
+                                           inside the tracker step; off with
+                                           init_ground_truth (true)
+detection.threshold             double     smallest combined log response of a new
+                                           detection (1.0)
 ==============================  =========  =================================================
 """
 from __future__ import annotations
@@ -136,11 +138,12 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
     'tracker.mrf_radius': (0.4, 'spatial exclusion radius, m (000 §VI-A)', _fr(0.0, 5.0)),
     'tracker.use_mrf': (True, 'apply the spatial-exclusion MRF prior', {}),
     'tracker.seed': (-1, 'random seed; -1 = fresh entropy', _ir(-1, 2 ** 31 - 1)),
-    'tracker.release_time': (2.0, 'placeholder (detection): s before a lost track is released',
-                             _fr(0.0, 3600.0)),
-    'detection.enabled': (False, 'automatic detection, acquisition and release of people '
-                          '(TrackerConfig.detection)', {}),
-    'detection.threshold': (0.5, 'placeholder: acquisition threshold', _fr(0.0, 1.0)),
+    'tracker.release_time': (1.0, 's without foreground support before a track is released '
+                             '(003 §4.3)', _fr(0.01, 3600.0)),
+    'detection.enabled': (True, 'automatic detection, acquisition and release of people '
+                          '(TrackerConfig.detection); off when init_ground_truth is set', {}),
+    'detection.threshold': (1.0, 'smallest combined log response of a new detection',
+                            _fr(-100.0, 100.0)),
 }
 
 
@@ -219,9 +222,8 @@ def declare_and_read(node: Node) -> tuple[NodeParams, RoomCalibration]:
         'sigma': float(v['tracker.sigma']), 'd_occ': float(v['tracker.d_occ']),
         'mrf_radius': float(v['tracker.mrf_radius']), 'use_mrf': bool(v['tracker.use_mrf']),
         'seed': None if v['tracker.seed'] < 0 else int(v['tracker.seed']),
-        # automatic detection (003 §4, 001) inside Tracker.step; the other detection values
-        # are passed on once TrackerConfig has fields of these names
-        'detection': bool(v['detection.enabled']),
+        # automatic detection (003 §4, 001) inside Tracker.step
+        'detection': bool(v['detection.enabled']) and not gt,  # ground truth starts tracks
         'release_time': float(v['tracker.release_time']),
         'detection_threshold': float(v['detection.threshold']),
     }
