@@ -20,6 +20,8 @@ import numpy as np
 __all__ = ['add_parser', 'run']
 
 _PROG = 'mbtrack experiments'
+# 004 baselines (Kalman-filter based): they report no particles, so no posterior-mass curve
+_NO_PARTICLES = frozenset({'pdaf', 'jpdaf', 'jlf'})
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -37,7 +39,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument('--runs', default='hjs:100,hjs:500,separable:100,separable:500,'
                                           'joint:10000',
                         help='comma-separated ALG:N list (N = particles per target, or '
-                             'joint particles for joint)')
+                             'joint particles for joint; samples per target for the 004 '
+                             'baselines pdaf and jpdaf, joint samples for jlf, which have '
+                             'no posterior-mass curve), e.g. hjs:100,pdaf:100,jpdaf:100,'
+                             'jlf:100')
     parser.add_argument('--ablation', type=Path, default=None, metavar='RECORDING',
                         help='recording for the MRF ablation (HJS N=100 with/without MRF)')
     parser.add_argument('--seeds', default='0,1,2,3,4', help='seeds of the ablation')
@@ -81,9 +86,10 @@ def _replay(recording: Path, out: Path, alg: str, n: int, seed: int, max_frames:
     from mbtrack_ros.recording.csvfiles import read_ground_truth, read_tracks
 
     gt = recording / 'ground_truth.csv'
+    particles = alg not in _NO_PARTICLES
     argv = ['replay', str(recording), '--out', str(out), '--init-from', str(gt),
-            '--algorithm', alg, '--seed', str(seed), '--save-particles',
-            '--d-occ', str(d_occ), '--sigma', str(sigma)]
+            '--algorithm', alg, '--seed', str(seed), '--d-occ', str(d_occ),
+            '--sigma', str(sigma)] + (['--save-particles'] if particles else [])
     argv += ['--joint-particles', str(n)] if alg == 'joint' else ['--particles', str(n)]
     if not mrf:
         argv.append('--no-mrf')
@@ -100,21 +106,28 @@ def _replay(recording: Path, out: Path, alg: str, n: int, seed: int, max_frames:
         truth = [r for r in truth if r.stamp_ns in keep]
     frames = len({r.stamp_ns for r in tracks})
     result = clear_mot(tracks, truth, name=f'{recording.name} {alg} {n}')
-    mass = posterior_mass(out / 'particles.npz', truth, tracks, matching=result)
+    if particles:
+        mass = posterior_mass(out / 'particles.npz', truth, tracks, matching=result)
+        at_025, at_05, curve = mass.at(0.25), mass.at(0.5), [mass.distances.tolist(),
+                                                             mass.fraction.tolist()]
+    else:  # baselines: no posterior samples (mass and curve not defined)
+        at_025 = at_05 = float('nan')
+        curve = None
     return {'recording': recording.name, 'algorithm': alg, 'particles': n, 'seed': seed,
             'mrf': mrf, 'd_occ': d_occ, 'sigma': sigma, 'exit_code': code, 'frames': frames, 'wall_s': wall,
             'frames_per_s': frames / max(wall, 1e-9), 'mota': result.mota,
             'motp_mm': result.motp_mm, 'miss_rate': result.miss_rate,
             'false_positive_rate': result.false_positive_rate,
-            'mismatches': result.mismatches, 'mass_0_5': mass.at(0.5),
-            'mass_0_25': mass.at(0.25), 'curve': [mass.distances.tolist(),
-                                                  mass.fraction.tolist()]}
+            'mismatches': result.mismatches, 'mass_0_5': at_05,
+            'mass_0_25': at_025, 'curve': curve}
 
 
 def _aggregate(group: list[dict]) -> dict:
     """Mean +- std over seeds of one (recording, run), as formatted strings."""
     def ms(key: str, scale: float = 1.0, digits: int = 3, unit: str = '') -> str:
         v = np.array([g[key] for g in group], np.float64) * scale
+        if np.all(np.isnan(v)):  # not defined (baselines have no posterior mass)
+            return '-'
         if len(v) == 1:
             return f'{v[0]:.{digits}f}{unit}'
         return f'{v.mean():.{digits}f} +- {v.std(ddof=1):.{digits}f}{unit}'
@@ -170,9 +183,13 @@ def run(args: argparse.Namespace) -> int:
                 rows.append(r)
                 group.append(r)
             summary.append(_aggregate(group))
+            if group[0]['curve'] is None:  # baselines: no posterior-mass curve
+                continue
             d = np.array(group[0]['curve'][0])
             frac = np.mean([g['curve'][1] for g in group], axis=0)
             curves[f'{"HJS" if alg == "hjs" else alg[0].upper()}_{n}p'] = (d, frac)
+        if not curves:
+            continue
         plot_posterior_curves(curves, img / f'posterior_{rec.name}{args.tag}.png',
                               title=f'{rec.name}: posterior mass around the truth'
                                     + (f' ({len(run_seeds)} seeds)' if len(run_seeds) > 1
