@@ -11,6 +11,11 @@ Per configuration the tracker is stepped over static frames at 15 Hz after a war
 (numba compilation) and the median per-frame time of ``Tracker.step`` is reported, with
 frames/s, HJS/separable ratios, scaling exponents in K and N (least-squares fit of
 ``log t = a + b log K``) and the peak memory of the process.
+
+With ``--baselines`` the data-association baselines of 004 (``pdaf``, ``jpdaf``, ``jlf``;
+:mod:`mbtrack_ros.core.association`) are timed in the same run on the same scenes (K = 2, 3,
+5, N = 100 samples, 4 cameras 320x240, spread and occluded) next to HJS, with the ratio of
+their time per frame to HJS's.
 """
 from __future__ import annotations
 
@@ -36,6 +41,8 @@ __all__ = ['BenchResult', 'add_parser', 'bench_room', 'fit_exponent', 'paint_peo
            'run', 'run_config', 'scene_states']
 
 _PROG = 'mbtrack bench'
+BASELINES = ('pdaf', 'jpdaf', 'jlf')  # 004 association baselines (--baselines)
+BASELINE_KS = (2, 3, 5)
 FLOOR = (0.0, 0.0, 6.0, 5.0)
 
 
@@ -209,6 +216,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument('--frames', type=int, default=None,
                         help='timed frames per configuration (default 3 quick, 8 full)')
     parser.add_argument('--seed', type=int, default=0, help='scene seed')
+    parser.add_argument('--baselines', action='store_true',
+                        help='also time the 004 baselines pdaf, jpdaf, jlf next to HJS '
+                             '(K = 2, 3, 5, N = 100, 4 cameras 320x240, spread and occluded; '
+                             'not part of --quick: adds about a minute)')
     # -- live benchmark (mbtrack_ros.commands.bench_live) --
     from mbtrack_ros.commands.bench_live import add_arguments as _live_arguments
     _live_arguments(parser)
@@ -221,7 +232,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     return parser
 
 
-def _grid(quick: bool) -> list[dict]:
+def _grid(quick: bool, baselines: bool = False) -> list[dict]:
     big, small = (320, 240), (200, 150)
     jobs = []
 
@@ -245,6 +256,11 @@ def _grid(quick: bool) -> list[dict]:
     joint_ks = (1, 2, 3) if quick else (1, 2, 3, 5)
     for k in joint_ks:
         add('joint', k, 100, 4, big, False, 'joint')
+    if baselines:  # 004 baselines next to HJS on the same scenes (HJS results are shared)
+        for occ in (False, True):
+            for k in BASELINE_KS:
+                for alg in ('hjs',) + BASELINES:
+                    add(alg, k, 100, 4, big, occ, 'assoc')
     return jobs
 
 
@@ -259,7 +275,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     from tqdm import tqdm
 
-    jobs = _grid(args.quick)
+    jobs = _grid(args.quick, getattr(args, 'baselines', False))
     results: list[tuple[str, BenchResult]] = []
     t0 = time.perf_counter()
     seen: dict[tuple, BenchResult] = {}
@@ -347,6 +363,7 @@ def _report(seen: dict, results: list[tuple[str, BenchResult]], frames: int) -> 
     if main_occ is not None and sep_occ is not None:
         summary['hjs_over_separable_k5_occluded'] = (main_occ.seconds_per_frame
                                                      / sep_occ.seconds_per_frame)
+    summary.update(_report_baselines(seen))
     print()
     for key, value in summary.items():
         print(f'{key}: {value:.3g}')
@@ -362,4 +379,34 @@ def _report(seen: dict, results: list[tuple[str, BenchResult]], frames: int) -> 
     if b is not None:
         print(f'target HJS growth in K under occlusion <= K^2: '
               f'{"met" if b <= 2.0 else "NOT met"} (exponent {b:.2f})')
+    return summary
+
+
+def _report_baselines(seen: dict) -> dict:
+    """Table of the 004 baselines next to HJS; summary keys ``<alg>_k<K>_<scene>_over_hjs``."""
+    big = (320, 240)
+    rows = [(occ, k) for occ in (False, True) for k in BASELINE_KS
+            if any((alg, k, 100, 4, big, occ) in seen for alg in BASELINES)]
+    summary: dict = {}
+    if not rows:
+        return summary
+    print()
+    print('004 baselines vs HJS, N = 100, 4 cameras 320x240 (frames/s, time per frame / HJS)')
+    print(f'{"scene":8} {"K":>2} ' + ' '.join(f'{a:>16}' for a in ('hjs',) + BASELINES))
+    for occ, k in rows:
+        hjs = seen.get(('hjs', k, 100, 4, big, occ))
+        scene = 'occluded' if occ else 'spread'
+        cells = []
+        for alg in ('hjs',) + BASELINES:
+            r = seen.get((alg, k, 100, 4, big, occ))
+            if r is None:
+                cells.append(f'{"-":>16}')
+                continue
+            ratio = ''
+            if alg != 'hjs' and hjs is not None:
+                ratio = r.seconds_per_frame / hjs.seconds_per_frame
+                summary[f'{alg}_k{k}_{scene}_over_hjs'] = ratio
+                ratio = f'{ratio:.2f}x'
+            cells.append(f'{r.frames_per_second:8.1f} {ratio:>7}')
+        print(f'{scene:8} {k:2d} ' + ' '.join(cells))
     return summary
