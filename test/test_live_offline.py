@@ -143,8 +143,9 @@ def live_tracks(recording: Path, seed: int, *, sync_timeout: float = 5.0
                 if last in got:
                     break
             time.sleep(0.1)
-        counters = {'dropped_sets': node._dropped_sets, 'missing': dict(node.sync.counters.missing), 'dropped_frames': node._dropped,
-                    'incomplete': node.sync.counters.incomplete, 'resets': node._resets}
+        counters = {'dropped_sets': node._dropped_sets, 'dropped_frames': node._dropped,
+                    'incomplete': node.sync.counters.incomplete, 'resets': node._resets,
+                    'missing': dict(node.sync.counters.missing)}
     finally:
         if player.poll() is None:
             player.kill()

@@ -3,9 +3,13 @@
 A ``clear-room`` recording (four corner cameras, no ceiling camera, 320x240, 15 Hz) is played
 in real time by ``bag_player`` (own process, with ``/clock``) to ``tracker_node`` (own
 process, automatic detection, ``use_sim_time``). A listener in this process records, with its
-own monotonic clock, when each frame of ``/cam0/image_raw`` arrives and when the
-``/tracker_node/people`` message with that stamp arrives; the difference is the end-to-end
-latency (image published -> people published, both seen by the same subscriber). It also
+DDS time stamps (system clock, one machine) the moment the player published the first
+``/clock`` message carrying a frame's stamp (the player publishes ``/clock`` = the stamp just
+before each message of the frame set, so this is when the frame set starts to go out; cheaper
+to receive than an image: its ``source_timestamp``) and the moment the
+``/tracker_node/people`` message with that stamp reached the listener (its
+``received_timestamp``); the difference is the end-to-end latency. Taking both times from the
+middleware, not from the Python callbacks, keeps a busy listener out of the measurement. It also
 reads the node's counters from ``/diagnostics`` and the CPU time of the tracker process from
 ``/proc/<pid>/stat``. Then ``mbtrack replay`` runs over the same recording, timed, for the
 offline speed.
@@ -128,7 +132,8 @@ def _diag_values(msg) -> dict:
 
 
 def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
-             max_pending_sets: int = 2, timeout: float = 600.0) -> LiveResult:
+             max_pending_sets: int = 2, timeout: float = 600.0, use_sim_time: bool = True,
+             node_args: tuple[str, ...] = ()) -> LiveResult:
     """Play ``recording`` to a tracker_node process and measure (see the module docstring)."""
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
@@ -137,7 +142,7 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
     from rclpy.context import Context
     from rclpy.executors import MultiThreadedExecutor
     from rclpy.qos import QoSProfile, ReliabilityPolicy
-    from sensor_msgs.msg import Image
+    from rosgraph_msgs.msg import Clock
 
     from mbtrack_ros.nodes.conversions import stamp_to_ns
     from mbtrack_ros.recording.bag import RecordingReader
@@ -164,13 +169,13 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
     group = ReentrantCallbackGroup()  # an image callback never delays a people callback
     qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
 
-    def on_image(msg) -> None:
-        t = time.monotonic()
+    def on_clock(msg, info) -> None:  # info: rmw message info, system clock ns
+        t = info['source_timestamp'] / 1e9
         with lock:
-            images.setdefault(stamp_to_ns(msg.header.stamp), t)
+            images.setdefault(stamp_to_ns(msg.clock), t)
 
-    def on_people(msg) -> None:
-        t = time.monotonic()
+    def on_people(msg, info) -> None:
+        t = info['received_timestamp'] / 1e9
         s = stamp_to_ns(msg.header.stamp)
         with lock:
             people.setdefault(s, t)
@@ -180,7 +185,9 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
         with lock:
             diags.append(_diag_values(msg))
 
-    listener.create_subscription(Image, '/cam0/image_raw', on_image, qos, callback_group=group)
+    listener.create_subscription(Clock, '/clock', on_clock,
+                                 QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE),
+                                 callback_group=group)
     listener.create_subscription(PoseArray, '/tracker_node/people', on_people, qos,
                                  callback_group=group)
     listener.create_subscription(DiagnosticArray, '/diagnostics', on_diag, qos,
@@ -195,7 +202,8 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
          '-p', f'calibration_file:={recording / "calibration.yaml"}',
          '-p', 'cameras:=[cam0,cam1,cam2,cam3]', '-p', 'detection.enabled:=true',
          '-p', f'tracker.seed:={seed}', '-p', 'image_reliability:=reliable',
-         '-p', f'max_pending_sets:={max_pending_sets}', '-p', 'use_sim_time:=true'],
+         '-p', f'max_pending_sets:={max_pending_sets}',
+         '-p', f'use_sim_time:={str(use_sim_time).lower()}', *node_args],
         cwd=REPO, env=env, stdout=log, stderr=subprocess.STDOUT, text=True)
     player = None
     try:
@@ -280,6 +288,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help='frames of the live recording (default 1800 = 2 minutes)')
     parser.add_argument('--live-recording', type=Path, default=None, metavar='DIR',
                         help='keep the generated recording here (reused if it exists)')
+    parser.add_argument('--live-no-sim-time', action='store_true',
+                        help='run tracker_node without use_sim_time (it then does not '
+                             'subscribe to /clock; its outputs use message stamps anyway)')
 
 
 def _error(message: str) -> int:
@@ -306,7 +317,7 @@ def main_live(args: argparse.Namespace) -> int:
                   f'{recording}', file=sys.stderr)
             make_recording(recording, frames=args.live_frames, seed=seed)
         load0 = os.getloadavg()
-        live = run_live(recording, seed=seed)
+        live = run_live(recording, seed=seed, use_sim_time=not args.live_no_sim_time)
         load1 = os.getloadavg()
         offline = run_offline(recording, seed=seed)
     except (LatencyError, RuntimeError, OSError) as err:
@@ -316,10 +327,12 @@ def main_live(args: argparse.Namespace) -> int:
             shutil.rmtree(tmp, ignore_errors=True)
     d = live.diagnostics
     a, b = live.latency_all, live.latency_after_1s
-    print(f'live: {live.frames} frames, {live.people_messages} PoseArrays, '
+    print(f'live: {live.frames} frames, {live.people_messages} PoseArrays '
+          f'({live.frames - live.people_messages} frame sets without output), '
           f'{live.mean_people_truth:.2f} people / {live.mean_tracks:.2f} tracks on average')
     print(f'latency image -> people: p50 {1e3 * a.p50:.1f} ms, p95 {1e3 * a.p95:.1f} ms, '
-          f'max {1e3 * a.max:.1f} ms ({a.matched} frames, {a.missing} unanswered); after the '
+          f'max {1e3 * a.max:.1f} ms ({a.matched} frames timed, {a.missing} seen on /clock '
+          'without output); after the '
           f'first second: p50 {1e3 * b.p50:.1f} ms, p95 {1e3 * b.p95:.1f} ms')
     print(f'node counters (last /diagnostics): frame sets {d.get("frame sets")}, incomplete '
           f'{d.get("incomplete frame sets")}, dropped frames/sets {d.get("dropped frames")}, '
@@ -332,7 +345,7 @@ def main_live(args: argparse.Namespace) -> int:
     print(f'load average before / after the live run: {load0[0]:.2f} / {load1[0]:.2f}')
     if args.json is not None:
         doc = {'live': asdict(live), 'offline': offline, 'loadavg_before': load0,
-               'loadavg_after': load1, 'seed': seed}
+               'loadavg_after': load1, 'seed': seed, 'use_sim_time': not args.live_no_sim_time}
         try:
             args.json.write_text(json.dumps(doc, indent=1), encoding='utf-8')
         except OSError as err:
