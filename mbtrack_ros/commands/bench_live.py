@@ -133,8 +133,15 @@ def _diag_values(msg) -> dict:
 
 def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
              max_pending_sets: int = 2, timeout: float = 600.0, use_sim_time: bool = True,
-             node_args: tuple[str, ...] = ()) -> LiveResult:
-    """Play ``recording`` to a tracker_node process and measure (see the module docstring)."""
+             ground_truth: bool = False, node_args: tuple[str, ...] = ()) -> LiveResult:
+    """Play ``recording`` to a tracker_node process and measure (see the module docstring).
+
+    ``ground_truth``: start tracks from the recording's ground truth (``init_ground_truth``)
+    instead of the automatic detection.
+    """
+    if ground_truth:
+        node_args = ('-p', 'detection.enabled:=false',
+                     '-p', f'init_ground_truth:={recording / "ground_truth.csv"}', *node_args)
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import PoseArray
@@ -261,8 +268,9 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
         mean_tracks=float(np.mean(list(tracks.values()))) if tracks else 0.0)
 
 
-def run_offline(recording: Path, *, seed: int = 0) -> dict:
-    """Time ``mbtrack replay`` (automatic detection) over the recording: frames/s, x real time."""
+def run_offline(recording: Path, *, seed: int = 0, ground_truth: bool = False) -> dict:
+    """Time ``mbtrack replay`` over the recording (automatic detection, or ``--init-from``
+    the ground truth): frames/s and the ratio to real time."""
     from mbtrack_ros.cli import main
     from mbtrack_ros.recording.bag import RecordingReader
 
@@ -270,7 +278,8 @@ def run_offline(recording: Path, *, seed: int = 0) -> dict:
         frames = reader.frame_count
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
-        code = main(['replay', str(recording), '--out', tmp, '--seed', str(seed)])
+        extra = ['--init-from', str(recording / 'ground_truth.csv')] if ground_truth else []
+        code = main(['replay', str(recording), '--out', tmp, '--seed', str(seed), *extra])
         wall = time.perf_counter() - t0
     if code != 0:
         raise RuntimeError(f'mbtrack replay exited with {code}')
@@ -291,6 +300,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--live-no-sim-time', action='store_true',
                         help='run tracker_node without use_sim_time (it then does not '
                              'subscribe to /clock; its outputs use message stamps anyway)')
+    parser.add_argument('--live-ground-truth', action='store_true',
+                        help='start tracks from the ground truth (node init_ground_truth, '
+                             'replay --init-from) instead of the automatic detection')
 
 
 def _error(message: str) -> int:
@@ -317,9 +329,10 @@ def main_live(args: argparse.Namespace) -> int:
                   f'{recording}', file=sys.stderr)
             make_recording(recording, frames=args.live_frames, seed=seed)
         load0 = os.getloadavg()
-        live = run_live(recording, seed=seed, use_sim_time=not args.live_no_sim_time)
+        live = run_live(recording, seed=seed, use_sim_time=not args.live_no_sim_time,
+                        ground_truth=args.live_ground_truth)
         load1 = os.getloadavg()
-        offline = run_offline(recording, seed=seed)
+        offline = run_offline(recording, seed=seed, ground_truth=args.live_ground_truth)
     except (LatencyError, RuntimeError, OSError) as err:
         return _error(str(err))
     finally:
@@ -345,7 +358,8 @@ def main_live(args: argparse.Namespace) -> int:
     print(f'load average before / after the live run: {load0[0]:.2f} / {load1[0]:.2f}')
     if args.json is not None:
         doc = {'live': asdict(live), 'offline': offline, 'loadavg_before': load0,
-               'loadavg_after': load1, 'seed': seed, 'use_sim_time': not args.live_no_sim_time}
+               'loadavg_after': load1, 'seed': seed, 'use_sim_time': not args.live_no_sim_time,
+               'ground_truth': bool(args.live_ground_truth)}
         try:
             args.json.write_text(json.dumps(doc, indent=1), encoding='utf-8')
         except OSError as err:
