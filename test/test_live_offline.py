@@ -58,6 +58,22 @@ def test_latency_stats_refuses_no_overlap_and_negative_latency():
         latency_stats({1: 1.0, 2: 2.0}, {1: 1.1, 2: 1.5})
 
 
+def test_cpu_seconds_reads_proc_like_os_times():
+    from mbtrack_ros.commands.bench_live import cpu_seconds
+    x = 0.0
+    for i in range(300_000):  # burn a little CPU so that both clocks move
+        x += i ** 0.5
+    t = os.times()
+    assert abs(cpu_seconds(os.getpid()) - (t.user + t.system)) < 0.05
+
+
+def test_bench_live_bad_frames_is_a_one_line_error(capsys):
+    from mbtrack_ros.cli import main
+    assert main(['bench', '--live', '--live-frames', '5']) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ['mbtrack bench: error: --live-frames must be >= 30, got 5']
+
+
 # -- live vs offline ---------------------------------------------------------------------
 @pytest.fixture(scope='module')
 def recording(tmp_path_factory) -> Path:

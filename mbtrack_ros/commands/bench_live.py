@@ -314,6 +314,9 @@ def main_live(args: argparse.Namespace) -> int:
     """``mbtrack bench --live``: run, print a summary, optionally write JSON."""
     if args.live_frames < 30:
         return _error(f'--live-frames must be >= 30, got {args.live_frames}')
+    from mbtrack_ros.recording.bag import BagError
+    from mbtrack_ros.synth.errors import SynthError
+
     seed = args.seed
     tmp = None
     try:
@@ -333,7 +336,7 @@ def main_live(args: argparse.Namespace) -> int:
                         ground_truth=args.live_ground_truth)
         load1 = os.getloadavg()
         offline = run_offline(recording, seed=seed, ground_truth=args.live_ground_truth)
-    except (LatencyError, RuntimeError, OSError) as err:
+    except (LatencyError, RuntimeError, OSError, SynthError, BagError) as err:
         return _error(str(err))
     finally:
         if tmp is not None:
