@@ -124,6 +124,8 @@ class LiveResult:
     cpu_percent: float
     mean_people_truth: float
     mean_tracks: float
+    publish_spread_p50: float = float('nan')
+    publish_spread_p95: float = float('nan')
 
 
 def _diag_values(msg) -> dict:
@@ -166,6 +168,7 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
     os.environ['ROS_DOMAIN_ID'] = env['ROS_DOMAIN_ID']
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     images: dict[int, float] = {}
+    clock_last: dict[int, float] = {}
     people: dict[int, float] = {}
     tracks: dict[int, int] = {}
     diags: list[dict] = []
@@ -178,8 +181,10 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
 
     def on_clock(msg, info) -> None:  # info: rmw message info, system clock ns
         t = info['source_timestamp'] / 1e9
+        s = stamp_to_ns(msg.clock)
         with lock:
-            images.setdefault(stamp_to_ns(msg.clock), t)
+            images.setdefault(s, t)
+            clock_last[s] = t  # the player's last message of this frame set
 
     def on_people(msg, info) -> None:
         t = info['received_timestamp'] / 1e9
@@ -253,6 +258,8 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
         log.close()
     with lock:
         images_c, people_c, diag = dict(images), dict(people), (diags[-1] if diags else {})
+        # how long the player took to publish one frame set (first to last /clock of a stamp)
+        spread = np.array([clock_last[s] - images[s] for s in images], dtype=np.float64)
     first = min(images_c) if images_c else 0
     later = {s: t for s, t in images_c.items() if s >= first + 1_000_000_000}
     cpu = cpu1 - cpu0
@@ -265,7 +272,9 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
         cpu_percent=100.0 * cpu / max(wall, 1e-9),
         mean_people_truth=float(np.mean([truth_count.get(s, 0) for s in images_c]))
         if images_c else 0.0,
-        mean_tracks=float(np.mean(list(tracks.values()))) if tracks else 0.0)
+        mean_tracks=float(np.mean(list(tracks.values()))) if tracks else 0.0,
+        publish_spread_p50=nearest_rank(spread, 0.5) if spread.size else float('nan'),
+        publish_spread_p95=nearest_rank(spread, 0.95) if spread.size else float('nan'))
 
 
 def run_offline(recording: Path, *, seed: int = 0, ground_truth: bool = False) -> dict:
@@ -353,6 +362,8 @@ def main_live(args: argparse.Namespace) -> int:
     print(f'node counters (last /diagnostics): frame sets {d.get("frame sets")}, incomplete '
           f'{d.get("incomplete frame sets")}, dropped frames/sets {d.get("dropped frames")}, '
           f'step time {d.get("step time [ms]")} ms')
+    print(f'bag_player: publishing one frame set took p50 {1e3 * live.publish_spread_p50:.1f} '
+          f'ms, p95 {1e3 * live.publish_spread_p95:.1f} ms (first to last /clock of a stamp)')
     print(f'tracker_node CPU: {live.cpu_seconds:.1f} s over {live.wall_seconds:.1f} s '
           f'= {live.cpu_percent:.0f} % of one core')
     print(f'offline replay: {offline["frames"]} frames in {offline["wall_seconds"]:.1f} s = '
