@@ -176,7 +176,7 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
     context = Context()
     rclpy.init(context=context)
     listener = rclpy.create_node('bench_live_listener', context=context)
-    group = ReentrantCallbackGroup()  # an image callback never delays a people callback
+    group = ReentrantCallbackGroup()  # a /clock callback never waits for a people callback
     qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
 
     def on_clock(msg, info) -> None:  # info: rmw message info, system clock ns
@@ -233,8 +233,9 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
              '-p', 'wait_for_subscribers:=true', '-p', 'start_delay:=1.0'],
             cwd=REPO, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT)
         cpu0, wall0 = cpu_seconds(node.pid), time.monotonic()
-        player.wait(timeout=timeout)
-        # the last frame sets: wait until the outputs stop coming (at most 5 s)
+        if player.wait(timeout=timeout) != 0:
+            raise RuntimeError(f'bag_player exited with {player.returncode}')
+        # the last frame sets: wait until no output has come for 1 s
         last_n, quiet = -1, time.monotonic()
         while time.monotonic() - quiet < 1.0 and time.monotonic() - wall0 < timeout + 5:
             with lock:
@@ -345,7 +346,8 @@ def main_live(args: argparse.Namespace) -> int:
                         ground_truth=args.live_ground_truth)
         load1 = os.getloadavg()
         offline = run_offline(recording, seed=seed, ground_truth=args.live_ground_truth)
-    except (LatencyError, RuntimeError, OSError, SynthError, BagError) as err:
+    except (LatencyError, RuntimeError, OSError, SynthError, BagError,
+            subprocess.TimeoutExpired) as err:
         return _error(str(err))
     finally:
         if tmp is not None:
