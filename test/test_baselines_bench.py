@@ -1,4 +1,4 @@
-"""The 004 baselines (pdaf, jpdaf, jlf) in `mbtrack bench --baselines` and `mbtrack experiments`."""
+"""The 004 baselines (pdaf, jpdaf, jlf) in `mbtrack bench` and `mbtrack experiments`."""
 from __future__ import annotations
 
 import json
@@ -20,10 +20,10 @@ def recording(tmp_path_factory):
     return out
 
 
-def test_grid_has_baselines_only_with_the_flag():
-    plain = bench._grid(True)
+def test_grid_has_baselines_unless_left_out():
+    plain = bench._grid(True, baselines=False)
     assert not any(j['algorithm'] in bench.BASELINES for j in plain)
-    jobs = bench._grid(True, baselines=True)
+    jobs = bench._grid(True)
     assoc = [j for j in jobs if j['group'] == 'assoc']
     keys = {(j['algorithm'], j['k'], j['occluded']) for j in assoc}
     want = {(a, k, occ) for a in ('hjs',) + bench.BASELINES for k in bench.BASELINE_KS
@@ -90,3 +90,11 @@ def test_experiments_bad_run_is_one_line_error(recording, tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith('mbtrack experiments: error: ')
     assert experiments._parse_runs('pdaf:100,jlf:50') == [('pdaf', 100), ('jlf', 50)]
+
+
+def test_bench_parser_baselines_default_on_and_switch_off():
+    import argparse
+    sub = argparse.ArgumentParser().add_subparsers()
+    parser = bench.add_parser(sub)
+    assert parser.parse_args(['--quick']).baselines is True
+    assert parser.parse_args(['--quick', '--no-baselines']).baselines is False

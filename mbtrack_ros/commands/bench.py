@@ -12,10 +12,11 @@ Per configuration the tracker is stepped over static frames at 15 Hz after a war
 frames/s, HJS/separable ratios, scaling exponents in K and N (least-squares fit of
 ``log t = a + b log K``) and the peak memory of the process.
 
-With ``--baselines`` the data-association baselines of 004 (``pdaf``, ``jpdaf``, ``jlf``;
+The data-association baselines of 004 (``pdaf``, ``jpdaf``, ``jlf``;
 :mod:`mbtrack_ros.core.association`) are timed in the same run on the same scenes (K = 2, 3,
 5, N = 100 samples, 4 cameras 320x240, spread and occluded) next to HJS, with the ratio of
-their time per frame to HJS's.
+their time per frame to HJS's (also in ``--quick``, which stays well under a minute;
+``--no-baselines`` leaves them out).
 """
 from __future__ import annotations
 
@@ -206,20 +207,22 @@ def fit_exponent(x: Sequence[float], t: Sequence[float]) -> float:
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """Register ``bench``."""
     parser = subparsers.add_parser(
-        'bench', help='time the HJS, separable and joint filters on synthetic scenes',
+        'bench', help='time the HJS, separable and joint filters and the 004 baselines '
+                      'on synthetic scenes',
         description='Per-frame time and frames/s of the tracker for K people, N particles, '
                     '1 and 4 cameras, two image sizes; HJS/separable ratios, scaling '
-                    'exponents in K and N, occluded vs spread scenes, peak memory.')
+                    'exponents in K and N, occluded vs spread scenes, peak memory; the '
+                    'PDAF/JPDAF/JLF baselines next to HJS with their time ratio to HJS.')
     parser.add_argument('--quick', action='store_true', help='a reduced grid (< 1 minute)')
     parser.add_argument('--json', type=Path, default=None, metavar='FILE',
                         help='also write all results as JSON')
     parser.add_argument('--frames', type=int, default=None,
                         help='timed frames per configuration (default 3 quick, 8 full)')
     parser.add_argument('--seed', type=int, default=0, help='scene seed')
-    parser.add_argument('--baselines', action='store_true',
-                        help='also time the 004 baselines pdaf, jpdaf, jlf next to HJS '
-                             '(K = 2, 3, 5, N = 100, 4 cameras 320x240, spread and occluded; '
-                             'not part of --quick: adds about a minute)')
+    parser.add_argument('--no-baselines', dest='baselines', action='store_false',
+                        help='leave out the 004 baselines pdaf, jpdaf, jlf (timed by default, '
+                             'also with --quick, next to HJS: K = 2, 3, 5, N = 100, 4 cameras '
+                             '320x240, spread and occluded)')
     # -- live benchmark (mbtrack_ros.commands.bench_live) --
     from mbtrack_ros.commands.bench_live import add_arguments as _live_arguments
     _live_arguments(parser)
@@ -232,7 +235,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     return parser
 
 
-def _grid(quick: bool, baselines: bool = False) -> list[dict]:
+def _grid(quick: bool, baselines: bool = True) -> list[dict]:
     big, small = (320, 240), (200, 150)
     jobs = []
 
@@ -275,7 +278,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     from tqdm import tqdm
 
-    jobs = _grid(args.quick, getattr(args, 'baselines', False))
+    jobs = _grid(args.quick, getattr(args, 'baselines', True))
     results: list[tuple[str, BenchResult]] = []
     t0 = time.perf_counter()
     seen: dict[tuple, BenchResult] = {}
