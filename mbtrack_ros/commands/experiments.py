@@ -114,7 +114,8 @@ def _replay(recording: Path, out: Path, alg: str, n: int, seed: int, max_frames:
         at_025 = at_05 = float('nan')
         curve = None
     return {'recording': recording.name, 'algorithm': alg, 'particles': n, 'seed': seed,
-            'mrf': mrf, 'd_occ': d_occ, 'sigma': sigma, 'exit_code': code, 'frames': frames, 'wall_s': wall,
+            'mrf': mrf, 'd_occ': d_occ, 'sigma': sigma, 'exit_code': code, 'frames': frames,
+            'wall_s': wall,
             'frames_per_s': frames / max(wall, 1e-9), 'mota': result.mota,
             'motp_mm': result.motp_mm, 'miss_rate': result.miss_rate,
             'false_positive_rate': result.false_positive_rate,
