@@ -57,6 +57,7 @@ __all__ = ['GroundTruthInitializer', 'TrackerNode', 'main']
 
 OUTPUT_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 WARN_PERIOD_S = 10.0
+RATE_WINDOW_NS = 1_000_000_000  # input rates in /diagnostics: the last second of stamps
 STEP_POLL_S = 0.1  # s, steady clock: backup poll; queued frame sets wake the step at once
 
 
@@ -413,9 +414,14 @@ class TrackerNode(Node):
         with self._lock:
             rates = {}
             for cam, stamps in self._rate_window.items():
-                span = (max(stamps) - min(stamps)) / 1e9 if len(stamps) > 1 else 0.0
-                rates[cam] = (len(stamps) - 1) / span if span > 0 else 0.0
-                self._rate_window[cam] = stamps[-1:]
+                # frames of the last second of message time before this camera's newest
+                # frame: a sliding window, so the rate does not depend on when the (slower)
+                # tracker step takes this snapshot
+                newest = max(stamps) if stamps else 0
+                recent = sorted({t for t in stamps if t >= newest - RATE_WINDOW_NS})
+                span = (recent[-1] - recent[0]) / 1e9 if len(recent) > 1 else 0.0
+                rates[cam] = (len(recent) - 1) / span if span > 0 else 0.0
+                self._rate_window[cam] = recent
             counters = self.sync.counters
             snap = messages.DiagnosticsSnapshot(
                 input_rate_hz=rates,
