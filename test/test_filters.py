@@ -307,3 +307,16 @@ def test_velocity_damping_decays_velocity():
     out = predict(p, 2.0, cfg, rng)
     np.testing.assert_allclose(out[0, 2:4], p[0, 2:4] * np.exp(-1.0))
     np.testing.assert_allclose(out[0, :2], out[0, 2:4] * 2.0)
+
+
+def test_logsumexp_matches_scipy_and_handles_minus_infinity(rng):
+    from scipy.special import logsumexp as scipy_logsumexp
+
+    from mbtrack_ros.core.resampling import logsumexp
+
+    a = rng.normal(0.0, 30.0, 50)
+    a[::7] = -np.inf
+    assert logsumexp(a) == pytest.approx(float(scipy_logsumexp(a)), rel=1e-12)
+    assert logsumexp(np.array([1000.0, 1000.0])) == pytest.approx(1000.0 + np.log(2.0))
+    assert logsumexp(np.full(3, -np.inf)) == -np.inf
+    assert logsumexp(np.zeros(0)) == -np.inf

@@ -44,20 +44,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from mbtrack_ros.core.resampling import logsumexp
+
 __all__ = ['AuxiliaryConfig', 'ExistenceError', 'TrackAuxiliary', 'binary_step',
            'mixture_loglik', 'predictive_loglik', 'transition']
 
 
 class ExistenceError(ValueError):
     """Bad input to the visibility/existence filters."""
-
-
-def _logsumexp(a: np.ndarray) -> float:
-    """log sum exp of a 1-D array (-inf entries allowed; all -inf -> -inf)."""
-    m = float(np.max(a)) if a.size else -np.inf
-    if not np.isfinite(m):
-        return m
-    return m + float(np.log(np.sum(np.exp(a - m))))
 
 
 def transition(p_on: float, p_off: float, dt: float) -> np.ndarray:
@@ -98,7 +92,7 @@ def binary_step(xi: float, A: np.ndarray, loglik0: float, loglik1: float
     with np.errstate(divide='ignore'):
         logp = np.log(prior) + np.array([loglik0, loglik1], dtype=np.float64)
     logp = np.where(np.isnan(logp), -np.inf, logp)
-    norm = _logsumexp(logp)
+    norm = logsumexp(logp)
     if not np.isfinite(norm):                          # no information: keep the prior
         return float(prior[1]), float(prior[1])
     return float(np.exp(logp[1] - norm)), float(prior[1])
@@ -122,8 +116,8 @@ def predictive_loglik(loglik: np.ndarray, log_weights: np.ndarray | None = None)
         if lw.shape != ll.shape:
             raise ExistenceError('loglik and log_weights differ in shape')
         lw = np.where(np.isnan(lw), -np.inf, lw)
-        lw = lw - _logsumexp(lw)
-    return float(_logsumexp(ll + lw))
+        lw = lw - logsumexp(lw)
+    return float(logsumexp(ll + lw))
 
 
 def mixture_loglik(loglik_visible: np.ndarray, loglik_hidden: np.ndarray,
