@@ -30,14 +30,25 @@ def build_parser() -> argparse.ArgumentParser:
                 continue  # subcommand not part of this build
             raise
         sub = module.add_parser(subparsers)
-        sub.set_defaults(_run=module.run)
+        sub.error = _one_line_error(sub.prog)
+        sub.set_defaults(_run=module.run, _error=sub.error)
     return parser
+
+
+def _one_line_error(prog: str):
+    """argparse's error hook for a subcommand: one line on stderr, exit code 2."""
+    def error(message: str) -> None:
+        print(f'{prog}: error: {message}', file=sys.stderr)
+        raise SystemExit(2)
+    return error
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``mbtrack``; returns the exit code."""
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, unknown = parser.parse_known_args(argv)
+    if unknown:  # reported by the subcommand, in its own one-line form
+        getattr(args, '_error', parser.error)(f'unrecognized arguments: {" ".join(unknown)}')
     if not getattr(args, '_run', None):
         parser.print_help()
         return 2

@@ -226,12 +226,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     # -- live benchmark (mbtrack_ros.commands.bench_live) --
     from mbtrack_ros.commands.bench_live import add_arguments as _live_arguments
     _live_arguments(parser)
-
-    def error(message: str) -> None:
-        print(f'{_PROG}: error: {message}', file=sys.stderr)
-        raise SystemExit(2)
-
-    parser.error = error
     return parser
 
 

@@ -53,12 +53,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument('--d-occ', type=float, default=0.15, help='occlusion penalty d_occ')
     parser.add_argument('--sigma', type=float, default=0.12, help='likelihood width sigma')
     parser.add_argument('--tag', default='', help='suffix of the PNG names')
-
-    def error(message: str) -> None:
-        print(f'{_PROG}: error: {message}', file=sys.stderr)
-        raise SystemExit(2)
-
-    parser.error = error
     return parser
 
 

@@ -67,13 +67,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument('--start-time', type=float, default=EPOCH_NS / 1e9, metavar='SECONDS',
                         help='stamp of the first frame set, seconds since the epoch '
                              '(default 1.7e9, as mbtrack synth)')
-    parser.error = _parser_error  # one-line errors for bad arguments, exit code 2
     return parser
-
-
-def _parser_error(message: str) -> None:
-    print(f'{_PROG}: error: {message}', file=sys.stderr)
-    raise SystemExit(2)
 
 
 def _error(msg: str) -> int:

@@ -44,11 +44,6 @@ class _UserError(Exception):
     """A problem with the command's input, reported as one line with exit code 2."""
 
 
-def _parser_error(message: str) -> None:
-    print(f'{_PROG}: error: {message}', file=sys.stderr)
-    raise SystemExit(2)
-
-
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """Register ``replay``."""
     parser = subparsers.add_parser(
@@ -81,7 +76,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                         help='write OUTDIR/particles.npz (posterior particle sets)')
     parser.add_argument('--max-frames', type=int, default=None, metavar='N',
                         help='stop after N frames')
-    parser.error = _parser_error  # one-line errors for bad arguments, exit code 2
     return parser
 
 
