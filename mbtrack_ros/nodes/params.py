@@ -95,9 +95,6 @@ class NodeParams:
     init_ground_truth: str
     output_bag: str
     max_pending_sets: int
-    release_time: float
-    detection_enabled: bool
-    detection_threshold: float
 
     @property
     def camera_names(self) -> list[str]:
@@ -242,10 +239,7 @@ def declare_and_read(node: Node) -> tuple[NodeParams, RoomCalibration]:
         rescale_images=bool(v['rescale_images']), debug_images=bool(v['debug_images']),
         diagnostics_period_ns=int(round(v['diagnostics_period'] * 1e9)),
         init_ground_truth=gt, output_bag=str(v['output_bag']),
-        max_pending_sets=int(v['max_pending_sets']),
-        release_time=float(v['tracker.release_time']),
-        detection_enabled=bool(v['detection.enabled']),
-        detection_threshold=float(v['detection.threshold']))
+        max_pending_sets=int(v['max_pending_sets']))
     return params, calibration
 
 
