@@ -261,27 +261,39 @@ def accumulate_histogram(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, nch,
     the touched bins afterwards, cheaper than per pixel). Touched bins (shared by all
     channels) are appended to ``touched`` and flagged in ``mark`` starting at ``nt``;
     returns the new count.
+
+    With one channel, runs of neighbouring pixels in the same bin are summed in a register
+    and added to the histogram once per run: the read-add-write of one histogram cell per
+    pixel is a dependency chain through memory (the next pixel usually hits the same bin),
+    which made this loop several times slower than its arithmetic.
     """
     for s in range(s0, s1):
         r = row[s]
         q = part[s] - 1
         base = q * N_BINS
-        if nch == 0:
-            for c in range(x0[s], x1[s]):
-                idx = base + bins[r, c]
-                hist[0, idx] += 1.0
-                if not mark[idx]:
-                    mark[idx] = True
-                    touched[nt] = idx
-                    nt += 1
-        elif nch == 1:
+        if nch <= 1:
             rr = r - oy
+            prev = -1
+            run = 0.0
             for c in range(x0[s], x1[s]):
                 idx = base + bins[r, c]
-                hist[0, idx] += wmap[rr, c - ox, 0]
-                if not mark[idx]:
-                    mark[idx] = True
-                    touched[nt] = idx
+                v = 1.0 if nch == 0 else wmap[rr, c - ox, 0]
+                if idx == prev:
+                    run += v
+                    continue
+                if prev >= 0:
+                    hist[0, prev] += run
+                    if not mark[prev]:
+                        mark[prev] = True
+                        touched[nt] = prev
+                        nt += 1
+                prev = idx
+                run = v
+            if prev >= 0:
+                hist[0, prev] += run
+                if not mark[prev]:
+                    mark[prev] = True
+                    touched[nt] = prev
                     nt += 1
         else:
             rr = r - oy
@@ -378,13 +390,18 @@ def occlusion_terms(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, nch, area, d_
 
 # -- HJS update (000 Algorithm 1, per camera) -------------------------------------------------
 @njit(cache=True, nogil=True)
-def hjs_camera(bins, row, x0, x1, part, offsets, area, bbox, order, target, prior,
-               key, va, vb, wa, n_targets, d_occ, separable, record, pix_offsets):
+def hjs_camera_ws(bins, row, x0, x1, part, offsets, area, bbox, order, target, prior,
+                  key, va, vb, wa, n_targets, d_occ, separable, record, pix_offsets,
+                  mfg, bbg, wmap):
     """Visit all K*N particles of one camera from near to far (000 Algorithm 1 "update").
 
-    Buffers are (h, w, K) over the union bounding box of all silhouettes (pixel-interleaved
-    so the K factors of a pixel are contiguous); b_fg is kept as the accumulated prior mass
-    m_fg = 1 - b_fg, so that all buffers start at zero (cheap, lazily zeroed memory).
+    The image buffers are caller-owned workspaces (H', W', C) with H' >= H, W' >= W,
+    C >= max(K, 1), indexed by image pixel and pixel-interleaved (the K factors of a pixel
+    are contiguous). b_fg is kept as the accumulated prior mass m_fg = 1 - b_fg so that
+    every buffer starts at zero. ``mfg`` and ``bbg`` must be zero on entry and are zero
+    again on return (only the rectangle that was written is cleared); ``wmap`` is scratch.
+    Reusing them across calls saves allocating and clearing 2 x H x W x K doubles per
+    camera and frame (which cost as much as the whole update of a frame without overlap).
 
     Args:
         bins: (H, W) int16 colour bins of the image.
@@ -395,9 +412,11 @@ def hjs_camera(bins, row, x0, x1, part, offsets, area, bbox, order, target, prio
         prior: (P,) normalised prior weight pi_p of each particle within its target.
         key: (K, V, 1536) key-view part histograms of the targets (normalised per part).
         va, vb, wa: (P,) the two key views of each particle and the weight of ``va``.
-        separable: if True, every target is scored alone (w* = 1, no background term).
+        separable: if True, every target is scored alone (w* = 1, no background term;
+            the workspaces are not touched and may be (1, 1, 1)).
         record: flat float64 array receiving w* at every span pixel (size 0: do not
             record); pixel ``pix_offsets[p]`` is the first pixel of particle p.
+        mfg, bbg, wmap: (H', W', C) float64 workspaces (see above).
 
     Returns:
         fc (P,) foreground terms, bc (P,) background terms, alpha (P,) sum of w*.
@@ -414,27 +433,11 @@ def hjs_camera(bins, row, x0, x1, part, offsets, area, bbox, order, target, prio
     d2 = np.empty(3)
     out_l = np.empty(nk)
     out_v = np.empty(nk)
-    # union bounding box of all silhouettes (buffer extent); per target, the union boxes of
-    # its particles nearer than the current one (pre, grown while visiting) and of those
-    # farther than position oi (suf[oi], precomputed backwards)
-    gx0 = 1 << 30
-    gy0 = 1 << 30
-    gx1 = -1
-    gy1 = -1
-    for p in range(npart):
-        if area[p] > 0:
-            gx0 = min(gx0, bbox[p, 0])
-            gy0 = min(gy0, bbox[p, 1])
-            gx1 = max(gx1, bbox[p, 2])
-            gy1 = max(gy1, bbox[p, 3])
-    if gx1 < 0:
-        return fc, bc, vis
-    gw = gx1 - gx0
-    gh = gy1 - gy0
+    ones = np.ones((1, 1, 1))
     # plain int64 (not literal) arguments: one compiled version of the helpers
-    oy = np.int64(gy0)
-    ox = np.int64(gx0)
     zero = np.int64(0)
+    # per target, the union boxes of its particles nearer than the current one (pre, grown
+    # while visiting) and of those farther than position oi (suf[oi], precomputed backwards)
     pre = np.empty((nk, 4), np.int64)
     pre[:, 0] = 1 << 30
     pre[:, 1] = 1 << 30
@@ -442,9 +445,6 @@ def hjs_camera(bins, row, x0, x1, part, offsets, area, bbox, order, target, prio
     pre[:, 3] = -1
     if separable:
         suf = np.empty((1, nk, 4), np.int64)
-        mfg = np.zeros((1, 1, 1))
-        bbg = np.zeros((1, 1, 1))
-        wmap = np.ones((1, 1, 1))
     else:
         suf = np.empty((npart + 1, nk, 4), np.int64)
         suf[npart, :, 0] = 1 << 30
@@ -460,11 +460,12 @@ def hjs_camera(bins, row, x0, x1, part, offsets, area, bbox, order, target, prio
                 suf[oi, h, 1] = min(suf[oi, h, 1], bbox[p, 1])
                 suf[oi, h, 2] = max(suf[oi, h, 2], bbox[p, 2])
                 suf[oi, h, 3] = max(suf[oi, h, 3], bbox[p, 3])
-        # 000 Algorithm 1: b_fg starts at "N" (here 1 with normalised priors: m_fg = 0),
-        # b_bg at 0
-        mfg = np.zeros((gh, gw, nk))
-        bbg = np.zeros((gh, gw, nk))
-        wmap = np.empty((gh, gw, nk))
+    # 000 Algorithm 1: b_fg starts at "N" (here 1 with normalised priors: m_fg = 0), b_bg
+    # at 0; the rectangle written to them is cleared before returning
+    wx0 = 1 << 30
+    wy0 = 1 << 30
+    wx1 = -1
+    wy1 = -1
     rel = np.empty(nk, np.int64)
     need = np.empty(nk, np.int64)
     skip = np.empty(nk, np.int64)
@@ -505,52 +506,48 @@ def hjs_camera(bins, row, x0, x1, part, offsets, area, bbox, order, target, prio
                 pre[k, 1] = min(pre[k, 1], by0)
                 pre[k, 2] = max(pre[k, 2], bx1)
                 pre[k, 3] = max(pre[k, 3], by1)
-        # 000 Eq. 34: occlusion map w* = Delta(x_p) prod_{h != k} b_fg^h
+        # 000 Eq. 34: occlusion map w* = Delta(x_p) prod_{h != k} b_fg^h, and in the same
+        # pass the background term of Eq. 40 (the sum of b_bg^k over the silhouette)
         occluded = False
+        acc = 0.0
         if nrel > 0:
             for s in range(s0, s1):
-                r = row[s] - gy0
-                for c in range(x0[s] - gx0, x1[s] - gx0):
+                r = row[s]
+                for c in range(x0[s], x1[s]):
                     w = 1.0
                     for j in range(nrel):
                         w *= max(1.0 - mfg[r, c, rel[j]], 0.0)   # >= 0 despite rounding
                     wmap[r, c, 0] = w
+                    acc += bbg[r, c, k]
                     if w != 1.0:
                         occluded = True
         # 000 Eq. 33 with Eq. 26: foreground term on the w*-weighted part histograms
-        nch = np.int64(1 if occluded else 0)
-        occlusion_terms(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, nch, ap, d_occ, key,
-                        k, va[p], vb[p], wa[p], hist, touched, mark, mt, d2, out_l, out_v)
+        if occluded:
+            occlusion_terms(bins, row, x0, x1, part, s0, s1, wmap, zero, zero, np.int64(1),
+                            ap, d_occ, key, k, va[p], vb[p], wa[p], hist, touched, mark, mt,
+                            d2, out_l, out_v)
+        else:
+            occlusion_terms(bins, row, x0, x1, part, s0, s1, ones, zero, zero, zero, ap,
+                            d_occ, key, k, va[p], vb[p], wa[p], hist, touched, mark, mt,
+                            d2, out_l, out_v)
         fc[p] = out_l[0]
         vis[p] = out_v[0]
         f_free = out_l[0] if not occluded else -1.0   # the term with w = 1, lazily
         if do_record:
             q = pix_offsets[p]
             for s in range(s0, s1):
-                r = row[s] - gy0
-                for c in range(x0[s] - gx0, x1[s] - gx0):
+                r = row[s]
+                for c in range(x0[s], x1[s]):
                     record[q] = wmap[r, c, 0] if occluded else 1.0
                     q += 1
         if separable:
             continue
-        # 000 Eq. 40: background term = sum of b_bg^k over the silhouette. With w* = 1 no
-        # nearer particle of another target overlaps (000 IV-B.3): b_bg^k is 0 there.
+        # 000 Eq. 40: with w* = 1 no nearer particle of another target overlaps (000
+        # IV-B.3): b_bg^k is 0 there, and the term is 0.
         if occluded:
-            acc = 0.0
-            for s in range(s0, s1):
-                r = row[s] - gy0
-                for c in range(x0[s] - gx0, x1[s] - gx0):
-                    acc += bbg[r, c, k]
             bc[p] = acc
         if nneed == 0 or pi_p == 0.0:
             continue
-        # Algorithm 1: b_fg^{k_p} -= pi_p Delta(x_p). The listing's "b_fg = N, subtract
-        # Delta, divide by N" is the uniform-weight case of subtracting the normalised prior
-        # weight (000 Eq. 35), which is what the non-uniform BP weights need.
-        for s in range(s0, s1):
-            r = row[s] - gy0
-            for c in range(x0[s] - gx0, x1[s] - gx0):
-                mfg[r, c, k] += pi_p
         # reduced terms (000 Eq. 36-39): for every other target h, the foreground term of
         # x_p ignoring h (and k_p), rfc, spread over Delta(x_p) into b_bg^h. The listing
         # writes b_bg^{k_p}, which contradicts Eq. 36-39: the receiving buffer is the one of
@@ -567,8 +564,8 @@ def hjs_camera(bins, row, x0, x1, part, offsets, area, bbox, order, target, prio
         if reduced:
             # reduced maps w^_h = prod_{m != h, k_p} b_fg^m for all needed h in one pass
             for s in range(s0, s1):
-                r = row[s] - gy0
-                for c in range(x0[s] - gx0, x1[s] - gx0):
+                r = row[s]
+                for c in range(x0[s], x1[s]):
                     for j in range(nrel):
                         vals[j] = max(1.0 - mfg[r, c, rel[j]], 0.0)
                     for i in range(nneed):
@@ -577,26 +574,57 @@ def hjs_camera(bins, row, x0, x1, part, offsets, area, bbox, order, target, prio
                             if j != skip[i]:
                                 w *= vals[j]
                         wmap[r, c, i] = w
-            occlusion_terms(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, np.int64(nneed),
-                            ap, d_occ, key, k, va[p], vb[p], wa[p], hist, touched, mark, mt,
-                            d2, out_l, out_v)
+            occlusion_terms(bins, row, x0, x1, part, s0, s1, wmap, zero, zero,
+                            np.int64(nneed), ap, d_occ, key, k, va[p], vb[p], wa[p], hist,
+                            touched, mark, mt, d2, out_l, out_v)
         else:                                       # every reduced map is 1 on Delta(x_p)
             if f_free < 0.0:
-                occlusion_terms(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, zero, ap,
+                occlusion_terms(bins, row, x0, x1, part, s0, s1, ones, zero, zero, zero, ap,
                                 d_occ, key, k, va[p], vb[p], wa[p], hist, touched, mark,
                                 mt, d2, out_l, out_v)
                 f_free = out_l[0]
             for i in range(nneed):
                 out_l[i] = f_free
-        # 000 Eq. 39: intensity pi_p * rfc_p / area(x_p) on the silhouette
+        # Algorithm 1: b_fg^{k_p} -= pi_p Delta(x_p). The listing's "b_fg = N, subtract
+        # Delta, divide by N" is the uniform-weight case of subtracting the normalised prior
+        # weight (000 Eq. 35), which is what the non-uniform BP weights need. In the same
+        # pass, 000 Eq. 39: intensity pi_p * rfc_p / area(x_p) into b_bg^h on the silhouette
+        # (m_fg^{k_p} is never read for this particle's own reduced maps, so the order of
+        # the two updates does not matter).
         for i in range(nneed):
             vals[i] = pi_p * out_l[i] / ap
         for s in range(s0, s1):
-            r = row[s] - gy0
-            for c in range(x0[s] - gx0, x1[s] - gx0):
+            r = row[s]
+            for c in range(x0[s], x1[s]):
+                mfg[r, c, k] += pi_p
                 for i in range(nneed):
                     bbg[r, c, need[i]] += vals[i]
+        wx0 = min(wx0, bx0)
+        wy0 = min(wy0, by0)
+        wx1 = max(wx1, bx1)
+        wy1 = max(wy1, by1)
+    if wx1 > wx0 and wy1 > wy0:                    # leave the workspaces zero
+        mfg[wy0:wy1, wx0:wx1, :] = 0.0
+        bbg[wy0:wy1, wx0:wx1, :] = 0.0
     return fc, bc, vis
+
+
+@njit(cache=True, nogil=True)
+def hjs_camera(bins, row, x0, x1, part, offsets, area, bbox, order, target, prior,
+               key, va, vb, wa, n_targets, d_occ, separable, record, pix_offsets):
+    """:func:`hjs_camera_ws` with freshly allocated workspaces (one-off calls)."""
+    if separable:
+        mfg = np.zeros((1, 1, 1))
+        bbg = np.zeros((1, 1, 1))
+        wmap = np.zeros((1, 1, 1))
+    else:
+        shape = (bins.shape[0], bins.shape[1], max(n_targets, 1))
+        mfg = np.zeros(shape)
+        bbg = np.zeros(shape)
+        wmap = np.empty(shape)
+    return hjs_camera_ws(bins, row, x0, x1, part, offsets, area, bbox, order, target, prior,
+                         key, va, vb, wa, n_targets, d_occ, separable, record, pix_offsets,
+                         mfg, bbg, wmap)
 
 
 # -- joint rendering (000 Eq. 20-21, 26 with binary masks) ------------------------------------

@@ -25,9 +25,11 @@ the part masses alpha_part = sum w* change.
 from __future__ import annotations
 
 import os
+import threading
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -130,6 +132,36 @@ def _normalised_priors(weights: np.ndarray, n: int, k: int, log_weights: bool) -
     return w / total
 
 
+_NO_BUFFER = np.zeros((1, 1, 1))   # workspace argument of the separable evaluation (unused)
+
+
+class _Workspaces:
+    """Reusable image buffers (m_fg, b_bg, w*) of :func:`_kernels.hjs_camera_ws`.
+
+    One set per concurrently evaluated camera: a set is taken for one call and handed back
+    afterwards (the kernel leaves m_fg and b_bg zero). A set is grown to the largest image
+    and target count seen; a call that fails drops its set, which may not be zero.
+    """
+
+    def __init__(self) -> None:
+        self._free: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        self._lock = threading.Lock()
+
+    @contextmanager
+    def get(self, height: int, width: int, channels: int
+            ) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        with self._lock:
+            ws = self._free.pop() if self._free else None
+        if ws is None or (ws[0].shape[0] < height or ws[0].shape[1] < width
+                          or ws[0].shape[2] < channels):
+            old = ws[0].shape if ws is not None else (0, 0, 0)
+            shape = (max(height, old[0]), max(width, old[1]), max(channels, old[2], 1))
+            ws = (np.zeros(shape), np.zeros(shape), np.empty(shape))
+        yield ws
+        with self._lock:
+            self._free.append(ws)
+
+
 class MeasurementModel:
     """Per-frame image preparation and the likelihood evaluations of every filter.
 
@@ -148,6 +180,7 @@ class MeasurementModel:
         self._bins: dict[str, np.ndarray] = {}
         self._pool: ThreadPoolExecutor | None = None
         self._pool_size = 0
+        self._workspaces = _Workspaces()
 
     # -- images ---------------------------------------------------------------------------
     def set_images(self, images: Mapping[str, np.ndarray]) -> None:
@@ -236,29 +269,25 @@ class MeasurementModel:
                 raise LikelihoodError(f'model {k} has no key views')
         return out
 
-    def _prepare(self, camera: str, particles: list[np.ndarray],
+    def _prepare(self, camera: str, states: np.ndarray, target: np.ndarray,
                  models: Sequence[PersonModel], timings: dict[str, float]
-                 ) -> tuple[Silhouettes, np.ndarray, np.ndarray]:
-        """Silhouettes of the K targets' particles in one camera, target index (P,) and the
-        key views with per-particle interpolation weights (see :meth:`_views`)."""
+                 ) -> tuple[Silhouettes, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """Silhouettes of the K targets' particles (states (P, 6), target index (P,)) in one
+        camera and the per-particle key-view interpolation (va, vb, wa), see
+        :meth:`_view_weights`."""
         cam = self._camera(camera)
         t0 = time.perf_counter()
-        states = (np.concatenate(particles, axis=0) if particles
-                  else np.zeros((0, STATE_DIM)))
-        target = np.concatenate([np.full(p.shape[0], k, np.int64)
-                                 for k, p in enumerate(particles)]) if particles else \
-            np.zeros(0, np.int64)
         heights = np.array([m.height for m in models], dtype=np.float64)[target]
         widths = np.array([m.width for m in models], dtype=np.float64)[target]
         chair = models[0].chair_height if len(models) else 0.45
         sil = rasterize(cam, states, BodyShape(chair_height=chair), heights=heights,
                         widths=widths, row_step=int(self.config.subsample))
         t1 = time.perf_counter()
-        views = self._views(cam, states, target, models)
+        views = self._view_weights(cam, states, target, models)
         t2 = time.perf_counter()
         timings['rasterize'] = timings.get('rasterize', 0.0) + t1 - t0
         timings['models'] = timings.get('models', 0.0) + t2 - t1
-        return sil, target, views
+        return sil, views
 
     @staticmethod
     def _key_views(models: Sequence[PersonModel]) -> np.ndarray:
@@ -270,10 +299,11 @@ class MeasurementModel:
                 m.view_angles.size, -1)
         return key
 
-    def _views(self, cam: Camera, states: np.ndarray, target: np.ndarray,
-               models: Sequence[PersonModel]) -> tuple[np.ndarray, ...]:
-        """Key views (K, V, 1536) and per-particle interpolation (va, vb, wa) (003 Eq. 1-2)
-        for the relative viewing angle of every particle in this camera."""
+    @staticmethod
+    def _view_weights(cam: Camera, states: np.ndarray, target: np.ndarray,
+                      models: Sequence[PersonModel]) -> tuple[np.ndarray, ...]:
+        """Per-particle key views and weight (va, vb, wa) (003 Eq. 1-2) for the relative
+        viewing angle of every particle in this camera."""
         n = states.shape[0]
         rel = relative_angle(states[:, THETA], cam.viewing_angle(states[:, [X, Y]]))
         va = np.zeros(n, np.int64)
@@ -283,7 +313,12 @@ class MeasurementModel:
             sel = target == k
             if np.any(sel):
                 va[sel], vb[sel], wa[sel] = m.interpolation_weights(rel[sel])
-        return self._key_views(models), va, vb, wa
+        return va, vb, wa
+
+    def _views(self, cam: Camera, states: np.ndarray, target: np.ndarray,
+               models: Sequence[PersonModel]) -> tuple[np.ndarray, ...]:
+        """Key views (K, V, 1536) and per-particle interpolation (va, vb, wa)."""
+        return (self._key_views(models),) + self._view_weights(cam, states, target, models)
 
     def _loglik(self, value: np.ndarray, sil: Silhouettes) -> np.ndarray:
         # the exponent of 000 Eq. 19 is negative; Algorithm 1 as printed lost the minus sign
@@ -293,11 +328,13 @@ class MeasurementModel:
         return out
 
     # -- HJS --------------------------------------------------------------------------------
-    def _hjs_camera(self, camera: str, particles: list[np.ndarray], priors: list[np.ndarray],
-                    models: Sequence[PersonModel], *, separable: bool, record: bool,
-                    timings: dict[str, float]):
-        sil, target, (key, va, vb, wa) = self._prepare(camera, particles, models, timings)
-        prior = (np.concatenate(priors) if priors else np.zeros(0))
+    def _hjs_camera(self, camera: str, states: np.ndarray, target: np.ndarray,
+                    prior: np.ndarray, key: np.ndarray, models: Sequence[PersonModel], *,
+                    separable: bool, record: bool, timings: dict[str, float]):
+        """000 Algorithm 1 "update" in one camera for the stacked particles of all targets
+        (states (P, 6), target (P,), normalised priors (P,), key views (K, V, 1536))."""
+        sil, (va, vb, wa) = self._prepare(camera, states, target, models, timings)
+        n_targets = key.shape[0]
         t0 = time.perf_counter()
         order = np.argsort(sil.distance, kind='stable')
         if record:
@@ -308,12 +345,32 @@ class MeasurementModel:
         else:
             pix_offsets = np.zeros(len(sil) + 1, np.int64)
             rec = np.zeros(0)
-        fc, bc, vis = _kernels.hjs_camera(
-            self.bins(camera), sil.row, sil.x0, sil.x1, sil.part, sil.offsets, sil.area,
-            sil.bbox, order, target, prior, key, va, vb, wa, len(particles),
-            float(self.config.d_occ), bool(separable), rec, pix_offsets)
+        bins = self.bins(camera)
+
+        def kernel(mfg: np.ndarray, bbg: np.ndarray, wmap: np.ndarray):
+            return _kernels.hjs_camera_ws(
+                bins, sil.row, sil.x0, sil.x1, sil.part, sil.offsets, sil.area, sil.bbox,
+                order, target, prior, key, va, vb, wa, n_targets, float(self.config.d_occ),
+                bool(separable), rec, pix_offsets, mfg, bbg, wmap)
+
+        if separable:                               # no image buffers
+            fc, bc, vis = kernel(_NO_BUFFER, _NO_BUFFER, _NO_BUFFER)
+        else:
+            with self._workspaces.get(bins.shape[0], bins.shape[1], n_targets) as ws:
+                fc, bc, vis = kernel(*ws)
         timings['kernel'] = timings.get('kernel', 0.0) + time.perf_counter() - t0
-        return sil, target, prior, fc, bc, vis, rec, pix_offsets
+        return sil, fc, bc, vis, rec, pix_offsets
+
+    def _stack(self, parts: list[np.ndarray], priors: list[np.ndarray],
+               models: Sequence[PersonModel]
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The K targets' particles stacked: states (P, 6), target (P,), prior (P,) and the
+        key views (K, V, 1536), shared by every camera of a frame."""
+        states = np.concatenate(parts, axis=0) if parts else np.zeros((0, STATE_DIM))
+        target = np.repeat(np.arange(len(parts), dtype=np.int64),
+                           [p.shape[0] for p in parts])
+        prior = np.concatenate(priors) if priors else np.zeros(0)
+        return states, target, prior, self._key_views(models)
 
     def _evaluate(self, particles: Sequence[np.ndarray], weights: Sequence[np.ndarray] | None,
                   models: Sequence[PersonModel], *, separable: bool,
@@ -333,16 +390,17 @@ class MeasurementModel:
         timings: dict[str, float] = {}
         cams = [(c, name) for c, name in enumerate(self.camera_names)
                 if name in self._bins and parts]
+        t0 = time.perf_counter()
+        states, target, prior, key = self._stack(parts, priors, models)
 
         def one(name: str):
             own: dict[str, float] = {}
-            out = self._hjs_camera(name, parts, priors, models, separable=separable,
-                                   record=False, timings=own)
+            out = self._hjs_camera(name, states, target, prior, key, models,
+                                   separable=separable, record=False, timings=own)
             return out, own
 
-        t0 = time.perf_counter()
         results = self._map(one, [name for _, name in cams])
-        for (c, name), ((sil, target, prior, fc, bc, vis, _, _), own) in zip(cams, results):
+        for (c, name), ((sil, fc, bc, vis, _, _), own) in zip(cams, results):
             for key_, value in own.items():
                 timings[key_] = timings.get(key_, 0.0) + value
             loglik += self._loglik(fc + bc, sil)
@@ -407,8 +465,10 @@ class MeasurementModel:
         parts = self._check_targets(particles, models)
         priors = [_normalised_priors(w, p.shape[0], k, False)
                   for k, (w, p) in enumerate(zip(weights, parts))]
-        sil, target, prior, fc, bc, vis, rec, pix = self._hjs_camera(
-            camera, parts, priors, models, separable=False, record=True, timings={})
+        states, target, prior, key = self._stack(parts, priors, models)
+        sil, fc, bc, vis, rec, pix = self._hjs_camera(
+            camera, states, target, prior, key, models, separable=False, record=True,
+            timings={})
         w_star = np.zeros((len(sil), sil.height, sil.width))
         for p in range(len(sil)):
             q = int(pix[p])
