@@ -262,38 +262,30 @@ def accumulate_histogram(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, nch,
     channels) are appended to ``touched`` and flagged in ``mark`` starting at ``nt``;
     returns the new count.
 
-    With one channel, runs of neighbouring pixels in the same bin are summed in a register
-    and added to the histogram once per run: the read-add-write of one histogram cell per
-    pixel is a dependency chain through memory (the next pixel usually hits the same bin),
-    which made this loop several times slower than its arithmetic.
+    (Summing runs of equal bins in a register first was tried: 30 % faster on flat-coloured
+    bench people, twice slower on the textured synthetic rooms, where half of the
+    neighbouring pixels change bin and the run test mispredicts.)
     """
     for s in range(s0, s1):
         r = row[s]
         q = part[s] - 1
         base = q * N_BINS
-        if nch <= 1:
-            rr = r - oy
-            prev = -1
-            run = 0.0
+        if nch == 0:
             for c in range(x0[s], x1[s]):
                 idx = base + bins[r, c]
-                v = 1.0 if nch == 0 else wmap[rr, c - ox, 0]
-                if idx == prev:
-                    run += v
-                    continue
-                if prev >= 0:
-                    hist[0, prev] += run
-                    if not mark[prev]:
-                        mark[prev] = True
-                        touched[nt] = prev
-                        nt += 1
-                prev = idx
-                run = v
-            if prev >= 0:
-                hist[0, prev] += run
-                if not mark[prev]:
-                    mark[prev] = True
-                    touched[nt] = prev
+                hist[0, idx] += 1.0
+                if not mark[idx]:
+                    mark[idx] = True
+                    touched[nt] = idx
+                    nt += 1
+        elif nch == 1:
+            rr = r - oy
+            for c in range(x0[s], x1[s]):
+                idx = base + bins[r, c]
+                hist[0, idx] += wmap[rr, c - ox, 0]
+                if not mark[idx]:
+                    mark[idx] = True
+                    touched[nt] = idx
                     nt += 1
         else:
             rr = r - oy
