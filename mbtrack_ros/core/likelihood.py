@@ -270,11 +270,9 @@ class MeasurementModel:
         return out
 
     def _prepare(self, camera: str, states: np.ndarray, target: np.ndarray,
-                 models: Sequence[PersonModel], timings: dict[str, float]
-                 ) -> tuple[Silhouettes, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+                 models: Sequence[PersonModel], timings: dict[str, float]) -> Silhouettes:
         """Silhouettes of the K targets' particles (states (P, 6), target index (P,)) in one
-        camera and the per-particle key-view interpolation (va, vb, wa), see
-        :meth:`_view_weights`."""
+        camera."""
         cam = self._camera(camera)
         t0 = time.perf_counter()
         heights = np.array([m.height for m in models], dtype=np.float64)[target]
@@ -282,12 +280,8 @@ class MeasurementModel:
         chair = models[0].chair_height if len(models) else 0.45
         sil = rasterize(cam, states, BodyShape(chair_height=chair), heights=heights,
                         widths=widths, row_step=int(self.config.subsample))
-        t1 = time.perf_counter()
-        views = self._view_weights(cam, states, target, models)
-        t2 = time.perf_counter()
-        timings['rasterize'] = timings.get('rasterize', 0.0) + t1 - t0
-        timings['models'] = timings.get('models', 0.0) + t2 - t1
-        return sil, views
+        timings['rasterize'] = timings.get('rasterize', 0.0) + time.perf_counter() - t0
+        return sil
 
     @staticmethod
     def _key_views(models: Sequence[PersonModel]) -> np.ndarray:
@@ -300,25 +294,32 @@ class MeasurementModel:
         return key
 
     @staticmethod
-    def _view_weights(cam: Camera, states: np.ndarray, target: np.ndarray,
+    def _view_weights(cams: Sequence[Camera], states: np.ndarray, target: np.ndarray,
                       models: Sequence[PersonModel]) -> tuple[np.ndarray, ...]:
-        """Per-particle key views and weight (va, vb, wa) (003 Eq. 1-2) for the relative
-        viewing angle of every particle in this camera."""
-        n = states.shape[0]
-        rel = relative_angle(states[:, THETA], cam.viewing_angle(states[:, [X, Y]]))
-        va = np.zeros(n, np.int64)
-        vb = np.zeros(n, np.int64)
-        wa = np.ones(n)
+        """Per camera and particle, the two key views and the weight of the first (va, vb,
+        wa), each (C, P) (003 Eq. 1-2), for the relative viewing angles of every particle
+        in the C cameras (one interpolation call per target for all cameras)."""
+        shape = (len(cams), states.shape[0])
+        rel = np.empty(shape)
+        for c, cam in enumerate(cams):
+            rel[c] = relative_angle(states[:, THETA], cam.viewing_angle(states[:, [X, Y]]))
+        va = np.zeros(shape, np.int64)
+        vb = np.zeros(shape, np.int64)
+        wa = np.ones(shape)
         for k, m in enumerate(models):
             sel = target == k
-            if np.any(sel):
-                va[sel], vb[sel], wa[sel] = m.interpolation_weights(rel[sel])
+            if np.any(sel) and shape[0]:
+                a, b, w = m.interpolation_weights(rel[:, sel].ravel())
+                va[:, sel] = a.reshape(shape[0], -1)
+                vb[:, sel] = b.reshape(shape[0], -1)
+                wa[:, sel] = w.reshape(shape[0], -1)
         return va, vb, wa
 
     def _views(self, cam: Camera, states: np.ndarray, target: np.ndarray,
                models: Sequence[PersonModel]) -> tuple[np.ndarray, ...]:
-        """Key views (K, V, 1536) and per-particle interpolation (va, vb, wa)."""
-        return (self._key_views(models),) + self._view_weights(cam, states, target, models)
+        """Key views (K, V, 1536) and per-particle interpolation (va, vb, wa) (P,)."""
+        va, vb, wa = self._view_weights([cam], states, target, models)
+        return self._key_views(models), va[0], vb[0], wa[0]
 
     def _loglik(self, value: np.ndarray, sil: Silhouettes) -> np.ndarray:
         # the exponent of 000 Eq. 19 is negative; Algorithm 1 as printed lost the minus sign
@@ -329,11 +330,14 @@ class MeasurementModel:
 
     # -- HJS --------------------------------------------------------------------------------
     def _hjs_camera(self, camera: str, states: np.ndarray, target: np.ndarray,
-                    prior: np.ndarray, key: np.ndarray, models: Sequence[PersonModel], *,
-                    separable: bool, record: bool, timings: dict[str, float]):
+                    prior: np.ndarray, key: np.ndarray, views: tuple[np.ndarray, ...],
+                    models: Sequence[PersonModel], *, separable: bool, record: bool,
+                    timings: dict[str, float]):
         """000 Algorithm 1 "update" in one camera for the stacked particles of all targets
-        (states (P, 6), target (P,), normalised priors (P,), key views (K, V, 1536))."""
-        sil, (va, vb, wa) = self._prepare(camera, states, target, models, timings)
+        (states (P, 6), target (P,), normalised priors (P,), key views (K, V, 1536), the
+        camera's key-view interpolation (va, vb, wa) (P,))."""
+        sil = self._prepare(camera, states, target, models, timings)
+        va, vb, wa = views
         n_targets = key.shape[0]
         t0 = time.perf_counter()
         order = np.argsort(sil.distance, kind='stable')
@@ -362,15 +366,18 @@ class MeasurementModel:
         return sil, fc, bc, vis, rec, pix_offsets
 
     def _stack(self, parts: list[np.ndarray], priors: list[np.ndarray],
-               models: Sequence[PersonModel]
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """The K targets' particles stacked: states (P, 6), target (P,), prior (P,) and the
-        key views (K, V, 1536), shared by every camera of a frame."""
+               models: Sequence[PersonModel], cameras: Sequence[str]
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict]:
+        """The K targets' particles stacked: states (P, 6), target (P,), prior (P,), the key
+        views (K, V, 1536) and, per camera name, the key-view interpolation (va, vb, wa)."""
         states = np.concatenate(parts, axis=0) if parts else np.zeros((0, STATE_DIM))
         target = np.repeat(np.arange(len(parts), dtype=np.int64),
                            [p.shape[0] for p in parts])
         prior = np.concatenate(priors) if priors else np.zeros(0)
-        return states, target, prior, self._key_views(models)
+        va, vb, wa = self._view_weights([self._camera(c) for c in cameras], states, target,
+                                        models)
+        views = {c: (va[i], vb[i], wa[i]) for i, c in enumerate(cameras)}
+        return states, target, prior, self._key_views(models), views
 
     def _evaluate(self, particles: Sequence[np.ndarray], weights: Sequence[np.ndarray] | None,
                   models: Sequence[PersonModel], *, separable: bool,
@@ -391,11 +398,13 @@ class MeasurementModel:
         cams = [(c, name) for c, name in enumerate(self.camera_names)
                 if name in self._bins and parts]
         t0 = time.perf_counter()
-        states, target, prior, key = self._stack(parts, priors, models)
+        states, target, prior, key, views = self._stack(parts, priors, models,
+                                                        [name for _, name in cams])
+        timings['models'] = time.perf_counter() - t0
 
         def one(name: str):
             own: dict[str, float] = {}
-            out = self._hjs_camera(name, states, target, prior, key, models,
+            out = self._hjs_camera(name, states, target, prior, key, views[name], models,
                                    separable=separable, record=False, timings=own)
             return out, own
 
@@ -465,10 +474,10 @@ class MeasurementModel:
         parts = self._check_targets(particles, models)
         priors = [_normalised_priors(w, p.shape[0], k, False)
                   for k, (w, p) in enumerate(zip(weights, parts))]
-        states, target, prior, key = self._stack(parts, priors, models)
+        states, target, prior, key, views = self._stack(parts, priors, models, [camera])
         sil, fc, bc, vis, rec, pix = self._hjs_camera(
-            camera, states, target, prior, key, models, separable=False, record=True,
-            timings={})
+            camera, states, target, prior, key, views[camera], models, separable=False,
+            record=True, timings={})
         w_star = np.zeros((len(sil), sil.height, sil.width))
         for p in range(len(sil)):
             q = int(pix[p])
