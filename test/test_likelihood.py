@@ -383,3 +383,33 @@ def test_threads_and_joint_chunks_do_not_change_results():
     mm.JOINT_CHUNK = 4                                       # 2 joint samples per chunk
     np.testing.assert_allclose(mm.joint(np.stack(parts, axis=1), models), out[0][1],
                                atol=1e-12)
+
+
+def test_reused_workspaces_equal_fresh_ones_and_are_left_zero():
+    """The image buffers of the HJS update are kept between calls (grown to the largest
+    image and target count): a model evaluated again and again, with fewer targets than
+    its buffers hold and two image sizes, gives exactly the results of a fresh model."""
+    rng = np.random.default_rng(15)
+    cams = _two_cameras()
+    small = _camera('small', (0.5, -3.0, 1.2), size=(30, 20), focal=40.0)
+    room = _room(*cams, small)
+    images = {c.name: _random_image(rng, c.height, c.width) for c in (*cams, small)}
+    reused = MeasurementModel(room, LikelihoodConfig(threads=1))
+    reused.set_images(images)
+    for trial, n_targets in enumerate((3, 2, 3, 1, 2)):
+        models = [_random_model(rng, 1.6 + 0.1 * k) for k in range(n_targets)]
+        parts = [_random_particles(rng, (0.25 * k - 0.2, 0.3 * k), 6)
+                 for k in range(n_targets)]
+        weights = [rng.random(6) + 0.05 for _ in range(n_targets)]
+        fresh = MeasurementModel(room, LikelihoodConfig(threads=1))
+        fresh.set_images(images)
+        a = reused.hjs(parts, weights, models)
+        b = fresh.hjs(parts, weights, models)
+        for la, lb in zip(a.loglik, b.loglik):
+            np.testing.assert_array_equal(la, lb)
+        np.testing.assert_array_equal(a.visible_fraction, b.visible_fraction)
+        if trial == 0:
+            assert any(np.any(np.abs(la) > 0) for la in a.loglik)
+    # the kept buffers are back at zero (m_fg and b_bg; w* is scratch)
+    (mfg, bbg, _), = reused._workspaces._free
+    assert mfg.shape[2] >= 3 and not np.any(mfg) and not np.any(bbg)
