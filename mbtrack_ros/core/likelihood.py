@@ -1,9 +1,9 @@
 """Measurement model: the HJS, separable and joint likelihoods (000 §IV-B, Algorithm 1).
 
-Per frame, :meth:`MeasurementModel.set_images` quantises every camera image once; the
-three evaluations then work on row-span silhouettes (:mod:`mbtrack_ros.core.shape`) and
-part histograms (:mod:`mbtrack_ros.core.appearance`) with numba kernels
-(:mod:`mbtrack_ros.core._kernels`):
+Per frame, :meth:`MeasurementModel.set_images` takes the camera images (each is quantised
+once, by the worker thread that first evaluates its camera); the three evaluations then
+work on row-span silhouettes (:mod:`mbtrack_ros.core.shape`) and part histograms
+(:mod:`mbtrack_ros.core.appearance`) with numba kernels (:mod:`mbtrack_ros.core._kernels`):
 
 * :meth:`~MeasurementModel.hjs`: all K*N particles of a camera are visited from near to
   far; occlusion maps w* (000 Eq. 34) and occlusion evidence (Eq. 36-40) are accumulated
@@ -177,6 +177,7 @@ class MeasurementModel:
         self.calibration = calibration
         self.config = config
         self.camera_names: list[str] = list(calibration.cameras)
+        self._images: dict[str, np.ndarray] = {}
         self._bins: dict[str, np.ndarray] = {}
         self._pool: ThreadPoolExecutor | None = None
         self._pool_size = 0
@@ -184,11 +185,13 @@ class MeasurementModel:
 
     # -- images ---------------------------------------------------------------------------
     def set_images(self, images: Mapping[str, np.ndarray]) -> None:
-        """Quantise the frame's images (H, W, 3) uint8 RGB once; missing cameras are skipped.
+        """Take the frame's images (H, W, 3) uint8 RGB; missing cameras are skipped.
 
         Raises :class:`LikelihoodError` for unknown cameras or images of the wrong size.
+        Each image is quantised once, when its camera is first evaluated (in that camera's
+        worker thread).
         """
-        bins: dict[str, np.ndarray] = {}
+        checked: dict[str, np.ndarray] = {}
         for name, image in images.items():
             cam = self.calibration.cameras.get(name)
             if cam is None:
@@ -199,20 +202,25 @@ class MeasurementModel:
                 raise LikelihoodError(
                     f'{name}: expected ({cam.height}, {cam.width}, 3) uint8 RGB image, got '
                     f'{image.shape} {image.dtype}')
-            bins[name] = quantize(image)
-        self._bins = bins
+            checked[name] = image
+        self._images = checked
+        self._bins = {}
 
     @property
     def active_cameras(self) -> list[str]:
         """Cameras with an image this frame, in calibration order."""
-        return [n for n in self.camera_names if n in self._bins]
+        return [n for n in self.camera_names if n in self._images]
 
     def bins(self, camera: str) -> np.ndarray:
         """(H, W) int16 quantised image of a camera this frame."""
-        try:
-            return self._bins[camera]
-        except KeyError as err:
-            raise LikelihoodError(f'no image for camera {camera!r} this frame') from err
+        out = self._bins.get(camera)
+        if out is None:
+            try:
+                image = self._images[camera]
+            except KeyError as err:
+                raise LikelihoodError(f'no image for camera {camera!r} this frame') from err
+            out = self._bins[camera] = quantize(image)
+        return out
 
     # -- silhouettes ----------------------------------------------------------------------
     def _camera(self, name: str) -> Camera:
@@ -396,7 +404,7 @@ class MeasurementModel:
         visible = np.zeros((len(parts), len(self.camera_names)))
         timings: dict[str, float] = {}
         cams = [(c, name) for c, name in enumerate(self.camera_names)
-                if name in self._bins and parts]
+                if name in self._images and parts]
         t0 = time.perf_counter()
         states, target, prior, key, views = self._stack(parts, priors, models,
                                                         [name for _, name in cams])
@@ -569,7 +577,7 @@ class MeasurementModel:
                     order, k, float(self.config.d_occ), key, va, vb, wa, min_pix)
             return total
 
-        cams = [(c, name) for c, name in enumerate(self.camera_names) if name in self._bins]
+        cams = [(c, name) for c, name in enumerate(self.camera_names) if name in self._images]
         for total in self._map(one, cams):
             out -= total / (2.0 * self.config.sigma ** 2)
         return out
