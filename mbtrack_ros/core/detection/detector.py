@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from mbtrack_ros.core.appearance import quantize
 from mbtrack_ros.core.camera import Camera, RoomCalibration
 from mbtrack_ros.core.detection import DetectionError
 from mbtrack_ros.core.detection.features import (
@@ -80,7 +81,8 @@ class DetectorConfig:
         confirm_radius: largest position change between confirming frames.
         exclusion_radius: hypotheses this close to a track are not tested.
         nms_radius: non-maximum-suppression radius between detections.
-        max_candidates: coarse neighbourhoods refined per frame.
+        max_candidates: coarse neighbourhoods refined per frame (a fixed budget that bounds
+            the search time; the neighbourhoods of candidates being confirmed go first).
         min_motion: fraction of recently moving pixels of the silhouette (in every side
             camera that sees it, in one of the confirming frames) to confirm a detection.
         min_speed, max_speed: m/s; a confirmed detection faster than ``min_speed`` over
@@ -90,7 +92,7 @@ class DetectorConfig:
 
     coarse_spacing: float = 0.3
     fine_spacing: float = 0.1
-    fine_radius: float = 0.3
+    fine_radius: float = 0.2
     zones: str = 'floor'
     heights: tuple[float, ...] = (1.6, 1.75, 1.9)
     widths: tuple[float, ...] = (0.45, 0.55)
@@ -118,7 +120,7 @@ class DetectorConfig:
     confirm_radius: float = 0.4
     exclusion_radius: float = 0.5
     nms_radius: float = 0.6
-    max_candidates: int = 6
+    max_candidates: int = 3
     min_motion: float = 0.05
     min_speed: float = 0.3
     max_speed: float = 2.0
@@ -185,6 +187,14 @@ class FrameEvidence:
     _integral: ForegroundIntegral | None = field(default=None, repr=False)
     _plain: ForegroundIntegral | None = field(default=None, repr=False)
     _edges: EdgeMap | None = field(default=None, repr=False)
+    _bins: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def bins(self) -> np.ndarray:
+        """Colour bins of the image (``appearance.quantize``), computed once per frame."""
+        if self._bins is None:
+            self._bins = quantize(self.image)
+        return self._bins
 
     @property
     def integral(self) -> ForegroundIntegral:
@@ -325,7 +335,7 @@ class Detector:
         if full and not self.ceiling[name]:
             con, _ = contour_loglik_spans(ev.edges, sil, _max_span_width(sil))
             resp = resp + cfg.w_contour * (con - cfg.contour_ref)
-            sym = colour_symmetry(ev.image, sil)
+            sym = colour_symmetry(ev.image, sil, bins=ev.bins)
             resp = resp + cfg.w_symmetry * np.where(np.isfinite(sym),
                                                     cfg.symmetry_ref - sym, 0.0)
         return np.where(sees, resp, 0.0), sees, np.where(sees, cov, np.nan)
@@ -397,7 +407,14 @@ class Detector:
         if good.size == 0:
             return []
         picks = good[_nms(self.coarse_xy[good], score[good], cfg.coarse_spacing * 1.5,
-                          cfg.max_candidates)]
+                          len(good))]
+        if self._candidates:
+            # a fixed budget of refinements per frame; neighbourhoods of the candidates
+            # being confirmed go first so that a confirmation is not starved
+            pend = np.array([c.xy for c in self._candidates])
+            d = np.linalg.norm(self.coarse_xy[picks][:, None] - pend[None], axis=2).min(axis=1)
+            picks = picks[np.argsort(d > cfg.confirm_radius + cfg.fine_radius, kind='stable')]
+        picks = picks[:cfg.max_candidates]
         found: list[Detection] = []
         for p in picks:
             det = self._refine(evidence, self.coarse_xy[p], track_xy)
@@ -433,16 +450,23 @@ class Detector:
         best = int(np.argmax(score))
         if not np.isfinite(score[best]):
             return None
-        # step 2: size and orientation around the best position
+        # step 2: size and orientation at the best position, then the position at half
+        # the fine spacing with the best size (separately: 24 + 9 hypotheses, not 216)
         bx = states[best, [X, Y]]
+        H, W, O = (a.ravel() for a in np.meshgrid(np.asarray(cfg.heights),
+                                                   np.asarray(cfg.widths),
+                                                   np.asarray(cfg.orientations),
+                                                   indexing='ij'))
+        states2 = _states(np.repeat(bx[None], len(H), axis=0), O, states[best, SIT])
+        score2, _, _ = self._score(evidence, states2, H, W, full=True)
+        b = int(np.argmax(score2))
+        if not np.isfinite(score2[b]):
+            return None
         d = np.array([-cfg.fine_spacing, 0.0, cfg.fine_spacing]) * 0.5
         sx, sy = np.meshgrid(d, d)
         pos = bx + np.stack([sx.ravel(), sy.ravel()], axis=1)
-        H, W, O, P = np.meshgrid(np.asarray(cfg.heights), np.asarray(cfg.widths),
-                                 np.asarray(cfg.orientations), np.arange(len(pos)),
-                                 indexing='ij')
-        H, W, O, P = H.ravel(), W.ravel(), O.ravel(), P.ravel()
-        states2 = _states(pos[P], O, states[best, SIT])
+        H, W = np.full(len(pos), H[b]), np.full(len(pos), W[b])
+        states2 = _states(pos, O[b], states[best, SIT])
         score2, _, covs = self._score(evidence, states2, H, W, full=True)
         b = int(np.argmax(score2))
         if not np.isfinite(score2[b]):
