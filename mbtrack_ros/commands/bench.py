@@ -309,6 +309,8 @@ def run(args: argparse.Namespace) -> int:
     tracemalloc.stop()
     rss_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     summary = _report(seen, results, frames)
+    from mbtrack_ros.commands.bench_detection import run_detection  # issue 4
+    summary.update(run_detection(args))
     load_after = _loadavg()
     print(f'load average (1 min) before / after the run: {load_before:.2f} / {load_after:.2f} '
           f'on {os.cpu_count()} cores')
