@@ -450,3 +450,114 @@ def test_tracker_detects_tracks_and_releases_a_painted_person():
     assert ended is not None and 0 < (ended - leave) / FPS <= 1.5
     assert max(existence) > 0.9
     assert tracker.track_ids == []
+
+
+def test_detector_refines_a_fixed_budget_with_pending_candidates_first(monkeypatch):
+    """Refinement cost is bounded per frame; candidates being confirmed are not starved."""
+    rng = np.random.default_rng(5)
+    calib = make_room()
+    bgs = backgrounds(calib)
+    crowd = [person(1.5, 1.5), person(4.5, 1.5, colours=(SKIN, (180, 40, 40), (60, 60, 140))),
+             person(1.5, 3.6, colours=(SKIN, (40, 150, 60), TROUSERS)),
+             person(4.4, 3.5, colours=(SKIN, (200, 200, 60), (90, 50, 20)))]
+    frames = [paint(calib, bgs, [], rng) for _ in range(5)]
+    frames += [paint(calib, bgs, crowd, rng) for _ in range(4)]
+    calls = []
+    original = Detector._refine
+
+    def counting(self, *args, **kwargs):
+        calls[-1] += 1
+        return original(self, *args, **kwargs)
+
+    original_detect = Detector.detect
+
+    def detect(self, *args, **kwargs):
+        calls.append(0)
+        return original_detect(self, *args, **kwargs)
+
+    monkeypatch.setattr(Detector, '_refine', counting)
+    monkeypatch.setattr(Detector, 'detect', detect)
+    found = run_detector(calib, frames, config=DetectorConfig(max_candidates=2))
+    assert calls and max(calls) == 2                   # 4 people, budget 2 per frame
+    first = [d for k, d in found if k == 5 + 2]        # confirmed on the 3rd frame
+    assert len(first) == 2                             # the same two kept being refined
+    for d in first:
+        assert min(np.linalg.norm(d.xy - p[0][:2]) for p in crowd) < 0.2
+
+
+def _track_painted(tracker, calib, bgs, rng, frames, people_at):
+    """Step the tracker over painted frames; returns the per-frame results."""
+    out = []
+    for k in range(frames):
+        stamp = int(round(k * 1e9 / FPS))
+        out.append(tracker.step(stamp, paint(calib, bgs, people_at(k), rng)))
+    return out
+
+
+def test_tracker_moves_a_drifted_track_back_instead_of_a_second_birth():
+    """A track 0.8 m off its person: the person is re-detected beside it; the track's own
+    appearance model explains the detection better than its place, so the track is moved
+    (same id) and no second track is born on the person."""
+    from mbtrack_ros.core.tracker import Tracker, TrackerConfig
+
+    rng = np.random.default_rng(3)
+    calib = make_room()
+    bgs = backgrounds(calib)
+    tracker = Tracker(calib, TrackerConfig(detection=True, particles=50, seed=2),
+                      rng=np.random.default_rng(2))
+    tracker.detection.bootstrap({n: [bgs[n]] for n in calib.cameras})
+    walker = lambda k: [person(2.0 + 0.03 * k, 2.6, theta=0.0)]   # noqa: E731
+    res = _track_painted(tracker, calib, bgs, rng, 8, walker)
+    assert tracker.track_ids == [1]
+    # the track drifts: its particles are put 0.8 m beside the person
+    state = res[-1].tracks[0].mean.copy()
+    state[1] += 0.8
+    tracker.relocate_track(1, state)
+    ids, last = set(), None
+    for k in range(8, 30):
+        r = tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, walker(k), rng))
+        ids |= {t.track_id for t in r.tracks}
+        last = (k, r)
+    assert ids == {1} and tracker.track_ids == [1]        # never a second track
+    k, r = last
+    assert np.hypot(r.tracks[0].mean[0] - (2.0 + 0.03 * k), r.tracks[0].mean[1] - 2.6) < 0.25
+
+
+def test_tracker_births_a_different_person_beside_a_tracked_one():
+    """A differently dressed person who appears 0.7 m beside a tracked person is born as a
+    new track; the tracked person keeps id 1 and its place."""
+    from mbtrack_ros.core.tracker import Tracker, TrackerConfig
+
+    rng = np.random.default_rng(4)
+    calib = make_room()
+    bgs = backgrounds(calib)
+    tracker = Tracker(calib, TrackerConfig(detection=True, particles=50, seed=3),
+                      rng=np.random.default_rng(3))
+    tracker.detection.bootstrap({n: [bgs[n]] for n in calib.cameras})
+    a = person(2.5, 2.5, theta=0.0)
+    b = lambda k: person(2.5 + 0.02 * (k - 8), 3.2, theta=0.0,        # noqa: E731
+                         colours=(SKIN, (200, 40, 40), (200, 200, 200)))
+    res = _track_painted(tracker, calib, bgs, rng, 20,
+                         lambda k: [a] if k < 8 else [a, b(k)])
+    assert tracker.track_ids == [1, 2]
+    final = {t.track_id: t.mean[:2] for t in res[-1].tracks}
+    assert np.linalg.norm(final[1] - [2.5, 2.5]) < 0.25
+    assert np.linalg.norm(final[2] - b(19)[0][:2]) < 0.25
+
+
+def test_bench_detection_reports_times_and_tracks_five_people_without_births():
+    """`mbtrack bench` detection part on a tiny scene: every scene is timed, the five
+    tracked people stay five tracks (no birth beside them), people entering are found."""
+    from mbtrack_ros.commands.bench_detection import bench_detection, print_detection
+
+    r = bench_detection(frames=2, size=(160, 120))
+    summary = print_detection(r)
+    for key in ('entering_5cams', 'entering_4cams', 'tracked_5cams', 'tracked_4cams',
+                'empty_5cams'):
+        assert r[key]['frames'] == 2 and r[key]['detect']['median_ms'] > 0
+    assert r['tracked_4cams']['cameras'] == 4 and r['tracked_5cams']['cameras'] == 5
+    for tag in ('4cams', '5cams'):
+        assert r[f'tracked_{tag}']['tracks_mean'] == 5.0
+        assert r[f'tracked_{tag}']['births'] == 0
+        assert r[f'entering_{tag}']['detections'] >= 2      # confirmed on the 3rd frame
+    assert summary['pipeline_4cams_fps'] > 0

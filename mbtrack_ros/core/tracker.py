@@ -235,6 +235,22 @@ class Tracker:
         self._heights.pop(track_id, None)
         self._models.pop(track_id, None)
 
+    def relocate_track(self, track_id: int, state: np.ndarray) -> None:
+        """Restart the particles of a live track at ``state`` (6,) of the current frame,
+        keeping its id and model (a track that drifted off its person, re-found by the
+        detection)."""
+        s = np.asarray(state, dtype=np.float64).reshape(-1)
+        if s.shape != (STATE_DIM,) or not np.all(np.isfinite(s)):
+            raise TrackerError(f'a track state must be {STATE_DIM} finite numbers')
+        if track_id not in self._models:
+            raise TrackerError(f'no track {track_id}')
+        model = self._models[track_id]
+        try:
+            self.filter.remove(track_id)
+            self.filter.add(track_id, model, s, self.rng)
+        except FilterError as err:
+            raise TrackerError(str(err)) from err
+
     def reset(self) -> None:
         """Forget all tracks and the time base (ids keep increasing)."""
         self.filter.reset()
@@ -285,7 +301,10 @@ class Tracker:
             tracks = [t for t in tracks
                       if t.track_id not in ended and self.detection.reported(t.track_id)]
             for birth in births:
-                self.add_track(birth.model, birth.state, stamp_ns)
+                if birth.track_id is not None and birth.track_id in self._models:
+                    self.relocate_track(birth.track_id, birth.state)
+                else:
+                    self.add_track(birth.model, birth.state, stamp_ns)
             timings.update(self.detection.timings)
         timings['total'] = time.perf_counter() - t0
         return FrameResult(stamp_ns=stamp_ns, tracks=tracks, ended=ended, timings=timings)
