@@ -589,18 +589,37 @@ def hjs_camera_ws(bins, row, x0, x1, part, offsets, area, bbox, order, target, p
         # pass, 000 Eq. 39: intensity pi_p * rfc_p / area(x_p) into b_bg^h on the silhouette
         # (m_fg^{k_p} is never read for this particle's own reduced maps, so the order of
         # the two updates does not matter).
+        # Only farther particles of the needed targets read these pixels, and they lie in
+        # those targets' boxes suf[oi + 1]: writes outside the union of the boxes are never
+        # read and are skipped.
+        ux0 = 1 << 30
+        uy0 = 1 << 30
+        ux1 = -1
+        uy1 = -1
         for i in range(nneed):
             vals[i] = pi_p * out_l[i] / ap
+            h = need[i]
+            ux0 = min(ux0, suf[oi + 1, h, 0])
+            uy0 = min(uy0, suf[oi + 1, h, 1])
+            ux1 = max(ux1, suf[oi + 1, h, 2])
+            uy1 = max(uy1, suf[oi + 1, h, 3])
+        ux0 = max(ux0, bx0)
+        uy0 = max(uy0, by0)
+        ux1 = min(ux1, bx1)
+        uy1 = min(uy1, by1)
         for s in range(s0, s1):
             r = row[s]
-            for c in range(x0[s], x1[s]):
+            if r < uy0 or r >= uy1:
+                continue
+            for c in range(max(x0[s], ux0), min(x1[s], ux1)):
                 mfg[r, c, k] += pi_p
                 for i in range(nneed):
                     bbg[r, c, need[i]] += vals[i]
-        wx0 = min(wx0, bx0)
-        wy0 = min(wy0, by0)
-        wx1 = max(wx1, bx1)
-        wy1 = max(wy1, by1)
+        if ux1 > ux0 and uy1 > uy0:
+            wx0 = min(wx0, ux0)
+            wy0 = min(wy0, uy0)
+            wx1 = max(wx1, ux1)
+            wy1 = max(wy1, uy1)
     if wx1 > wx0 and wy1 > wy0:                    # leave the workspaces zero
         mfg[wy0:wy1, wx0:wx1, :] = 0.0
         bbg[wy0:wy1, wx0:wx1, :] = 0.0
