@@ -387,6 +387,25 @@ def occlusion_terms(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, nch, area, d_
 
 # -- HJS update (000 Algorithm 1, per camera) -------------------------------------------------
 @njit(cache=True, nogil=True)
+def _fill_outside(row, x0, x1, s0, s1, vx0, vy0, vx1, vy1, wmap, nch):
+    """wmap[..., :nch] = 1 on the pixels of spans [s0, s1) outside the box v (exclusive)."""
+    for s in range(s0, s1):
+        r = row[s]
+        if r < vy0 or r >= vy1:
+            a = x1[s]
+            b = x1[s]
+        else:
+            a = min(max(x0[s], vx0), x1[s])
+            b = max(min(x1[s], vx1), a)
+        for c in range(x0[s], a):
+            for ch in range(nch):
+                wmap[r, c, ch] = 1.0
+        for c in range(b, x1[s]):
+            for ch in range(nch):
+                wmap[r, c, ch] = 1.0
+
+
+@njit(cache=True, nogil=True)
 def hjs_camera_ws(bins, row, x0, x1, part, offsets, area, bbox, order, target, prior,
                   key, va, vb, wa, n_targets, d_occ, separable, record, pix_offsets,
                   mfg, bbg, wmap):
@@ -506,12 +525,27 @@ def hjs_camera_ws(bins, row, x0, x1, part, offsets, area, bbox, order, target, p
                 pre[k, 3] = max(pre[k, 3], by1)
         # 000 Eq. 34: occlusion map w* = Delta(x_p) prod_{h != k} b_fg^h, and in the same
         # pass the background term of Eq. 40 (the sum of b_bg^k over the silhouette)
+        # m_fg^h and b_bg^k can only be non-zero inside the boxes pre[h] of the targets h
+        # in rel (their nearer particles with a prior wrote there): w* is computed inside
+        # the union v of these boxes and is 1 elsewhere.
         occluded = False
         acc = 0.0
+        vx0 = 1 << 30
+        vy0 = 1 << 30
+        vx1 = -1
+        vy1 = -1
         if nrel > 0:
+            for j in range(nrel):
+                h = rel[j]
+                vx0 = min(vx0, pre[h, 0])
+                vy0 = min(vy0, pre[h, 1])
+                vx1 = max(vx1, pre[h, 2])
+                vy1 = max(vy1, pre[h, 3])
             for s in range(s0, s1):
                 r = row[s]
-                for c in range(x0[s], x1[s]):
+                if r < vy0 or r >= vy1:
+                    continue
+                for c in range(max(x0[s], vx0), min(x1[s], vx1)):
                     w = 1.0
                     for j in range(nrel):
                         w *= max(1.0 - mfg[r, c, rel[j]], 0.0)   # >= 0 despite rounding
@@ -519,6 +553,8 @@ def hjs_camera_ws(bins, row, x0, x1, part, offsets, area, bbox, order, target, p
                     acc += bbg[r, c, k]
                     if w != 1.0:
                         occluded = True
+            if occluded:
+                _fill_outside(row, x0, x1, s0, s1, vx0, vy0, vx1, vy1, wmap, 1)
         # 000 Eq. 33 with Eq. 26: foreground term on the w*-weighted part histograms
         if occluded:
             occlusion_terms(bins, row, x0, x1, part, s0, s1, wmap, zero, zero, np.int64(1),
@@ -563,7 +599,9 @@ def hjs_camera_ws(bins, row, x0, x1, part, offsets, area, bbox, order, target, p
             # reduced maps w^_h = prod_{m != h, k_p} b_fg^m for all needed h in one pass
             for s in range(s0, s1):
                 r = row[s]
-                for c in range(x0[s], x1[s]):
+                if r < vy0 or r >= vy1:
+                    continue
+                for c in range(max(x0[s], vx0), min(x1[s], vx1)):
                     for j in range(nrel):
                         vals[j] = max(1.0 - mfg[r, c, rel[j]], 0.0)
                     for i in range(nneed):
@@ -572,6 +610,7 @@ def hjs_camera_ws(bins, row, x0, x1, part, offsets, area, bbox, order, target, p
                             if j != skip[i]:
                                 w *= vals[j]
                         wmap[r, c, i] = w
+            _fill_outside(row, x0, x1, s0, s1, vx0, vy0, vx1, vy1, wmap, nneed)
             occlusion_terms(bins, row, x0, x1, part, s0, s1, wmap, zero, zero,
                             np.int64(nneed), ap, d_occ, key, k, va[p], vb[p], wa[p], hist,
                             touched, mark, mt, d2, out_l, out_v)
