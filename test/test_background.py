@@ -172,3 +172,67 @@ def test_bank_and_errors():
         BackgroundConfig(alpha=1.5)
     with pytest.raises(DetectionError, match='not bootstrapped'):
         BackgroundModel().foreground(bg)
+
+
+def _person_scene(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Empty room, the same room with a person, and the person's (H, W) bool mask."""
+    bg = scene(rng)
+    body = np.zeros((H, W), bool)
+    body[30:100, 60:85] = True
+    person = bg.copy()
+    person[body] = (200, 30, 40)
+    return bg, person, body
+
+
+def test_unknown_pixels_are_foreground_until_the_tracked_person_leaves():
+    """Never-empty room: a person in every bootstrap frame is burnt into the median; his
+    pixels marked not yet known are foreground while he stands there (tracked) and are
+    learnt as soon as he and his track have left: no ghost."""
+    rng = np.random.default_rng(8)
+    bg, person, body = _person_scene(rng)
+    region = np.zeros((H, W), bool)
+    region[20:110, 45:100] = True
+    cfg = BackgroundConfig(bootstrap_frames=3, bootstrap_stride=1, unknown_frames=4,
+                           people=None)
+    marked, plain = BackgroundModel(cfg), BackgroundModel(cfg)
+    for _ in range(3):
+        frame = noisy(person, rng)
+        marked.apply(frame)
+        plain.apply(frame)
+    marked.set_unknown(region, foreground=body)
+    for _ in range(8):                     # he stands still, a track covers him
+        frame = noisy(person, rng)
+        fg = marked.apply(frame, exclude=body)
+        assert fg[body].mean() > 0.95                     # a possible person
+        assert not fg[region & ~body].any()               # void, not foreground
+        assert plain.apply(frame, exclude=body)[body].mean() < 0.01  # burnt in: invisible
+    assert marked.unknown[body].all()                     # not learnt under the track
+    assert marked.presence()[body].all()
+    for _ in range(2):                     # he has left, and his track with him
+        frame = noisy(bg, rng)
+        marked.apply(frame)
+        ghost = plain.apply(frame)
+    assert ghost[body].mean() > 0.9                       # without marking: a ghost
+    fg = marked.apply(noisy(bg, rng))
+    assert fg[region].mean() < 0.01 and not marked.unknown.any()
+
+
+def test_unknown_pixels_nobody_covered_are_learnt_after_the_wait():
+    rng = np.random.default_rng(9)
+    bg, person, body = _person_scene(rng)
+    cfg = BackgroundConfig(bootstrap_frames=2, bootstrap_stride=1, unknown_frames=5,
+                           people=None)
+    model = BackgroundModel(cfg)
+    for _ in range(2):
+        model.apply(noisy(bg, rng))
+    core = np.zeros((H, W), bool)
+    core[30:100, 70:75] = True
+    model.set_unknown(body, core=core)     # e.g. a false cue: empty floor, no track
+    assert np.array_equal(model.presence(), core)         # no motion: the core only
+    for k in range(5):
+        fg = model.apply(noisy(bg, rng))
+        assert fg[body].mean() > 0.97, k                    # possible foreground meanwhile
+    fg = model.apply(noisy(bg, rng))                       # learnt with the 5th frame
+    assert fg.mean() < 0.002 and not model.unknown.any()
+    with pytest.raises(DetectionError, match='unknown-pixel mask'):
+        model.set_unknown(np.zeros((5, 5), bool))

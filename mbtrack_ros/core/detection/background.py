@@ -8,6 +8,18 @@ pixels covered by the current tracks (label images rendered from the track estim
 passed in as masks) are left untouched, so that a person standing still while tracked does
 not fade into the background.
 
+**A room that is never empty.** The first frames of a recording may show people; their
+median then contains them, a person who barely moves is never foreground and a "ghost" is
+left where he stood. Pixels that likely hold a person at the online bootstrap (the
+multi-view cue of :mod:`.people`, found without a background) are therefore *not yet
+known*: they are not learnt until seen empty, i.e. outside every track after a track has
+covered them (the person there was found and has left) or, when no track ever covered
+them, after ``unknown_frames`` frames (nobody was found there). Meanwhile the foreground
+test is void there (the model may show a person): the cue's person-sized blob counts as
+foreground (a possible person), the rest of the region as neither; and the blob's core
+replaces motion as the proof, required of new people, that a detection is no ghost
+(:meth:`BackgroundModel.presence`).
+
 Foreground is a Y-Cb-Cr threshold test with separate luminance and chroma thresholds. The
 luminance and chroma offsets of the background are first rescaled by a global gain
 (median ratio I/B of the luminance), which makes the test robust to slow global
@@ -21,13 +33,15 @@ Images are ``(H, W, 3) uint8`` RGB; masks are ``(H, W) bool``.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
 from numba import njit
 
+from mbtrack_ros.core.camera import RoomCalibration
 from mbtrack_ros.core.detection import DetectionError
+from mbtrack_ros.core.detection.people import PeopleCue, PeopleCueConfig
 
 __all__ = ['BackgroundBank', 'BackgroundConfig', 'BackgroundModel', 'clean_mask']
 
@@ -39,8 +53,7 @@ class BackgroundConfig:
     Attributes:
         alpha: temporal filter memory of 003 §4.2 (``B = alpha B + (1 - alpha) I``).
         bootstrap_frames: frames whose median initialises the model when none is given.
-        bootstrap_stride: take every n-th frame for that median (people walking through the
-            first seconds of a recording then drop out of the median).
+        bootstrap_stride: take every n-th frame for that median.
         luma_threshold: |Y - g B_Y| above which a pixel is foreground (0..255 scale).
         chroma_threshold: Euclidean Cb-Cr distance above which a pixel is foreground.
         shadow_ratio: (lo, hi) luminance ratio I_Y / (g B_Y) of a shadow (chroma unchanged);
@@ -56,11 +69,19 @@ class BackgroundConfig:
             outside every track for ``static_frames`` frames is updated with the faster
             ``static_alpha`` (absorbs "ghosts" left by people in the bootstrap frames and
             moved objects; 0 disables).
+        unknown_frames: frames a not-yet-known pixel that no track has covered waits before
+            it is learnt (time for the detector to find the person there).
+        settle_frames: frames a not-yet-known pixel must keep a steady value other than its
+            bootstrap one (no motion) to be learnt even under a track (the person who
+            stood there has left, whatever a track does).
+        people: the person cue that marks not-yet-known pixels at the online bootstrap
+            (:class:`~.people.PeopleCue`, used by :class:`BackgroundBank` when it has the
+            calibration); ``None`` learns every pixel of the bootstrap frames.
     """
 
     alpha: float = 0.97
-    bootstrap_frames: int = 10
-    bootstrap_stride: int = 4
+    bootstrap_frames: int = 6
+    bootstrap_stride: int = 1
     luma_threshold: float = 28.0
     chroma_threshold: float = 10.0
     shadow_ratio: tuple[float, float] | None = (0.55, 0.92)
@@ -73,6 +94,9 @@ class BackgroundConfig:
     min_blob_area: int = 0
     static_frames: int = 45
     static_alpha: float = 0.9
+    unknown_frames: int = 15
+    settle_frames: int = 20
+    people: PeopleCueConfig | None = field(default_factory=PeopleCueConfig)
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.alpha < 1.0:
@@ -85,6 +109,12 @@ class BackgroundConfig:
             raise DetectionError('background thresholds must be positive')
         if not 0.0 <= self.motion_decay < 1.0:
             raise DetectionError('motion_decay must be in [0, 1)')
+        if self.unknown_frames < 1 or self.settle_frames < 1:
+            raise DetectionError('unknown_frames and settle_frames must be >= 1')
+
+
+# not-yet-known pixel flags: not learnt; counts as foreground; has been covered by a track
+_UNKNOWN, _POSSIBLE, _COVERED, _CORE = 1, 2, 4, 8
 
 
 def _kernel(size: int) -> np.ndarray | None:
@@ -160,11 +190,37 @@ def _motion_kernel(y: np.ndarray, prev: np.ndarray, motion: np.ndarray, decay: f
 @njit(cache=True)
 def _blend_kernel(bg: np.ndarray, ycc: np.ndarray, frozen: np.ndarray, fg: np.ndarray,
                   static: np.ndarray, use_fg: bool, alpha: float, static_alpha: float,
-                  static_frames: int) -> None:  # pragma: no cover - compiled
-    """003 §4.2 temporal filter on the unfrozen pixels, in place."""
+                  static_frames: int, unknown: np.ndarray, occupied: np.ndarray,
+                  expired: bool, raw: np.ndarray, moving: np.ndarray, changed: np.ndarray,
+                  settle_frames: int) -> None:  # pragma: no cover - compiled
+    """003 §4.2 temporal filter on the unfrozen pixels, in place.
+
+    A not-yet-known pixel is learnt (set to the image) when it has shown a steady value
+    other than its bootstrap one (``raw`` foreground without ``moving``) for
+    ``settle_frames`` frames (whoever stood there has left it), or when it is outside the
+    tracks (``occupied``) and either was covered by a track before or the wait has
+    ``expired``."""
     h, w = frozen.shape
     for i in range(h):
         for j in range(w):
+            if unknown[i, j]:
+                static[i, j] = 0
+                if raw[i, j] and not moving[i, j]:
+                    changed[i, j] += 1
+                else:
+                    changed[i, j] = 0
+                if changed[i, j] >= settle_frames:
+                    unknown[i, j] = 0
+                    changed[i, j] = 0
+                    for c in range(3):
+                        bg[i, j, c] = ycc[i, j, c]
+                elif occupied[i, j]:
+                    unknown[i, j] |= 4           # _COVERED
+                elif (unknown[i, j] & 4) or expired:
+                    unknown[i, j] = 0
+                    for c in range(3):
+                        bg[i, j, c] = ycc[i, j, c]
+                continue
             if frozen[i, j]:
                 static[i, j] = 0
                 continue
@@ -214,6 +270,10 @@ class BackgroundModel:
         self._prev_y: np.ndarray | None = None
         self._motion: np.ndarray | None = None       # accumulated motion, float32
         self._static: np.ndarray | None = None       # frames of motionless foreground
+        self._unknown: np.ndarray | None = None      # (H, W) uint8, 1 = not yet known
+        self._unknown_age = 0                        # frames since pixels were marked
+        self._changed: np.ndarray | None = None      # frames an unknown pixel kept a new value
+        self._raw: np.ndarray | None = None          # the last foreground test before unknowns
         self._seen = 0                               # frames offered for bootstrapping
         self.gain: float = 1.0                       # luminance gain of the last frame
 
@@ -241,6 +301,66 @@ class BackgroundModel:
             return np.zeros(self.shape or (0, 0), bool)
         return self._motion >= self.config.motion_persistent
 
+    @property
+    def unknown(self) -> np.ndarray:
+        """(H, W) bool pixels not yet known (never seen empty, not learnt)."""
+        if self._unknown is None:
+            return np.zeros(self.shape or (0, 0), bool)
+        return (self._unknown & _UNKNOWN) > 0
+
+    @property
+    def possible_foreground(self) -> np.ndarray:
+        """(H, W) bool not-yet-known pixels that count as foreground (a possible person)."""
+        if self._unknown is None:
+            return np.zeros(self.shape or (0, 0), bool)
+        return (self._unknown & _POSSIBLE) > 0
+
+    def set_unknown(self, mask: np.ndarray, *, foreground: np.ndarray | None = None,
+                    core: np.ndarray | None = None) -> None:
+        """Mark pixels (H, W) bool as not yet known (in addition to those already marked).
+
+        They are not learnt until seen empty: outside every track once a track has covered
+        them (the person there was found and has left), or after ``unknown_frames`` frames
+        when no track ever covered them (nobody was found there). Meanwhile the pixels of
+        ``foreground`` (default: all of ``mask``) count as foreground, the others as
+        neither foreground nor background (the model there may show a person); ``core``
+        (default: ``foreground``) is where a person's presence is certain enough to
+        replace motion (see :meth:`presence`).
+        """
+        if self._bg is None:
+            raise DetectionError(f'background model {self.name!r} is not bootstrapped')
+        mask = np.asarray(mask, dtype=bool)
+        fg = mask if foreground is None else np.asarray(foreground, dtype=bool)
+        core = fg if core is None else np.asarray(core, dtype=bool) & fg
+        for m, what in ((mask, 'unknown-pixel'), (fg, 'possible-foreground'),
+                        (core, 'core')):
+            if m.shape != self._bg.shape[:2]:
+                raise DetectionError(
+                    f'camera {self.name!r}: {what} mask shape {m.shape} differs from '
+                    f'the background {self._bg.shape[:2]}')
+        self._ensure_unknown()
+        self._unknown[mask | fg] = _UNKNOWN
+        self._unknown[fg] |= _POSSIBLE
+        self._unknown[core] |= _CORE
+        self._changed[mask | fg] = 0
+        self._unknown_age = 0
+
+    def _ensure_unknown(self) -> None:
+        shape = self._bg.shape[:2]
+        if self._unknown is None or self._unknown.shape != shape:
+            self._unknown = np.zeros(shape, np.uint8)
+            self._changed = np.zeros(shape, np.int16)
+
+    def presence(self, level: float = 0.3) -> np.ndarray | None:
+        """(H, W) bool pixels whose foreground cannot be a ghost (a background change left by
+        someone who stood there when the model was learnt): recent motion (see
+        :meth:`recent_motion`) or possible foreground never learnt; None before the model
+        exists. The detector requires it of new people."""
+        moving = self.recent_motion(level)
+        if moving is None or self._unknown is None:
+            return moving
+        return moving | ((self._unknown & _CORE) > 0)
+
     def recent_motion(self, level: float = 0.3) -> np.ndarray | None:
         """(H, W) bool pixels that moved in the last few frames (accumulated motion above
         ``level``), or None before the model exists."""
@@ -260,6 +380,7 @@ class BackgroundModel:
         self._pending = []
         self._motion = np.zeros(self._bg.shape[:2], np.float32)
         self._prev_y = stack[-1, ..., 0]
+        self._unknown = None
 
     # -- per frame ------------------------------------------------------------------------
     def foreground(self, image: np.ndarray) -> np.ndarray:
@@ -278,6 +399,12 @@ class BackgroundModel:
         lo, hi = cfg.shadow_ratio if cfg.shadow_ratio is not None else (1.0, 0.0)
         fg = _foreground_kernel(ycc, bg, self.gain, float(cfg.luma_threshold),
                                 float(cfg.chroma_threshold), float(lo), float(hi))
+        if self._unknown is not None and self._unknown.any():
+            # not yet known: the model may show a person there, so the test is void; the
+            # possible-person pixels are foreground, the others are not
+            self._raw = fg.copy()
+            fg[(self._unknown & _UNKNOWN) > 0] = 0
+            fg[(self._unknown & _POSSIBLE) > 0] = 1
         h, w = fg.shape
         min_area = int(round(cfg.min_blob_area * (h * w) / (320.0 * 240.0)))
         return clean_mask(fg, open_size=cfg.open_size, close_size=cfg.close_size,
@@ -314,6 +441,7 @@ class BackgroundModel:
         # Persistent motion: decaying accumulation of thresholded frame differences.
         frozen = _motion_kernel(y, self._prev_y, self._motion, float(cfg.motion_decay),
                                 float(cfg.motion_threshold), float(cfg.motion_persistent))
+        moving = frozen.copy()
         self._prev_y = y
         if exclude is not None:
             exclude = np.asarray(exclude, dtype=bool)
@@ -325,13 +453,25 @@ class BackgroundModel:
         k = _kernel(2 * cfg.mask_dilation + 1)
         if k is not None and frozen.any():
             frozen = cv2.dilate(frozen, k)
+        # a not-yet-known pixel is seen empty when no track covers it (motion next to a
+        # person who walks away must not keep his bootstrap place unknown: a ghost)
+        occupied = np.zeros(y.shape, np.uint8) if exclude is None else exclude.view(np.uint8)
+        if k is not None and occupied.any():
+            occupied = cv2.dilate(occupied, k)
         if self._static is None or self._static.shape != y.shape:
             self._static = np.zeros(y.shape, np.int16)
         use_fg = fg is not None
         fgu = fg.view(np.uint8) if use_fg else frozen
+        self._ensure_unknown()
         # 003 §4.2: B_t = alpha B_{t-1} + (1 - alpha) I_t on the stable pixels only.
+        self._unknown_age += 1
+        raw = self._raw if self._raw is not None and self._raw.shape == y.shape \
+            else np.zeros(y.shape, np.uint8)
         _blend_kernel(self._bg, ycc, frozen, fgu, self._static, use_fg, float(cfg.alpha),
-                      float(cfg.static_alpha), int(cfg.static_frames))
+                      float(cfg.static_alpha), int(cfg.static_frames), self._unknown,
+                      occupied, self._unknown_age >= cfg.unknown_frames, raw, moving,
+                      self._changed, int(cfg.settle_frames))
+        self._raw = None
 
     def apply(self, image: np.ndarray, *, exclude: np.ndarray | None = None
               ) -> np.ndarray | None:
@@ -347,11 +487,24 @@ class BackgroundModel:
 
 
 class BackgroundBank:
-    """One :class:`BackgroundModel` per camera, created on first sight of a camera."""
+    """One :class:`BackgroundModel` per camera, created on first sight of a camera.
 
-    def __init__(self, config: BackgroundConfig | None = None) -> None:
+    Args:
+        config: the models' parameters.
+        calibration: the room; with it and ``config.people`` the online bootstrap marks the
+            pixels of person-like places of the bootstrap frames as not yet known
+            (:class:`~.people.PeopleCue`).
+    """
+
+    def __init__(self, config: BackgroundConfig | None = None, *,
+                 calibration: RoomCalibration | None = None) -> None:
         self.config = config or BackgroundConfig()
         self.models: dict[str, BackgroundModel] = {}
+        self.cue: PeopleCue | None = None
+        if calibration is not None and self.config.people is not None:
+            self.cue = PeopleCue(calibration, self.config.people)
+        self._frames: list[dict[str, np.ndarray]] = []   # bootstrap frame sets for the cue
+        self._seen = 0
 
     def model(self, name: str) -> BackgroundModel:
         if name not in self.models:
@@ -368,9 +521,29 @@ class BackgroundBank:
               ) -> dict[str, np.ndarray]:
         """Foreground masks of all cameras that are bootstrapped (others are omitted)."""
         out: dict[str, np.ndarray] = {}
+        started: list[str] = []
         for name, image in images.items():
-            fg = self.model(name).apply(image, exclude=None if exclude is None
-                                        else exclude.get(name))
+            model = self.model(name)
+            was_ready = model.ready
+            fg = model.apply(image, exclude=None if exclude is None else exclude.get(name))
             if fg is not None:
                 out[name] = fg
+            elif model.ready and not was_ready:
+                started.append(name)
+        if self.cue is not None and (started or not all(m.ready for m in
+                                                        self.models.values())):
+            # keep the frame sets the models' bootstrap medians are made of
+            cfg = self.config
+            if self._seen % cfg.bootstrap_stride == 0:
+                self._frames.append(dict(images))
+            self._seen += 1
+            self._frames = self._frames[-cfg.bootstrap_frames:]
+            if started:
+                regions = self.cue.regions(self._frames)
+                for name in started:
+                    if name in regions:
+                        region, body, core = regions[name]
+                        self.models[name].set_unknown(region, foreground=body, core=core)
+            if all(m.ready for m in self.models.values()):
+                self._frames = []
         return out

@@ -12,6 +12,8 @@ import cv2
 import yaml
 
 FIRST, COUNT = 45, 10          # frames 45..54 of the 100-frame clip (frame 50 inside)
+START_COUNT = 18               # videos_start/: frames 0..17 (automatic detection from the start)
+START_QUALITY = 70             # MJPG quality of videos_start/ (keeps it under 2 MB)
 SIZE = (272, 480)              # 1/4 of the calibrated 1088 x 1920
 QUALITY = 80                   # MJPG quality
 
@@ -38,20 +40,21 @@ def main(src: Path) -> None:
                'projection_matrix': {'rows': 3, 'cols': 4,
                                      'data': k[:3] + [0.0] + k[3:6] + [0.0] + k[6:] + [0.0]}}
         (here / 'camera_info' / f'{cam}.yaml').write_text(yaml.safe_dump(doc, sort_keys=False))
-    (here / 'videos').mkdir(exist_ok=True)
-    for video in sorted((src / 'single_person' / 'videos').glob('cam*.mp4')):
-        cap = cv2.VideoCapture(str(video))
-        cap.set(cv2.CAP_PROP_POS_FRAMES, FIRST)
-        out = cv2.VideoWriter(str(here / 'videos' / f'{video.stem}.avi'),
-                              cv2.VideoWriter_fourcc(*'MJPG'), 60.0, SIZE)
-        out.set(cv2.VIDEOWRITER_PROP_QUALITY, QUALITY)
-        for _ in range(COUNT):
-            ok, frame = cap.read()
-            assert ok, video
-            out.write(cv2.resize(frame, SIZE, interpolation=cv2.INTER_AREA))
-        out.release()
-        cap.release()
-
+    for folder, first, count, quality in (('videos', FIRST, COUNT, QUALITY),
+                                          ('videos_start', 0, START_COUNT, START_QUALITY)):
+        (here / folder).mkdir(exist_ok=True)
+        for video in sorted((src / 'single_person' / 'videos').glob('cam*.mp4')):
+            cap = cv2.VideoCapture(str(video))
+            cap.set(cv2.CAP_PROP_POS_FRAMES, first)
+            out = cv2.VideoWriter(str(here / folder / f'{video.stem}.avi'),
+                                  cv2.VideoWriter_fourcc(*'MJPG'), 60.0, SIZE)
+            out.set(cv2.VIDEOWRITER_PROP_QUALITY, quality)
+            for _ in range(count):
+                ok, frame = cap.read()
+                assert ok, video
+                out.write(cv2.resize(frame, SIZE, interpolation=cv2.INTER_AREA))
+            out.release()
+            cap.release()
 
 if __name__ == '__main__':
     main(Path(sys.argv[1]))

@@ -1,0 +1,302 @@
+"""Background-independent multi-view person cue for bootstrapping a never-empty room.
+
+A background model learnt from the first frames of a recording contains whoever stands in
+the room then; the detector (003 §4.1) needs foreground, so a person who is there from the
+first frame and barely moves is never found, and a ghost appears where he stood once he
+leaves. The cure is to *not learn* the pixels that likely hold a person: this module finds
+them without a background, and :class:`~.background.BackgroundModel` treats them as "not
+yet known" (possible foreground) until they are seen empty.
+
+The cue scores a floor grid of standing-person hypotheses (one size, a few orientations)
+over the bootstrap frames, in every side camera, with evidence that does not depend on a
+background:
+
+* **motion**: the fraction of the silhouette covered by pixels that changed between
+  consecutive bootstrap frames (a person present from the start moves limbs, head or
+  balance even on the spot; furniture does not);
+* the detector's **contour likelihood** (003 Eq. 5) against the Canny edges of the *whole*
+  last frame, plus its upper-body **colour symmetry** (003 §4.2, third feature). A
+  cluttered room (furniture, a treadmill, posters) has person-like edges everywhere, so a
+  camera's response is taken relative to that camera's clutter: the robust z-score
+  ``(r - median) / (1.4826 MAD)`` over all hypotheses it sees (most floor points hold
+  nobody).
+
+A place is person-like if ``min_views`` cameras see it, the motion fraction reaches
+``min_motion`` in *every* camera that sees it and the mean contour/symmetry z-score reaches
+``min_score`` (multi-view consistency: motion or clutter edges in one view do not line up
+with evidence in the others). Places are taken greedily, most moving first, and the motion
+inside a taken place's region is explained away (it no longer counts for the others), so
+the places on a person's lines of sight are not taken too.
+
+Per place and camera three nested masks are returned (:meth:`PeopleCue.regions`): a larger
+body (not to be learnt: arms, a lean, the grid's position error), the tested body (possible
+foreground: a person-sized blob the detector can localise) and its core (a narrow strip: a
+hypothesis that covers the core in every view stands where the cue's person stands; one
+that combines the blobs of two people from different views does not).
+
+Measured on the real Pose2Sim clip (docs/real_data.md): the contour/symmetry z-score alone
+ranks the subject only 3rd-30th of the floor places in a frame; motion over the first six
+frames (0.1 s) singles him out, and the rendered woman of the composite barely moves but
+still passes at ``min_motion = 0.03``.
+
+OpenCV's HOG people detector (``cv2.HOGDescriptor``) would be the obvious single-view cue,
+but OpenCV 5 moved it out of the main package (``opencv-python-headless`` 5.0 has no
+``HOGDescriptor``), hence the detector's own features here.
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from mbtrack_ros.core.camera import RoomCalibration
+from mbtrack_ros.core.detection import DetectionError
+from mbtrack_ros.core.detection.detector import (
+    _grid, _max_span_width, _nms, _states, is_ceiling)
+from mbtrack_ros.core.detection.features import (
+    EdgeMap, ForegroundIntegral, colour_symmetry, contour_loglik_spans)
+from mbtrack_ros.core.shape import BodyShape, rasterize
+
+__all__ = ['PeopleCue', 'PeopleCueConfig']
+
+
+@dataclass(frozen=True)
+class PeopleCueConfig:
+    """Parameters of the person cue (metres, radians, pixels at 320x240).
+
+    Attributes:
+        spacing: floor grid spacing of the hypotheses.
+        height, width: the single body size tested.
+        orientations: body orientations tested (the best one counts per camera).
+        min_views: cameras that must see a hypothesis (silhouette mostly inside the image);
+            all side cameras when the room has fewer.
+        min_visible: fraction of a silhouette inside the image for a camera to see it.
+        min_area: smallest silhouette area seen, pixels at 320x240 (scaled).
+        motion_threshold: frame-difference luminance above which a pixel moved.
+        motion_dilation: pixels by which the moving pixels grow (at the image size used).
+        min_motion: smallest moving fraction of the silhouette in every seeing camera
+            (ignored with a single bootstrap frame).
+        w_symmetry: weight of the colour-symmetry term against the contour term.
+        min_score: smallest mean contour/symmetry robust z-score over the seeing cameras.
+        max_people: largest number of person-like places marked.
+        nms_radius: smallest distance between two marked places.
+        region_height, region_width: size of the body whose silhouette is marked as not
+            yet known (larger than a person: arms, a lean, the grid's position error), so
+            that no part of the person is learnt into the background.
+        dilation: pixels by which those silhouettes grow.
+        core_width: width of the body's core, metres (see :meth:`PeopleCue.regions`).
+        The possible foreground inside the region is the silhouette of the tested body
+        (``height`` x ``width``): a person-sized blob the detector can localise.
+    """
+
+    spacing: float = 0.1
+    height: float = 1.75
+    width: float = 0.5
+    orientations: tuple[float, ...] = (0.0, np.pi / 4, np.pi / 2, 3 * np.pi / 4)
+    min_views: int = 3
+    min_visible: float = 0.7
+    min_area: int = 60
+    motion_threshold: float = 20.0
+    motion_dilation: int = 2
+    min_motion: float = 0.03
+    w_symmetry: float = 0.3
+    min_score: float = 0.0
+    max_people: int = 6
+    nms_radius: float = 0.7
+    region_height: float = 2.1
+    region_width: float = 1.0
+    core_width: float = 0.15
+    dilation: int = 3
+
+    def __post_init__(self) -> None:
+        if not (self.spacing > 0 and self.height > 0 and self.width > 0
+                and self.region_height > 0 and self.region_width > 0):
+            raise DetectionError('people cue spacing and sizes must be > 0')
+        if not self.orientations:
+            raise DetectionError('people cue needs at least one orientation')
+        if self.min_views < 1 or self.max_people < 0 or self.dilation < 0:
+            raise DetectionError('people cue min_views >= 1, max_people >= 0, dilation >= 0')
+        if not 0.0 < self.min_visible <= 1.0:
+            raise DetectionError(f'people cue min_visible must be in (0, 1], got '
+                                 f'{self.min_visible}')
+
+
+class PeopleCue:
+    """Where people likely stand in one multi-view frame set, without a background.
+
+    Args:
+        calibration: the room (its floor is searched; top-down cameras are skipped: a
+            person's contour seen from above is not an upright silhouette).
+        config: cue parameters.
+    """
+
+    def __init__(self, calibration: RoomCalibration, config: PeopleCueConfig | None = None
+                 ) -> None:
+        self.calibration = calibration
+        self.config = cfg = config or PeopleCueConfig()
+        self.cameras = [n for n, c in calibration.cameras.items() if not is_ceiling(c)]
+        xy = _grid([calibration.floor], cfg.spacing)
+        self.xy = np.concatenate([xy] * len(cfg.orientations))
+        self.states = np.concatenate([_states(xy, th, 0.0) for th in cfg.orientations])
+        self.n_places = len(xy)
+        self.shape = BodyShape(height=cfg.height, width=cfg.width)
+        self._sils = {n: rasterize(calibration.cameras[n], self.states, self.shape)
+                      for n in self.cameras}
+
+    @staticmethod
+    def _kernel(radius: int) -> np.ndarray:
+        return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
+
+    def score(self, frames: Sequence[Mapping[str, np.ndarray]]
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Evidence per floor place over consecutive frame sets (camera -> (H, W, 3) uint8).
+
+        Returns:
+            (P, 2) place positions (metres); (P,) mean contour/symmetry robust z-score of
+            the last frame set over the seeing cameras; (P,) smallest moving fraction over
+            the seeing cameras (``nan`` with one frame set). Places seen by fewer than
+            ``min_views`` cameras score ``-inf``.
+        """
+        xy, mean, moved = self._evidence(frames)
+        motion = self._motion(moved) if moved else np.full(len(xy), np.nan)
+        return xy, mean, motion
+
+    def _evidence(self, frames: Sequence[Mapping[str, np.ndarray]]
+                  ) -> tuple[np.ndarray, np.ndarray, dict[str, tuple[np.ndarray, np.ndarray]]]:
+        """Places, mean z-score, and per camera (moving pixels (H, W) bool, (n_or * P,)
+        seen flags) when there are several frame sets."""
+        cfg = self.config
+        frames = list(frames)
+        if not frames:
+            raise DetectionError('the people cue needs at least one frame set')
+        images = frames[-1]
+        m = self.n_places
+        n_or = len(cfg.orientations)
+        total = np.zeros(m)
+        views = np.zeros(m, np.int64)
+        moved_by_cam: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        for name in self.cameras:
+            if name not in images or any(name not in f for f in frames):
+                continue
+            image = images[name]
+            cam = self.calibration.cameras[name]
+            for f in frames:
+                if f[name].shape[:2] != (cam.height, cam.width):
+                    raise DetectionError(
+                        f'camera {name!r}: image {f[name].shape[1]}x{f[name].shape[0]} '
+                        f'differs from the calibration {cam.width}x{cam.height}')
+            sil = self._sils[name]
+            edges = EdgeMap.from_image(image)          # whole image: no background needed
+            con, _ = contour_loglik_spans(edges, sil, _max_span_width(sil))      # 003 Eq. 5
+            sym = colour_symmetry(image, sil)
+            resp = con + cfg.w_symmetry * np.where(np.isfinite(sym), 1.0 - sym, 0.0)
+            min_area = cfg.min_area * cam.width * cam.height / (320.0 * 240.0)
+            sees = (sil.area >= cfg.min_visible * np.maximum(sil.full_area, 1)) \
+                & (sil.area >= min_area)
+            resp = np.where(sees, resp, -np.inf).reshape(n_or, m).max(axis=0)
+            seen = np.isfinite(resp)
+            if seen.sum() < 8:
+                continue
+            med = float(np.median(resp[seen]))
+            mad = 1.4826 * float(np.median(np.abs(resp[seen] - med)))
+            z = (resp - med) / max(mad, 1e-6)
+            total += np.where(seen, z, 0.0)
+            views += seen
+            if len(frames) > 1:
+                moved = np.zeros((cam.height, cam.width), np.uint8)
+                prev = cv2.cvtColor(frames[0][name], cv2.COLOR_RGB2GRAY)
+                for f in frames[1:]:
+                    cur = cv2.cvtColor(f[name], cv2.COLOR_RGB2GRAY)
+                    moved |= (cv2.absdiff(cur, prev) > cfg.motion_threshold).view(np.uint8)
+                    prev = cur
+                if cfg.motion_dilation > 0:      # limbs move, the body between them not
+                    moved = cv2.dilate(moved, self._kernel(cfg.motion_dilation))
+                moved_by_cam[name] = (moved.astype(bool), sees)
+        need = min(cfg.min_views, max(len(self.cameras), 1))
+        mean = np.where(views >= need, total / np.maximum(views, 1), -np.inf)
+        return self.xy[:m], mean, moved_by_cam
+
+    def _motion(self, moved_by_cam: Mapping[str, tuple[np.ndarray, np.ndarray]]
+                ) -> np.ndarray:
+        """(P,) smallest moving fraction of each place over the cameras that see it."""
+        m = self.n_places
+        n_or = len(self.config.orientations)
+        motion = np.full(m, np.inf)
+        for name, (moved, sees) in moved_by_cam.items():
+            cov, _, _ = ForegroundIntegral(moved).coverage(self._sils[name])
+            cov = np.where(sees, cov, -np.inf).reshape(n_or, m).max(axis=0)
+            motion = np.where(np.isfinite(cov), np.minimum(motion, cov), motion)
+        return np.where(np.isfinite(motion), motion, 0.0)
+
+    def places(self, frames: Sequence[Mapping[str, np.ndarray]]) -> np.ndarray:
+        """(K, 2) floor positions of person-like places, most moving first (at most
+        ``max_people``, at least ``nms_radius`` apart).
+
+        With several frame sets the places are chosen greedily with explaining-away: the
+        moving pixels inside a chosen place's region no longer count for the others, so
+        that a person's motion does not also make the places on his lines of sight (which
+        see him in one camera and something else in another) person-like.
+        """
+        cfg = self.config
+        xy, score, moved = self._evidence(frames)
+        ok = np.isfinite(score) & (score >= cfg.min_score)
+        if cfg.max_people == 0 or not ok.any():
+            return np.zeros((0, 2))
+        if not moved:
+            good = np.flatnonzero(ok)
+            keep = _nms(xy[good], score[good], cfg.nms_radius, cfg.max_people)
+            return xy[good[keep]]
+        moved = {n: (mv.copy(), sees) for n, (mv, sees) in moved.items()}
+        chosen: list[int] = []
+        while len(chosen) < cfg.max_people:
+            motion = self._motion(moved)
+            cand = ok & (motion >= cfg.min_motion)
+            if chosen:
+                d = np.linalg.norm(xy[:, None] - xy[chosen][None], axis=2).min(axis=1)
+                cand &= d >= cfg.nms_radius
+            if not cand.any():
+                break
+            best = int(np.flatnonzero(cand)[np.argmax(motion[cand])])
+            chosen.append(best)
+            for name, (mv, _) in moved.items():     # explained: not evidence for others
+                mv &= ~self._region(name, xy[best:best + 1], cfg.region_height,
+                                    cfg.region_width)
+        return xy[chosen] if chosen else np.zeros((0, 2))
+
+    def _region(self, name: str, xy: np.ndarray, height: float, width: float,
+                dilation: int | None = None) -> np.ndarray:
+        """(H, W) bool union of the silhouettes of ``height`` x ``width`` bodies standing at
+        places ``xy`` (K, 2) in a camera, dilated by ``dilation`` (default the config's)."""
+        cfg = self.config
+        cam = self.calibration.cameras[name]
+        mask = np.zeros((cam.height, cam.width), np.uint8)
+        n = len(xy)
+        if n:
+            sil = rasterize(cam, _states(np.asarray(xy, np.float64)), self.shape,
+                            heights=np.full(n, height), widths=np.full(n, width))
+            for i in range(n):
+                mask |= (sil.mask(i) > 0).view(np.uint8)
+            dilation = cfg.dilation if dilation is None else dilation
+            if dilation > 0:
+                mask = cv2.dilate(mask, self._kernel(dilation))
+        return mask.astype(bool)
+
+    def regions(self, frames: Sequence[Mapping[str, np.ndarray]]
+                ) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """Per camera of the last frame set, three (H, W) bool masks of the person-like
+        places: the pixels not to learn (``region_*`` bodies, dilated); inside them, the
+        possible foreground (the tested body); inside that, the body's core
+        (``core_width`` wide), where the person stands whichever view."""
+        cfg = self.config
+        frames = list(frames)
+        xy = self.places(frames)
+        out = {}
+        for name in frames[-1]:
+            if name in self.calibration.cameras:
+                region = self._region(name, xy, cfg.region_height, cfg.region_width)
+                body = self._region(name, xy, cfg.height, cfg.width, 0)
+                core = self._region(name, xy, cfg.height, cfg.core_width, 0) & body
+                out[name] = (region | body, body, core)
+        return out
