@@ -106,7 +106,7 @@ class AutoDetection:
         self.calibration = calibration
         self.config = cfg = config or AutoDetectionConfig()
         self.rng = rng if rng is not None else np.random.default_rng(0)
-        self.background = BackgroundBank(cfg.background)
+        self.background = BackgroundBank(cfg.background, calibration=calibration)
         self.detector = Detector(calibration, cfg.detector)
         self.releaser = Releaser(calibration, cfg.release)
         self.aux: dict[int, TrackAuxiliary] = {}
@@ -166,7 +166,7 @@ class AutoDetection:
         # 2. background and foreground
         fg = self.background.apply({n: images[n] for n in names}, exclude=masks)
         evidence = {n: FrameEvidence(images[n], fg[n], masks[n],
-                                     motion=self.background.models[n].recent_motion())
+                                     motion=self.background.models[n].presence())
                     for n in fg}
         t2 = time.perf_counter()
         # 3. support, visibility and existence
