@@ -153,14 +153,17 @@ def rasterize_quads(left, right, seg_part, valid, width, height, row_step, row_l
     n = left.shape[0]
     nseg = left.shape[1] - 1
     edges = np.empty((4, 4))
-    ub = 0
+    ub = 0                                   # rows inside the image: bounds the span count
     for i in range(n):
         if not valid[i]:
             continue
         for j in range(nseg):
             if seg_part[i, j] == 0:
                 continue
-            ylo, yhi = _quad_edges(i, j, left, right, edges)
+            ylo = min(min(left[i, j, 1], right[i, j, 1]),
+                      min(left[i, j + 1, 1], right[i, j + 1, 1]))
+            yhi = max(max(left[i, j, 1], right[i, j, 1]),
+                      max(left[i, j + 1, 1], right[i, j + 1, 1]))
             r0 = max(int(np.ceil(ylo)), 0)
             r1 = min(int(np.ceil(yhi)), height)
             if r1 > r0:
@@ -175,7 +178,7 @@ def rasterize_quads(left, right, seg_part, valid, width, height, row_step, row_l
     full_area = np.zeros(n, np.int64)
     bbox = np.zeros((n, 4), np.int32)
     m = 0
-    for i in range(n):
+    for i in range(n):                       # areas in locals, written once per particle
         offsets[i] = m
         if not valid[i]:
             continue
@@ -183,6 +186,10 @@ def rasterize_quads(left, right, seg_part, valid, width, height, row_step, row_l
         by0 = height
         bx1 = 0
         by1 = 0
+        fa = 0
+        pa0 = 0
+        pa1 = 0
+        pa2 = 0
         for j in range(nseg):
             q = seg_part[i, j]
             if q == 0:
@@ -192,6 +199,7 @@ def rasterize_quads(left, right, seg_part, valid, width, height, row_step, row_l
             r1 = min(int(np.ceil(yhi)), height + row_limit)
             if row_step > 1:
                 r0 = r0 + (-r0) % row_step
+            qa = 0
             for r in range(r0, r1, row_step):
                 xl, xr, hit = _row_interval(float(r), edges)
                 if not hit:
@@ -200,7 +208,7 @@ def rasterize_quads(left, right, seg_part, valid, width, height, row_step, row_l
                 c1 = int(np.ceil(xr))
                 if c1 <= c0:
                     continue
-                full_area[i] += c1 - c0
+                fa += c1 - c0
                 if r < 0 or r >= height:
                     continue
                 c0 = max(c0, 0)
@@ -212,12 +220,22 @@ def rasterize_quads(left, right, seg_part, valid, width, height, row_step, row_l
                 x1[m] = c1
                 part[m] = q
                 m += 1
-                area[i] += c1 - c0
-                part_area[i, q - 1] += c1 - c0
+                qa += c1 - c0
                 bx0 = min(bx0, c0)
                 bx1 = max(bx1, c1)
                 by0 = min(by0, r)
                 by1 = max(by1, r + 1)
+            if q == 1:
+                pa0 += qa
+            elif q == 2:
+                pa1 += qa
+            else:
+                pa2 += qa
+        full_area[i] = fa
+        part_area[i, 0] = pa0
+        part_area[i, 1] = pa1
+        part_area[i, 2] = pa2
+        area[i] = pa0 + pa1 + pa2
         if area[i] > 0:
             bbox[i, 0] = bx0
             bbox[i, 1] = by0
