@@ -21,35 +21,51 @@ N_PARTS = 3
 
 # -- rasterisation ----------------------------------------------------------------------------
 @njit(cache=True, nogil=True)
-def outline_points(end_px, end_depth, f, half, width, scale, focal, valid):
+def outline_points(end_px, end_depth, sitting, frac, half, parts, hip, width, scale, focal):
     """Outline points left/right of the body axis at the profile heights (003 §2.1).
 
     Args:
         end_px: (N, 2, 2) projected bottom and top axis points; end_depth (N, 2) their
             optical depths, metres.
-        f: (N, P) height fraction of each profile point between bottom and top.
-        half: (P,) half-width fractions; width (N,) body widths, metres; scale (N,) s(o).
-        focal: focal length, pixels; valid: (N,) bool (others get zeros).
+        sitting: (N,) bool; frac (P,) profile height fractions, half (P,) half-width
+            fractions, parts (P - 1,) int8 segment parts, hip the hip height fraction.
+        width: (N,) body widths, metres; scale: (N,) s(o); focal: focal length, pixels.
 
-    The image position of the axis point at fraction f is placed on the segment with the
-    perspective-correct fraction ``f d1 / ((1 - f) d0 + f d1)`` (exact for a pinhole
-    camera, depth being linear along the axis); offsets are half-width * focal / depth * s,
-    perpendicular to the bottom -> top image direction.
+    A standing axis runs from the feet to the head top (height fraction f = frac); a
+    sitting one from the hip to the head top, f = (frac - hip) / (1 - hip) clipped at 0,
+    and its segments below the hip (the legs) are dropped. The image position of the axis
+    point at fraction f is placed on the segment with the perspective-correct fraction
+    ``f d1 / ((1 - f) d0 + f d1)`` (exact for a pinhole camera, depth being linear along
+    the axis); offsets are half-width * focal / depth * s, perpendicular to the
+    bottom -> top image direction.
 
     Returns:
-        left, right: (N, P, 2) image points.
+        left, right: (N, P, 2) image points (zeros for invalid particles); seg_part
+        (N, P - 1) int8 segment parts (0: dropped); valid (N,) bool, both axis ends in
+        front of the camera (depth > 1 mm) with finite image points.
     """
-    n = f.shape[0]
-    npts = f.shape[1]
+    n = end_px.shape[0]
+    npts = frac.shape[0]
     left = np.zeros((n, npts, 2))
     right = np.zeros((n, npts, 2))
+    seg_part = np.empty((n, npts - 1), np.int8)
+    valid = np.zeros(n, np.bool_)
     for i in range(n):
-        if not valid[i]:
-            continue
+        sit = sitting[i]
+        for j in range(npts - 1):
+            seg_part[i, j] = 0 if (sit and frac[j] < hip - 1e-12) else parts[j]
         bx = end_px[i, 0, 0]
         by = end_px[i, 0, 1]
-        dx = end_px[i, 1, 0] - bx
-        dy = end_px[i, 1, 1] - by
+        tx = end_px[i, 1, 0]
+        ty = end_px[i, 1, 1]
+        d0 = end_depth[i, 0]
+        d1 = end_depth[i, 1]
+        if not (d0 > 1e-3 and d1 > 1e-3 and np.isfinite(bx) and np.isfinite(by)
+                and np.isfinite(tx) and np.isfinite(ty)):
+            continue
+        valid[i] = True
+        dx = tx - bx
+        dy = ty - by
         norm = np.sqrt(dx * dx + dy * dy)
         if norm > 1e-9:
             nx = -dy / norm
@@ -57,10 +73,10 @@ def outline_points(end_px, end_depth, f, half, width, scale, focal, valid):
         else:                                   # camera looking straight down the axis
             nx = 1.0
             ny = 0.0
-        d0 = end_depth[i, 0]
-        d1 = end_depth[i, 1]
         for j in range(npts):
-            fj = f[i, j]
+            fj = frac[j]
+            if sit:
+                fj = max((fj - hip) / (1.0 - hip), 0.0)
             dep = (1.0 - fj) * d0 + fj * d1
             g = fj * d1 / dep
             ax = bx + g * dx
@@ -70,7 +86,7 @@ def outline_points(end_px, end_depth, f, half, width, scale, focal, valid):
             left[i, j, 1] = ay - ny * off
             right[i, j, 0] = ax + nx * off
             right[i, j, 1] = ay + ny * off
-    return left, right
+    return left, right, seg_part, valid
 
 
 @njit(cache=True, nogil=True)

@@ -208,32 +208,26 @@ def silhouette_outline(camera: Camera, states: np.ndarray, shape: BodyShape, *,
     n = states.shape[0]
     h = _per_particle(heights, shape.height, n, 'heights')
     w = _per_particle(widths, shape.width, n, 'widths')
-    frac = shape.fractions
     hip = shape.hip_fraction
     sitting = states[:, SIT] >= 0.5
     # axis end points: feet (z = 0) and head top (z = h) standing; sitting, the hip at chair
     # height and the head top at chair height + upper body height; legs dropped
     zb = np.where(sitting, shape.chair_height, 0.0)
     zt = np.where(sitting, shape.chair_height + (1.0 - hip) * h, h)
-    f = np.where(sitting[:, None], np.clip((frac[None, :] - hip) / (1.0 - hip), 0.0, None),
-                 frac[None, :])                               # (N, P) height fraction on axis
-    seg_part = np.broadcast_to(shape.segment_parts, (n, frac.size - 1)).copy()
-    below_hip = frac[:-1] < hip - 1e-12
-    seg_part[np.ix_(sitting, below_hip)] = 0
     ends = np.empty((n, 2, 3))
     ends[:, :, 0] = states[:, None, X]
     ends[:, :, 1] = states[:, None, Y]
     ends[:, 0, 2] = zb
     ends[:, 1, 2] = zt
     # 003 §2.1: project the bottom and top points; the axis points in between lie on the
-    # image segment joining them (perspective-correct placement in the kernel)
-    end_px = camera.project(ends)                              # (N, 2, 2)
+    # image segment joining them (perspective-correct placement in the kernel, which also
+    # drops the leg segments and rescales the profile heights of sitting particles)
+    end_px = np.ascontiguousarray(camera.project(ends))        # (N, 2, 2)
     end_depth = camera.depth(ends)                             # (N, 2), linear in z
-    valid = np.all(end_depth > 1e-3, axis=1) & np.all(np.isfinite(end_px), axis=(1, 2))
     rel = states[:, THETA] - camera.viewing_angle(states[:, :2])
-    left, right = _kernels.outline_points(
-        np.ascontiguousarray(end_px), end_depth, np.ascontiguousarray(f), shape.half_widths,
-        w, width_scale(rel), camera.focal, valid)
+    left, right, seg_part, valid = _kernels.outline_points(
+        end_px, end_depth, sitting, shape.fractions, shape.half_widths, shape.segment_parts,
+        float(hip), w, width_scale(rel), camera.focal)
     centre = np.stack([states[:, X], states[:, Y], 0.5 * (zb + zt)], axis=1)
     distance = np.where(valid, camera.distance(centre), np.inf)
     return left, right, seg_part, valid, distance
