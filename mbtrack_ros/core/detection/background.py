@@ -500,11 +500,18 @@ class BackgroundBank:
                  calibration: RoomCalibration | None = None) -> None:
         self.config = config or BackgroundConfig()
         self.models: dict[str, BackgroundModel] = {}
-        self.cue: PeopleCue | None = None
-        if calibration is not None and self.config.people is not None:
-            self.cue = PeopleCue(calibration, self.config.people)
+        self.calibration = calibration
+        self._cue: PeopleCue | None = None
         self._frames: list[dict[str, np.ndarray]] = []   # bootstrap frame sets for the cue
         self._seen = 0
+
+    @property
+    def cue(self) -> PeopleCue | None:
+        """The people cue (built on first use: it rasterises a floor grid), or None."""
+        if self._cue is None and self.calibration is not None \
+                and self.config.people is not None:
+            self._cue = PeopleCue(self.calibration, self.config.people)
+        return self._cue
 
     def model(self, name: str) -> BackgroundModel:
         if name not in self.models:
@@ -530,12 +537,12 @@ class BackgroundBank:
                 out[name] = fg
             elif model.ready and not was_ready:
                 started.append(name)
-        if self.cue is not None and (started or not all(m.ready for m in
-                                                        self.models.values())):
+        if self.calibration is not None and self.config.people is not None \
+                and (started or not all(m.ready for m in self.models.values())):
             # keep the frame sets the models' bootstrap medians are made of
             cfg = self.config
             if self._seen % cfg.bootstrap_stride == 0:
-                self._frames.append(dict(images))
+                self._frames.append({n: np.array(im, copy=True) for n, im in images.items()})
             self._seen += 1
             self._frames = self._frames[-cfg.bootstrap_frames:]
             if started:
