@@ -57,8 +57,10 @@ def flatten(doc: dict, prefix: str = '') -> dict:
     return out
 
 
-def start(context, *args: str) -> TrackerNode:
-    return TrackerNode(cli_args=['--ros-args', *args], context=context)
+def start(context, *args: str, step_thread: bool = False) -> TrackerNode:
+    """A node; without ``step_thread`` queued sets wait for process_pending() (by hand)."""
+    return TrackerNode(cli_args=['--ros-args', *args], context=context,
+                       step_thread=step_thread)
 
 
 @pytest.mark.parametrize('config', CONFIGS, ids=[c.name for c in CONFIGS])
@@ -173,7 +175,7 @@ def test_bad_frames_dropped_and_stamps_backwards_reset(room_calibration, context
             node._on_image('cam0', image_msg(rgb, t0 + k * period))
             if k != 2:  # cam1 misses frame 2: that set goes out without cam1
                 node._on_image('cam1', image_msg(rgb, t0 + k * period, 'cam1_optical_frame'))
-            node._on_frame_sets()  # what the step timer does
+            node.process_pending()  # what the step thread does
         assert node._last_stamp == t0 + 3 * period
         snap = node.snapshot(messages_result())
         assert snap.frame_sets == 3 and snap.incomplete_sets == 1 and snap.dropped_frames == 2
@@ -186,7 +188,7 @@ def test_bad_frames_dropped_and_stamps_backwards_reset(room_calibration, context
         # the recording restarts: both cameras back at t0
         node._on_image('cam0', image_msg(rgb, t0))
         node._on_image('cam1', image_msg(rgb, t0, 'cam1_optical_frame'))
-        node._on_frame_sets()
+        node.process_pending()
         assert node._resets == 1 and node._last_stamp == t0
         assert node.sync.counters.resets == 1
     finally:
@@ -262,7 +264,7 @@ def test_end_to_end_bag_player_tracker_subscriber(recording, context, tmp_path):
                  '-p', f'init_ground_truth:={recording / "ground_truth.csv"}',
                  '-p', 'tracker.seed:=0', '-p', 'max_pending_sets:=100',
                  '-p', 'image_reliability:=reliable',  # no frame lost on a loaded machine
-                 '-p', f'output_bag:={tmp_path / "out"}')
+                 '-p', f'output_bag:={tmp_path / "out"}', step_thread=True)
     listener = rclpy.create_node('e2e_listener', context=context)
     qos = QoSProfile(depth=200, reliability=ReliabilityPolicy.RELIABLE)
     got: dict[str, list] = {'people': [], 'markers': [], 'diagnostics': [], 'debug': []}

@@ -3,7 +3,11 @@
 There is no ``ros2 bag`` on this platform: the bag is read with rosbags and every message is
 published as the raw CDR bytes stored in the bag (rclpy publishers accept serialised
 messages), so nothing is decoded. Message time comes from the bag's log time; ``/clock``
-(rosgraph_msgs/Clock) follows it, so a tracker with ``use_sim_time`` sees bag time.
+(rosgraph_msgs/Clock) follows it, so a tracker with ``use_sim_time`` sees bag time: one
+``/clock`` message when the bag time advances (before the first message of each stamp; all
+messages of a frame set share a stamp), not one per message. The messages of one stamp go out
+back to back. Fast DDS gets a shared-memory segment large enough for a burst of images
+(:mod:`mbtrack_ros.nodes.transport`).
 
 Parameters: ``bag`` (rosbag2 directory, or a recording directory with ``bag/`` inside;
 required), ``rate`` (playback speed factor, 1.0), ``loop`` (restart at the end, false),
@@ -28,6 +32,7 @@ from rosbags.highlevel import AnyReader
 from rosgraph_msgs.msg import Clock
 
 from mbtrack_ros.nodes.conversions import ns_to_stamp
+from mbtrack_ros.nodes.transport import use_large_shm_segment
 
 __all__ = ['BagPlayer', 'PlayerError', 'main', 'message_class']
 
@@ -105,6 +110,7 @@ class BagPlayer(Node):
                                                             c.topic, reliable)
         self._clock = self.create_publisher(Clock, '/clock', 10) if self.publish_clock else None
         self.published = 0
+        self.burst_seconds: list[float] = []  # wall time to publish each stamp's messages
         self.loops = 0
         self.done = threading.Event()
         self._stop = threading.Event()
@@ -142,19 +148,28 @@ class BagPlayer(Node):
         """One pass through the bag; False when stopped before the end."""
         wall0 = bag0 = None
         clock = Clock()
+        last = None  # bag time of the previous message
+        burst0 = 0.0
         for conn, stamp, raw in self._reader.messages(connections=self._conns):
             if self._stop.is_set():
                 return False
             if wall0 is None:
                 wall0, bag0 = time.monotonic(), stamp
-            delay = wall0 + (stamp - bag0) / 1e9 / self.rate - time.monotonic()
-            if delay > 0 and self._stop.wait(delay):
-                return False
-            if self._clock is not None:
-                ns_to_stamp(stamp, clock.clock)
-                self._clock.publish(clock)
-            self._pubs[conn.topic].publish(bytes(raw))
+            if stamp != last:  # the bag time advances: wait for it, then tick /clock once
+                if last is not None:
+                    self.burst_seconds.append(time.monotonic() - burst0)
+                delay = wall0 + (stamp - bag0) / 1e9 / self.rate - time.monotonic()
+                if delay > 0 and self._stop.wait(delay):
+                    return False
+                burst0 = time.monotonic()
+                if self._clock is not None:
+                    ns_to_stamp(stamp, clock.clock)
+                    self._clock.publish(clock)
+                last = stamp
+            self._pubs[conn.topic].publish(raw if isinstance(raw, bytes) else bytes(raw))
             self.published += 1
+        if last is not None:
+            self.burst_seconds.append(time.monotonic() - burst0)
         return True
 
     def destroy_node(self) -> None:
@@ -165,6 +180,7 @@ class BagPlayer(Node):
 
 def main(args: list[str] | None = None) -> int:
     """Entry point ``bag_player``; exits non-zero when the bag cannot be played."""
+    use_large_shm_segment()  # before rclpy.init: bursts of images fit in shared memory
     rclpy.init(args=args)
     node = None
     code = 0
@@ -176,7 +192,11 @@ def main(args: list[str] | None = None) -> int:
         player.start()
         while rclpy.ok() and not (node.done.is_set() and node.exit_when_done):
             executor.spin_once(timeout_sec=0.1)
-        node.get_logger().info(f'published {node.published} messages from {node.bag}')
+        bursts = sorted(node.burst_seconds) or [0.0]
+        node.get_logger().info(
+            f'published {node.published} messages from {node.bag}; one stamp\'s messages '
+            f'took p50 {1e3 * bursts[len(bursts) // 2]:.1f} ms, '
+            f'p95 {1e3 * bursts[min(len(bursts) - 1, int(0.95 * len(bursts)))]:.1f} ms')
     except PlayerError as err:
         print(f'bag_player: error: {err}', file=sys.stderr)
         code = 2

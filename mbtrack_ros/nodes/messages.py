@@ -207,6 +207,13 @@ class DiagnosticsSnapshot:
         tracks: tracks reported in the last result.
         missing_cameras: cameras missing in the last frame set (WARN when not empty).
         resets: tracker resets so far (stamps jumped or went backwards).
+        bad_images, late_frames: of ``dropped_frames``, images refused (encoding, size) and
+            frames the synchroniser could not use (late, duplicate stamp, overflow).
+        dropped_sets_full, dropped_sets_error: of ``dropped_frames``, whole frame sets lost
+            because the tracker stayed ``max_pending_sets`` behind, or because its step
+            raised.
+        queued_sets, queue_peak: frame sets waiting for the tracker now, and the most that
+            waited since the previous message.
     """
 
     input_rate_hz: dict[str, float] = field(default_factory=dict)
@@ -217,6 +224,12 @@ class DiagnosticsSnapshot:
     tracks: int = 0
     missing_cameras: tuple[str, ...] = ()
     resets: int = 0
+    bad_images: int = 0
+    late_frames: int = 0
+    dropped_sets_full: int = 0
+    dropped_sets_error: int = 0
+    queued_sets: int = 0
+    queue_peak: int = 0
 
 
 def diagnostics_message(stamp_ns: int, snap: DiagnosticsSnapshot, *,
@@ -239,7 +252,13 @@ def diagnostics_message(stamp_ns: int, snap: DiagnosticsSnapshot, *,
         kv('step time [ms]', f'{1e3 * snap.step_seconds:.1f}'),
         kv('frame sets', snap.frame_sets), kv('incomplete frame sets', snap.incomplete_sets),
         kv('dropped frames', snap.dropped_frames), kv('tracks', snap.tracks),
-        kv('resets', snap.resets), kv('missing cameras', ','.join(snap.missing_cameras))]
+        kv('resets', snap.resets), kv('missing cameras', ','.join(snap.missing_cameras)),
+        kv('dropped images (bad)', snap.bad_images),
+        kv('dropped frames (late or duplicate)', snap.late_frames),
+        kv('dropped frame sets (queue full)', snap.dropped_sets_full),
+        kv('dropped frame sets (step error)', snap.dropped_sets_error),
+        kv('queued frame sets', snap.queued_sets),
+        kv('queued frame sets (peak)', snap.queue_peak)]
     statuses = [main]
     for cam, rate in snap.input_rate_hz.items():
         st = DiagnosticStatus(name=f'{name}: input {cam}', hardware_id=cam)

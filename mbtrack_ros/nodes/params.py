@@ -24,8 +24,11 @@ debug_images                    bool       always publish ``~/debug/<cam>/occlus
 diagnostics_period              double     seconds of message time between /diagnostics (1.0)
 init_ground_truth               string     ground-truth CSV to start/end tracks from ('')
 output_bag                      string     also write every output to this MCAP bag ('')
-max_pending_sets                int        frame sets queued for the tracker; older ones
-                                           are dropped when it falls behind (2)
+max_pending_sets                int        frame sets queued for the tracker; the oldest
+                                           is dropped (counted in /diagnostics) only when
+                                           it stays this far behind (15 = 1 s at 15 Hz)
+executor                        string     ``events`` (rclpy EventsExecutor, default),
+                                           ``single`` or ``multi`` (Python executors)
 tracker.algorithm               string     hjs | separable | joint | registered baseline
 tracker.particles               int        particles per target (100)
 tracker.joint_particles         int        joint-filter particles (10000)
@@ -57,11 +60,12 @@ from rclpy.node import Node
 from mbtrack_ros.core.camera import CalibrationError, RoomCalibration
 from mbtrack_ros.core.tracker import TrackerConfig, TrackerError
 
-__all__ = ['RELIABILITIES', 'TRANSPORTS', 'CameraInput', 'NodeParams', 'ParamsError',
+__all__ = ['EXECUTORS', 'RELIABILITIES', 'TRANSPORTS', 'CameraInput', 'NodeParams', 'ParamsError',
            'declare_and_read']
 
 TRANSPORTS = ('raw', 'compressed')
 RELIABILITIES = ('best_effort', 'reliable')
+EXECUTORS = ('events', 'single', 'multi')
 
 
 class ParamsError(ValueError):
@@ -95,6 +99,7 @@ class NodeParams:
     init_ground_truth: str
     output_bag: str
     max_pending_sets: int
+    executor: str = 'events'
 
     @property
     def camera_names(self) -> list[str]:
@@ -125,8 +130,10 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
                            _fr(0.05, 60.0)),
     'init_ground_truth': ('', 'ground-truth CSV used to start and end tracks', {}),
     'output_bag': ('', 'also write all outputs to this MCAP bag directory', {}),
-    'max_pending_sets': (2, 'frame sets queued for the tracker before dropping the oldest',
-                         _ir(1, 100)),
+    'max_pending_sets': (15, 'frame sets queued for the tracker before dropping the oldest',
+                         _ir(1, 300)),
+    'executor': ('events', 'events (rclpy EventsExecutor) | single | multi: how callbacks '
+                 'are dispatched; the tracker step has its own thread', {}),
     'tracker.algorithm': ('hjs', 'hjs | separable | joint | a registered baseline', {}),
     'tracker.particles': (100, 'particles per target (000 §VI)', _ir(1, 100_000)),
     'tracker.joint_particles': (10_000, 'joint-filter particles', _ir(1, 1_000_000)),
@@ -210,6 +217,10 @@ def declare_and_read(node: Node) -> tuple[NodeParams, RoomCalibration]:
     if timeout_ns <= slop_ns:
         raise ParamsError(f'sync.timeout ({v["sync.timeout"]}) must exceed sync.slop '
                           f'({v["sync.slop"]})')
+    executor = str(v['executor'])
+    if executor not in EXECUTORS:
+        raise ParamsError(f'parameter executor: {executor!r} is not one of '
+                          f'{", ".join(EXECUTORS)}')
     gt = str(v['init_ground_truth'])
     if gt and not Path(gt).is_file():
         raise ParamsError(f'init_ground_truth {gt!r} does not exist')
@@ -239,7 +250,7 @@ def declare_and_read(node: Node) -> tuple[NodeParams, RoomCalibration]:
         rescale_images=bool(v['rescale_images']), debug_images=bool(v['debug_images']),
         diagnostics_period_ns=int(round(v['diagnostics_period'] * 1e9)),
         init_ground_truth=gt, output_bag=str(v['output_bag']),
-        max_pending_sets=int(v['max_pending_sets']))
+        max_pending_sets=int(v['max_pending_sets']), executor=executor)
     return params, calibration
 
 

@@ -8,11 +8,14 @@ Outputs (reliable, stamped with the frame set's time, frame ``output_frame_id``)
 ``/diagnostics`` (DiagnosticArray). See :mod:`mbtrack_ros.nodes.params` for parameters and
 :mod:`mbtrack_ros.nodes.messages` for the message layouts.
 
-Threading: image callbacks (one mutually exclusive group per camera) only convert the image
-and hand it to the :class:`~mbtrack_ros.recording.sync.FrameSetSynchronizer`; complete (or
-timed-out) frame sets are queued and the tracker step runs in its own mutually exclusive
-callback group (a steady-clock timer draining the queue), under a
-:class:`~rclpy.executors.MultiThreadedExecutor`. Time is message time only.
+Threading: image callbacks only convert the image and hand it to the
+:class:`~mbtrack_ros.recording.sync.FrameSetSynchronizer`; complete (or timed-out) frame sets
+are queued (at most ``max_pending_sets``) and the tracker step runs in its own plain thread,
+woken by a condition variable, so it overlaps with message reception (the numba kernels and
+OpenCV release the GIL). The callbacks are dispatched by rclpy's ``EventsExecutor`` (C++
+event queue; ``executor`` parameter): the Python ``MultiThreadedExecutor`` rebuilt its wait
+set for every message and cost an idle node tens of ms per frame set
+(docs/live_measurements.md). Time is message time only.
 
 Track start: with ``detection.enabled`` the tracker step detects, acquires and releases
 people itself (``TrackerConfig.detection``); with ``init_ground_truth`` tracks are started and
@@ -33,8 +36,8 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseArray
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import (
+    Executor, ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor)
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image, PointCloud2
@@ -50,15 +53,15 @@ from mbtrack_ros.nodes.conversions import (
     ImageConversionError, compressed_to_rgb, image_to_rgb, rgb_to_image, stamp_to_ns)
 from mbtrack_ros.nodes.debug import occlusion_layers
 from mbtrack_ros.nodes.params import NodeParams, ParamsError, declare_and_read
+from mbtrack_ros.nodes.transport import use_large_shm_segment
 from mbtrack_ros.recording.csvfiles import CsvFormatError, GroundTruthRow, read_ground_truth
 from mbtrack_ros.recording.sync import FrameSet, FrameSetSynchronizer
 
-__all__ = ['GroundTruthInitializer', 'TrackerNode', 'main']
+__all__ = ['GroundTruthInitializer', 'TrackerNode', 'main', 'make_executor', 'spin']
 
 OUTPUT_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 WARN_PERIOD_S = 10.0
 RATE_WINDOW_NS = 1_000_000_000  # input rates in /diagnostics: the last second of stamps
-STEP_POLL_S = 0.1  # s, steady clock: backup poll; queued frame sets wake the step at once
 
 
 class GroundTruthInitializer:
@@ -153,10 +156,14 @@ class GroundTruthInitializer:
 
 
 class TrackerNode(Node):
-    """The tracker node (see the module docstring). Raises :class:`ParamsError` at start."""
+    """The tracker node (see the module docstring). Raises :class:`ParamsError` at start.
+
+    ``step_thread=False`` starts no step thread: queued frame sets then wait until
+    :meth:`process_pending` is called (tests drive the node by hand this way).
+    """
 
     def __init__(self, *, cli_args: list[str] | None = None, context=None,
-                 tracker: Tracker | None = None) -> None:
+                 tracker: Tracker | None = None, step_thread: bool = True) -> None:
         super().__init__('tracker_node', cli_args=cli_args, context=context)
         self.params: NodeParams
         self.params, self.calibration = declare_and_read(self)
@@ -167,15 +174,18 @@ class TrackerNode(Node):
         except TrackerError as err:
             raise ParamsError(str(err)) from err
         self.sync = FrameSetSynchronizer(p.camera_names, p.slop_ns, p.timeout_ns)
-        self._lock = threading.Lock()  # synchroniser and frame-set queue
+        self._lock = threading.Lock()  # synchroniser, frame-set queue and counters
+        self._wake = threading.Condition(self._lock)  # a frame set was queued, or closing
         self._step_lock = threading.Lock()  # one tracker step at a time; held while closing
         self._closing = False
         self._models: dict[int, PersonModel] = {}  # track id -> appearance model
         self._shown: set[int] = set()  # track ids with markers on screen
         self._pending: deque[FrameSet] = deque()
         self._warned: dict[str, float] = {}
-        self._dropped = 0
-        self._dropped_sets = 0
+        self._dropped = 0  # images refused (bad encoding/size)
+        self._dropped_sets = 0  # frame sets lost: queue full (tracker behind) or step error
+        self._dropped_full = 0  # of these, because the queue was full
+        self._queue_peak = 0  # longest frame-set queue since the last /diagnostics
         self._resets = 0
         self._last_stamp: int | None = None
         self._last_diag: int | None = None
@@ -212,7 +222,7 @@ class TrackerNode(Node):
         self.pub_debug = {c: self.create_publisher(Image, f'~/debug/{c}/occlusion', OUTPUT_QOS)
                           for c in p.camera_names}
         # inputs: cheap callbacks, one mutually exclusive group per camera (frames of one
-        # camera stay in order, cameras do not wait for each other)
+        # camera stay in order under a multi-threaded executor)
         self._subs = []
         image_qos = qos_profile_sensor_data if p.image_reliability == 'best_effort' else \
             QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
@@ -227,15 +237,13 @@ class TrackerNode(Node):
                     CameraInfo, cam.camera_info_topic,
                     lambda msg, c=cam.name: self._on_camera_info(c, msg),
                     qos_profile_sensor_data, callback_group=group))
-        # the tracker step: its own mutually exclusive group, woken by a guard condition when
-        # a frame set is queued, with a slow steady-clock backup poll (independent of sim
-        # time). A 5 ms poll cost an idle node 25 % of a core (docs/live_measurements.md).
-        self._step_group = MutuallyExclusiveCallbackGroup()
-        self._step_wake = self.create_guard_condition(self._on_frame_sets,
-                                                      callback_group=self._step_group)
-        self._step_timer = self.create_timer(
-            STEP_POLL_S, self._on_frame_sets, callback_group=self._step_group,
-            clock=Clock(clock_type=ClockType.STEADY_TIME))
+        # the tracker step: a plain thread woken by self._wake when a frame set is queued
+        # (no executor involved, no polling; it runs while callbacks receive the next set)
+        self._worker: threading.Thread | None = None
+        if step_thread:
+            self._worker = threading.Thread(target=self._step_loop, name='tracker_step',
+                                            daemon=True)
+            self._worker.start()
         self.get_logger().info(
             f'tracking with {p.tracker.algorithm} on {len(p.cameras)} camera(s): '
             + ', '.join(f'{c.name} <- {c.image_topic} ({c.transport})' for c in p.cameras))
@@ -305,17 +313,44 @@ class TrackerNode(Node):
         with self._lock:
             self._rate_window[camera].append(stamp)
             ready = self.sync.add(camera, stamp, rgb)
-            for fs in ready:
-                self._pending.append(fs)
-            if ready:
-                self._step_wake.trigger()  # run the step now (no polling delay, no idle CPU)
-            while len(self._pending) > self.params.max_pending_sets:
-                old = self._pending.popleft()
-                if old.after_reset and self._pending:
-                    self._pending[0].after_reset = True  # keep the reset request
-                self._dropped_sets += 1
+            self._queue(ready)
+
+    def _queue(self, ready: list[FrameSet]) -> None:
+        """Queue frame sets for the step (caller holds the lock); drop the oldest when full.
+
+        A tracker must see every set under normal load, so the queue absorbs a step that is
+        momentarily slower than the frame rate; only a tracker that stays behind for
+        ``max_pending_sets`` frames loses sets (oldest first, counted in /diagnostics as
+        ``dropped frame sets (queue full)``; the next step predicts over the longer gap).
+        """
+        if not ready:
+            return
+        self._pending.extend(ready)
+        while len(self._pending) > self.params.max_pending_sets:
+            old = self._pending.popleft()
+            if old.after_reset and self._pending:
+                self._pending[0].after_reset = True  # keep the reset request
+            self._dropped_sets += 1
+            self._dropped_full += 1
+        self._queue_peak = max(self._queue_peak, len(self._pending))
+        self._wake.notify()
+
+    def _step_loop(self) -> None:
+        """The step thread: wait for queued frame sets, process them, until closing."""
+        while True:
+            with self._wake:
+                while not self._pending and not self._closing:
+                    self._wake.wait()
+                if self._closing:
+                    return
+            self.process_pending()
 
     def _on_frame_sets(self) -> None:
+        """Alias of :meth:`process_pending` (older tests and tools call this name)."""
+        self.process_pending()
+
+    def process_pending(self) -> None:
+        """Process every queued frame set, oldest first, in the calling thread."""
         while not self._closing:
             with self._lock:
                 if not self._pending:
@@ -429,19 +464,26 @@ class TrackerNode(Node):
                 frame_sets=counters.complete, incomplete_sets=counters.incomplete,
                 dropped_frames=self._dropped + counters.dropped_frames + self._dropped_sets,
                 tracks=len(result.tracks), missing_cameras=tuple(self._last_missing),
-                resets=self._resets)
+                resets=self._resets, bad_images=self._dropped,
+                late_frames=counters.dropped_frames, dropped_sets_full=self._dropped_full,
+                dropped_sets_error=self._dropped_sets - self._dropped_full,
+                queued_sets=len(self._pending), queue_peak=self._queue_peak)
+            self._queue_peak = len(self._pending)
             self._step_times.clear()
         return snap
 
     def flush(self) -> None:
         """Process every frame set still buffered (end of a replay)."""
         with self._lock:
-            for fs in self.sync.flush():
-                self._pending.append(fs)
-        self._on_frame_sets()
+            self._pending.extend(self.sync.flush())
+        self.process_pending()
 
     def destroy_node(self) -> None:
-        self._closing = True
+        with self._wake:
+            self._closing = True
+            self._wake.notify_all()
+        if self._worker is not None and self._worker is not threading.current_thread():
+            self._worker.join(timeout=30.0)  # a running step finishes first
         with self._step_lock:  # let a running step finish its output-bag write
             if self._output_bag is not None:
                 self._output_bag.close()
@@ -449,17 +491,49 @@ class TrackerNode(Node):
         super().destroy_node()
 
 
+def make_executor(kind: str, context=None) -> Executor:
+    """The executor named by the ``executor`` parameter (``events``, ``single``, ``multi``).
+
+    ``events`` (default) is rclpy's C++ ``EventsExecutor``: per message it only calls the
+    Python callback, where the Python executors rebuild a wait set (``multi`` also hands
+    every callback to a thread pool). Falls back to ``single`` if this rclpy has none.
+    Spin it with :func:`spin`.
+    """
+    if kind == 'events':
+        try:
+            from rclpy.experimental import EventsExecutor
+        except ImportError:
+            kind = 'single'
+        else:
+            return EventsExecutor(context=context)
+    if kind == 'multi':
+        return MultiThreadedExecutor(num_threads=3, context=context)
+    return SingleThreadedExecutor(context=context)
+
+
+def spin(executor: Executor, context=None) -> None:
+    """Dispatch callbacks until the context shuts down (SIGINT/SIGTERM).
+
+    ``spin_once`` in a loop rather than ``spin()``: the ``EventsExecutor`` of rclpy 7.1.5
+    (Jazzy) dispatches nothing from ``spin()`` (not even a timer; it busy-waits and ignores
+    SIGTERM), while ``spin_once`` works.
+    """
+    while rclpy.ok(context=context):
+        executor.spin_once(timeout_sec=0.1)
+
+
 def main(args: list[str] | None = None) -> int:
     """Entry point ``tracker_node``; exits non-zero on bad parameters."""
+    use_large_shm_segment()  # before rclpy.init (debug images are large too)
     rclpy.init(args=args)
     node = None
     code = 0
     try:
         node = TrackerNode()
-        # one thread per camera input plus the tracker step and the middleware's callbacks
-        executor = MultiThreadedExecutor(num_threads=len(node.params.cameras) + 2)
+        # callbacks in the executor, the tracker step in the node's own thread
+        executor = make_executor(node.params.executor)
         executor.add_node(node)
-        executor.spin()
+        spin(executor)
     except ParamsError as err:
         print(f'tracker_node: error: {err}', file=sys.stderr)
         code = 2
