@@ -9,7 +9,7 @@ from mcap.reader import make_reader
 
 from mbtrack_ros.recording.bag import (
     GROUND_TRUTH_TOPIC, BagError, RecordingReader, RecordingWriter, camera_info_topic,
-    image_topic)
+    image_topic, prefetched)
 from mbtrack_ros.recording.csvfiles import GroundTruthRow
 
 STAMP0 = 1_700_000_000 * 10**9
@@ -110,6 +110,56 @@ def test_truncated_bag_raises_bag_error_after_good_frames(tmp_path, room, rng):
     assert got[:3] == [0, 1, 2]
     assert 'damaged' in str(info.value) and '\n' not in str(info.value)
     assert f'frame set {got[-1]}' in str(info.value)
+
+
+def test_prefetched_reader_gives_the_same_frames_then_the_same_error(tmp_path, room, rng):
+    """The reader thread of ``mbtrack replay``: every frame set before the damage, in order,
+    with the same pixels, then the same BagError as reading directly."""
+    write(tmp_path / 'bag', room, frames(room, 24, rng))
+    mcap_file = next(Path(tmp_path / 'bag').glob('*.mcap'))
+    data = mcap_file.read_bytes()
+    mcap_file.write_bytes(data[: len(data) * 2 // 3])
+
+    def read(wrap):
+        got = []
+        with pytest.raises(BagError) as info:
+            with RecordingReader(tmp_path / 'bag') as reader:
+                for fs in wrap(reader.frames()):
+                    got.append(fs)
+        return got, str(info.value)
+
+    direct, direct_error = read(lambda it: it)
+    ahead, ahead_error = read(lambda it: prefetched(it, depth=2))
+    assert len(direct) >= 3 and ahead_error == direct_error
+    assert [fs.index for fs in ahead] == [fs.index for fs in direct]
+    assert [fs.stamp_ns for fs in ahead] == [fs.stamp_ns for fs in direct]
+    for a, d in zip(ahead, direct):
+        assert all(np.array_equal(a.images[c], d.images[c]) for c in d.images)
+
+
+def test_prefetched_order_error_position_and_early_stop():
+    def items():
+        yield from range(5)
+        raise ValueError('broken after 4')
+
+    got = []
+    with pytest.raises(ValueError, match='broken after 4'):
+        for x in prefetched(items(), depth=1):
+            got.append(x)
+    assert got == [0, 1, 2, 3, 4]
+    produced = []
+
+    def counting():
+        for i in range(1000):
+            produced.append(i)
+            yield i
+
+    it = prefetched(counting(), depth=3)
+    assert [next(it) for _ in range(2)] == [0, 1]
+    it.close()  # the consumer stops: the thread stops too, a few items ahead at most
+    assert len(produced) <= 2 + 3 + 2
+    with pytest.raises(ValueError):
+        next(prefetched([], depth=0))
 
 
 def test_incomplete_sets_name_the_missing_camera(tmp_path, room, rng):

@@ -137,7 +137,7 @@ def _diag_values(msg) -> dict:
 
 
 def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
-             max_pending_sets: int = 2, timeout: float = 600.0, use_sim_time: bool = True,
+             max_pending_sets: int = 15, timeout: float = 600.0, use_sim_time: bool = True,
              ground_truth: bool = False, node_args: tuple[str, ...] = ()) -> LiveResult:
     """Play ``recording`` to a tracker_node process and measure (see the module docstring).
 

@@ -3,7 +3,9 @@
 BAG is a rosbag2 directory (MCAP or sqlite3) or a recording directory made by
 ``mbtrack synth`` (then ``--config`` defaults to its ``calibration.yaml``). Frames are read
 with :class:`~mbtrack_ros.recording.bag.RecordingReader` and fed to the
-:class:`~mbtrack_ros.core.tracker.Tracker` as fast as possible. Outputs in ``--out``:
+:class:`~mbtrack_ros.core.tracker.Tracker` as fast as possible (a reader thread decodes the
+next frame sets while the tracker works: :func:`~mbtrack_ros.recording.bag.prefetched`).
+Outputs in ``--out``:
 
 * ``tracks.csv`` (``recording.csvfiles`` format), written row by row while tracking;
 * ``particles.npz`` with ``--save-particles`` (format of ``evaluation.posterior``).
@@ -31,7 +33,7 @@ from mbtrack_ros.core.filters import FilterError
 from mbtrack_ros.core.initiation import InitiationError, initial_tracks, plan_key_views
 from mbtrack_ros.core.likelihood import LikelihoodError
 from mbtrack_ros.core.tracker import Tracker, TrackerConfig, TrackerError
-from mbtrack_ros.recording.bag import BagError, RecordingReader
+from mbtrack_ros.recording.bag import BagError, RecordingReader, prefetched
 from mbtrack_ros.recording.csvfiles import (
     CsvFormatError, GroundTruthRow, TrackRow, read_ground_truth, write_tracks)
 
@@ -195,8 +197,9 @@ def _track_rows(tracker: Tracker, reader: RecordingReader, index: _FrameIndex, s
                disable=not sys.stderr.isatty())
     known = set(tracker.calibration.cameras)
     t_start = time.perf_counter()
+    frames = prefetched(reader.frames(), depth=4)  # read and decode while tracking
     try:
-        for fs in reader.frames():
+        for fs in frames:
             if args.max_frames is not None and status['frames'] >= args.max_frames:
                 break
             frame = index.frame(fs.stamp_ns)
@@ -241,6 +244,7 @@ def _track_rows(tracker: Tracker, reader: RecordingReader, index: _FrameIndex, s
     except BagError as err:
         status['bag_error'] = str(err)
     finally:
+        frames.close()  # stop the reader thread before the reader closes
         bar.close()
         status['wall_s'] = time.perf_counter() - t_start
 

@@ -17,11 +17,14 @@ driver and a motion-capture bridge would write them. No rclpy is imported here.
 """
 from __future__ import annotations
 
+import queue
 import re
+import threading
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
+from typing import TypeVar
 
 import numpy as np
 from mcap.records import Channel, Message, Schema
@@ -37,7 +40,7 @@ from mbtrack_ros.recording.images import (
 
 __all__ = [
     'GROUND_TRUTH_TOPIC', 'BagError', 'FrameSet', 'RecordingReader', 'RecordingWriter',
-    'camera_info_topic', 'image_topic', 'typestore',
+    'camera_info_topic', 'image_topic', 'prefetched', 'typestore',
 ]
 
 GROUND_TRUTH_TOPIC = '/ground_truth/people'
@@ -423,3 +426,55 @@ class RecordingReader:
                                        float(p['y']), float(p['z_head']),
                                        bool(p['sitting'] > 0.5), ()) for p in pts)
         return rows
+
+
+_T_item = TypeVar('_T_item')
+
+
+def prefetched(items: Iterable[_T_item], depth: int = 4) -> Iterator[_T_item]:
+    """Iterate ``items`` in a background thread, at most ``depth`` items ahead, in order.
+
+    For :meth:`RecordingReader.frames`: reading, decompressing and decoding the next frame
+    sets overlaps with the caller's work on the current one (zstd/lz4, numpy copies and the
+    numba/OpenCV work of the caller release the GIL). An exception raised by ``items``
+    (e.g. :class:`BagError` at a damaged chunk) is raised here after every item produced
+    before it, so the caller sees the same sequence as without prefetching. Closing the
+    iterator early (``break``) stops the thread at its next item.
+    """
+    if depth < 1:
+        raise ValueError(f'depth must be >= 1, got {depth}')
+    slots: queue.Queue = queue.Queue(maxsize=depth)
+    stop = threading.Event()
+
+    def put(entry: tuple) -> bool:
+        while not stop.is_set():
+            try:
+                slots.put(entry, timeout=0.05)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def work() -> None:
+        try:
+            for item in items:
+                if not put(('item', item)):
+                    return
+            put(('end', None))
+        except BaseException as err:  # handed to the consumer, raised there in order
+            put(('error', err))
+
+    thread = threading.Thread(target=work, name='prefetch', daemon=True)
+    thread.start()
+    try:
+        while True:
+            kind, value = slots.get()
+            if kind == 'item':
+                yield value
+            elif kind == 'end':
+                return
+            else:
+                raise value
+    finally:
+        stop.set()
+        thread.join(timeout=5.0)
