@@ -75,7 +75,8 @@ class PeopleCueConfig:
         min_visible: fraction of a silhouette inside the image for a camera to see it.
         min_area: smallest silhouette area seen, pixels at 320x240 (scaled).
         motion_threshold: frame-difference luminance above which a pixel moved.
-        motion_dilation: pixels by which the moving pixels grow (at the image size used).
+        motion_dilation: pixels by which the moving pixels grow (not scaled: limbs that
+            moved by a few pixels fill the body between them).
         min_motion: smallest moving fraction of the silhouette in every seeing camera
             (ignored with a single bootstrap frame).
         w_symmetry: weight of the colour-symmetry term against the contour term.
@@ -112,7 +113,8 @@ class PeopleCueConfig:
 
     def __post_init__(self) -> None:
         if not (self.spacing > 0 and self.height > 0 and self.width > 0
-                and self.region_height > 0 and self.region_width > 0):
+                and self.region_height > 0 and self.region_width > 0
+                and self.core_width > 0):
             raise DetectionError('people cue spacing and sizes must be > 0')
         if not self.orientations:
             raise DetectionError('people cue needs at least one orientation')
