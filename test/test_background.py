@@ -8,6 +8,7 @@ import pytest
 from mbtrack_ros.core.detection import DetectionError
 from mbtrack_ros.core.detection.background import (
     BackgroundBank, BackgroundConfig, BackgroundModel, _to_ycc, clean_mask)
+from mbtrack_ros.core.detection.people import PeopleCueConfig
 
 H, W = 120, 160
 
@@ -236,3 +237,7 @@ def test_unknown_pixels_nobody_covered_are_learnt_after_the_wait():
     assert fg.mean() < 0.002 and not model.unknown.any()
     with pytest.raises(DetectionError, match='unknown-pixel mask'):
         model.set_unknown(np.zeros((5, 5), bool))
+    with pytest.raises(DetectionError, match='unknown_frames'):
+        BackgroundConfig(unknown_frames=0)
+    with pytest.raises(DetectionError, match='people cue'):
+        PeopleCueConfig(core_width=0.0)
