@@ -20,8 +20,11 @@ to there is kept on disk and the exit code is 1.
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import queue
 import shutil
 import sys
+import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -249,6 +252,52 @@ def _track_rows(tracker: Tracker, reader: RecordingReader, index: _FrameIndex, s
         status['wall_s'] = time.perf_counter() - t_start
 
 
+class _BackgroundWriter:
+    """Writes frame results to an ``OutputBagWriter`` in a thread (in order, bounded queue).
+
+    Building and serialising the rclpy messages of a frame (MarkerArray above all) took
+    ~13 % of the replay's wall time in the main thread; here it overlaps with the next
+    tracker step (its numba kernels release the GIL). Each result is snapshotted (track
+    means and covariances copied, particles left out) so the tracker may reuse its buffers.
+    A write error is raised by the next :meth:`write` or by :meth:`close`.
+    """
+
+    def __init__(self, writer, depth: int = 8) -> None:
+        self._writer = writer
+        self._queue: queue.Queue = queue.Queue(maxsize=depth)
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, name='output_bag', daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while True:
+            result = self._queue.get()
+            if result is None:
+                return
+            if self._error is None:
+                try:
+                    self._writer.write(result)
+                except BaseException as err:  # reported in the main thread
+                    self._error = err
+
+    def write(self, result) -> None:
+        if self._error is not None:
+            raise self._error
+        tracks = [dataclasses.replace(t, mean=np.array(t.mean), covariance=np.array(
+            t.covariance), visible_fraction=dict(t.visible_fraction),
+            visibility=dict(t.visibility), particles=None, weights=None)
+            for t in result.tracks]
+        self._queue.put(dataclasses.replace(result, tracks=tracks, ended=list(result.ended)))
+
+    def close(self) -> None:
+        """Write what is queued, close the bag, raise a write error if one happened."""
+        self._queue.put(None)
+        self._thread.join()
+        self._writer.close()
+        if self._error is not None:
+            raise self._error
+
+
 def _output_bag(out: Path, calibration: RoomCalibration):
     """Writer of OUTDIR/tracks.mcap: every tracker_node output topic (None without rclpy)."""
     try:
@@ -260,7 +309,7 @@ def _output_bag(out: Path, calibration: RoomCalibration):
     if (path / 'metadata.yaml').exists():
         shutil.rmtree(path)  # replaced like tracks.csv
     try:
-        return OutputBagWriter(path, calibration)
+        return _BackgroundWriter(OutputBagWriter(path, calibration))
     except OutputBagError as err:
         raise _UserError(str(err)) from err
 
