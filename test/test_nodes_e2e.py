@@ -200,6 +200,66 @@ def messages_result():
     return FrameResult(stamp_ns=0)
 
 
+def test_step_thread_processes_every_queued_set_in_order(room_calibration, context):
+    """The step thread: sets queued while a step is running are all processed, in stamp
+    order, none dropped (the queue holds up to max_pending_sets)."""
+    node = start(context, '-p', f'calibration_file:={room_calibration}',
+                 '-p', 'cameras:=[cam0,cam1]', '-p', 'detection.enabled:=false',
+                 step_thread=True)
+    seen = []
+    process = node.process
+
+    def spy(fs):
+        seen.append(fs.stamp_ns)
+        return process(fs)
+
+    node.process = spy
+    try:
+        rgb = np.full((240, 320, 3), 90, np.uint8)
+        period = 66_666_667
+        stamps = [1_000_000_000 + k * period for k in range(12)]
+        with node._step_lock:  # a long step: the thread cannot process while we feed
+            for t in stamps:
+                node._on_image('cam0', image_msg(rgb, t))
+                node._on_image('cam1', image_msg(rgb, t, 'cam1_optical_frame'))
+            time.sleep(0.2)
+            assert len(node._pending) >= 11  # queued, not dropped (default queue: 15)
+        deadline = time.monotonic() + 30
+        while len(seen) < len(stamps) and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert seen == stamps
+        snap = node.snapshot(messages_result())
+        assert snap.dropped_sets_full == 0 and snap.dropped_frames == 0
+        assert snap.queue_peak >= 11 and snap.frame_sets == len(stamps)
+    finally:
+        node.destroy_node()
+
+
+def test_queue_overflow_drops_oldest_and_says_why(room_calibration, context):
+    """A tracker that stays max_pending_sets behind loses the oldest sets, counted as
+    'dropped frame sets (queue full)' in /diagnostics; the newest are kept."""
+    from mbtrack_ros.nodes.messages import diagnostics_message
+
+    node = start(context, '-p', f'calibration_file:={room_calibration}',
+                 '-p', 'cameras:=[cam0]', '-p', 'max_pending_sets:=3',
+                 '-p', 'detection.enabled:=false')
+    try:
+        rgb = np.full((240, 320, 3), 90, np.uint8)
+        stamps = [1_000_000_000 + k * 66_666_667 for k in range(5)]
+        for t in stamps:
+            node._on_image('cam0', image_msg(rgb, t))
+        assert [fs.stamp_ns for fs in node._pending] == stamps[2:]
+        snap = node.snapshot(messages_result())
+        assert snap.dropped_sets_full == 2 and snap.dropped_sets_error == 0
+        assert snap.queued_sets == 3 and snap.queue_peak == 3
+        values = {kv.key: kv.value for kv in diagnostics_message(0, snap).status[0].values}
+        assert values['dropped frame sets (queue full)'] == '2'
+        node.process_pending()
+        assert node._last_stamp == stamps[-1]
+    finally:
+        node.destroy_node()
+
+
 def test_compressed_transport_and_rescaling(room_calibration, context):
     from sensor_msgs.msg import CompressedImage
 
@@ -427,3 +487,25 @@ def test_replay_writes_output_bag(recording, tmp_path):
     from_csv = sorted((r.stamp_ns, round(r.x, 3), round(r.y, 3)) for r in rows)
     assert len(from_bag) == len(from_csv) > 0
     np.testing.assert_allclose(np.array(from_bag), np.array(from_csv), atol=2e-3, rtol=0)
+
+
+def test_large_shm_segment_profile_respects_user_settings(tmp_path, monkeypatch):
+    """The Fast DDS profile: installed for Fast DDS only, never over the user's own."""
+    import xml.etree.ElementTree as ET
+
+    from mbtrack_ros.nodes.transport import SEGMENT_BYTES, use_large_shm_segment
+
+    monkeypatch.setattr('tempfile.tempdir', str(tmp_path))
+    env = {}
+    path = use_large_shm_segment(env)
+    assert env['FASTRTPS_DEFAULT_PROFILES_FILE'] == str(path) and path.parent == tmp_path
+    ns = {'p': 'http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles'}
+    root = ET.parse(path).getroot()
+    sizes = [int(e.text) for e in root.iterfind('.//p:segment_size', ns)]
+    assert sizes == [SEGMENT_BYTES] and SEGMENT_BYTES >= 4 * 320 * 240 * 3 * 4
+    assert root.find('.//p:useBuiltinTransports', ns).text == 'false'
+    for user in ({'FASTRTPS_DEFAULT_PROFILES_FILE': '/mine.xml'},
+                 {'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4'},
+                 {'RMW_IMPLEMENTATION': 'rmw_cyclonedds_cpp'}):
+        env = dict(user)
+        assert use_large_shm_segment(env) is None and env == user
