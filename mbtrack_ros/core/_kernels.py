@@ -520,6 +520,8 @@ def hjs_camera_ws(bins, row, x0, x1, part, offsets, area, bbox, order, target, p
     rel = np.empty(nk, np.int64)
     need = np.empty(nk, np.int64)
     skip = np.empty(nk, np.int64)
+    todo = np.empty(nk, np.int64)
+    rfc = np.empty(nk)
     vals = np.empty(nk)
     do_record = record.shape[0] > 0
     for oi in range(npart):
@@ -620,17 +622,31 @@ def hjs_camera_ws(bins, row, x0, x1, part, offsets, area, bbox, order, target, p
         # x_p ignoring h (and k_p), rfc, spread over Delta(x_p) into b_bg^h. The listing
         # writes b_bg^{k_p}, which contradicts Eq. 36-39: the receiving buffer is the one of
         # the target h whose farther particles will read it (Eq. 40).
-        reduced = False
-        if occluded:
-            for i in range(nneed):                 # position of h in rel, or -1
-                skip[i] = -1
-                for j in range(nrel):
-                    if rel[j] == need[i]:
-                        skip[i] = j
-                if skip[i] < 0 or nrel > 1:
-                    reduced = True
-        if reduced:
-            # reduced maps w^_h = prod_{m != h, k_p} b_fg^m for all needed h in one pass
+        # A needed target h that does not occlude x_p (not in rel) has the reduced map
+        # prod_{m != h, k_p} b_fg^m = w* itself: rfc = fc. Ignoring the only occluder leaves
+        # the map 1: rfc = the term with w = 1. Only the other targets need their own maps.
+        ntodo = 0
+        for i in range(nneed):
+            skip[i] = -1                            # position of h in rel, or -1
+            for j in range(nrel):
+                if rel[j] == need[i]:
+                    skip[i] = j
+            if not occluded:                        # every reduced map is 1 on Delta(x_p)
+                rfc[i] = f_free
+            elif skip[i] < 0:
+                rfc[i] = fc[p]
+            elif nrel == 1:
+                if f_free < 0.0:
+                    occlusion_terms(bins, row, x0, x1, part, s0, s1, ones, zero, zero, zero,
+                                    ap, d_occ, key, k, va[p], vb[p], wa[p], counts, touched,
+                                    mark, mt, d2, out_l, out_v)
+                    f_free = out_l[0]
+                rfc[i] = f_free
+            else:
+                todo[ntodo] = i
+                ntodo += 1
+        if ntodo > 0:
+            # reduced maps w^_h = prod_{m != h, k_p} b_fg^m for these h in one pass
             for s in range(s0, s1):
                 r = row[s]
                 if r < vy0 or r >= vy1:
@@ -638,24 +654,19 @@ def hjs_camera_ws(bins, row, x0, x1, part, offsets, area, bbox, order, target, p
                 for c in range(max(x0[s], vx0), min(x1[s], vx1)):
                     for j in range(nrel):
                         vals[j] = max(1.0 - mfg[r, c, rel[j]], 0.0)
-                    for i in range(nneed):
+                    for t in range(ntodo):
+                        sk = skip[todo[t]]
                         w = 1.0
                         for j in range(nrel):
-                            if j != skip[i]:
+                            if j != sk:
                                 w *= vals[j]
-                        wmap[r, c, i] = w
-            _fill_outside(row, x0, x1, s0, s1, vx0, vy0, vx1, vy1, wmap, nneed)
+                        wmap[r, c, t] = w
+            _fill_outside(row, x0, x1, s0, s1, vx0, vy0, vx1, vy1, wmap, ntodo)
             occlusion_terms(bins, row, x0, x1, part, s0, s1, wmap, zero, zero,
-                            np.int64(nneed), ap, d_occ, key, k, va[p], vb[p], wa[p], hist,
+                            np.int64(ntodo), ap, d_occ, key, k, va[p], vb[p], wa[p], hist,
                             touched, mark, mt, d2, out_l, out_v)
-        else:                                       # every reduced map is 1 on Delta(x_p)
-            if f_free < 0.0:
-                occlusion_terms(bins, row, x0, x1, part, s0, s1, ones, zero, zero, zero, ap,
-                                d_occ, key, k, va[p], vb[p], wa[p], counts, touched, mark,
-                                mt, d2, out_l, out_v)
-                f_free = out_l[0]
-            for i in range(nneed):
-                out_l[i] = f_free
+            for t in range(ntodo):
+                rfc[todo[t]] = out_l[t]
         # Algorithm 1: b_fg^{k_p} -= pi_p Delta(x_p). The listing's "b_fg = N, subtract
         # Delta, divide by N" is the uniform-weight case of subtracting the normalised prior
         # weight (000 Eq. 35), which is what the non-uniform BP weights need. In the same
@@ -670,7 +681,7 @@ def hjs_camera_ws(bins, row, x0, x1, part, offsets, area, bbox, order, target, p
         ux1 = -1
         uy1 = -1
         for i in range(nneed):
-            vals[i] = pi_p * out_l[i] / ap
+            vals[i] = pi_p * rfc[i] / ap
             h = need[i]
             ux0 = min(ux0, suf[oi + 1, h, 0])
             uy0 = min(uy0, suf[oi + 1, h, 1])
