@@ -4,9 +4,9 @@ A ``clear-room`` recording (four corner cameras, no ceiling camera, 320x240, 15 
 in real time by ``bag_player`` (own process, with ``/clock``) to ``tracker_node`` (own
 process, automatic detection, ``use_sim_time``). A listener in this process records, with its
 DDS time stamps (system clock, one machine) the moment the player published the first
-``/clock`` message carrying a frame's stamp (the player publishes ``/clock`` = the stamp just
-before each message of the frame set, so this is when the frame set starts to go out; cheaper
-to receive than an image: its ``source_timestamp``) and the moment the
+``/clock`` message carrying a frame's stamp (the player publishes one ``/clock`` = the stamp
+just before the first message of the frame set, so this is when the frame set starts to go
+out; cheaper to receive than an image: its ``source_timestamp``) and the moment the
 ``/tracker_node/people`` message with that stamp reached the listener (its
 ``received_timestamp``); the difference is the end-to-end latency. Taking both times from the
 middleware, not from the Python callbacks, keeps a busy listener out of the measurement. It also
