@@ -350,23 +350,25 @@ class TrackerNode(Node):
         self.process_pending()
 
     def process_pending(self) -> None:
-        """Process every queued frame set, oldest first, in the calling thread."""
+        """Process every queued frame set, oldest first, in the calling thread.
+
+        A set is taken from the queue under the step lock, so two callers (the step thread
+        and :meth:`flush`) never process sets out of order.
+        """
         while not self._closing:
-            with self._lock:
-                if not self._pending:
-                    return
-                fs = self._pending.popleft()
-            try:
-                with self._step_lock:
-                    if self._closing:
-                        return
-                    self.process(fs)
-            except Exception as err:  # noqa: BLE001 - a bad frame must not kill the node
+            with self._step_lock:
                 with self._lock:
-                    self._dropped_sets += 1
-                self.warn_once(f'step:{type(err).__name__}',
-                               f'frame set at {fs.stamp_ns} ns dropped: '
-                               f'{type(err).__name__}: {err}')
+                    if not self._pending or self._closing:
+                        return
+                    fs = self._pending.popleft()
+                try:
+                    self.process(fs)
+                except Exception as err:  # noqa: BLE001 - a bad frame must not kill the node
+                    with self._lock:
+                        self._dropped_sets += 1
+                    self.warn_once(f'step:{type(err).__name__}',
+                                   f'frame set at {fs.stamp_ns} ns dropped: '
+                                   f'{type(err).__name__}: {err}')
 
     # -- processing -----------------------------------------------------------------------
     def reset(self, stamp_ns: int, reason: str) -> None:
