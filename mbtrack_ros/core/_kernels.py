@@ -446,10 +446,11 @@ def hjs_camera_ws(bins, row, x0, x1, part, offsets, area, bbox, order, target, p
     """Visit all K*N particles of one camera from near to far (000 Algorithm 1 "update").
 
     The image buffers are caller-owned workspaces (H', W', C) with H' >= H, W' >= W,
-    C >= max(K, 1), indexed by image pixel and pixel-interleaved (the K factors of a pixel
-    are contiguous). b_fg is kept as the accumulated prior mass m_fg = 1 - b_fg so that
-    every buffer starts at zero. ``mfg`` and ``bbg`` must be zero on entry and are zero
-    again on return (only the rectangle that was written is cleared); ``wmap`` is scratch.
+    C >= max(K, 1) (``mfg``: 2C, it also holds the shared part of b_bg, see below), indexed
+    by image pixel and pixel-interleaved (the K factors of a pixel are contiguous). b_fg is
+    kept as the accumulated prior mass m_fg = 1 - b_fg so that every buffer starts at zero.
+    ``mfg`` and ``bbg`` must be zero on entry and are zero again on return (only the
+    rectangle that was written is cleared); ``wmap`` is scratch.
     Reusing them across calls saves allocating and clearing 2 x H x W x K doubles per
     camera and frame (which cost as much as the whole update of a frame without overlap).
 
@@ -466,7 +467,7 @@ def hjs_camera_ws(bins, row, x0, x1, part, offsets, area, bbox, order, target, p
             the workspaces are not touched and may be (1, 1, 1)).
         record: flat float64 array receiving w* at every span pixel (size 0: do not
             record); pixel ``pix_offsets[p]`` is the first pixel of particle p.
-        mfg, bbg, wmap: (H', W', C) float64 workspaces (see above).
+        mfg (H', W', 2C), bbg, wmap (H', W', C): float64 workspaces (see above).
 
     Returns:
         fc (P,) foreground terms, bc (P,) background terms, alpha (P,) sum of w*.
@@ -584,9 +585,11 @@ def hjs_camera_ws(bins, row, x0, x1, part, offsets, area, bbox, order, target, p
                 for c in range(max(x0[s], vx0), min(x1[s], vx1)):
                     w = 1.0
                     for j in range(nrel):
-                        w *= max(1.0 - mfg[r, c, rel[j]], 0.0)   # >= 0 despite rounding
+                        h = rel[j]
+                        w *= max(1.0 - mfg[r, c, h], 0.0)   # >= 0 despite rounding
+                        acc += mfg[r, c, nk + h]             # b_bg^k, shared part
                     wmap[r, c, 0] = w
-                    acc += bbg[r, c, k]
+                    acc += bbg[r, c, k]                      # b_bg^k, own corrections
                     if w != 1.0:
                         occluded = True
             if occluded:
@@ -676,13 +679,24 @@ def hjs_camera_ws(bins, row, x0, x1, part, offsets, area, bbox, order, target, p
         # Only farther particles of the needed targets read these pixels, and they lie in
         # those targets' boxes suf[oi + 1]: writes outside the union of the boxes are never
         # read and are skipped.
+        # b_bg^h is stored in two parts: the intensity with rfc = fc (the usual value of
+        # every h, see above) once per writing target, t^{k_p} = mfg[..., K + k_p], which a
+        # reader of target h sums over the other targets (b_bg^h = sum_{m != h} t^m +
+        # corrections); and, only for the h whose reduced term differs from fc, the
+        # correction pi_p (rfc_h - fc) / area in bbg[..., h]. One write per pixel instead
+        # of one per needed target.
+        tval = pi_p * fc[p] / ap
+        ncorr = 0
         ux0 = 1 << 30
         uy0 = 1 << 30
         ux1 = -1
         uy1 = -1
         for i in range(nneed):
-            vals[i] = pi_p * rfc[i] / ap
             h = need[i]
+            if rfc[i] != fc[p]:
+                skip[ncorr] = h
+                vals[ncorr] = pi_p * (rfc[i] - fc[p]) / ap
+                ncorr += 1
             ux0 = min(ux0, suf[oi + 1, h, 0])
             uy0 = min(uy0, suf[oi + 1, h, 1])
             ux1 = max(ux1, suf[oi + 1, h, 2])
@@ -697,8 +711,9 @@ def hjs_camera_ws(bins, row, x0, x1, part, offsets, area, bbox, order, target, p
                 continue
             for c in range(max(x0[s], ux0), min(x1[s], ux1)):
                 mfg[r, c, k] += pi_p
-                for i in range(nneed):
-                    bbg[r, c, need[i]] += vals[i]
+                mfg[r, c, nk + k] += tval
+                for i in range(ncorr):
+                    bbg[r, c, skip[i]] += vals[i]
         if ux1 > ux0 and uy1 > uy0:
             wx0 = min(wx0, ux0)
             wy0 = min(wy0, uy0)
@@ -720,7 +735,7 @@ def hjs_camera(bins, row, x0, x1, part, offsets, area, bbox, order, target, prio
         wmap = np.zeros((1, 1, 1))
     else:
         shape = (bins.shape[0], bins.shape[1], max(n_targets, 1))
-        mfg = np.zeros(shape)
+        mfg = np.zeros((shape[0], shape[1], 2 * shape[2]))
         bbg = np.zeros(shape)
         wmap = np.empty(shape)
     return hjs_camera_ws(bins, row, x0, x1, part, offsets, area, bbox, order, target, prior,
