@@ -506,21 +506,21 @@ def test_tracker_moves_a_drifted_track_back_instead_of_a_second_birth():
     tracker = Tracker(calib, TrackerConfig(detection=True, particles=50, seed=2),
                       rng=np.random.default_rng(2))
     tracker.detection.bootstrap({n: [bgs[n]] for n in calib.cameras})
-    walker = lambda k: [person(2.0 + 0.03 * k, 2.6, theta=0.0)]   # noqa: E731
-    res = _track_painted(tracker, calib, bgs, rng, 8, walker)
+    walker = lambda k: [person(2.0 + 0.02 * k, 2.6, theta=0.0)]   # noqa: E731
+    res = _track_painted(tracker, calib, bgs, rng, 36, walker)   # > relocate_interval
     assert tracker.track_ids == [1]
     # the track drifts: its particles are put 0.8 m beside the person
     state = res[-1].tracks[0].mean.copy()
     state[1] += 0.8
     tracker.relocate_track(1, state)
     ids, last = set(), None
-    for k in range(8, 30):
+    for k in range(36, 56):
         r = tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, walker(k), rng))
         ids |= {t.track_id for t in r.tracks}
         last = (k, r)
     assert ids == {1} and tracker.track_ids == [1]        # never a second track
     k, r = last
-    assert np.hypot(r.tracks[0].mean[0] - (2.0 + 0.03 * k), r.tracks[0].mean[1] - 2.6) < 0.25
+    assert np.hypot(r.tracks[0].mean[0] - (2.0 + 0.02 * k), r.tracks[0].mean[1] - 2.6) < 0.25
 
 
 def test_tracker_births_a_different_person_beside_a_tracked_one():
@@ -561,3 +561,29 @@ def test_bench_detection_reports_times_and_tracks_five_people_without_births():
         assert r[f'tracked_{tag}']['births'] == 0
         assert r[f'entering_{tag}']['detections'] >= 2      # confirmed on the 3rd frame
     assert summary['pipeline_4cams_fps'] > 0
+
+
+def test_a_track_moved_or_born_recently_is_not_moved_again_and_no_twin_is_born():
+    """Within ``relocate_interval`` of a track's birth a detection that its model explains
+    is dropped: neither a move (a young model in a group would hop) nor a second birth."""
+    from mbtrack_ros.core.tracker import Tracker, TrackerConfig
+
+    rng = np.random.default_rng(3)
+    calib = make_room()
+    bgs = backgrounds(calib)
+    tracker = Tracker(calib, TrackerConfig(detection=True, particles=50, seed=2),
+                      rng=np.random.default_rng(2))
+    tracker.detection.bootstrap({n: [bgs[n]] for n in calib.cameras})
+    walker = lambda k: [person(2.0 + 0.02 * k, 2.6, theta=0.0)]   # noqa: E731
+    res = _track_painted(tracker, calib, bgs, rng, 8, walker)
+    assert tracker.track_ids == [1]
+    state = res[-1].tracks[0].mean.copy()
+    state[1] += 0.8
+    tracker.relocate_track(1, state)                  # drift 0.5 s after the birth
+    actions = []
+    for k in range(8, 20):
+        tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, walker(k), rng))
+        actions += [d['action'] for d in tracker.detection.decisions]
+    assert tracker.track_ids == [1]
+    assert any(a.startswith('drop') for a in actions)
+    assert not any(a.startswith('move') or a == 'birth' for a in actions)

@@ -223,7 +223,7 @@ class Tracker:
         self._heights[track_id] = float(getattr(model, 'height', float('nan')))
         self._models[track_id] = model
         if self.detection is not None:
-            self.detection.register(track_id)
+            self.detection.register(track_id, stamp_ns)
         return track_id
 
     def remove_track(self, track_id: int) -> None:
