@@ -149,3 +149,43 @@ def test_wrong_image_size_mid_bag_is_one_line_error(recording, tmp_path, capsys,
     err = capsys.readouterr().err
     assert 'Traceback' not in err and 'frame set 6' in err
     assert {r.frame for r in read_tracks(out / 'tracks.csv')} == set(range(6))
+
+
+def test_background_writer_keeps_order_snapshots_results_and_reports_errors():
+    """tracks.mcap is written in a thread: results in order, as they were when handed over
+    (the tracker may reuse its arrays), and a write error is raised in the main thread."""
+    from mbtrack_ros.commands.replay import _BackgroundWriter
+    from mbtrack_ros.core.state import FrameResult, TrackEstimate
+
+    class Fake:
+        def __init__(self, fail_at=None):
+            self.got, self.closed, self.fail_at = [], False, fail_at
+
+        def write(self, result):
+            if result.stamp_ns == self.fail_at:
+                raise OSError('disk full')
+            self.got.append((result.stamp_ns, [t.mean[0] for t in result.tracks]))
+
+        def close(self):
+            self.closed = True
+
+    mean = np.zeros(6)
+    fake = Fake()
+    writer = _BackgroundWriter(fake, depth=2)
+    for k in range(20):
+        mean[0] = k  # one buffer, overwritten like a tracker reusing its arrays
+        writer.write(FrameResult(stamp_ns=k, tracks=[TrackEstimate(
+            track_id=1, mean=mean, covariance=np.eye(4), height=1.7)]))
+    writer.close()
+    assert fake.closed and fake.got == [(k, [float(k)]) for k in range(20)]
+
+    failing = Fake(fail_at=3)
+    writer = _BackgroundWriter(failing, depth=2)
+    for k in range(6):
+        try:
+            writer.write(FrameResult(stamp_ns=k))
+        except OSError:
+            break
+    with pytest.raises(OSError, match='disk full'):
+        writer.close()
+    assert failing.closed and [s for s, _ in failing.got] == [0, 1, 2]
