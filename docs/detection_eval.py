@@ -1,0 +1,249 @@
+"""Identity-switch analysis of automatic detection on a recording (docs/detection.md).
+
+    .venv/bin/python docs/detection_eval.py run REC OUT [--seed S]   # track, log events
+    .venv/bin/python docs/detection_eval.py report OUT REC            # causes of switches
+    .venv/bin/python docs/detection_eval.py table OUT REC [OUT REC]   # one row per run
+
+``run`` steps :class:`~mbtrack_ros.core.tracker.Tracker` with ``detection=True`` exactly as
+``mbtrack replay REC --out OUT --eval REC/ground_truth.csv --seed S`` does (same
+configuration, same random generator, so the same tracks.csv) and also writes
+OUT/events.json: every birth, every release with its reason (support, existence,
+duplicate) and every decision on a confirmed detection next to a track
+(``AutoDetection.decisions``: birth / move / drop, with the appearance gain).
+``report`` lists, per identity switch of the CLEAR MOT matching, the person, the old and
+new track, where the old track was, how it ended and where the new one was born; the
+false births (farther than 0.5 m from every person; door and screen flagged) and the
+entering / release latencies. ``table`` prints the rows of docs/detection.md.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from mbtrack_ros.core.camera import RoomCalibration
+from mbtrack_ros.core.detection import release as release_module
+from mbtrack_ros.core.tracker import Tracker, TrackerConfig
+from mbtrack_ros.evaluation.clear_mot import clear_mot
+from mbtrack_ros.recording.bag import RecordingReader
+from mbtrack_ros.recording.csvfiles import (
+    TrackRow, read_ground_truth, read_tracks, write_tracks)
+
+FPS = 15.0
+FLOOR = (0.3, 0.3, 5.7, 4.7)          # the clear-room walkable floor (calibration.yaml)
+
+
+def _door(x: float, y: float) -> bool:
+    return y > 4.2 and 4.0 < x < 5.3
+
+
+def _screen(x: float, y: float) -> bool:
+    return x > 5.2 and 1.4 < y < 3.6
+
+
+def run(rec: Path, out: Path, seed: int) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    cal = RoomCalibration.load(rec / 'calibration.yaml')
+    events: list[dict] = []
+    frame = {'index': 0}
+    update, duplicates = release_module.Releaser.update, release_module.Releaser.duplicates
+
+    def logged_update(self, stamp, ids, supported, existence=None):
+        ended = update(self, stamp, ids, supported, existence)
+        for tid in ended:
+            k = list(ids).index(tid)
+            events.append({'kind': 'end', 'frame': frame['index'], 'id': int(tid),
+                           'reason': 'support' if not supported[k] else 'existence'})
+        return ended
+
+    def logged_duplicates(self, stamp, ids, xy):
+        ended = duplicates(self, stamp, ids, xy)
+        events.extend({'kind': 'end', 'frame': frame['index'], 'id': int(t),
+                       'reason': 'duplicate'} for t in ended)
+        return ended
+
+    release_module.Releaser.update = logged_update
+    release_module.Releaser.duplicates = logged_duplicates
+    rows: list[TrackRow] = []
+    with RecordingReader(rec / 'bag') as reader:
+        cal = cal.subset([n for n in cal.names if n in reader.cameras])
+        tracker = Tracker(cal, TrackerConfig(seed=seed, detection=True))
+        known = set()
+        for fs in reader.frames():
+            frame['index'] = fs.index
+            result = tracker.step(fs.stamp_ns, {c: im for c, im in fs.images.items()
+                                                if c in cal.cameras})
+            for d in tracker.detection.decisions:
+                events.append({'kind': 'decision', 'frame': fs.index, **d})
+            for tid in sorted(set(tracker.track_ids) - known):
+                events.append({'kind': 'birth', 'frame': fs.index, 'id': int(tid)})
+            known |= set(tracker.track_ids)
+            rows.extend(TrackRow(stamp_ns=fs.stamp_ns, frame=fs.index, track_id=t.track_id,
+                                 x=float(t.mean[0]), y=float(t.mean[1]),
+                                 existence=t.existence) for t in result.tracks)
+    write_tracks(out / 'tracks.csv', rows)
+    (out / 'events.json').write_text(json.dumps(events), encoding='utf-8')
+    res = clear_mot(rows, read_ground_truth(rec / 'ground_truth.csv'))
+    print(f'MOTA {100 * res.mota:.1f} % MOTP {res.motp_mm:.0f} mm mismatches '
+          f'{res.mismatches} people {res.persons} tracks {res.tracks}')
+
+
+def _load(out: Path, rec: Path):
+    tracks = read_tracks(out / 'tracks.csv')
+    truth = read_ground_truth(rec / 'ground_truth.csv')
+    last = max(t.frame for t in tracks)
+    truth = [r for r in truth if r.frame <= last]
+    events = json.loads((out / 'events.json').read_text(encoding='utf-8'))
+    return tracks, truth, events, last
+
+
+def _analyse(out: Path, rec: Path) -> dict:
+    tracks, truth, events, last = _load(out, rec)
+    res = clear_mot(tracks, truth)
+    d = res.matches_detail
+    ends = {e['id']: e for e in events if e['kind'] == 'end'}
+    gt: dict[int, list] = {}
+    for r in truth:
+        gt.setdefault(r.frame, []).append(r)
+    by_track: dict[int, list] = {}
+    for t in tracks:
+        by_track.setdefault(t.track_id, []).append(t)
+    s0 = min(r.stamp_ns for r in truth)
+
+    def frame_of(stamp):
+        return int(round((int(stamp) - s0) / (1e9 / FPS)))
+
+    def nearest(f, x, y, exclude=None):
+        best = (np.inf, None)
+        for r in gt.get(f, []):
+            if r.person_id != exclude and np.hypot(r.x - x, r.y - y) < best[0]:
+                best = (float(np.hypot(r.x - x, r.y - y)), r.person_id)
+        return best
+
+    switches, births, enter, leave, causes = [], [], [], [], {}
+    per_person: dict[int, list] = {}
+    for r in truth:
+        per_person.setdefault(r.person_id, []).append(r)
+    for p, prow in per_person.items():
+        sel = d.person_id == p
+        tid, st = d.track_id[sel], d.stamp_ns[sel]
+        prev, prev_f = -1, None
+        for k in range(len(tid)):
+            if tid[k] < 0:
+                continue
+            if prev >= 0 and tid[k] != prev:
+                f = frame_of(st[k])
+                old = [t for t in by_track[prev] if t.frame <= f][-1]
+                me = [r for r in gt.get(old.frame, []) if r.person_id == p]
+                other = nearest(old.frame, old.x, old.y, exclude=p)
+                new0 = by_track[int(tid[k])][0]
+                e = ends.get(prev)
+                if f - prev_f > 20 and not me:
+                    cause = 'person absent from the ground truth in between'
+                elif e is not None and e['frame'] < f - 3:
+                    cause = f'old track released ({e["reason"]}) while the person was there'
+                elif new0.frame >= f - 30:
+                    cause = 'new track born beside the live old track'
+                else:
+                    cause = 'swap between two live tracks'
+                causes[cause] = causes.get(cause, 0) + 1
+                switches.append(
+                    f'person {p} frame {f}: track {prev} -> {tid[k]}; old track '
+                    f'{np.hypot(me[0].x - old.x, me[0].y - old.y) if me else np.nan:.2f} m '
+                    f'from the person, {other[0]:.2f} m from person {other[1]}, '
+                    f'{"ended f%d (%s)" % (e["frame"], e["reason"]) if e else "alive"}; '
+                    f'new track born f{new0.frame} [{cause}]')
+            prev, prev_f = int(tid[k]), frame_of(st[k])
+        prow.sort(key=lambda r: r.frame)
+        m = np.flatnonzero(tid >= 0)
+        if prow[0].frame > 0 and m.size:
+            enter.append((frame_of(st[m[0]]) - prow[0].frame) / FPS)
+        floor = [r.frame for r in prow if FLOOR[0] <= r.x <= FLOOR[2]
+                 and FLOOR[1] <= r.y <= FLOOR[3]]
+        if prow[-1].frame < last - 30 and floor:
+            tail = tid[-30:]
+            tail = tail[tail >= 0]
+            e = ends.get(int(np.bincount(tail).argmax())) if tail.size else None
+            if e:
+                leave.append((e['frame'] - floor[-1]) / FPS)
+    for tid, rows in sorted(by_track.items()):
+        r0 = rows[0]
+        dist, pid = nearest(r0.frame, r0.x, r0.y)
+        if dist > 0.5:
+            e = ends.get(tid)
+            births.append({'track': tid, 'frame': r0.frame, 'xy': (r0.x, r0.y),
+                           'person': pid, 'distance': dist, 'life': rows[-1].frame
+                           - r0.frame + 1, 'end': e['reason'] if e else 'alive',
+                           'door': _door(r0.x, r0.y), 'screen': _screen(r0.x, r0.y)})
+    moves = sum(1 for e in events if e['kind'] == 'decision'
+                and e['action'].startswith('move'))
+    return {'result': res, 'switches': switches, 'false_births': births, 'enter': enter,
+            'leave': leave, 'moves': moves, 'causes': causes}
+
+
+def report(out: Path, rec: Path) -> None:
+    a = _analyse(out, rec)
+    res = a['result']
+    print(f'MOTA {100 * res.mota:.1f} % MOTP {res.motp_mm:.0f} mm mismatches '
+          f'{res.mismatches} people {res.persons} tracks {res.tracks} moves {a["moves"]}')
+    for s in a['switches']:
+        print('  switch', s)
+    for cause, n in sorted(a['causes'].items(), key=lambda c: -c[1]):
+        print(f'  {n:3d} x {cause}')
+    for b in a['false_births']:
+        print(f'  false birth: track {b["track"]} f{b["frame"]} at ({b["xy"][0]:.2f}, '
+              f'{b["xy"][1]:.2f}), {b["distance"]:.2f} m from person {b["person"]}, '
+              f'{b["life"]} frames, {b["end"]}'
+              f'{" DOOR" if b["door"] else ""}{" SCREEN" if b["screen"] else ""}')
+    print('  entering (s):', ' '.join(f'{v:.2f}' for v in a['enter']))
+    print('  release after leaving the floor (s):', ' '.join(f'{v:.2f}' for v in a['leave']))
+
+
+def table(pairs: list[tuple[Path, Path]]) -> None:
+    print('| run | MOTA | MOTP | miss | false pos | mismatches / people | tracks | moves | '
+          'false births (door, screen) | entering s | release s |')
+    print('| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |')
+
+    def span(v):
+        return f'{min(v):.2f}-{max(v):.2f}' if v else '-'
+
+    for out, rec in pairs:
+        a = _analyse(out, rec)
+        r = a['result']
+        fb = a['false_births']
+        print(f'| {out.name} | {100 * r.mota:.1f} % | {r.motp_mm:.0f} mm | '
+              f'{100 * r.miss_rate:.1f} % | {100 * r.false_positive_rate:.1f} % | '
+              f'{r.mismatches} / {r.persons} = {r.mismatches / r.persons:.2f} | {r.tracks} | '
+              f'{a["moves"]} | {len(fb)} ({sum(b["door"] for b in fb)}, '
+              f'{sum(b["screen"] for b in fb)}) | {span(a["enter"])} | {span(a["leave"])} |')
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = p.add_subparsers(dest='cmd', required=True)
+    r = sub.add_parser('run')
+    r.add_argument('rec', type=Path)
+    r.add_argument('out', type=Path)
+    r.add_argument('--seed', type=int, default=0)
+    s = sub.add_parser('report')
+    s.add_argument('out', type=Path)
+    s.add_argument('rec', type=Path)
+    t = sub.add_parser('table')
+    t.add_argument('pairs', type=Path, nargs='+')
+    args = p.parse_args(argv)
+    if args.cmd == 'run':
+        run(args.rec, args.out, args.seed)
+    elif args.cmd == 'report':
+        report(args.out, args.rec)
+    else:
+        if len(args.pairs) % 2:
+            p.error('table needs OUT REC pairs')
+        table(list(zip(args.pairs[::2], args.pairs[1::2])))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
