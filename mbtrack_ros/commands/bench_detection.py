@@ -16,7 +16,9 @@ bootstrapped from empty-room frames of the same seed (same camera gains and nois
 * **empty room** - nobody, the screen changing.
 
 Times are medians (and maxima) of ``time.perf_counter`` around each step after one
-warm-up frame (numba compilation, caches).
+warm-up frame (numba compilation, caches), with the CPU time of the process
+(``time.process_time``, all threads) beside them: on a shared machine the wall-clock time
+varies with the load.
 """
 from __future__ import annotations
 
@@ -90,53 +92,61 @@ def _models(calibration: RoomCalibration, images: dict, truth: list) -> list:
 def _entering(cal: RoomCalibration, scene: list, empty: list, seed: int) -> dict:
     auto = AutoDetection(cal, rng=np.random.default_rng(seed))
     _bootstrap(auto, empty)
-    total, search, found = [], [], 0
+    total, cpu, search, found = [], [], [], 0
     for i, f in enumerate(scene):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         _, births = auto.step(f.stamp_ns, f.images, [], {})
-        dt = time.perf_counter() - t0
+        dt, dc = time.perf_counter() - t0, time.process_time() - c0
         found += len(births)
         if i:  # the first frame compiles and fills caches
             total.append(dt)
+            cpu.append(dc)
             search.append(auto.timings['detect_search'])
     return {'cameras': len(cal.cameras), 'frames': len(total), 'detect': _ms(total),
-            'search': _ms(search), 'detections': found}
+            'detect_cpu': _ms(cpu), 'search': _ms(search), 'detections': found}
 
 
 def _tracked(cal: RoomCalibration, scene: list, empty: list, seed: int) -> dict:
     tracker = Tracker(cal, TrackerConfig(detection=True, seed=seed),
                       rng=np.random.default_rng(seed))
     _bootstrap(tracker.detection, empty)
-    total, detect, search, births, tracks = [], [], [], 0, []
+    total, cpu, detect, search, tracks = [], [], [], [], []
+    initial: set[int] = set()
+    born: set[int] = set()
     for i, f in enumerate(scene):
         if i == 0:
             side = tracker.detection.tracking_images(f.images)
             for model, state in _models(cal, side, f.ground_truth):
-                tracker.add_track(model, state, f.stamp_ns)
-        n_before = tracker._next_id
+                initial.add(tracker.add_track(model, state, f.stamp_ns))
+        c0 = time.process_time()
         result = tracker.step(f.stamp_ns, f.images)
-        births += tracker._next_id - n_before
+        dc = time.process_time() - c0
+        born |= set(tracker.track_ids) - initial
         if i:
             total.append(result.timings['total'])
+            cpu.append(dc)
             detect.append(result.timings.get('detect', np.nan))
             search.append(result.timings.get('detect_search', np.nan))
             tracks.append(len(result.tracks))
     med = float(np.median(total)) if total else float('nan')
     return {'cameras': len(cal.cameras), 'frames': len(total), 'step': _ms(total),
-            'detect': _ms(detect), 'search': _ms(search), 'frames_per_second': 1.0 / med,
-            'tracks_mean': float(np.mean(tracks)) if tracks else 0.0, 'births': births}
+            'step_cpu': _ms(cpu), 'detect': _ms(detect), 'search': _ms(search),
+            'frames_per_second': 1.0 / med, 'births': len(born),
+            'tracks_mean': float(np.mean(tracks)) if tracks else 0.0}
 
 
 def _empty_room(cal: RoomCalibration, scene: list, empty: list, seed: int) -> dict:
     auto = AutoDetection(cal, rng=np.random.default_rng(seed))
     _bootstrap(auto, empty)
-    total = []
+    total, cpu = [], []
     for i, f in enumerate(scene):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         auto.step(f.stamp_ns, f.images, [], {})
         if i:
             total.append(time.perf_counter() - t0)
-    return {'cameras': len(cal.cameras), 'frames': len(total), 'detect': _ms(total)}
+            cpu.append(time.process_time() - c0)
+    return {'cameras': len(cal.cameras), 'frames': len(total), 'detect': _ms(total),
+            'detect_cpu': _ms(cpu)}
 
 
 def bench_detection(*, frames: int = 30, seed: int = 0,
@@ -175,11 +185,14 @@ def print_detection(results: dict) -> dict:
         d = r['detect']
         line = (f'{scene:9} {tag:6} detection {d["median_ms"]:6.1f} / {d["p90_ms"]:6.1f} / '
                 f'{d["max_ms"]:6.1f}')
+        if 'detect_cpu' in r:
+            line += f'  (CPU {r["detect_cpu"]["median_ms"]:6.1f})'
         if 'search' in r:
             s = r['search']
             line += f'  search {s["median_ms"]:6.1f} / {s["max_ms"]:6.1f}'
         if 'step' in r:
-            line += (f'  whole step {r["step"]["median_ms"]:6.1f} ms '
+            line += (f'  whole step {r["step"]["median_ms"]:6.1f} ms, CPU '
+                     f'{r["step_cpu"]["median_ms"]:6.1f} ms '
                      f'({r["frames_per_second"]:.1f} frames/s, {r["tracks_mean"]:.1f} tracks)')
         print(line)
         summary[f'detect_{scene}_{tag}_ms'] = d['median_ms']
