@@ -76,6 +76,19 @@ def test_ids_increase_and_are_never_reused(algorithm):
         tr.remove_track(1)
 
 
+def test_models_follow_the_live_tracks():
+    tr = make()
+    first, second = Model(), Model()
+    a = tr.add_track(first, [1, 1, 0, 0, 0, 0], 0)
+    b = tr.add_track(second, [3, 3, 0, 0, 0, 0], 0)
+    assert tr.models == {a: first, b: second}
+    tr.remove_track(a)
+    models = tr.models
+    assert models == {b: second}
+    models.clear()  # a copy: the tracker's own mapping is untouched
+    assert tr.models == {b: second}
+
+
 def test_stamps_going_backwards_raise():
     tr = make()
     tr.add_track(Model(), [1, 1, 0, 0, 0, 0], 1_000)

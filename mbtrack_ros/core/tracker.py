@@ -192,6 +192,11 @@ class Tracker:
         return self.filter.track_ids()
 
     @property
+    def models(self) -> dict[int, object]:
+        """Appearance model (PersonModel) of every live track by id (a copy of the mapping)."""
+        return dict(self._models)
+
+    @property
     def last_stamp_ns(self) -> int | None:
         return self._last_stamp
 
