@@ -587,3 +587,30 @@ def test_a_track_moved_or_born_recently_is_not_moved_again_and_no_twin_is_born()
     assert tracker.track_ids == [1]
     assert any(a.startswith('drop') for a in actions)
     assert not any(a.startswith('move') or a == 'birth' for a in actions)
+
+
+def test_deferred_search_gives_the_same_tracks_as_the_full_step():
+    """step(search=False) + search() (the node publishes in between) == step()."""
+    from mbtrack_ros.core.tracker import Tracker, TrackerConfig
+
+    calib = make_room()
+    bgs = backgrounds(calib)
+    frames = [paint(calib, bgs, [person(1.5 + 0.05 * k, 2.8, theta=0.0)] if k >= 3 else [],
+                    np.random.default_rng(k)) for k in range(14)]
+    runs = []
+    for deferred in (False, True):
+        tracker = Tracker(calib, TrackerConfig(detection=True, particles=50, seed=1),
+                          rng=np.random.default_rng(1))
+        tracker.detection.bootstrap({n: [bgs[n]] for n in calib.cameras})
+        rows, started = [], []
+        for k, images in enumerate(frames):
+            res = tracker.step(int(round(k * 1e9 / FPS)), images, search=not deferred)
+            rows.append([(t.track_id, *np.round(t.mean[:2], 9)) for t in res.tracks])
+            if deferred:
+                started += tracker.search()
+                assert tracker.search() == []  # one search per step
+        runs.append(rows)
+        if deferred:
+            assert started == [1]
+    assert runs[0] == runs[1]
+    assert any(runs[1]) and not any(runs[1][:4])  # born after entering, not before

@@ -178,6 +178,7 @@ class Tracker:
         self.measurement = measurement
         self._next_id = 1
         self._last_stamp: int | None = None
+        self._search_pending = False  # step(search=False) left the detection search
         self._heights: dict[int, float] = {}
         self._models: dict[int, object] = {}
         self.detection = None
@@ -264,17 +265,28 @@ class Tracker:
         if self.detection is not None:
             self.detection.reset()
         self._last_stamp = None
+        self._search_pending = False
 
-    def step(self, stamp_ns: int, images: dict[str, np.ndarray]) -> FrameResult:
+    def step(self, stamp_ns: int, images: dict[str, np.ndarray], *,
+             search: bool = True) -> FrameResult:
         """Predict all tracks to ``stamp_ns`` and update them with ``images``.
+
+        With automatic detection the step also releases tracks and updates existence and
+        visibility (001), then searches for new people (003 §4.1). People found are added
+        as tracks from the next frame on, so the search does not change this frame's
+        result: with ``search=False`` it is left for :meth:`search`, which a node calls
+        after publishing the result (lower latency, the same outputs); a search left
+        pending runs at the start of the next step.
 
         Args:
             stamp_ns: frame stamp, integer nanoseconds; must not go backwards.
             images: ``(H, W, 3) uint8`` RGB images by camera name.
+            search: run the detection search now (default) or leave it for :meth:`search`.
 
         Returns:
             :class:`~mbtrack_ros.core.state.FrameResult` with one estimate per track.
         """
+        self.search()  # a search left pending by the previous step
         stamp_ns = int(stamp_ns)
         if self._last_stamp is not None and stamp_ns < self._last_stamp:
             raise TrackerError(f'stamp {stamp_ns} ns is before the previous frame '
@@ -299,17 +311,32 @@ class Tracker:
         timings.update(self.filter.timings)
         timings['filter'] = t2 - t1
         ended: list[int] = []
-        if self.detection is not None:  # 003 §4: release, detect, acquire; 001: existence
-            ended, births = self.detection.step(stamp_ns, images, tracks, self._models)
+        if self.detection is not None:  # 003 §4: release; 001: existence and visibility
+            ended = self.detection.update(stamp_ns, images, tracks, self._models)
             for tid in ended:
                 self.remove_track(tid)
             tracks = [t for t in tracks
                       if t.track_id not in ended and self.detection.reported(t.track_id)]
-            for birth in births:
-                if birth.track_id is not None and birth.track_id in self._models:
-                    self.relocate_track(birth.track_id, birth.state)
-                else:
-                    self.add_track(birth.model, birth.state, stamp_ns)
+            self._search_pending = True
+            if search:
+                self.search()
             timings.update(self.detection.timings)
         timings['total'] = time.perf_counter() - t0
         return FrameResult(stamp_ns=stamp_ns, tracks=tracks, ended=ended, timings=timings)
+
+    def search(self) -> list[int]:
+        """The detection search and acquisition of the last step (003 §4.1-4.2), if pending:
+        new people become tracks, re-found ones move their track. Returns the ids of the
+        tracks started or moved."""
+        if not self._search_pending or self.detection is None:
+            return []
+        self._search_pending = False
+        stamp_ns = self._last_stamp
+        changed = []
+        for birth in self.detection.search():
+            if birth.track_id is not None and birth.track_id in self._models:
+                self.relocate_track(birth.track_id, birth.state)
+                changed.append(int(birth.track_id))
+            else:
+                changed.append(self.add_track(birth.model, birth.state, stamp_ns))
+        return changed

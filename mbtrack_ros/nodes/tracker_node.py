@@ -395,18 +395,24 @@ class TrackerNode(Node):
         ended = []
         if self._ground_truth is not None:
             ended = self._ground_truth.update(self, fs.stamp_ns, fs.images)
-        # with detection enabled, Tracker.step also starts and releases tracks (003 §4)
+        # with detection enabled, Tracker.step also releases tracks (003 §4.3) and updates
+        # existence and visibility (001); its search for new people (003 §4.1) only adds
+        # tracks for the next frame, so it runs after publishing (same outputs, the
+        # latency of the frame set does not include it)
         t0 = time.perf_counter()
         try:
-            result = self.tracker.step(fs.stamp_ns, fs.images)
+            result = self.tracker.step(fs.stamp_ns, fs.images, search=False)
         except TrackerError as err:
             self.reset(fs.stamp_ns, str(err))
-            result = self.tracker.step(fs.stamp_ns, fs.images)
-        self._step_times.append(time.perf_counter() - t0)
+            result = self.tracker.step(fs.stamp_ns, fs.images, search=False)
+        spent = time.perf_counter() - t0
         result.ended = list(result.ended) + [t for t in ended if t not in result.ended]
         self._last_stamp = fs.stamp_ns
         self._last_missing = fs.missing
         self.publish(result, fs)
+        t1 = time.perf_counter()
+        self.tracker.search()
+        self._step_times.append(spent + time.perf_counter() - t1)
         return result
 
     def publish(self, result: FrameResult, fs: FrameSet) -> None:

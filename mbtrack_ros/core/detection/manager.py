@@ -118,6 +118,7 @@ class AutoDetection:
         self.timings: dict[str, float] = {}
         self.decisions: list[dict] = []    # per frame: what happened to confirmed detections
         self._placed: dict[int, int] = {}  # track id -> stamp of its birth or last move
+        self._pending: tuple | None = None  # what search() needs from the last update()
         self.side = [n for n, c in calibration.cameras.items() if not is_ceiling(c)]
         self.ceiling = [n for n in calibration.cameras if n not in self.side]
 
@@ -131,14 +132,29 @@ class AutoDetection:
         self._placed.clear()
         self.detector.reset()
         self._last_stamp = None
+        self._pending = None
 
     # -- per frame ------------------------------------------------------------------------
     def step(self, stamp_ns: int, images: Mapping[str, np.ndarray],
              tracks: Sequence[TrackEstimate], models: Mapping[int, PersonModel]
              ) -> tuple[list[int], list[Birth]]:
-        """Process one frame set after the tracker's filter step.
+        """Process one frame set after the tracker's filter step: :meth:`update`, then
+        :meth:`search`.
 
-        Fills ``visibility`` and ``existence`` of ``tracks`` in place.
+        Returns:
+            (ids of tracks to release now, people to add).
+        """
+        ended = self.update(stamp_ns, images, tracks, models)
+        return ended, self.search()
+
+    def update(self, stamp_ns: int, images: Mapping[str, np.ndarray],
+               tracks: Sequence[TrackEstimate], models: Mapping[int, PersonModel]
+               ) -> list[int]:
+        """Background, support, visibility, existence and release for one frame set.
+
+        Fills ``visibility`` and ``existence`` of ``tracks`` in place and keeps what
+        :meth:`search` needs. Everything that decides this frame's output happens here; the
+        search only adds tracks for the next frame, so a node can publish in between.
 
         Args:
             stamp_ns: the frame stamp.
@@ -147,7 +163,7 @@ class AutoDetection:
             models: track id -> person model (for shapes and appearance).
 
         Returns:
-            (ids of tracks to release now, people to add).
+            ids of the tracks to release now.
         """
         cfg = self.config
         t0 = time.perf_counter()
@@ -198,7 +214,21 @@ class AutoDetection:
             self.aux.pop(tid, None)
             self._placed.pop(tid, None)
         t3 = time.perf_counter()
-        # 5. detection and acquisition
+        self.timings = {'detect_render': t1 - t0, 'detect_background': t2 - t1,
+                        'detect_existence': t3 - t2}
+        self._pending = (int(stamp_ns), images, tracks, models, means, shapes, evidence,
+                         ended)
+        return ended
+
+    def search(self) -> list[Birth]:
+        """Detection and acquisition (003 §4.1-4.2) on the frame set of the last
+        :meth:`update`: the people to add, new or re-found (at most once per update)."""
+        if self._pending is None:
+            return []
+        stamp_ns, images, tracks, models, means, shapes, evidence, ended = self._pending
+        self._pending = None
+        cfg = self.config
+        t3 = time.perf_counter()
         births: list[Birth] = []
         self.decisions = []
         if evidence:
@@ -218,10 +248,10 @@ class AutoDetection:
                 if birth is not None:
                     births.append(birth)
         t4 = time.perf_counter()
-        self.timings = {'detect_render': t1 - t0, 'detect_background': t2 - t1,
-                        'detect_existence': t3 - t2, 'detect_search': t4 - t3,
-                        'detect': t4 - t0}
-        return ended, births
+        self.timings['detect_search'] = t4 - t3
+        self.timings['detect'] = sum(self.timings[k] for k in (
+            'detect_render', 'detect_background', 'detect_existence', 'detect_search'))
+        return births
 
     def tracking_images(self, images: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
         """The images the tracking filter should use: the side cameras only (003 §5: the
