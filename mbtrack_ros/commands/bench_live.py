@@ -129,6 +129,7 @@ class LiveResult:
     mean_tracks: float
     publish_spread_p50: float = float('nan')
     publish_spread_p95: float = float('nan')
+    latency_series: tuple[tuple[float, float], ...] = ()  # (s since first frame, latency s)
 
 
 def _diag_values(msg) -> dict:
@@ -268,6 +269,7 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
     later = {s: t for s, t in images_c.items() if s >= first + 1_000_000_000}
     cpu = cpu1 - cpu0
     wall = wall1 - wall0
+    stamps, lat, _ = match_latencies(images_c, people_c)
     return LiveResult(
         frames=frames, people_messages=len(people_c),
         latency_all=latency_stats(images_c, people_c),
@@ -278,7 +280,8 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
         if images_c else 0.0,
         mean_tracks=float(np.mean(list(tracks.values()))) if tracks else 0.0,
         publish_spread_p50=float(burst['p50']) / 1e3 if burst else float('nan'),
-        publish_spread_p95=float(burst['p95']) / 1e3 if burst else float('nan'))
+        publish_spread_p95=float(burst['p95']) / 1e3 if burst else float('nan'),
+        latency_series=tuple(zip(((stamps - first) / 1e9).tolist(), lat.tolist())))
 
 
 def run_offline(recording: Path, *, seed: int = 0, ground_truth: bool = False) -> dict:
