@@ -418,16 +418,22 @@ def test_auto_detection_tracks_with_side_cameras_and_rejects_bad_images():
 
 
 # -- tracker integration -----------------------------------------------------------------
-def test_tracker_detects_tracks_and_releases_a_painted_person():
-    """End to end with the real tracker: born within 0.5 s, released within 1.5 s."""
+def _detecting_tracker(calib, bgs, seed):
+    """A Tracker with automatic detection, background bootstrapped from ``bgs``."""
     from mbtrack_ros.core.tracker import Tracker, TrackerConfig
 
+    tracker = Tracker(calib, TrackerConfig(detection=True, particles=50, seed=seed),
+                      rng=np.random.default_rng(seed))
+    tracker.detection.bootstrap({n: [bgs[n]] for n in calib.cameras})
+    return tracker
+
+
+def test_tracker_detects_tracks_and_releases_a_painted_person():
+    """End to end with the real tracker: born within 0.5 s, released within 1.5 s."""
     rng = np.random.default_rng(8)
     calib = make_room()
     bgs = backgrounds(calib)
-    tracker = Tracker(calib, TrackerConfig(detection=True, particles=50, seed=1),
-                      rng=np.random.default_rng(1))
-    tracker.detection.bootstrap({n: [bgs[n]] for n in calib.cameras})
+    tracker = _detecting_tracker(calib, bgs, seed=1)
     enter, leave, total = 3, 30, 60
     born = ended = None
     existence = []
@@ -498,14 +504,10 @@ def test_tracker_moves_a_drifted_track_back_instead_of_a_second_birth():
     """A track 0.8 m off its person: the person is re-detected beside it; the track's own
     appearance model explains the detection better than its place, so the track is moved
     (same id) and no second track is born on the person."""
-    from mbtrack_ros.core.tracker import Tracker, TrackerConfig
-
     rng = np.random.default_rng(3)
     calib = make_room()
     bgs = backgrounds(calib)
-    tracker = Tracker(calib, TrackerConfig(detection=True, particles=50, seed=2),
-                      rng=np.random.default_rng(2))
-    tracker.detection.bootstrap({n: [bgs[n]] for n in calib.cameras})
+    tracker = _detecting_tracker(calib, bgs, seed=2)
     walker = lambda k: [person(2.0 + 0.02 * k, 2.6, theta=0.0)]   # noqa: E731
     res = _track_painted(tracker, calib, bgs, rng, 36, walker)   # > relocate_interval
     assert tracker.track_ids == [1]
@@ -526,14 +528,10 @@ def test_tracker_moves_a_drifted_track_back_instead_of_a_second_birth():
 def test_tracker_births_a_different_person_beside_a_tracked_one():
     """A differently dressed person who appears 0.7 m beside a tracked person is born as a
     new track; the tracked person keeps id 1 and its place."""
-    from mbtrack_ros.core.tracker import Tracker, TrackerConfig
-
     rng = np.random.default_rng(4)
     calib = make_room()
     bgs = backgrounds(calib)
-    tracker = Tracker(calib, TrackerConfig(detection=True, particles=50, seed=3),
-                      rng=np.random.default_rng(3))
-    tracker.detection.bootstrap({n: [bgs[n]] for n in calib.cameras})
+    tracker = _detecting_tracker(calib, bgs, seed=3)
     a = person(2.5, 2.5, theta=0.0)
     b = lambda k: person(2.5 + 0.02 * (k - 8), 3.2, theta=0.0,        # noqa: E731
                          colours=(SKIN, (200, 40, 40), (200, 200, 200)))
@@ -566,14 +564,10 @@ def test_bench_detection_reports_times_and_tracks_five_people_without_births():
 def test_a_track_moved_or_born_recently_is_not_moved_again_and_no_twin_is_born():
     """Within ``relocate_interval`` of a track's birth a detection that its model explains
     is dropped: neither a move (a young model in a group would hop) nor a second birth."""
-    from mbtrack_ros.core.tracker import Tracker, TrackerConfig
-
     rng = np.random.default_rng(3)
     calib = make_room()
     bgs = backgrounds(calib)
-    tracker = Tracker(calib, TrackerConfig(detection=True, particles=50, seed=2),
-                      rng=np.random.default_rng(2))
-    tracker.detection.bootstrap({n: [bgs[n]] for n in calib.cameras})
+    tracker = _detecting_tracker(calib, bgs, seed=2)
     walker = lambda k: [person(2.0 + 0.02 * k, 2.6, theta=0.0)]   # noqa: E731
     res = _track_painted(tracker, calib, bgs, rng, 8, walker)
     assert tracker.track_ids == [1]
@@ -591,17 +585,13 @@ def test_a_track_moved_or_born_recently_is_not_moved_again_and_no_twin_is_born()
 
 def test_deferred_search_gives_the_same_tracks_as_the_full_step():
     """step(search=False) + search() (the node publishes in between) == step()."""
-    from mbtrack_ros.core.tracker import Tracker, TrackerConfig
-
     calib = make_room()
     bgs = backgrounds(calib)
     frames = [paint(calib, bgs, [person(1.5 + 0.05 * k, 2.8, theta=0.0)] if k >= 3 else [],
                     np.random.default_rng(k)) for k in range(14)]
     runs = []
     for deferred in (False, True):
-        tracker = Tracker(calib, TrackerConfig(detection=True, particles=50, seed=1),
-                          rng=np.random.default_rng(1))
-        tracker.detection.bootstrap({n: [bgs[n]] for n in calib.cameras})
+        tracker = _detecting_tracker(calib, bgs, seed=1)
         rows, started = [], []
         for k, images in enumerate(frames):
             res = tracker.step(int(round(k * 1e9 / FPS)), images, search=not deferred)
