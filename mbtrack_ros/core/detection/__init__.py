@@ -1,7 +1,10 @@
 """Automatic target detection, model acquisition and track release (003 §4), and the
 visibility/existence auxiliary processes (001 §3) in :mod:`mbtrack_ros.core.existence`.
 
-* :mod:`.background` - per-camera Y-Cb-Cr background model and foreground masks;
+* :mod:`.background` - per-camera Y-Cb-Cr background model and foreground masks, with
+  *not yet known* places for rooms that are never empty;
+* :mod:`.people` - a background-independent multi-view people cue (motion in several
+  views, contour and colour symmetry) that marks those places at the online bootstrap;
 * :mod:`.features` - single-view detection features: foreground coverage, contour
   likelihood (003 Eq. 5), upper-body colour symmetry;
 * :mod:`.detector` - coarse-to-fine grid search over the floor, multi-camera fusion,
