@@ -241,3 +241,29 @@ def test_unknown_pixels_nobody_covered_are_learnt_after_the_wait():
         BackgroundConfig(unknown_frames=0)
     with pytest.raises(DetectionError, match='people cue'):
         PeopleCueConfig(core_width=0.0)
+
+
+def test_prepare_builds_the_people_cue_once_ahead_of_the_bootstrap(room, monkeypatch):
+    """A node calls prepare() at start: the cue is built then, not again at the bootstrap."""
+    import mbtrack_ros.core.detection.background as background
+
+    built = []
+
+    class CountingCue(background.PeopleCue):
+        def __init__(self, *args, **kwargs):
+            built.append(1)
+            super().__init__(*args, **kwargs)
+
+    monkeypatch.setattr(background, 'PeopleCue', CountingCue)
+    bank = BackgroundBank(BackgroundConfig(bootstrap_frames=2, bootstrap_stride=1),
+                          calibration=room)
+    bank.prepare()
+    assert len(built) == 1
+    frame = np.full((room.cameras[room.names[0]].height,
+                     room.cameras[room.names[0]].width, 3), 90, np.uint8)
+    for _ in range(3):   # through the online bootstrap, which uses the cue
+        bank.apply({n: frame for n in room.names})
+    assert len(built) == 1 and all(m.ready for m in bank.models.values())
+    no_cue = BackgroundBank(BackgroundConfig(people=None), calibration=room)
+    no_cue.prepare()
+    assert len(built) == 1

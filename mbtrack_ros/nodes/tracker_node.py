@@ -173,6 +173,8 @@ class TrackerNode(Node):
                                               rng=np.random.default_rng(p.tracker.seed))
         except TrackerError as err:
             raise ParamsError(str(err)) from err
+        if getattr(self.tracker, 'detection', None) is not None:
+            self.tracker.detection.prepare()  # one-off work now, not at the bootstrap frame
         self.sync = FrameSetSynchronizer(p.camera_names, p.slop_ns, p.timeout_ns)
         self._lock = threading.Lock()  # synchroniser, frame-set queue and counters
         self._wake = threading.Condition(self._lock)  # a frame set was queued, or closing

@@ -513,6 +513,10 @@ class BackgroundBank:
             self._cue = PeopleCue(self.calibration, self.config.people)
         return self._cue
 
+    def prepare(self) -> None:
+        """Build the people cue now (a node at start) rather than at the bootstrap frame."""
+        _ = self.cue
+
     def model(self, name: str) -> BackgroundModel:
         if name not in self.models:
             self.models[name] = BackgroundModel(self.config, name=name)

@@ -122,6 +122,11 @@ class AutoDetection:
         self.side = [n for n, c in calibration.cameras.items() if not is_ceiling(c)]
         self.ceiling = [n for n in calibration.cameras if n not in self.side]
 
+    def prepare(self) -> None:
+        """Do the one-off work of the first frames ahead (the people cue's floor grid), so
+        that a live node does not stall at the bootstrap frame."""
+        self.background.prepare()
+
     def bootstrap(self, frames: Mapping[str, Sequence[np.ndarray]]) -> None:
         """Initialise the background models from empty-room frames per camera."""
         self.background.bootstrap(frames)
