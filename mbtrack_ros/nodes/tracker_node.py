@@ -180,7 +180,6 @@ class TrackerNode(Node):
         self._wake = threading.Condition(self._lock)  # a frame set was queued, or closing
         self._step_lock = threading.Lock()  # one tracker step at a time; held while closing
         self._closing = False
-        self._models: dict[int, PersonModel] = {}  # track id -> appearance model
         self._shown: set[int] = set()  # track ids with markers on screen
         self._pending: deque[FrameSet] = deque()
         self._warned: dict[str, float] = {}
@@ -262,12 +261,10 @@ class TrackerNode(Node):
         except TrackerError as err:
             self.warn_once('add_track', f'cannot start a track: {err}')
             return None
-        self._models[track_id] = model
         return track_id
 
     def end_track(self, track_id: int) -> None:
         """End a track started with :meth:`start_track`."""
-        self._models.pop(track_id, None)
         try:
             self.tracker.remove_track(track_id)
         except TrackerError as err:
@@ -378,7 +375,6 @@ class TrackerNode(Node):
         self._resets += 1
         self.get_logger().warning(f'resetting the tracker: {reason}')
         self.tracker.reset()
-        self._models.clear()
         if self._ground_truth is not None:
             self._ground_truth.reset()
         self._shown = set()
@@ -447,10 +443,8 @@ class TrackerNode(Node):
 
     def debug_image(self, camera: str, rgb: np.ndarray, result: FrameResult) -> Image:
         """``~/debug/<camera>/occlusion``: occlusion maps and silhouettes (000 Fig. 4)."""
-        models = dict(getattr(self.tracker, 'models', None) or {})  # tracks born in step
-        models.update(self._models)
         occ, sil = occlusion_layers(self.tracker.measurement, self.calibration.cameras[camera],
-                                    result, models)
+                                    result, self.tracker.models)
         out = messages.debug_overlay(rgb, occlusion=occ, silhouettes=sil)
         return rgb_to_image(out, messages.make_header(
             result.stamp_ns, self.calibration.cameras[camera].frame_id))
