@@ -1,5 +1,13 @@
-"""Shared fixtures: a small calibrated room that needs no data files."""
+"""Shared fixtures: a small calibrated room that needs no data files; a bag played to
+nodes over DDS."""
 from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import threading
+from contextlib import contextmanager
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -28,3 +36,38 @@ def room() -> RoomCalibration:
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(1234)
+
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+@contextmanager
+def playing(recording: Path, nodes: list, context, *, rate: float, threads: int,
+            timeout: float):
+    """Spin ``nodes`` in a multi-threaded executor while ``bag_player`` (its own process)
+    plays ``recording`` at ``rate``; yields once the player has finished (its exit code is
+    checked). On exit: player killed if still running, executor stopped, nodes destroyed."""
+    from rclpy.executors import MultiThreadedExecutor
+
+    executor = MultiThreadedExecutor(num_threads=threads, context=context)
+    for node in nodes:
+        executor.add_node(node)
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
+    player = subprocess.Popen(
+        [sys.executable, '-m', 'mbtrack_ros.nodes.bag_player', '--ros-args',
+         '-p', f'bag:={recording}', '-p', f'rate:={rate}', '-p', 'wait_for_subscribers:=true',
+         '-p', 'start_delay:=1.0'],
+        cwd=REPO, env=dict(os.environ, PYTHONPATH=str(REPO)), stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT, text=True)
+    try:
+        out, _ = player.communicate(timeout=timeout)
+        assert player.returncode == 0, out
+        yield
+    finally:
+        if player.poll() is None:
+            player.kill()
+        executor.shutdown()
+        spinner.join(timeout=5)
+        for node in nodes:
+            node.destroy_node()

@@ -3,8 +3,6 @@ benchmark's latency helper."""
 from __future__ import annotations
 
 import os
-import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
@@ -16,10 +14,10 @@ import pytest
 os.environ['ROS_DOMAIN_ID'] = str(150 + os.getpid() % 70)
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 
+from conftest import playing  # noqa: E402
 from mbtrack_ros.commands.bench_live import (  # noqa: E402
     LatencyError, latency_stats, match_latencies)
 
-REPO = Path(__file__).resolve().parents[1]
 SEED = 5
 FRAMES = 60  # clear-room at 160x120: the automatic detection starts tracks from frame ~40
 
@@ -99,7 +97,6 @@ def live_tracks(recording: Path, seed: int, *, sync_timeout: float = 5.0
     """bag_player (own process) -> DDS -> tracker_node (in process) -> DDS -> ~/tracks."""
     import rclpy
     from rclpy.context import Context
-    from rclpy.executors import MultiThreadedExecutor
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import PointCloud2
 
@@ -139,36 +136,19 @@ def live_tracks(recording: Path, seed: int, *, sync_timeout: float = 5.0
 
     listener.create_subscription(PointCloud2, '/tracker_node/tracks', on_tracks,
                                  QoSProfile(depth=500, reliability=ReliabilityPolicy.RELIABLE))
-    executor = MultiThreadedExecutor(num_threads=len(cameras) + 3, context=context)
-    executor.add_node(node)
-    executor.add_node(listener)
-    spinner = threading.Thread(target=executor.spin, daemon=True)
-    spinner.start()
-    env = dict(os.environ, PYTHONPATH=str(REPO))
-    player = subprocess.Popen(
-        [sys.executable, '-m', 'mbtrack_ros.nodes.bag_player', '--ros-args',
-         '-p', f'bag:={recording}', '-p', 'rate:=0.5', '-p', 'wait_for_subscribers:=true',
-         '-p', 'start_delay:=1.0'],
-        cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
-        out, _ = player.communicate(timeout=90)
-        assert player.returncode == 0, out
-        deadline = time.monotonic() + 30
-        while time.monotonic() < deadline:
-            with lock:
-                if last in got:
-                    break
-            time.sleep(0.1)
-        counters = {'dropped_sets': node._dropped_sets, 'dropped_frames': node._dropped,
-                    'incomplete': node.sync.counters.incomplete, 'resets': node._resets,
-                    'missing': dict(node.sync.counters.missing)}
+        with playing(recording, [node, listener], context, rate=0.5, threads=len(cameras) + 3,
+                     timeout=90):
+            deadline = time.monotonic() + 30
+            while time.monotonic() < deadline:
+                with lock:
+                    if last in got:
+                        break
+                time.sleep(0.1)
+            counters = {'dropped_sets': node._dropped_sets, 'dropped_frames': node._dropped,
+                        'incomplete': node.sync.counters.incomplete, 'resets': node._resets,
+                        'missing': dict(node.sync.counters.missing)}
     finally:
-        if player.poll() is None:
-            player.kill()
-        executor.shutdown()
-        spinner.join(timeout=5)
-        node.destroy_node()
-        listener.destroy_node()
         rclpy.try_shutdown(context=context)
     return got, counters
 

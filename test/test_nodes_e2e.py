@@ -4,8 +4,6 @@ from __future__ import annotations
 import math
 import os
 import py_compile
-import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
@@ -22,11 +20,11 @@ from rclpy.context import Context  # noqa: E402
 from rclpy.executors import MultiThreadedExecutor  # noqa: E402
 from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
 
+from conftest import REPO, playing  # noqa: E402
 from mbtrack_ros.nodes import tracker_node  # noqa: E402
 from mbtrack_ros.nodes.params import ParamsError  # noqa: E402
 from mbtrack_ros.nodes.tracker_node import TrackerNode  # noqa: E402
 
-REPO = Path(__file__).resolve().parents[1]
 CONFIGS = sorted((REPO / 'config').glob('*.yaml'))
 
 
@@ -341,20 +339,7 @@ def test_end_to_end_bag_player_tracker_subscriber(recording, context, tmp_path):
     listener.create_subscription(DiagnosticArray, '/diagnostics', keep('diagnostics'), qos)
     # subscribing is what switches the debug image on
     listener.create_subscription(Image, '/tracker_node/debug/cam0/occlusion', keep('debug'), qos)
-    executor = MultiThreadedExecutor(num_threads=3, context=context)
-    executor.add_node(node)
-    executor.add_node(listener)
-    spinner = threading.Thread(target=executor.spin, daemon=True)
-    spinner.start()
-    env = dict(os.environ, PYTHONPATH=str(REPO))
-    player = subprocess.Popen(
-        [sys.executable, '-m', 'mbtrack_ros.nodes.bag_player', '--ros-args',
-         '-p', f'bag:={recording}', '-p', 'rate:=1.0', '-p', 'wait_for_subscribers:=true',
-         '-p', 'start_delay:=1.0'],
-        cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    try:
-        out, _ = player.communicate(timeout=60)
-        assert player.returncode == 0, out
+    with playing(recording, [node, listener], context, rate=1.0, threads=3, timeout=60):
         # let the last frame sets through (a cold numba cache compiles for a while)
         deadline = time.monotonic() + 40
         while time.monotonic() < deadline:
@@ -362,13 +347,6 @@ def test_end_to_end_bag_player_tracker_subscriber(recording, context, tmp_path):
                 if got['people'] and stamp_ns(got['people'][-1].header) == max(truth):
                     break
             time.sleep(0.1)
-    finally:
-        if player.poll() is None:
-            player.kill()
-        executor.shutdown()
-        spinner.join(timeout=5)
-        node.destroy_node()
-        listener.destroy_node()
 
     people = got['people']
     assert len(people) >= 20, f'only {len(people)} PoseArray messages for 30 frames'
