@@ -1,6 +1,6 @@
 """Identity-switch analysis of automatic detection on a recording (docs/detection.md).
 
-    .venv/bin/python docs/detection_eval.py run REC OUT [--seed S]   # track, log events
+    .venv/bin/python docs/detection_eval.py run REC OUT [--seed S] [--no-people-cue]
     .venv/bin/python docs/detection_eval.py report OUT REC            # causes of switches
     .venv/bin/python docs/detection_eval.py table OUT REC [OUT REC]   # one row per run
 
@@ -18,6 +18,7 @@ entering / release latencies. ``table`` prints the rows of docs/detection.md.
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 import json
 import sys
 from pathlib import Path
@@ -25,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from mbtrack_ros.core.camera import RoomCalibration
+from mbtrack_ros.core.detection.background import BackgroundBank
 from mbtrack_ros.core.detection import release as release_module
 from mbtrack_ros.core.tracker import Tracker, TrackerConfig
 from mbtrack_ros.evaluation.clear_mot import clear_mot
@@ -44,7 +46,7 @@ def _screen(x: float, y: float) -> bool:
     return x > 5.2 and 1.4 < y < 3.6
 
 
-def run(rec: Path, out: Path, seed: int) -> None:
+def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False) -> None:
     out.mkdir(parents=True, exist_ok=True)
     cal = RoomCalibration.load(rec / 'calibration.yaml')
     events: list[dict] = []
@@ -71,6 +73,10 @@ def run(rec: Path, out: Path, seed: int) -> None:
     with RecordingReader(rec / 'bag') as reader:
         cal = cal.subset([n for n in cal.names if n in reader.cameras])
         tracker = Tracker(cal, TrackerConfig(seed=seed, detection=True))
+        if no_people_cue:  # the bootstrap before issue 6: every pixel learnt, 10 x 4 frames
+            bg = replace(tracker.detection.config.background, people=None,
+                         bootstrap_frames=10, bootstrap_stride=4)
+            tracker.detection.background = BackgroundBank(bg, calibration=cal)
         known = set()
         for fs in reader.frames():
             frame['index'] = fs.index
@@ -228,6 +234,8 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument('rec', type=Path)
     r.add_argument('out', type=Path)
     r.add_argument('--seed', type=int, default=0)
+    r.add_argument('--no-people-cue', action='store_true',
+                   help='background bootstrap without the people cue (10 frames, stride 4)')
     s = sub.add_parser('report')
     s.add_argument('out', type=Path)
     s.add_argument('rec', type=Path)
@@ -235,7 +243,7 @@ def main(argv: list[str] | None = None) -> int:
     t.add_argument('pairs', type=Path, nargs='+')
     args = p.parse_args(argv)
     if args.cmd == 'run':
-        run(args.rec, args.out, args.seed)
+        run(args.rec, args.out, args.seed, args.no_people_cue)
     elif args.cmd == 'report':
         report(args.out, args.rec)
     else:
