@@ -191,10 +191,9 @@ class AutoDetection:
             masks[n] = mask
         t1 = time.perf_counter()
         # 2. background and foreground
-        fg = self.background.apply({n: images[n] for n in names}, exclude=masks)
-        evidence = {n: FrameEvidence(images[n], fg[n], masks[n],
-                                     motion=self.background.models[n].presence())
-                    for n in fg}
+        # the model update (and with it the motion the detector needs) waits for search()
+        fg = self.background.apply({n: images[n] for n in names}, exclude=masks, defer=True)
+        evidence = {n: FrameEvidence(images[n], fg[n], masks[n]) for n in fg}
         t2 = time.perf_counter()
         # 3. support, visibility and existence
         ended: list[int] = []
@@ -228,6 +227,7 @@ class AutoDetection:
     def search(self) -> list[Birth]:
         """Detection and acquisition (003 §4.1-4.2) on the frame set of the last
         :meth:`update`: the people to add, new or re-found (at most once per update)."""
+        self.update_background()
         if self._pending is None:
             return []
         stamp_ns, images, tracks, models, means, shapes, evidence, ended = self._pending
@@ -254,9 +254,23 @@ class AutoDetection:
                     births.append(birth)
         t4 = time.perf_counter()
         self.timings['detect_search'] = t4 - t3
-        self.timings['detect'] = sum(self.timings[k] for k in (
-            'detect_render', 'detect_background', 'detect_existence', 'detect_search'))
+        self.timings['detect'] = sum(self.timings.get(k, 0.0) for k in (
+            'detect_render', 'detect_background', 'detect_existence',
+            'detect_background_update', 'detect_search'))
         return births
+
+    def update_background(self) -> None:
+        """The background model update of the last :meth:`update` (003 §4.2), deferred so
+        that it does not delay the frame's result, and the recent motion it gives to the
+        frame's evidence (the detector's proof that a detection is no ghost). :meth:`search`
+        runs it first; the results are those of updating within :meth:`update`."""
+        t0 = time.perf_counter()
+        self.background.update_pending()
+        if self._pending is not None:
+            for name, ev in self._pending[6].items():
+                if ev.motion is None:
+                    ev.motion = self.background.models[name].presence()
+        self.timings['detect_background_update'] = time.perf_counter() - t0
 
     def tracking_images(self, images: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
         """The images the tracking filter should use: the side cameras only (003 §5: the
