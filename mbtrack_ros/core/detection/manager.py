@@ -23,7 +23,8 @@ import numpy as np
 
 from mbtrack_ros.core import _kernels
 from mbtrack_ros.core.appearance import (
-    PersonModel, quantize, relative_angle, single_target_loglik)
+    PersonModel, key_view_loglik, key_view_stack, quantize, relative_angle,
+    single_target_loglik, view_weights)
 from mbtrack_ros.core.camera import RoomCalibration
 from mbtrack_ros.core.detection import DetectionError
 from mbtrack_ros.core.detection.acquisition import AcquisitionConfig, acquire
@@ -153,8 +154,8 @@ class AutoDetection:
         return ended, self.search()
 
     def update(self, stamp_ns: int, images: Mapping[str, np.ndarray],
-               tracks: Sequence[TrackEstimate], models: Mapping[int, PersonModel]
-               ) -> list[int]:
+               tracks: Sequence[TrackEstimate], models: Mapping[int, PersonModel], *,
+               bins: Mapping[str, np.ndarray] | None = None) -> list[int]:
         """Background, support, visibility, existence and release for one frame set.
 
         Fills ``visibility`` and ``existence`` of ``tracks`` in place and keeps what
@@ -166,6 +167,8 @@ class AutoDetection:
             images: camera -> (H, W, 3) uint8 RGB.
             tracks: the tracker's estimates of this frame.
             models: track id -> person model (for shapes and appearance).
+            bins: colour bins (``appearance.quantize``) of cameras already quantised this
+                frame (the tracker's measurement model), reused.
 
         Returns:
             ids of the tracks to release now.
@@ -193,7 +196,9 @@ class AutoDetection:
         # 2. background and foreground
         # the model update (and with it the motion the detector needs) waits for search()
         fg = self.background.apply({n: images[n] for n in names}, exclude=masks, defer=True)
-        evidence = {n: FrameEvidence(images[n], fg[n], masks[n]) for n in fg}
+        known_bins = dict(bins or {})
+        evidence = {n: FrameEvidence(images[n], fg[n], masks[n], _bins=known_bins.get(n))
+                    for n in fg}
         t2 = time.perf_counter()
         # 3. support, visibility and existence
         ended: list[int] = []
@@ -207,7 +212,17 @@ class AutoDetection:
             else:
                 supported = np.ones(len(tracks), bool)
                 coverage = {}
-            self._auxiliary(dt, images, tracks, models, shapes, coverage)
+            def colour(name: str) -> np.ndarray | None:
+                """Colour bins of a camera this frame, quantised at most once."""
+                if name in evidence:
+                    return evidence[name].bins
+                if name not in images:
+                    return None
+                if name not in known_bins:
+                    known_bins[name] = quantize(images[name])
+                return known_bins[name]
+
+            self._auxiliary(dt, colour, tracks, models, shapes, coverage)
             existence = [self.aux[t.track_id].existence for t in tracks]
             if evidence:  # 4. release (only once the background exists)
                 ids = [t.track_id for t in tracks]
@@ -372,9 +387,11 @@ class AutoDetection:
         h = track.height if np.isfinite(track.height) and track.height > 0 else 1.75
         return BodyShape(height=float(h))
 
-    def _auxiliary(self, dt: float, images: Mapping[str, np.ndarray],
-                   tracks: Sequence[TrackEstimate], models: Mapping[int, PersonModel],
-                   shapes: Sequence[BodyShape], coverage: Mapping[str, np.ndarray]) -> None:
+    def _auxiliary(self, dt: float, colour, tracks: Sequence[TrackEstimate],
+                   models: Mapping[int, PersonModel], shapes: Sequence[BodyShape],
+                   coverage: Mapping[str, np.ndarray]) -> None:
+        """Visibility and existence of every track (001); ``colour(camera)`` gives the
+        frame's colour bins of a side camera."""
         cfg = self.config
         hidden = -cfg.clutter_distance ** 2 / (2.0 * cfg.sigma ** 2)    # 001 Eq. 23
         # a few posterior particles per track with a model (001 Eq. 18: particle average)
@@ -397,20 +414,18 @@ class AutoDetection:
         if rows:
             parts = np.concatenate(rows)
             owner_arr = np.asarray(owner)
-            cams = [n for n in self.side if n in images]
-            # relative viewing angles of every particle in every camera, then one key-view
-            # interpolation per track (003 Eq. 1-2) for all cameras at once
-            rel = np.stack([relative_angle(parts[:, THETA],
-                                           self.calibration.cameras[n].viewing_angle(
-                                               parts[:, [X, Y]])) for n in cams])
-            hists = np.empty((len(cams), len(parts), 3, 512))
-            for k in np.unique(owner_arr):
-                sel = owner_arr == k
-                h = models[tracks[k].track_id].interpolate(rel[:, sel].ravel())
-                hists[:, sel] = h.reshape(len(cams), int(sel.sum()), 3, 512)
+            cams = [n for n in self.side if colour(n) is not None]
+            # the tracks' key views, interpolated lazily per particle and camera at the
+            # relative viewing angles (003 Eq. 1-2), as in the filter's likelihood
+            with_model, target = np.unique(owner_arr, return_inverse=True)
+            refs = [models[tracks[k].track_id] for k in with_model]
+            key = key_view_stack(refs)
+            va, vb, wa = view_weights([self.calibration.cameras[n] for n in cams], parts,
+                                      target.ravel(), refs)
             for c, n in enumerate(cams):
                 sil = rasterize(self.calibration.cameras[n], parts, hyp_shapes)
-                ll = single_target_loglik(quantize(images[n]), sil, hists[c], sigma=cfg.sigma)
+                ll = key_view_loglik(colour(n), sil, key, target.ravel(), va[c], vb[c], wa[c],
+                                     sigma=cfg.sigma)
                 loglik[n] = np.where(sil.area > 0, ll, -np.inf)
         for k, t in enumerate(tracks):
             aux = self.aux.setdefault(t.track_id, TrackAuxiliary(cfg.existence))
