@@ -150,6 +150,17 @@ class Silhouettes:
     def __len__(self) -> int:
         return int(self.offsets.shape[0] - 1)
 
+    def select(self, start: int, stop: int) -> Silhouettes:
+        """The silhouettes of particles ``start:stop`` (views of the arrays, offsets from 0):
+        one rasterisation of several particle sets, then one object per set."""
+        a, b = int(self.offsets[start]), int(self.offsets[stop])
+        return Silhouettes(
+            row=self.row[a:b], x0=self.x0[a:b], x1=self.x1[a:b], part=self.part[a:b],
+            offsets=self.offsets[start:stop + 1] - a, area=self.area[start:stop],
+            part_area=self.part_area[start:stop], full_area=self.full_area[start:stop],
+            bbox=self.bbox[start:stop], distance=self.distance[start:stop],
+            width=self.width, height=self.height, row_step=self.row_step)
+
     def spans(self, i: int) -> slice:
         """Slice of the spans of particle i."""
         return slice(int(self.offsets[i]), int(self.offsets[i + 1]))

@@ -31,7 +31,9 @@ sitting one inside a standing person).
 """
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -306,6 +308,7 @@ class Detector:
                         for n, c in calibration.cameras.items()}
         self._candidates: list[Detection] = []
         self.last_timing: dict[str, float] = {}
+        self._pool: ThreadPoolExecutor | None = None
 
     # -- scoring --------------------------------------------------------------------------
     def _min_area(self, camera: Camera) -> float:
@@ -356,14 +359,18 @@ class Detector:
         ctx_states[:, SIT] = 0.0
         ctx_states[:, THETA] = 0.0
         m = len(ctx_states)
+        both_states = np.concatenate([states, ctx_states])
+        both_heights = np.concatenate([np.broadcast_to(heights, (n,)),
+                                       np.full(m, cfg.context_height)])
+        both_widths = np.concatenate([np.broadcast_to(widths, (n,)),
+                                      np.full(m, cfg.context_width)])
         for name, ev in evidence.items():
             if name not in self.calibration.cameras:
                 continue
-            cam = self.calibration.cameras[name]
-            sil = rasterize(cam, states, self.shape, heights=heights, widths=widths)
-            context = rasterize(cam, ctx_states, self.shape,
-                                heights=np.full(m, cfg.context_height),
-                                widths=np.full(m, cfg.context_width))
+            # the hypotheses and their context bodies in one rasterisation
+            both = rasterize(self.calibration.cameras[name], both_states, self.shape,
+                             heights=both_heights, widths=both_widths)
+            sil, context = both.select(0, n), both.select(n, n + m)
             resp, sees, cov = self._view_terms(name, ev, sil, full=full, context=context,
                                                ctx_index=ctx_index.ravel())
             total += resp
@@ -415,6 +422,7 @@ class Detector:
             d = np.linalg.norm(self.coarse_xy[picks][:, None] - pend[None], axis=2).min(axis=1)
             picks = picks[np.argsort(d > cfg.confirm_radius + cfg.fine_radius, kind='stable')]
         picks = picks[:cfg.max_candidates]
+        self._prepare_edges(evidence)
         found: list[Detection] = []
         for p in picks:
             det = self._refine(evidence, self.coarse_xy[p], track_xy)
@@ -425,6 +433,21 @@ class Detector:
         xy = np.array([d.xy for d in found])
         keep = _nms(xy, np.array([d.score for d in found]), cfg.nms_radius, len(found))
         return [found[i] for i in keep]
+
+    def _prepare_edges(self, evidence: Mapping[str, FrameEvidence]) -> None:
+        """The edge maps the fine level needs (side cameras), computed in parallel threads:
+        they are mostly OpenCV calls, which release the GIL (the same maps as computed
+        one by one on first use)."""
+        todo = [ev for name, ev in evidence.items()
+                if name in self.calibration.cameras and not self.ceiling[name]
+                and ev._edges is None]
+        workers = min(len(todo), os.cpu_count() or 1)
+        if workers < 2:
+            return
+        if self._pool is None or self._pool._max_workers < workers:
+            self._pool = ThreadPoolExecutor(max_workers=workers,
+                                            thread_name_prefix='mbtrack-edges')
+        list(self._pool.map(lambda ev: ev.edges, todo))
 
     def _refine(self, evidence: Mapping[str, FrameEvidence], centre: np.ndarray,
                 track_xy: np.ndarray) -> Detection | None:
