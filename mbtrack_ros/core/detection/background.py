@@ -42,6 +42,7 @@ from numba import njit
 from mbtrack_ros.core.camera import RoomCalibration
 from mbtrack_ros.core.detection import DetectionError
 from mbtrack_ros.core.detection.people import PeopleCue, PeopleCueConfig
+from mbtrack_ros.core.threads import CameraThreads
 
 __all__ = ['BackgroundBank', 'BackgroundConfig', 'BackgroundModel', 'clean_mask']
 
@@ -145,7 +146,7 @@ def clean_mask(mask: np.ndarray, *, open_size: int = 3, close_size: int = 5,
     return m.astype(bool)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _foreground_kernel(ycc: np.ndarray, bg: np.ndarray, gain: float, luma: float,
                        chroma: float, shadow_lo: float, shadow_hi: float
                        ) -> np.ndarray:  # pragma: no cover - compiled
@@ -169,7 +170,7 @@ def _foreground_kernel(ycc: np.ndarray, bg: np.ndarray, gain: float, luma: float
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _motion_kernel(y: np.ndarray, prev: np.ndarray, motion: np.ndarray, decay: float,
                    threshold: float, persistent: float) -> np.ndarray:  # pragma: no cover
     """Decaying accumulation of thresholded frame differences (in place); (H, W) uint8
@@ -187,7 +188,7 @@ def _motion_kernel(y: np.ndarray, prev: np.ndarray, motion: np.ndarray, decay: f
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _blend_kernel(bg: np.ndarray, ycc: np.ndarray, frozen: np.ndarray, fg: np.ndarray,
                   static: np.ndarray, use_fg: bool, alpha: float, static_alpha: float,
                   static_frames: int, unknown: np.ndarray, occupied: np.ndarray,
@@ -535,6 +536,7 @@ class BackgroundBank:
         self._cue: PeopleCue | None = None
         self._frames: list[dict[str, np.ndarray]] = []   # bootstrap frame sets for the cue
         self._seen = 0
+        self._threads = CameraThreads('mbtrack-background')
 
     @property
     def cue(self) -> PeopleCue | None:
@@ -567,14 +569,16 @@ class BackgroundBank:
         :meth:`update_pending` (see :meth:`BackgroundModel.apply`; the same results)."""
         out: dict[str, np.ndarray] = {}
         started: list[str] = []
-        for name, image in images.items():
-            model = self.model(name)
-            was_ready = model.ready
-            fg = model.apply(image, exclude=None if exclude is None else exclude.get(name),
-                             defer=defer)
+        names = list(images)
+        was_ready = [self.model(name).ready for name in names]
+        # one thread per camera (the kernels and OpenCV release the GIL)
+        fgs = self._threads.map(lambda name: self.models[name].apply(
+            images[name], exclude=None if exclude is None else exclude.get(name),
+            defer=defer), names)
+        for name, fg, ready in zip(names, fgs, was_ready):
             if fg is not None:
                 out[name] = fg
-            elif model.ready and not was_ready:
+            elif self.models[name].ready and not ready:
                 started.append(name)
         if self.calibration is not None and self.config.people is not None \
                 and (started or not all(m.ready for m in self.models.values())):
@@ -596,5 +600,5 @@ class BackgroundBank:
 
     def update_pending(self) -> None:
         """Run the model updates deferred by ``apply(..., defer=True)``."""
-        for model in self.models.values():
-            model.update_pending()
+        pending = [model for model in self.models.values() if model.pending]
+        self._threads.map(lambda model: model.update_pending(), pending)

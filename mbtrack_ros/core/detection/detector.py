@@ -31,9 +31,7 @@ sitting one inside a standing person).
 """
 from __future__ import annotations
 
-import os
 from collections.abc import Mapping, Sequence
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -45,6 +43,7 @@ from mbtrack_ros.core.detection.features import (
     EdgeMap, ForegroundIntegral, colour_symmetry, contour_loglik_spans, span_count)
 from mbtrack_ros.core.shape import BodyShape, rasterize
 from mbtrack_ros.core.state import SIT, STATE_DIM, THETA, VX, VY, X, Y
+from mbtrack_ros.core.threads import CameraThreads
 
 __all__ = ['Detection', 'Detector', 'DetectorConfig', 'FrameEvidence', 'is_ceiling']
 
@@ -308,7 +307,7 @@ class Detector:
                         for n, c in calibration.cameras.items()}
         self._candidates: list[Detection] = []
         self.last_timing: dict[str, float] = {}
-        self._pool: ThreadPoolExecutor | None = None
+        self._threads = CameraThreads('mbtrack-edges')
 
     # -- scoring --------------------------------------------------------------------------
     def _min_area(self, camera: Camera) -> float:
@@ -438,16 +437,10 @@ class Detector:
         """The edge maps the fine level needs (side cameras), computed in parallel threads:
         they are mostly OpenCV calls, which release the GIL (the same maps as computed
         one by one on first use)."""
-        todo = [ev for name, ev in evidence.items()
-                if name in self.calibration.cameras and not self.ceiling[name]
-                and ev._edges is None]
-        workers = min(len(todo), os.cpu_count() or 1)
-        if workers < 2:
-            return
-        if self._pool is None or self._pool._max_workers < workers:
-            self._pool = ThreadPoolExecutor(max_workers=workers,
-                                            thread_name_prefix='mbtrack-edges')
-        list(self._pool.map(lambda ev: ev.edges, todo))
+        self._threads.map(lambda ev: ev.edges,
+                          [ev for name, ev in evidence.items()
+                           if name in self.calibration.cameras and not self.ceiling[name]
+                           and ev._edges is None])
 
     def _refine(self, evidence: Mapping[str, FrameEvidence], centre: np.ndarray,
                 track_xy: np.ndarray) -> Detection | None:
