@@ -38,6 +38,7 @@ dropped; the torso and head keep their standing sizes, so the head top is at
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -189,8 +190,13 @@ def _check_states(states: np.ndarray) -> np.ndarray:
 
 def _per_particle(value: float | np.ndarray | None, default: float, n: int,
                   what: str) -> np.ndarray:
-    arr = np.array(np.broadcast_to(np.asarray(default if value is None else value,
-                                              np.float64), (n,)))     # writable, contiguous
+    value = default if value is None else value
+    if np.ndim(value) == 0:                   # one size for all (the common case): no scan
+        v = float(value)
+        if not (math.isfinite(v) and v > 0):
+            raise ShapeError(f'{what} must be positive and finite')
+        return np.full(n, v)
+    arr = np.array(np.broadcast_to(np.asarray(value, np.float64), (n,)))  # writable, contiguous
     if not np.all(np.isfinite(arr) & (arr > 0)):
         raise ShapeError(f'{what} must be positive and finite')
     return arr

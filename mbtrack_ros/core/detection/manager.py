@@ -180,13 +180,23 @@ class AutoDetection:
         names = [n for n in images if n in self.calibration.cameras]
         means = np.array([t.mean for t in tracks]).reshape(-1, 6)
         shapes = [self._shape(models.get(t.track_id), t) for t in tracks]
+        # posterior particles for the visibility likelihood (step 3), rasterised in the side
+        # cameras together with the tracks (one rasterisation per camera)
+        parts, owner, part_shapes = self._visibility_particles(tracks, models, shapes)
+        part_sils = {}
         # 1. rendered tracks per camera
         sils, masks = {}, {}
         for n in names:
             cam = self.calibration.cameras[n]
             mask = np.zeros((cam.height, cam.width), bool)
             if len(tracks):
-                sil = rasterize(cam, means, shapes)
+                k = len(tracks)
+                if len(parts) and n in self.side:
+                    both = rasterize(cam, np.concatenate([means, parts]), shapes + part_shapes)
+                    sil = both.select(0, k)
+                    part_sils[n] = both.select(k, k + len(parts))
+                else:
+                    sil = rasterize(cam, means, shapes)
                 sils[n] = sil
                 paint = mask.view(np.uint8)
                 _kernels.paint_spans(paint, sil.row, sil.x0, sil.x1, sil.part, 0,
@@ -222,7 +232,7 @@ class AutoDetection:
                     known_bins[name] = quantize(images[name])
                 return known_bins[name]
 
-            self._auxiliary(dt, colour, tracks, models, shapes, coverage)
+            self._auxiliary(dt, colour, tracks, models, parts, owner, part_sils, coverage)
             existence = [self.aux[t.track_id].existence for t in tracks]
             if evidence:  # 4. release (only once the background exists)
                 ids = [t.track_id for t in tracks]
@@ -387,15 +397,13 @@ class AutoDetection:
         h = track.height if np.isfinite(track.height) and track.height > 0 else 1.75
         return BodyShape(height=float(h))
 
-    def _auxiliary(self, dt: float, colour, tracks: Sequence[TrackEstimate],
-                   models: Mapping[int, PersonModel], shapes: Sequence[BodyShape],
-                   coverage: Mapping[str, np.ndarray]) -> None:
-        """Visibility and existence of every track (001); ``colour(camera)`` gives the
-        frame's colour bins of a side camera."""
+    def _visibility_particles(self, tracks: Sequence[TrackEstimate],
+                              models: Mapping[int, PersonModel], shapes: Sequence[BodyShape]
+                              ) -> tuple[np.ndarray, np.ndarray, list[BodyShape]]:
+        """A few posterior particles (P, 6) of every track with a model (001 Eq. 18: particle
+        average), the index (P,) of their track and their shapes."""
         cfg = self.config
-        hidden = -cfg.clutter_distance ** 2 / (2.0 * cfg.sigma ** 2)    # 001 Eq. 23
-        # a few posterior particles per track with a model (001 Eq. 18: particle average)
-        rows, owner, hyp_shapes = [], [], []
+        rows, owner, part_shapes = [], [], []
         for k, t in enumerate(tracks):
             model = models.get(t.track_id)
             if model is None or not getattr(model, 'view_angles', np.zeros(0)).size:
@@ -409,12 +417,22 @@ class AutoDetection:
             else:
                 rows.append(t.mean[None])
             owner.extend([k] * len(rows[-1]))
-            hyp_shapes.extend([shapes[k]] * len(rows[-1]))
+            part_shapes.extend([shapes[k]] * len(rows[-1]))
+        parts = np.concatenate(rows) if rows else np.zeros((0, 6))
+        return parts, np.asarray(owner, dtype=np.int64), part_shapes
+
+    def _auxiliary(self, dt: float, colour, tracks: Sequence[TrackEstimate],
+                   models: Mapping[int, PersonModel], parts: np.ndarray, owner_arr: np.ndarray,
+                   part_sils: Mapping[str, object], coverage: Mapping[str, np.ndarray]) -> None:
+        """Visibility and existence of every track (001) from the appearance likelihood of
+        its particles ``parts`` (``owner_arr``: their track) rasterised in ``part_sils``;
+        ``colour(camera)`` gives the frame's colour bins of a side camera."""
+        cfg = self.config
+        hidden = -cfg.clutter_distance ** 2 / (2.0 * cfg.sigma ** 2)    # 001 Eq. 23
+        rows = len(parts) > 0
         loglik: dict[str, np.ndarray] = {}
         if rows:
-            parts = np.concatenate(rows)
-            owner_arr = np.asarray(owner)
-            cams = [n for n in self.side if colour(n) is not None]
+            cams = [n for n in self.side if n in part_sils and colour(n) is not None]
             # the tracks' key views, interpolated lazily per particle and camera at the
             # relative viewing angles (003 Eq. 1-2), as in the filter's likelihood
             with_model, target = np.unique(owner_arr, return_inverse=True)
@@ -423,7 +441,7 @@ class AutoDetection:
             va, vb, wa = view_weights([self.calibration.cameras[n] for n in cams], parts,
                                       target.ravel(), refs)
             for c, n in enumerate(cams):
-                sil = rasterize(self.calibration.cameras[n], parts, hyp_shapes)
+                sil = part_sils[n]
                 ll = key_view_loglik(colour(n), sil, key, target.ravel(), va[c], vb[c], wa[c],
                                      sigma=cfg.sigma)
                 loglik[n] = np.where(sil.area > 0, ll, -np.inf)
