@@ -42,7 +42,6 @@ from numba import njit
 from mbtrack_ros.core.camera import RoomCalibration
 from mbtrack_ros.core.detection import DetectionError
 from mbtrack_ros.core.detection.people import PeopleCue, PeopleCueConfig
-from mbtrack_ros.core.threads import CameraThreads
 
 __all__ = ['BackgroundBank', 'BackgroundConfig', 'BackgroundModel', 'clean_mask']
 
@@ -536,7 +535,6 @@ class BackgroundBank:
         self._cue: PeopleCue | None = None
         self._frames: list[dict[str, np.ndarray]] = []   # bootstrap frame sets for the cue
         self._seen = 0
-        self._threads = CameraThreads('mbtrack-background')
 
     @property
     def cue(self) -> PeopleCue | None:
@@ -569,16 +567,14 @@ class BackgroundBank:
         :meth:`update_pending` (see :meth:`BackgroundModel.apply`; the same results)."""
         out: dict[str, np.ndarray] = {}
         started: list[str] = []
-        names = list(images)
-        was_ready = [self.model(name).ready for name in names]
-        # one thread per camera (the kernels and OpenCV release the GIL)
-        fgs = self._threads.map(lambda name: self.models[name].apply(
-            images[name], exclude=None if exclude is None else exclude.get(name),
-            defer=defer), names)
-        for name, fg, ready in zip(names, fgs, was_ready):
+        for name, image in images.items():
+            model = self.model(name)
+            was_ready = model.ready
+            fg = model.apply(image, exclude=None if exclude is None else exclude.get(name),
+                             defer=defer)
             if fg is not None:
                 out[name] = fg
-            elif self.models[name].ready and not ready:
+            elif model.ready and not was_ready:
                 started.append(name)
         if self.calibration is not None and self.config.people is not None \
                 and (started or not all(m.ready for m in self.models.values())):
@@ -600,5 +596,5 @@ class BackgroundBank:
 
     def update_pending(self) -> None:
         """Run the model updates deferred by ``apply(..., defer=True)``."""
-        pending = [model for model in self.models.values() if model.pending]
-        self._threads.map(lambda model: model.update_pending(), pending)
+        for model in self.models.values():
+            model.update_pending()

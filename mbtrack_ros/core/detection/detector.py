@@ -43,7 +43,6 @@ from mbtrack_ros.core.detection.features import (
     EdgeMap, ForegroundIntegral, colour_symmetry, contour_loglik_spans, span_count)
 from mbtrack_ros.core.shape import BodyShape, rasterize
 from mbtrack_ros.core.state import SIT, STATE_DIM, THETA, VX, VY, X, Y
-from mbtrack_ros.core.threads import CameraThreads
 
 __all__ = ['Detection', 'Detector', 'DetectorConfig', 'FrameEvidence', 'is_ceiling']
 
@@ -307,7 +306,6 @@ class Detector:
                         for n, c in calibration.cameras.items()}
         self._candidates: list[Detection] = []
         self.last_timing: dict[str, float] = {}
-        self._threads = CameraThreads('mbtrack-edges')
 
     # -- scoring --------------------------------------------------------------------------
     def _min_area(self, camera: Camera) -> float:
@@ -421,7 +419,6 @@ class Detector:
             d = np.linalg.norm(self.coarse_xy[picks][:, None] - pend[None], axis=2).min(axis=1)
             picks = picks[np.argsort(d > cfg.confirm_radius + cfg.fine_radius, kind='stable')]
         picks = picks[:cfg.max_candidates]
-        self._prepare_edges(evidence)
         found: list[Detection] = []
         for p in picks:
             det = self._refine(evidence, self.coarse_xy[p], track_xy)
@@ -432,15 +429,6 @@ class Detector:
         xy = np.array([d.xy for d in found])
         keep = _nms(xy, np.array([d.score for d in found]), cfg.nms_radius, len(found))
         return [found[i] for i in keep]
-
-    def _prepare_edges(self, evidence: Mapping[str, FrameEvidence]) -> None:
-        """The edge maps the fine level needs (side cameras), computed in parallel threads:
-        they are mostly OpenCV calls, which release the GIL (the same maps as computed
-        one by one on first use)."""
-        self._threads.map(lambda ev: ev.edges,
-                          [ev for name, ev in evidence.items()
-                           if name in self.calibration.cameras and not self.ceiling[name]
-                           and ev._edges is None])
 
     def _refine(self, evidence: Mapping[str, FrameEvidence], centre: np.ndarray,
                 track_xy: np.ndarray) -> Detection | None:
