@@ -5,6 +5,7 @@ import cv2
 import numpy as np
 import pytest
 
+from mbtrack_ros.core.appearance import quantize
 from mbtrack_ros.core.camera import Camera, RoomCalibration, look_at
 from mbtrack_ros.core.detection import DetectionError
 from mbtrack_ros.core.detection.acquisition import acquire
@@ -692,3 +693,32 @@ def test_selected_silhouettes_equal_separate_rasterisations():
         for f in ('row', 'x0', 'x1', 'part', 'offsets', 'area', 'part_area', 'full_area',
                   'bbox', 'distance'):
             np.testing.assert_array_equal(getattr(part, f), getattr(one, f))
+
+
+def test_step_reuses_the_filters_colour_bins_and_defers_the_background_update():
+    """After step(search=False) the side cameras' evidence holds the measurement model's
+    quantised images (no second quantisation) and the background update (with the motion
+    the detector needs) is pending until search()."""
+    calib = make_room()
+    bgs = backgrounds(calib)
+    tracker = _detecting_tracker(calib, bgs, seed=1)
+    checked = 0
+    for k in range(12):
+        images = paint(calib, bgs, [person(1.5 + 0.05 * k, 2.8, theta=0.0)] if k >= 3
+                       else [], np.random.default_rng(k))
+        tracker.step(int(round(k * 1e9 / FPS)), images, search=False)
+        pending = tracker.detection._pending
+        evidence = pending[6] if pending else {}
+        bins = tracker.measurement.frame_bins()
+        for name in set(evidence) & set(bins):
+            assert evidence[name].bins is bins[name]
+            np.testing.assert_array_equal(bins[name], quantize(images[name]))
+            checked += 1
+        models = tracker.detection.background.models
+        if evidence:
+            assert all(models[n].pending for n in evidence)
+            assert all(ev.motion is None for ev in evidence.values())
+        tracker.search()
+        assert not any(m.pending for m in models.values())
+        assert all(ev.motion is not None for ev in evidence.values())
+    assert checked > 0

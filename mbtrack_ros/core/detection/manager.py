@@ -16,7 +16,7 @@ filter step when automatic detection is enabled:
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -222,6 +222,7 @@ class AutoDetection:
             else:
                 supported = np.ones(len(tracks), bool)
                 coverage = {}
+
             def colour(name: str) -> np.ndarray | None:
                 """Colour bins of a camera this frame, quantised at most once."""
                 if name in evidence:
@@ -421,7 +422,8 @@ class AutoDetection:
         parts = np.concatenate(rows) if rows else np.zeros((0, 6))
         return parts, np.asarray(owner, dtype=np.int64), part_shapes
 
-    def _auxiliary(self, dt: float, colour, tracks: Sequence[TrackEstimate],
+    def _auxiliary(self, dt: float, colour: Callable[[str], np.ndarray | None],
+                   tracks: Sequence[TrackEstimate],
                    models: Mapping[int, PersonModel], parts: np.ndarray, owner_arr: np.ndarray,
                    part_sils: Mapping[str, object], coverage: Mapping[str, np.ndarray]) -> None:
         """Visibility and existence of every track (001) from the appearance likelihood of
@@ -429,9 +431,9 @@ class AutoDetection:
         ``colour(camera)`` gives the frame's colour bins of a side camera."""
         cfg = self.config
         hidden = -cfg.clutter_distance ** 2 / (2.0 * cfg.sigma ** 2)    # 001 Eq. 23
-        rows = len(parts) > 0
+        has_particles = len(parts) > 0
         loglik: dict[str, np.ndarray] = {}
-        if rows:
+        if has_particles:
             cams = [n for n in self.side if n in part_sils and colour(n) is not None]
             # the tracks' key views, interpolated lazily per particle and camera at the
             # relative viewing angles (003 Eq. 1-2), as in the filter's likelihood
@@ -449,7 +451,7 @@ class AutoDetection:
             aux = self.aux.setdefault(t.track_id, TrackAuxiliary(cfg.existence))
             vis: dict[str, float] = {}
             hid: dict[str, float] = {}
-            if rows:
+            if has_particles:
                 sel = owner_arr == k
                 if sel.any():
                     for n, ll in loglik.items():
