@@ -299,3 +299,19 @@ def test_deferred_update_gives_the_same_foreground_model_and_motion():
             np.testing.assert_array_equal(m_now.background_ycc, m_later.background_ycc)
             assert not m_later.pending
     assert now.models['c'].ready and now.models['c'].presence().any()
+
+
+def test_ycc_conversion_equals_reordered_opencv_ycrcb():
+    """_to_ycc (planes reordered before the float conversion) == YCrCb -> float -> Y, Cb, Cr."""
+    rng = np.random.default_rng(12)
+    for shape in ((H, W, 3), (1, 1, 3), (7, 5, 3)):
+        image = rng.integers(0, 256, shape, dtype=np.uint8)
+        plain = cv2.cvtColor(image, cv2.COLOR_RGB2YCrCb).astype(np.float32)[..., [0, 2, 1]]
+        fast = _to_ycc(image)
+        assert fast.dtype == np.float32 and fast.shape == shape
+        np.testing.assert_array_equal(fast, plain)
+    strided = rng.integers(0, 256, (H, 2 * W, 3), dtype=np.uint8)[:, ::2]
+    np.testing.assert_array_equal(
+        _to_ycc(strided),
+        cv2.cvtColor(np.ascontiguousarray(strided), cv2.COLOR_RGB2YCrCb)
+        .astype(np.float32)[..., [0, 2, 1]])

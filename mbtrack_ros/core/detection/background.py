@@ -239,8 +239,10 @@ def _blend_kernel(bg: np.ndarray, ycc: np.ndarray, frozen: np.ndarray, fg: np.nd
 
 def _to_ycc(image: np.ndarray) -> np.ndarray:
     """RGB uint8 (H, W, 3) -> float32 (H, W, 3) with channels Y, Cb, Cr."""
-    ycrcb = cv2.cvtColor(image, cv2.COLOR_RGB2YCrCb).astype(np.float32)
-    return ycrcb[..., [0, 2, 1]]
+    y, cr, cb = cv2.split(cv2.cvtColor(image, cv2.COLOR_RGB2YCrCb))
+    # reorder the uint8 planes, then convert (the same values as fancy-indexing the float
+    # image, which allocated and gathered a second float copy)
+    return cv2.merge([y, cb, cr]).astype(np.float32)
 
 
 def _check_image(image: np.ndarray, shape: tuple[int, int] | None, what: str) -> None:
