@@ -187,3 +187,39 @@ def test_model_from_images_and_single_target_likelihood():
         model_from_images({'zz': images['a']}, calib, state, 1.75, 0.5)
     with pytest.raises(AppearanceError):
         model_from_images(images, calib, np.zeros(3), 1.75, 0.5)
+
+
+def test_key_view_loglik_equals_interpolated_histograms():
+    """Lazy key-view interpolation (key_view_stack + view_weights + key_view_loglik) gives
+    the same 003 Eq. 3 values as PersonModel.interpolate + single_target_loglik, for two
+    models with different numbers of key views (one with a part missing in a view)."""
+    from mbtrack_ros.core.appearance import key_view_loglik, key_view_stack, view_weights
+    rng = np.random.default_rng(5)
+    cams = [_camera('a'), _camera('b', eye=(4.0, 0.0, 1.4))]
+    image = rng.integers(0, 256, size=(cams[0].height, cams[0].width, 3), dtype=np.uint8)
+    models = []
+    for views in (3, 1):
+        m = PersonModel(height=1.75, width=0.5)
+        for v in range(views):
+            h = rng.random((3, 512)) * (rng.random((3, 512)) < 0.2)
+            if views == 3 and v == 1:
+                h[2] = 0.0                           # legs not seen in this view
+            m.add_view(2.0 * np.pi * v / views - 1.0, h, merge_angle=0.0)
+        models.append(m)
+    states = np.zeros((10, 6))
+    states[:, X] = rng.uniform(-0.5, 0.5, 10)
+    states[:, Y] = rng.uniform(-0.5, 0.5, 10)
+    states[:, THETA] = rng.uniform(-np.pi, np.pi, 10)
+    target = np.array([0, 1] * 5)
+    va, vb, wa = view_weights(cams, states, target, models)
+    key = key_view_stack(models)
+    bins = quantize(image)
+    for c, cam in enumerate(cams):
+        sil = rasterize(cam, states, BodyShape())
+        rel = states[:, THETA] - cam.viewing_angle(states[:, [X, Y]])
+        hists = np.stack([models[t].interpolate(rel[i:i + 1])[0]
+                          for i, t in enumerate(target)])
+        plain = single_target_loglik(bins, sil, hists)
+        lazy = key_view_loglik(bins, sil, key, target, va[c], vb[c], wa[c])
+        assert np.any(plain < -0.1)
+        np.testing.assert_allclose(lazy, plain, rtol=0, atol=1e-12)

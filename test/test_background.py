@@ -267,3 +267,51 @@ def test_prepare_builds_the_people_cue_once_ahead_of_the_bootstrap(room, monkeyp
     no_cue = BackgroundBank(BackgroundConfig(people=None), calibration=room)
     no_cue.prepare()
     assert len(built) == 1
+
+
+def test_deferred_update_gives_the_same_foreground_model_and_motion():
+    """apply(defer=True) + update_pending() after the result equals updating in apply."""
+    rng = np.random.default_rng(11)
+    bg = scene(rng)
+    cfg = BackgroundConfig(bootstrap_frames=3, static_frames=4)
+    now, later = BackgroundBank(cfg), BackgroundBank(cfg)
+    for k in range(14):
+        frame = noisy(bg, rng)
+        x = 10 + 8 * k                          # a person walking, then standing still
+        frame[30:100, min(x, 90):min(x, 90) + 20] = (200, 30, 40)
+        exclude = np.zeros((H, W), bool)
+        exclude[20:60, 100:140] = k % 3 == 0    # a track covering pixels now and then
+        a = now.apply({'c': frame}, exclude={'c': exclude})
+        b = later.apply({'c': frame}, exclude={'c': exclude}, defer=True)
+        assert a.keys() == b.keys()
+        for name in a:
+            np.testing.assert_array_equal(a[name], b[name])
+        if later.models['c'].ready and k > cfg.bootstrap_frames:
+            assert later.models['c'].pending
+            if k % 2:                           # else left for the next apply
+                later.update_pending()
+                assert not later.models['c'].pending
+        m_now, m_later = now.models['c'], later.models['c']
+        # reading the state runs a pending update first
+        assert m_now.ready == m_later.ready
+        if m_now.ready:
+            np.testing.assert_array_equal(m_now.presence(), m_later.presence())
+            np.testing.assert_array_equal(m_now.background_ycc, m_later.background_ycc)
+            assert not m_later.pending
+    assert now.models['c'].ready and now.models['c'].presence().any()
+
+
+def test_ycc_conversion_equals_reordered_opencv_ycrcb():
+    """_to_ycc (planes reordered before the float conversion) == YCrCb -> float -> Y, Cb, Cr."""
+    rng = np.random.default_rng(12)
+    for shape in ((H, W, 3), (1, 1, 3), (7, 5, 3)):
+        image = rng.integers(0, 256, shape, dtype=np.uint8)
+        plain = cv2.cvtColor(image, cv2.COLOR_RGB2YCrCb).astype(np.float32)[..., [0, 2, 1]]
+        fast = _to_ycc(image)
+        assert fast.dtype == np.float32 and fast.shape == shape
+        np.testing.assert_array_equal(fast, plain)
+    strided = rng.integers(0, 256, (H, 2 * W, 3), dtype=np.uint8)[:, ::2]
+    np.testing.assert_array_equal(
+        _to_ycc(strided),
+        cv2.cvtColor(np.ascontiguousarray(strided), cv2.COLOR_RGB2YCrCb)
+        .astype(np.float32)[..., [0, 2, 1]])

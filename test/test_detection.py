@@ -5,6 +5,7 @@ import cv2
 import numpy as np
 import pytest
 
+from mbtrack_ros.core.appearance import quantize
 from mbtrack_ros.core.camera import Camera, RoomCalibration, look_at
 from mbtrack_ros.core.detection import DetectionError
 from mbtrack_ros.core.detection.acquisition import acquire
@@ -604,3 +605,120 @@ def test_deferred_search_gives_the_same_tracks_as_the_full_step():
             assert started == [1]
     assert runs[0] == runs[1]
     assert any(runs[1]) and not any(runs[1][:4])  # born after entering, not before
+
+
+# -- fast paths against their straightforward versions -----------------------------------
+def test_prefix_sums_equal_numpy_cumsum():
+    rng = np.random.default_rng(4)
+    fg = rng.random((H, W)) < 0.3
+    unknown = rng.random((H, W)) < 0.2
+    for unk in (unknown, None):
+        known = np.ones((H, W), bool) if unk is None else ~unk
+        integral = ForegroundIntegral(fg, unk)
+        np.testing.assert_array_equal(integral._fg[:, 1:], np.cumsum(fg & known, axis=1))
+        np.testing.assert_array_equal(integral._known[:, 1:], np.cumsum(known, axis=1))
+        assert not integral._fg[:, 0].any() and not integral._known[:, 0].any()
+
+
+def test_colour_symmetry_equals_numpy_histograms():
+    """The kernel (colours merged per visited pixel) equals a plain per-silhouette version."""
+    rng = np.random.default_rng(8)
+    calib = make_room()
+    cam = calib.cameras['cam1']
+    states = np.zeros((8, 6))
+    states[:, :2] = rng.uniform([1.0, 1.0], [5.0, 4.0], (8, 2))
+    states[:, 4] = rng.uniform(0, np.pi, 8)
+    sil = rasterize(cam, states, BodyShape(1.8, 0.55))
+    image = rng.integers(0, 256, (H, W, 3), dtype=np.uint8)
+    for levels in (2, 4, 8):
+        fast = colour_symmetry(image, sil, levels=levels, min_pixels=4)
+        q = (image // (256 // levels)).astype(np.int64)
+        colour = (q[..., 0] * levels + q[..., 1]) * levels + q[..., 2]
+        for i in range(len(states)):
+            left, right = [], []
+            for s in range(sil.offsets[i], sil.offsets[i + 1]):
+                if sil.part[s] != TORSO or not 0 <= sil.row[s] < H:
+                    continue
+                for x in range(max(sil.x0[s], 0), min(sil.x1[s], W)):
+                    side = np.sign(2 * x + 1 - (sil.x0[s] + sil.x1[s]))
+                    if side:
+                        (left if side < 0 else right).append(colour[sil.row[s], x])
+            if min(len(left), len(right)) < 4:
+                assert np.isnan(fast[i])
+                continue
+            hl = np.bincount(left, minlength=levels ** 3) / len(left)
+            hr = np.bincount(right, minlength=levels ** 3) / len(right)
+            assert fast[i] == pytest.approx(np.abs(hl - hr).sum(), abs=1e-12)
+        assert np.isfinite(fast).sum() >= 4
+
+
+def test_edge_map_equals_full_image_component_validation():
+    """Validating edge components inside the edges' bounding box keeps the same edges as the
+    connected components of the whole image."""
+    rng = np.random.default_rng(2)
+    image = cv2.resize(rng.integers(0, 256, (15, 20, 3), dtype=np.uint8), (W, H),
+                       interpolation=cv2.INTER_NEAREST)
+    fg = np.zeros((H, W), bool)
+    fg[30:90, 40:100] = True
+    fast = EdgeMap.from_image(image, fg, min_edge_pixels=12)
+    gray = cv2.GaussianBlur(cv2.cvtColor(image, cv2.COLOR_RGB2GRAY), (3, 3), 0)
+    edges = cv2.Canny(gray, 40.0, 120.0, L2gradient=True)
+    k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (15, 15))
+    edges &= cv2.dilate(fg.astype(np.uint8), k) * 255
+    _, labels, stats, _ = cv2.connectedComponentsWithStats((edges > 0).astype(np.uint8),
+                                                           connectivity=8)
+    keep = stats[:, cv2.CC_STAT_AREA] >= 12
+    keep[0] = False
+    np.testing.assert_array_equal(fast.edges, keep[labels])
+    assert fast.edges.any() and (fast.edges != (edges > 0)).any()   # some were dropped
+    dist, _ = cv2.distanceTransformWithLabels(np.where(keep[labels], 0, 1).astype(np.uint8),
+                                              cv2.DIST_L2, 5,
+                                              labelType=cv2.DIST_LABEL_PIXEL)
+    np.testing.assert_array_equal(fast.distance, dist)
+
+
+def test_selected_silhouettes_equal_separate_rasterisations():
+    rng = np.random.default_rng(9)
+    cam = make_room().cameras['cam2']
+    a = np.zeros((5, 6))
+    a[:, :2] = rng.uniform([0.5, 0.5], [5.5, 4.5], (5, 2))
+    a[1, 5] = 1.0
+    b = np.zeros((3, 6))
+    b[:, :2] = rng.uniform([0.5, 0.5], [5.5, 4.5], (3, 2))
+    shape = BodyShape(1.75, 0.5)
+    ha, hb = np.full(5, 1.7), np.full(3, 2.1)
+    both = rasterize(cam, np.concatenate([a, b]), shape, heights=np.concatenate([ha, hb]))
+    for part, (states, h) in zip((both.select(0, 5), both.select(5, 8)), ((a, ha), (b, hb))):
+        one = rasterize(cam, states, shape, heights=h)
+        for f in ('row', 'x0', 'x1', 'part', 'offsets', 'area', 'part_area', 'full_area',
+                  'bbox', 'distance'):
+            np.testing.assert_array_equal(getattr(part, f), getattr(one, f))
+
+
+def test_step_reuses_the_filters_colour_bins_and_defers_the_background_update():
+    """After step(search=False) the side cameras' evidence holds the measurement model's
+    quantised images (no second quantisation) and the background update (with the motion
+    the detector needs) is pending until search()."""
+    calib = make_room()
+    bgs = backgrounds(calib)
+    tracker = _detecting_tracker(calib, bgs, seed=1)
+    checked = 0
+    for k in range(12):
+        images = paint(calib, bgs, [person(1.5 + 0.05 * k, 2.8, theta=0.0)] if k >= 3
+                       else [], np.random.default_rng(k))
+        tracker.step(int(round(k * 1e9 / FPS)), images, search=False)
+        pending = tracker.detection._pending
+        evidence = pending[6] if pending else {}
+        bins = tracker.measurement.frame_bins()
+        for name in set(evidence) & set(bins):
+            assert evidence[name].bins is bins[name]
+            np.testing.assert_array_equal(bins[name], quantize(images[name]))
+            checked += 1
+        models = tracker.detection.background.models
+        if evidence:
+            assert all(models[n].pending for n in evidence)
+            assert all(ev.motion is None for ev in evidence.values())
+        tracker.search()
+        assert not any(m.pending for m in models.values())
+        assert all(ev.motion is not None for ev in evidence.values())
+    assert checked > 0

@@ -180,3 +180,66 @@ def test_visibility_drops_during_full_occlusion_and_recovers():
     assert vis[29, 0] < 0.5 and vis[20:30, 0].max() < 0.5   # hidden in cam0
     assert vis[15:30, 1].min() > 0.9               # still seen in cam1
     assert vis[44, 0] > 0.9                        # recovered
+
+
+def _reference_update(aux: TrackAuxiliary, dt, vis, hid, cov, frac) -> None:
+    """TrackAuxiliary.update written plainly with numpy arrays (the scalar code's reference)."""
+    cfg = aux.config
+    A_v = transition(cfg.desocclusion, cfg.occlusion, dt)
+
+    def step(xi, A, l0, l1):
+        prior = np.array([1.0 - xi, xi]) @ A
+        with np.errstate(divide='ignore', invalid='ignore'):
+            logp = np.log(prior) + np.array([l0, l1])
+        logp = np.where(np.isnan(logp), -np.inf, logp)
+        norm = logsumexp(logp)
+        if not np.isfinite(norm):
+            return prior[1], prior[1]
+        return np.exp(logp[1] - norm), prior[1]
+
+    ratio = 0.0
+    for cam in vis:
+        l1 = -np.inf if np.isnan(vis[cam]) else vis[cam]
+        l0 = -np.inf if np.isnan(hid[cam]) else hid[cam]
+        xi, prior = step(aux.visibility.get(cam, cfg.initial_visibility), A_v, l0, l1)
+        aux.visibility[cam] = xi
+        w = np.clip(frac.get(cam, 1.0), 0.0, 1.0)
+        if np.isfinite(l0):
+            pv = min(prior, cfg.visibility_cap)
+            with np.errstate(divide='ignore'):
+                ratio += cfg.appearance_weight * w * np.logaddexp(np.log(pv) + l1 - l0,
+                                                                  np.log1p(-pv))
+    for cam, f in cov.items():
+        w = np.clip(frac.get(cam, 1.0), 0.0, 1.0)
+        f = np.clip(f, 0.0, 1.0) if np.isfinite(f) else 0.0
+        ratio += w * cfg.support_gain * (2.0 * f - 1.0)
+    aux.existence, _ = step(aux.existence, transition(cfg.birth, cfg.death, dt), 0.0, ratio)
+
+
+def test_scalar_update_matches_the_array_reference():
+    """The scalar (fast) existence/visibility update equals a plain numpy version, also with
+    -inf / NaN likelihoods, empty coverage, certain priors and a visibility cap of 1."""
+    rng = np.random.default_rng(3)
+    for cap in (0.7, 1.0):
+        cfg = AuxiliaryConfig(visibility_cap=cap, initial_visibility=1.0 if cap == 1.0
+                              else 0.8)
+        fast, ref = TrackAuxiliary(cfg), TrackAuxiliary(cfg)
+        for t in range(60):
+            cams = ['a', 'b', 'c'][:1 + t % 3]
+            vis = {c: float(v) for c, v in zip(cams, rng.normal(-2.0, 3.0, len(cams)))}
+            hid = {c: -17.0 for c in cams}
+            if t % 7 == 0:
+                vis['a'] = -np.inf
+            if t % 11 == 0:
+                vis[cams[-1]], hid[cams[-1]] = np.nan, np.nan
+            cov = {} if t % 5 == 0 else {c: float(v) for c, v in
+                                          zip(cams, rng.uniform(-0.1, 1.1, len(cams)))}
+            frac = {c: float(v) for c, v in zip(cams, rng.uniform(-0.2, 1.2, len(cams)))}
+            dt = 0.0 if t == 4 else 1 / 15
+            fast.update(dt, loglik_visible=vis, loglik_hidden=hid, coverage=cov,
+                        visible_fraction=frac)
+            _reference_update(ref, dt, vis, hid, cov, frac)
+            assert fast.existence == pytest.approx(ref.existence, abs=1e-12)
+            for c in ref.visibility:
+                assert fast.visibility[c] == pytest.approx(ref.visibility[c], abs=1e-12)
+        assert 0.0 < fast.existence < 1.0

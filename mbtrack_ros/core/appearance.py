@@ -9,19 +9,19 @@ compared with the Bhattacharyya-coefficient based distance of 003 Eq. 4.
 """
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from mbtrack_ros.core import _kernels
-from mbtrack_ros.core.camera import RoomCalibration
+from mbtrack_ros.core.camera import Camera, RoomCalibration
 from mbtrack_ros.core.shape import BodyShape, Silhouettes, rasterize
 from mbtrack_ros.core.state import STATE_DIM, THETA, X, Y
 
 __all__ = ['N_BINS', 'N_PARTS', 'AppearanceError', 'PersonModel', 'bhattacharyya_distance_sq',
-           'model_from_images', 'part_histograms', 'quantize', 'relative_angle',
-           'single_target_loglik']
+           'key_view_loglik', 'key_view_stack', 'model_from_images', 'part_histograms',
+           'quantize', 'relative_angle', 'single_target_loglik', 'view_weights']
 
 N_BINS = _kernels.N_BINS
 N_PARTS = _kernels.N_PARTS
@@ -239,21 +239,68 @@ def single_target_loglik(bins: np.ndarray, silhouettes: Silhouettes,
     than ``min_pixels`` pixels in the image contribute 0 (neutral); over several cameras
     the results add (likelihoods multiply).
     """
-    bins = _check_bins(bins, silhouettes)
     n = len(silhouettes)
     model_hists = np.asarray(model_hists, dtype=np.float64)
     if model_hists.shape != (n, N_PARTS, N_BINS):
         raise AppearanceError(f'model_hists must be ({n}, 3, 512), got {model_hists.shape}')
-    key = np.ascontiguousarray(model_hists.reshape(n, 1, -1))
     zero = np.zeros(n, np.int64)
+    return key_view_loglik(bins, silhouettes, model_hists.reshape(n, 1, -1), np.arange(n),
+                           zero, zero, np.ones(n), sigma=sigma, min_pixels=min_pixels)
+
+
+def key_view_loglik(bins: np.ndarray, silhouettes: Silhouettes, key: np.ndarray,
+                    target: np.ndarray, va: np.ndarray, vb: np.ndarray, wa: np.ndarray, *,
+                    sigma: float = 0.12, min_pixels: int = 1) -> np.ndarray:
+    """:func:`single_target_loglik` with the model histograms interpolated lazily (only at
+    the bins a silhouette touches): particle i has the key views ``key[target[i]]`` (K, V,
+    1536) of :func:`key_view_stack`, mixed as ``wa key[., va] + (1 - wa) key[., vb]``
+    (003 Eq. 1, :func:`view_weights`). The same values as :meth:`PersonModel.interpolate`
+    then :func:`single_target_loglik`, without the (N, 3, 512) histograms."""
+    bins = _check_bins(bins, silhouettes)
+    n = len(silhouettes)
     fc, _, _ = _kernels.hjs_camera(
         bins, silhouettes.row, silhouettes.x0, silhouettes.x1, silhouettes.part,
         silhouettes.offsets, silhouettes.area, silhouettes.bbox, np.arange(n),
-        np.arange(n), np.ones(n), key, zero, zero, np.ones(n), n, 0.0, True, np.zeros(0),
-        np.zeros(n + 1, np.int64))
+        np.ascontiguousarray(target, np.int64), np.ones(n),
+        np.ascontiguousarray(key, np.float64), np.ascontiguousarray(va, np.int64),
+        np.ascontiguousarray(vb, np.int64), np.ascontiguousarray(wa, np.float64),
+        int(key.shape[0]), 0.0, True, np.zeros(0), np.zeros(n + 1, np.int64))
     out = -fc / (2.0 * sigma ** 2)
     out[silhouettes.area < max(int(min_pixels), 1)] = 0.0
     return out
+
+
+def key_view_stack(models: Sequence[PersonModel]) -> np.ndarray:
+    """(K, V_max, 1536) completed key-view histograms of K models, zero padded (the form in
+    which the likelihood kernels interpolate them lazily, 003 Eq. 1)."""
+    vmax = max((m.view_angles.size for m in models), default=1)
+    key = np.zeros((len(models), max(vmax, 1), N_PARTS * N_BINS))
+    for k, m in enumerate(models):
+        key[k, :m.view_angles.size] = m.completed_histograms().reshape(
+            m.view_angles.size, -1)
+    return key
+
+
+def view_weights(cameras: Sequence[Camera], states: np.ndarray, target: np.ndarray,
+                 models: Sequence[PersonModel]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per camera and state, the two key views and the weight of the first (va, vb, wa),
+    each (C, P) (003 Eq. 1-2), for the relative viewing angles of states (P, 6) of the
+    models ``models[target]`` in C cameras (one interpolation call per model)."""
+    shape = (len(cameras), states.shape[0])
+    rel = np.empty(shape)
+    for c, cam in enumerate(cameras):
+        rel[c] = relative_angle(states[:, THETA], cam.viewing_angle(states[:, [X, Y]]))
+    va = np.zeros(shape, np.int64)
+    vb = np.zeros(shape, np.int64)
+    wa = np.ones(shape)
+    for k, m in enumerate(models):
+        sel = target == k
+        if np.any(sel) and shape[0]:
+            a, b, w = m.interpolation_weights(rel[:, sel].ravel())
+            va[:, sel] = a.reshape(shape[0], -1)
+            vb[:, sel] = b.reshape(shape[0], -1)
+            wa[:, sel] = w.reshape(shape[0], -1)
+    return va, vb, wa
 
 
 def model_from_images(images: Mapping[str, np.ndarray], calibration: RoomCalibration,

@@ -39,6 +39,7 @@ below ``release_threshold`` (see :mod:`mbtrack_ros.core.detection.release`).
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
@@ -87,15 +88,42 @@ def binary_step(xi: float, A: np.ndarray, loglik0: float, loglik1: float
     Returns:
         (posterior ``p(a_t = 1 | y^t)``, predicted prior ``p(a_t = 1 | y^{t-1})``).
     """
-    prev = np.array([1.0 - xi, xi])
-    prior = prev @ A                                   # 001 Eq. 16: sum_j alpha_ji xi_j
-    with np.errstate(divide='ignore'):
-        logp = np.log(prior) + np.array([loglik0, loglik1], dtype=np.float64)
-    logp = np.where(np.isnan(logp), -np.inf, logp)
-    norm = logsumexp(logp)
-    if not np.isfinite(norm):                          # no information: keep the prior
-        return float(prior[1]), float(prior[1])
-    return float(np.exp(logp[1] - norm)), float(prior[1])
+    # scalar arithmetic (this runs per track and camera every frame: numpy's per-call
+    # overhead on 2-vectors cost more than the rest of the existence update)
+    xi = float(xi)
+    prior0 = (1.0 - xi) * float(A[0, 0]) + xi * float(A[1, 0])   # 001 Eq. 16: sum_j alpha_ji xi_j
+    prior1 = (1.0 - xi) * float(A[0, 1]) + xi * float(A[1, 1])
+    logp0 = _add(_log(prior0), float(loglik0))
+    logp1 = _add(_log(prior1), float(loglik1))
+    top = max(logp0, logp1)
+    if not math.isfinite(top):                         # no information: keep the prior
+        return prior1, prior1
+    norm = top + math.log(math.exp(logp0 - top) + math.exp(logp1 - top))
+    if not math.isfinite(norm):
+        return prior1, prior1
+    return math.exp(logp1 - norm), prior1
+
+
+def _log(x: float) -> float:
+    return math.log(x) if x > 0.0 else (-math.inf if x == 0.0 else math.nan)
+
+
+def _add(a: float, b: float) -> float:
+    """a + b with NaN (e.g. -inf + inf) read as -inf, the impossible outcome."""
+    out = a + b
+    return -math.inf if out != out else out
+
+
+def _logaddexp(x: float, y: float) -> float:
+    """``log(exp(x) + exp(y))`` of two floats, as ``np.logaddexp``."""
+    if x == y:
+        return x + math.log(2.0)
+    tmp = x - y
+    if tmp > 0:
+        return x + math.log1p(math.exp(-tmp))
+    if tmp <= 0:
+        return y + math.log1p(math.exp(tmp))
+    return tmp                                         # NaN
 
 
 def predictive_loglik(loglik: np.ndarray, log_weights: np.ndarray | None = None) -> float:
@@ -237,23 +265,32 @@ class TrackAuxiliary:
         self.prior_visibility = {}
         for cam in loglik_visible:
             l1, l0 = float(loglik_visible[cam]), float(loglik_hidden[cam])
-            l1 = -np.inf if np.isnan(l1) else l1
-            l0 = -np.inf if np.isnan(l0) else l0
+            l1 = -math.inf if math.isnan(l1) else l1
+            l0 = -math.inf if math.isnan(l0) else l0
             xi_prev = self.visibility.get(cam, cfg.initial_visibility)
             xi, prior = binary_step(xi_prev, A_v, l0, l1)    # 001 Eq. 16 per camera
             self.visibility[cam] = xi
             self.prior_visibility[cam] = prior
-            w = float(np.clip(visible_fraction.get(cam, 1.0), 0.0, 1.0))
+            w = _unit(visible_fraction.get(cam, 1.0))
             # e = 1: visibility mixture xi p_1 + (1 - xi) p_0 against p_0 for e = 0
-            if np.isfinite(l0):
+            if math.isfinite(l0):
                 pv = min(prior, cfg.visibility_cap)
-                with np.errstate(divide='ignore'):
-                    mix = np.logaddexp(np.log(pv) + l1 - l0, np.log1p(-pv))
-                log_ratio_e += cfg.appearance_weight * w * float(mix)
+                mix = _logaddexp(_log(pv) + l1 - l0, _log1p_neg(pv))
+                log_ratio_e += cfg.appearance_weight * w * mix
         for cam, f in coverage.items():
-            w = float(np.clip(visible_fraction.get(cam, 1.0), 0.0, 1.0))
-            f = float(np.clip(f, 0.0, 1.0)) if np.isfinite(f) else 0.0
+            w = _unit(visible_fraction.get(cam, 1.0))
+            f = _unit(f) if math.isfinite(f) else 0.0
             # truncated exponentials on [0, 1]: log p(f | e=1) - log p(f | e=0) = k (2f - 1)
             log_ratio_e += w * cfg.support_gain * (2.0 * f - 1.0)
         A_e = transition(cfg.birth, cfg.death, dt)
         self.existence, _ = binary_step(self.existence, A_e, 0.0, log_ratio_e)
+
+
+def _unit(x: float) -> float:
+    """x clipped to [0, 1] (NaN stays NaN, as np.clip)."""
+    return min(max(float(x), 0.0), 1.0) if x == x else float(x)
+
+
+def _log1p_neg(p: float) -> float:
+    """``log(1 - p)``, -inf at p = 1."""
+    return math.log1p(-p) if p < 1.0 else (-math.inf if p == 1.0 else math.nan)

@@ -35,10 +35,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mbtrack_ros.core import _kernels
-from mbtrack_ros.core.appearance import PersonModel, quantize, relative_angle
+from mbtrack_ros.core.appearance import (
+    PersonModel, key_view_stack, quantize, view_weights)
 from mbtrack_ros.core.camera import Camera, RoomCalibration
 from mbtrack_ros.core.shape import BodyShape, Silhouettes, rasterize
-from mbtrack_ros.core.state import STATE_DIM, THETA, X, Y
+from mbtrack_ros.core.state import STATE_DIM
 
 __all__ = ['HJSDebug', 'LikelihoodConfig', 'LikelihoodError', 'LikelihoodResult',
            'MeasurementModel']
@@ -222,6 +223,10 @@ class MeasurementModel:
             out = self._bins[camera] = quantize(image)
         return out
 
+    def frame_bins(self) -> dict[str, np.ndarray]:
+        """The quantised images of this frame computed so far, by camera (for reuse)."""
+        return dict(self._bins)
+
     # -- silhouettes ----------------------------------------------------------------------
     def _camera(self, name: str) -> Camera:
         try:
@@ -291,43 +296,11 @@ class MeasurementModel:
         timings['rasterize'] = timings.get('rasterize', 0.0) + time.perf_counter() - t0
         return sil
 
-    @staticmethod
-    def _key_views(models: Sequence[PersonModel]) -> np.ndarray:
-        """(K, V_max, 1536) key-view histograms of the targets (zero padded)."""
-        vmax = max((m.view_angles.size for m in models), default=1)
-        key = np.zeros((len(models), max(vmax, 1), 3 * _kernels.N_BINS))
-        for k, m in enumerate(models):
-            key[k, :m.view_angles.size] = m.completed_histograms().reshape(
-                m.view_angles.size, -1)
-        return key
-
-    @staticmethod
-    def _view_weights(cams: Sequence[Camera], states: np.ndarray, target: np.ndarray,
-                      models: Sequence[PersonModel]) -> tuple[np.ndarray, ...]:
-        """Per camera and particle, the two key views and the weight of the first (va, vb,
-        wa), each (C, P) (003 Eq. 1-2), for the relative viewing angles of every particle
-        in the C cameras (one interpolation call per target for all cameras)."""
-        shape = (len(cams), states.shape[0])
-        rel = np.empty(shape)
-        for c, cam in enumerate(cams):
-            rel[c] = relative_angle(states[:, THETA], cam.viewing_angle(states[:, [X, Y]]))
-        va = np.zeros(shape, np.int64)
-        vb = np.zeros(shape, np.int64)
-        wa = np.ones(shape)
-        for k, m in enumerate(models):
-            sel = target == k
-            if np.any(sel) and shape[0]:
-                a, b, w = m.interpolation_weights(rel[:, sel].ravel())
-                va[:, sel] = a.reshape(shape[0], -1)
-                vb[:, sel] = b.reshape(shape[0], -1)
-                wa[:, sel] = w.reshape(shape[0], -1)
-        return va, vb, wa
-
     def _views(self, cam: Camera, states: np.ndarray, target: np.ndarray,
                models: Sequence[PersonModel]) -> tuple[np.ndarray, ...]:
         """Key views (K, V, 1536) and per-particle interpolation (va, vb, wa) (P,)."""
-        va, vb, wa = self._view_weights([cam], states, target, models)
-        return self._key_views(models), va[0], vb[0], wa[0]
+        va, vb, wa = view_weights([cam], states, target, models)
+        return key_view_stack(models), va[0], vb[0], wa[0]
 
     def _loglik(self, value: np.ndarray, sil: Silhouettes) -> np.ndarray:
         # the exponent of 000 Eq. 19 is negative; Algorithm 1 as printed lost the minus sign
@@ -382,10 +355,9 @@ class MeasurementModel:
         target = np.repeat(np.arange(len(parts), dtype=np.int64),
                            [p.shape[0] for p in parts])
         prior = np.concatenate(priors) if priors else np.zeros(0)
-        va, vb, wa = self._view_weights([self._camera(c) for c in cameras], states, target,
-                                        models)
+        va, vb, wa = view_weights([self._camera(c) for c in cameras], states, target, models)
         views = {c: (va[i], vb[i], wa[i]) for i, c in enumerate(cameras)}
-        return states, target, prior, self._key_views(models), views
+        return states, target, prior, key_view_stack(models), views
 
     def _evaluate(self, particles: Sequence[np.ndarray], weights: Sequence[np.ndarray] | None,
                   models: Sequence[PersonModel], *, separable: bool,

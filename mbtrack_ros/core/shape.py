@@ -38,6 +38,7 @@ dropped; the torso and head keep their standing sizes, so the head top is at
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -150,6 +151,17 @@ class Silhouettes:
     def __len__(self) -> int:
         return int(self.offsets.shape[0] - 1)
 
+    def select(self, start: int, stop: int) -> Silhouettes:
+        """The silhouettes of particles ``start:stop`` (views of the arrays, offsets from 0):
+        one rasterisation of several particle sets, then one object per set."""
+        a, b = int(self.offsets[start]), int(self.offsets[stop])
+        return Silhouettes(
+            row=self.row[a:b], x0=self.x0[a:b], x1=self.x1[a:b], part=self.part[a:b],
+            offsets=self.offsets[start:stop + 1] - a, area=self.area[start:stop],
+            part_area=self.part_area[start:stop], full_area=self.full_area[start:stop],
+            bbox=self.bbox[start:stop], distance=self.distance[start:stop],
+            width=self.width, height=self.height, row_step=self.row_step)
+
     def spans(self, i: int) -> slice:
         """Slice of the spans of particle i."""
         return slice(int(self.offsets[i]), int(self.offsets[i + 1]))
@@ -178,8 +190,13 @@ def _check_states(states: np.ndarray) -> np.ndarray:
 
 def _per_particle(value: float | np.ndarray | None, default: float, n: int,
                   what: str) -> np.ndarray:
-    arr = np.array(np.broadcast_to(np.asarray(default if value is None else value,
-                                              np.float64), (n,)))     # writable, contiguous
+    value = default if value is None else value
+    if np.ndim(value) == 0:                   # one size for all (the common case): no scan
+        v = float(value)
+        if not (math.isfinite(v) and v > 0):
+            raise ShapeError(f'{what} must be positive and finite')
+        return np.full(n, v)
+    arr = np.array(np.broadcast_to(np.asarray(value, np.float64), (n,)))  # writable, contiguous
     if not np.all(np.isfinite(arr) & (arr > 0)):
         raise ShapeError(f'{what} must be positive and finite')
     return arr

@@ -312,7 +312,9 @@ class Tracker:
         timings['filter'] = t2 - t1
         ended: list[int] = []
         if self.detection is not None:  # 003 §4: release; 001: existence and visibility
-            ended = self.detection.update(stamp_ns, images, tracks, self._models)
+            frame_bins = getattr(self.measurement, 'frame_bins', None)
+            ended = self.detection.update(stamp_ns, images, tracks, self._models,
+                                          bins=frame_bins() if frame_bins else None)
             for tid in ended:
                 self.remove_track(tid)
             tracks = [t for t in tracks

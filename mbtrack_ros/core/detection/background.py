@@ -145,7 +145,7 @@ def clean_mask(mask: np.ndarray, *, open_size: int = 3, close_size: int = 5,
     return m.astype(bool)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _foreground_kernel(ycc: np.ndarray, bg: np.ndarray, gain: float, luma: float,
                        chroma: float, shadow_lo: float, shadow_hi: float
                        ) -> np.ndarray:  # pragma: no cover - compiled
@@ -169,7 +169,7 @@ def _foreground_kernel(ycc: np.ndarray, bg: np.ndarray, gain: float, luma: float
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _motion_kernel(y: np.ndarray, prev: np.ndarray, motion: np.ndarray, decay: float,
                    threshold: float, persistent: float) -> np.ndarray:  # pragma: no cover
     """Decaying accumulation of thresholded frame differences (in place); (H, W) uint8
@@ -187,7 +187,7 @@ def _motion_kernel(y: np.ndarray, prev: np.ndarray, motion: np.ndarray, decay: f
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _blend_kernel(bg: np.ndarray, ycc: np.ndarray, frozen: np.ndarray, fg: np.ndarray,
                   static: np.ndarray, use_fg: bool, alpha: float, static_alpha: float,
                   static_frames: int, unknown: np.ndarray, occupied: np.ndarray,
@@ -239,8 +239,10 @@ def _blend_kernel(bg: np.ndarray, ycc: np.ndarray, frozen: np.ndarray, fg: np.nd
 
 def _to_ycc(image: np.ndarray) -> np.ndarray:
     """RGB uint8 (H, W, 3) -> float32 (H, W, 3) with channels Y, Cb, Cr."""
-    ycrcb = cv2.cvtColor(image, cv2.COLOR_RGB2YCrCb).astype(np.float32)
-    return ycrcb[..., [0, 2, 1]]
+    y, cr, cb = cv2.split(cv2.cvtColor(image, cv2.COLOR_RGB2YCrCb))
+    # reorder the uint8 planes, then convert (the same values as fancy-indexing the float
+    # image, which allocated and gathered a second float copy)
+    return cv2.merge([y, cb, cr]).astype(np.float32)
 
 
 def _check_image(image: np.ndarray, shape: tuple[int, int] | None, what: str) -> None:
@@ -276,6 +278,7 @@ class BackgroundModel:
         self._raw: np.ndarray | None = None          # the last foreground test before unknowns
         self._seen = 0                               # frames offered for bootstrapping
         self.gain: float = 1.0                       # luminance gain of the last frame
+        self._deferred: tuple | None = None          # (ycc, exclude, fg) of apply(defer=True)
 
     # -- state ----------------------------------------------------------------------------
     @property
@@ -290,6 +293,7 @@ class BackgroundModel:
     @property
     def background_ycc(self) -> np.ndarray:
         """The current model, (H, W, 3) float32 Y, Cb, Cr; raises if not bootstrapped."""
+        self.update_pending()
         if self._bg is None:
             raise DetectionError(f'background model {self.name!r} is not bootstrapped')
         return self._bg
@@ -297,6 +301,7 @@ class BackgroundModel:
     @property
     def persistent_motion(self) -> np.ndarray:
         """(H, W) bool pixels with persistent motion (excluded from the update)."""
+        self.update_pending()
         if self._motion is None:
             return np.zeros(self.shape or (0, 0), bool)
         return self._motion >= self.config.motion_persistent
@@ -304,6 +309,7 @@ class BackgroundModel:
     @property
     def unknown(self) -> np.ndarray:
         """(H, W) bool pixels not yet known (never seen empty, not learnt)."""
+        self.update_pending()
         if self._unknown is None:
             return np.zeros(self.shape or (0, 0), bool)
         return (self._unknown & _UNKNOWN) > 0
@@ -311,6 +317,7 @@ class BackgroundModel:
     @property
     def possible_foreground(self) -> np.ndarray:
         """(H, W) bool not-yet-known pixels that count as foreground (a possible person)."""
+        self.update_pending()
         if self._unknown is None:
             return np.zeros(self.shape or (0, 0), bool)
         return (self._unknown & _POSSIBLE) > 0
@@ -327,6 +334,7 @@ class BackgroundModel:
         (default: ``foreground``) is where a person's presence is certain enough to
         replace motion (see :meth:`presence`).
         """
+        self.update_pending()
         if self._bg is None:
             raise DetectionError(f'background model {self.name!r} is not bootstrapped')
         mask = np.asarray(mask, dtype=bool)
@@ -356,6 +364,7 @@ class BackgroundModel:
         someone who stood there when the model was learnt): recent motion (see
         :meth:`recent_motion`) or possible foreground never learnt; None before the model
         exists. The detector requires it of new people."""
+        self.update_pending()
         moving = self.recent_motion(level)
         if moving is None or self._unknown is None:
             return moving
@@ -364,12 +373,14 @@ class BackgroundModel:
     def recent_motion(self, level: float = 0.3) -> np.ndarray | None:
         """(H, W) bool pixels that moved in the last few frames (accumulated motion above
         ``level``), or None before the model exists."""
+        self.update_pending()
         if self._motion is None:
             return None
         return self._motion >= level
 
     def bootstrap(self, frames: Sequence[np.ndarray]) -> None:
         """Initialise the model as the per-pixel median of empty-room RGB frames."""
+        self.update_pending()
         frames = list(frames)
         if not frames:
             raise DetectionError('bootstrap needs at least one frame')
@@ -385,6 +396,7 @@ class BackgroundModel:
     # -- per frame ------------------------------------------------------------------------
     def foreground(self, image: np.ndarray) -> np.ndarray:
         """Cleaned foreground mask (H, W) bool of an RGB frame; does not update the model."""
+        self.update_pending()
         _check_image(image, self.shape, f'camera {self.name!r}')
         return self._foreground(_to_ycc(image))
 
@@ -418,6 +430,7 @@ class BackgroundModel:
             exclude: optional (H, W) bool mask of pixels not to update (e.g. rendered
                 track silhouettes); persistent-motion pixels are always excluded.
         """
+        self.update_pending()
         _check_image(image, self.shape, f'camera {self.name!r}')
         self._update(_to_ycc(image), exclude)
 
@@ -473,17 +486,37 @@ class BackgroundModel:
                       self._changed, int(cfg.settle_frames))
         self._raw = None
 
-    def apply(self, image: np.ndarray, *, exclude: np.ndarray | None = None
-              ) -> np.ndarray | None:
+    def apply(self, image: np.ndarray, *, exclude: np.ndarray | None = None,
+              defer: bool = False) -> np.ndarray | None:
         """Foreground mask (H, W) bool of the frame, then the masked model update.
 
-        Returns ``None`` while the model is still collecting bootstrap frames.
+        With ``defer`` (and a bootstrapped model) the update is kept for
+        :meth:`update_pending`, which a caller runs once the frame's result is out (lower
+        latency; the foreground of the next frame is the same, since :meth:`apply` first
+        runs an update still pending). Returns ``None`` while the model is still collecting
+        bootstrap frames.
         """
         _check_image(image, self.shape, f'camera {self.name!r}')
+        self.update_pending()
         ycc = _to_ycc(image)
         fg = self._foreground(ycc) if self._bg is not None else None
-        self._update(ycc, exclude, fg)
+        if defer and fg is not None:
+            self._deferred = (ycc, exclude, fg)
+        else:
+            self._update(ycc, exclude, fg)
         return fg
+
+    @property
+    def pending(self) -> bool:
+        """True while the update of the last :meth:`apply` (with ``defer``) has not run."""
+        return self._deferred is not None
+
+    def update_pending(self) -> None:
+        """Run the model update that :meth:`apply` deferred, if any (003 §4.2)."""
+        if self._deferred is not None:
+            ycc, exclude, fg = self._deferred
+            self._deferred = None
+            self._update(ycc, exclude, fg)
 
 
 class BackgroundBank:
@@ -528,15 +561,19 @@ class BackgroundBank:
             self.model(name).bootstrap(fr)
 
     def apply(self, images: Mapping[str, np.ndarray], *,
-              exclude: Mapping[str, np.ndarray] | None = None
+              exclude: Mapping[str, np.ndarray] | None = None, defer: bool = False
               ) -> dict[str, np.ndarray]:
-        """Foreground masks of all cameras that are bootstrapped (others are omitted)."""
+        """Foreground masks of all cameras that are bootstrapped (others are omitted).
+
+        With ``defer`` the model updates of the bootstrapped cameras wait for
+        :meth:`update_pending` (see :meth:`BackgroundModel.apply`; the same results)."""
         out: dict[str, np.ndarray] = {}
         started: list[str] = []
         for name, image in images.items():
             model = self.model(name)
             was_ready = model.ready
-            fg = model.apply(image, exclude=None if exclude is None else exclude.get(name))
+            fg = model.apply(image, exclude=None if exclude is None else exclude.get(name),
+                             defer=defer)
             if fg is not None:
                 out[name] = fg
             elif model.ready and not was_ready:
@@ -558,3 +595,8 @@ class BackgroundBank:
             if all(m.ready for m in self.models.values()):
                 self._frames = []
         return out
+
+    def update_pending(self) -> None:
+        """Run the model updates deferred by ``apply(..., defer=True)``."""
+        for model in self.models.values():
+            model.update_pending()

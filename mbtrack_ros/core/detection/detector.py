@@ -356,14 +356,18 @@ class Detector:
         ctx_states[:, SIT] = 0.0
         ctx_states[:, THETA] = 0.0
         m = len(ctx_states)
+        both_states = np.concatenate([states, ctx_states])
+        both_heights = np.concatenate([np.broadcast_to(heights, (n,)),
+                                       np.full(m, cfg.context_height)])
+        both_widths = np.concatenate([np.broadcast_to(widths, (n,)),
+                                      np.full(m, cfg.context_width)])
         for name, ev in evidence.items():
             if name not in self.calibration.cameras:
                 continue
-            cam = self.calibration.cameras[name]
-            sil = rasterize(cam, states, self.shape, heights=heights, widths=widths)
-            context = rasterize(cam, ctx_states, self.shape,
-                                heights=np.full(m, cfg.context_height),
-                                widths=np.full(m, cfg.context_width))
+            # the hypotheses and their context bodies in one rasterisation
+            both = rasterize(self.calibration.cameras[name], both_states, self.shape,
+                             heights=both_heights, widths=both_widths)
+            sil, context = both.select(0, n), both.select(n, n + m)
             resp, sees, cov = self._view_terms(name, ev, sil, full=full, context=context,
                                                ctx_index=ctx_index.ravel())
             total += resp

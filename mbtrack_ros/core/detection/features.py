@@ -109,18 +109,15 @@ class ForegroundIntegral:
     """
 
     def __init__(self, foreground: np.ndarray, unknown: np.ndarray | None = None) -> None:
-        fg = np.asarray(foreground, dtype=bool)
+        fg = np.ascontiguousarray(foreground, dtype=bool)
         if fg.ndim != 2:
             raise DetectionError(f'foreground mask must be (H, W), got {fg.shape}')
         self.shape = fg.shape
-        known = np.ones_like(fg) if unknown is None else ~np.asarray(unknown, dtype=bool)
-        if known.shape != fg.shape:
+        known = np.ones((1, 1), bool) if unknown is None else \
+            ~np.ascontiguousarray(unknown, dtype=bool)
+        if unknown is not None and known.shape != fg.shape:
             raise DetectionError('unknown-pixel mask and foreground mask differ in shape')
-        h, w = fg.shape
-        self._fg = np.zeros((h, w + 1), np.int32)
-        np.cumsum(fg & known, axis=1, out=self._fg[:, 1:])
-        self._known = np.zeros((h, w + 1), np.int32)
-        np.cumsum(known, axis=1, out=self._known[:, 1:])
+        self._fg, self._known = _row_prefix_sums(fg, known)
 
     def counts(self, spans: Spans) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Raw pixel counts of N silhouettes: (foreground & known, known, area), (N,) each."""
@@ -143,7 +140,30 @@ class ForegroundIntegral:
         return cov, known, area
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
+def _row_prefix_sums(fg: np.ndarray, known: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+    """Row prefix sums (H, W + 1) int32 of ``fg & known`` and of ``known``, both in one
+    pass; ``known`` (1, 1) means every pixel is known."""
+    h, w = fg.shape
+    all_known = known.shape[0] == 1 and known.shape[1] == 1 and (h != 1 or w != 1)
+    cs_fg = np.zeros((h, w + 1), np.int32)
+    cs_known = np.zeros((h, w + 1), np.int32)
+    for i in range(h):
+        a = 0
+        b = 0
+        for j in range(w):
+            k = True if all_known else known[i, j]
+            if k:
+                b += 1
+                if fg[i, j]:
+                    a += 1
+            cs_fg[i, j + 1] = a
+            cs_known[i, j + 1] = b
+    return cs_fg, cs_known
+
+
+@njit(cache=True, nogil=True)
 def _coverage_kernel(cs_fg: np.ndarray, cs_known: np.ndarray, row: np.ndarray, x0: np.ndarray,
                      x1: np.ndarray, offsets: np.ndarray
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover
@@ -205,11 +225,15 @@ class EdgeMap:
             roi = cv2.dilate(np.asarray(foreground, np.uint8), k)
             edges &= roi * 255
         if min_edge_pixels > 1 and edges.any():
+            # components only within the box of the edge pixels (the same components)
+            bx, by, bw, bh = cv2.boundingRect(edges)
+            box = (slice(by, by + bh), slice(bx, bx + bw))
             n, labels, stats, _ = cv2.connectedComponentsWithStats(
-                (edges > 0).astype(np.uint8), connectivity=8)
+                (edges[box] > 0).view(np.uint8), connectivity=8)
             keep = stats[:, cv2.CC_STAT_AREA] >= min_edge_pixels
             keep[0] = False
-            edges = keep[labels]
+            edges = np.zeros(edges.shape, bool)
+            edges[box] = keep[labels]
         else:
             edges = edges > 0
         h, w = edges.shape
@@ -221,7 +245,7 @@ class EdgeMap:
         sy = cv2.Sobel(gray, cv2.CV_32F, 0, 1, ksize=3)
         # Distance transform with pixel labels: label k (1-based) is the k-th zero pixel
         # of the source in raster order, i.e. the k-th validated edge pixel.
-        src = np.where(edges, 0, 1).astype(np.uint8)
+        src = (~edges).view(np.uint8)
         dist, labels = cv2.distanceTransformWithLabels(
             src, cv2.DIST_L2, 5, labelType=cv2.DIST_LABEL_PIXEL)
         ey, ex = np.nonzero(edges)
@@ -229,8 +253,9 @@ class EdgeMap:
         norm = np.maximum(np.hypot(gxe, gye), 1e-6)
         gxe, gye = gxe / norm, gye / norm
         idx = labels - 1
-        return cls(edges, dist.astype(np.float32), gxe[idx].astype(np.float32),
-                   gye[idx].astype(np.float32))
+        return cls(edges, dist.astype(np.float32, copy=False),
+                   gxe.astype(np.float32, copy=False)[idx],
+                   gye.astype(np.float32, copy=False)[idx])
 
 
 @dataclass(frozen=True)
@@ -345,7 +370,7 @@ def contour_loglik(edge_map: EdgeMap, contour: Outline, body_width: np.ndarray
     return loglik, length
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _contour_kernel(dist: np.ndarray, gx: np.ndarray, gy: np.ndarray, row: np.ndarray,
                     x0: np.ndarray, x1: np.ndarray, offsets: np.ndarray, width: np.ndarray
                     ) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled
@@ -438,13 +463,17 @@ def contour_loglik_spans(edge_map: EdgeMap, spans: Spans, body_width: np.ndarray
                            np.ascontiguousarray(body_width, np.float64))
 
 
-@njit(cache=True)
-def _symmetry_kernel(index: np.ndarray, row: np.ndarray, x0: np.ndarray, x1: np.ndarray,
-                     part: np.ndarray, offsets: np.ndarray, torso: int, bins: int,
+@njit(cache=True, nogil=True)
+def _symmetry_kernel(colour: np.ndarray, row: np.ndarray, x0: np.ndarray, x1: np.ndarray,
+                     part: np.ndarray, offsets: np.ndarray, torso: int, levels: int,
                      min_pixels: int) -> np.ndarray:  # pragma: no cover - compiled
+    """Left/right torso histogram distances; ``colour`` (H, W) are the 8x8x8 bins, merged
+    to ``levels`` per channel at the pixels visited (not over the whole image)."""
     n = offsets.size - 1
     out = np.full(n, np.nan)
-    h, w = index.shape
+    h, w = colour.shape
+    f = 8 // levels
+    bins = levels * levels * levels
     left = np.zeros(bins)
     right = np.zeros(bins)
     for i in range(n):
@@ -462,7 +491,8 @@ def _symmetry_kernel(index: np.ndarray, row: np.ndarray, x0: np.ndarray, x1: np.
             b = x1[s]
             mid2 = a + b  # twice the span centre
             for x in range(max(a, 0), min(b, w)):
-                c = index[r, x]
+                q = np.int64(colour[r, x])
+                c = (((q >> 6) // f) * levels + ((q >> 3) & 7) // f) * levels + (q & 7) // f
                 if 2 * x + 1 < mid2:
                     left[c] += 1.0
                     nl += 1.0
@@ -494,12 +524,10 @@ def colour_symmetry(image: np.ndarray, spans: Spans, *, levels: int = 4,
         if image.ndim != 3 or image.shape[2] != 3 or image.dtype != np.uint8:
             raise DetectionError(f'expected an (H, W, 3) uint8 RGB image, got {image.shape}')
         bins = quantize(image)
-    q = np.asarray(bins, dtype=np.int32)
-    f = 8 // levels
-    index = (((q >> 6) // f) * levels + ((q >> 3) & 7) // f) * levels + (q & 7) // f
-    return _symmetry_kernel(index, np.ascontiguousarray(spans.row, np.int64),
+    return _symmetry_kernel(np.ascontiguousarray(bins, dtype=np.int16),
+                            np.ascontiguousarray(spans.row, np.int64),
                             np.ascontiguousarray(spans.x0, np.int64),
                             np.ascontiguousarray(spans.x1, np.int64),
                             np.ascontiguousarray(spans.part, np.int64),
                             np.ascontiguousarray(spans.offsets, np.int64), TORSO,
-                            levels ** 3, min_pixels)
+                            levels, min_pixels)

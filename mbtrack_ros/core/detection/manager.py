@@ -16,14 +16,15 @@ filter step when automatic detection is enabled:
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from mbtrack_ros.core import _kernels
 from mbtrack_ros.core.appearance import (
-    PersonModel, quantize, relative_angle, single_target_loglik)
+    PersonModel, key_view_loglik, key_view_stack, quantize, relative_angle,
+    single_target_loglik, view_weights)
 from mbtrack_ros.core.camera import RoomCalibration
 from mbtrack_ros.core.detection import DetectionError
 from mbtrack_ros.core.detection.acquisition import AcquisitionConfig, acquire
@@ -153,8 +154,8 @@ class AutoDetection:
         return ended, self.search()
 
     def update(self, stamp_ns: int, images: Mapping[str, np.ndarray],
-               tracks: Sequence[TrackEstimate], models: Mapping[int, PersonModel]
-               ) -> list[int]:
+               tracks: Sequence[TrackEstimate], models: Mapping[int, PersonModel], *,
+               bins: Mapping[str, np.ndarray] | None = None) -> list[int]:
         """Background, support, visibility, existence and release for one frame set.
 
         Fills ``visibility`` and ``existence`` of ``tracks`` in place and keeps what
@@ -166,6 +167,8 @@ class AutoDetection:
             images: camera -> (H, W, 3) uint8 RGB.
             tracks: the tracker's estimates of this frame.
             models: track id -> person model (for shapes and appearance).
+            bins: colour bins (``appearance.quantize``) of cameras already quantised this
+                frame (the tracker's measurement model), reused.
 
         Returns:
             ids of the tracks to release now.
@@ -177,13 +180,23 @@ class AutoDetection:
         names = [n for n in images if n in self.calibration.cameras]
         means = np.array([t.mean for t in tracks]).reshape(-1, 6)
         shapes = [self._shape(models.get(t.track_id), t) for t in tracks]
+        # posterior particles for the visibility likelihood (step 3), rasterised in the side
+        # cameras together with the tracks (one rasterisation per camera)
+        parts, owner, part_shapes = self._visibility_particles(tracks, models, shapes)
+        part_sils = {}
         # 1. rendered tracks per camera
         sils, masks = {}, {}
         for n in names:
             cam = self.calibration.cameras[n]
             mask = np.zeros((cam.height, cam.width), bool)
             if len(tracks):
-                sil = rasterize(cam, means, shapes)
+                k = len(tracks)
+                if len(parts) and n in self.side:
+                    both = rasterize(cam, np.concatenate([means, parts]), shapes + part_shapes)
+                    sil = both.select(0, k)
+                    part_sils[n] = both.select(k, k + len(parts))
+                else:
+                    sil = rasterize(cam, means, shapes)
                 sils[n] = sil
                 paint = mask.view(np.uint8)
                 _kernels.paint_spans(paint, sil.row, sil.x0, sil.x1, sil.part, 0,
@@ -191,9 +204,10 @@ class AutoDetection:
             masks[n] = mask
         t1 = time.perf_counter()
         # 2. background and foreground
-        fg = self.background.apply({n: images[n] for n in names}, exclude=masks)
-        evidence = {n: FrameEvidence(images[n], fg[n], masks[n],
-                                     motion=self.background.models[n].presence())
+        # the model update (and with it the motion the detector needs) waits for search()
+        fg = self.background.apply({n: images[n] for n in names}, exclude=masks, defer=True)
+        known_bins = dict(bins or {})
+        evidence = {n: FrameEvidence(images[n], fg[n], masks[n], _bins=known_bins.get(n))
                     for n in fg}
         t2 = time.perf_counter()
         # 3. support, visibility and existence
@@ -208,7 +222,18 @@ class AutoDetection:
             else:
                 supported = np.ones(len(tracks), bool)
                 coverage = {}
-            self._auxiliary(dt, images, tracks, models, shapes, coverage)
+
+            def colour(name: str) -> np.ndarray | None:
+                """Colour bins of a camera this frame, quantised at most once."""
+                if name in evidence:
+                    return evidence[name].bins
+                if name not in images:
+                    return None
+                if name not in known_bins:
+                    known_bins[name] = quantize(images[name])
+                return known_bins[name]
+
+            self._auxiliary(dt, colour, tracks, models, parts, owner, part_sils, coverage)
             existence = [self.aux[t.track_id].existence for t in tracks]
             if evidence:  # 4. release (only once the background exists)
                 ids = [t.track_id for t in tracks]
@@ -228,6 +253,7 @@ class AutoDetection:
     def search(self) -> list[Birth]:
         """Detection and acquisition (003 §4.1-4.2) on the frame set of the last
         :meth:`update`: the people to add, new or re-found (at most once per update)."""
+        self.update_background()
         if self._pending is None:
             return []
         stamp_ns, images, tracks, models, means, shapes, evidence, ended = self._pending
@@ -254,9 +280,23 @@ class AutoDetection:
                     births.append(birth)
         t4 = time.perf_counter()
         self.timings['detect_search'] = t4 - t3
-        self.timings['detect'] = sum(self.timings[k] for k in (
-            'detect_render', 'detect_background', 'detect_existence', 'detect_search'))
+        self.timings['detect'] = sum(self.timings.get(k, 0.0) for k in (
+            'detect_render', 'detect_background', 'detect_existence',
+            'detect_background_update', 'detect_search'))
         return births
+
+    def update_background(self) -> None:
+        """The background model update of the last :meth:`update` (003 §4.2), deferred so
+        that it does not delay the frame's result, and the recent motion it gives to the
+        frame's evidence (the detector's proof that a detection is no ghost). :meth:`search`
+        runs it first; the results are those of updating within :meth:`update`."""
+        t0 = time.perf_counter()
+        self.background.update_pending()
+        if self._pending is not None:
+            for name, ev in self._pending[6].items():
+                if ev.motion is None:
+                    ev.motion = self.background.models[name].presence()
+        self.timings['detect_background_update'] = time.perf_counter() - t0
 
     def tracking_images(self, images: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
         """The images the tracking filter should use: the side cameras only (003 §5: the
@@ -358,13 +398,13 @@ class AutoDetection:
         h = track.height if np.isfinite(track.height) and track.height > 0 else 1.75
         return BodyShape(height=float(h))
 
-    def _auxiliary(self, dt: float, images: Mapping[str, np.ndarray],
-                   tracks: Sequence[TrackEstimate], models: Mapping[int, PersonModel],
-                   shapes: Sequence[BodyShape], coverage: Mapping[str, np.ndarray]) -> None:
+    def _visibility_particles(self, tracks: Sequence[TrackEstimate],
+                              models: Mapping[int, PersonModel], shapes: Sequence[BodyShape]
+                              ) -> tuple[np.ndarray, np.ndarray, list[BodyShape]]:
+        """A few posterior particles (P, 6) of every track with a model (001 Eq. 18: particle
+        average), the index (P,) of their track and their shapes."""
         cfg = self.config
-        hidden = -cfg.clutter_distance ** 2 / (2.0 * cfg.sigma ** 2)    # 001 Eq. 23
-        # a few posterior particles per track with a model (001 Eq. 18: particle average)
-        rows, owner, hyp_shapes = [], [], []
+        rows, owner, part_shapes = [], [], []
         for k, t in enumerate(tracks):
             model = models.get(t.track_id)
             if model is None or not getattr(model, 'view_angles', np.zeros(0)).size:
@@ -378,31 +418,40 @@ class AutoDetection:
             else:
                 rows.append(t.mean[None])
             owner.extend([k] * len(rows[-1]))
-            hyp_shapes.extend([shapes[k]] * len(rows[-1]))
+            part_shapes.extend([shapes[k]] * len(rows[-1]))
+        parts = np.concatenate(rows) if rows else np.zeros((0, 6))
+        return parts, np.asarray(owner, dtype=np.int64), part_shapes
+
+    def _auxiliary(self, dt: float, colour: Callable[[str], np.ndarray | None],
+                   tracks: Sequence[TrackEstimate],
+                   models: Mapping[int, PersonModel], parts: np.ndarray, owner_arr: np.ndarray,
+                   part_sils: Mapping[str, object], coverage: Mapping[str, np.ndarray]) -> None:
+        """Visibility and existence of every track (001) from the appearance likelihood of
+        its particles ``parts`` (``owner_arr``: their track) rasterised in ``part_sils``;
+        ``colour(camera)`` gives the frame's colour bins of a side camera."""
+        cfg = self.config
+        hidden = -cfg.clutter_distance ** 2 / (2.0 * cfg.sigma ** 2)    # 001 Eq. 23
+        has_particles = len(parts) > 0
         loglik: dict[str, np.ndarray] = {}
-        if rows:
-            parts = np.concatenate(rows)
-            owner_arr = np.asarray(owner)
-            cams = [n for n in self.side if n in images]
-            # relative viewing angles of every particle in every camera, then one key-view
-            # interpolation per track (003 Eq. 1-2) for all cameras at once
-            rel = np.stack([relative_angle(parts[:, THETA],
-                                           self.calibration.cameras[n].viewing_angle(
-                                               parts[:, [X, Y]])) for n in cams])
-            hists = np.empty((len(cams), len(parts), 3, 512))
-            for k in np.unique(owner_arr):
-                sel = owner_arr == k
-                h = models[tracks[k].track_id].interpolate(rel[:, sel].ravel())
-                hists[:, sel] = h.reshape(len(cams), int(sel.sum()), 3, 512)
+        if has_particles:
+            cams = [n for n in self.side if n in part_sils and colour(n) is not None]
+            # the tracks' key views, interpolated lazily per particle and camera at the
+            # relative viewing angles (003 Eq. 1-2), as in the filter's likelihood
+            with_model, target = np.unique(owner_arr, return_inverse=True)
+            refs = [models[tracks[k].track_id] for k in with_model]
+            key = key_view_stack(refs)
+            va, vb, wa = view_weights([self.calibration.cameras[n] for n in cams], parts,
+                                      target.ravel(), refs)
             for c, n in enumerate(cams):
-                sil = rasterize(self.calibration.cameras[n], parts, hyp_shapes)
-                ll = single_target_loglik(quantize(images[n]), sil, hists[c], sigma=cfg.sigma)
+                sil = part_sils[n]
+                ll = key_view_loglik(colour(n), sil, key, target.ravel(), va[c], vb[c], wa[c],
+                                     sigma=cfg.sigma)
                 loglik[n] = np.where(sil.area > 0, ll, -np.inf)
         for k, t in enumerate(tracks):
             aux = self.aux.setdefault(t.track_id, TrackAuxiliary(cfg.existence))
             vis: dict[str, float] = {}
             hid: dict[str, float] = {}
-            if rows:
+            if has_particles:
                 sel = owner_arr == k
                 if sel.any():
                     for n, ll in loglik.items():
