@@ -29,6 +29,9 @@ max_pending_sets                int        frame sets queued for the tracker; th
                                            it stays this far behind (15 = 1 s at 15 Hz)
 executor                        string     ``events`` (rclpy EventsExecutor, default),
                                            ``single`` or ``multi`` (Python executors)
+warm_up                         bool       run the pipeline on a few synthetic frames at
+                                           start so the first real frames pay no kernel
+                                           loading (true)
 tracker.algorithm               string     hjs | separable | joint | registered baseline
 tracker.particles               int        particles per target (100)
 tracker.joint_particles         int        joint-filter particles (10000)
@@ -100,6 +103,7 @@ class NodeParams:
     output_bag: str
     max_pending_sets: int
     executor: str = 'events'
+    warm_up: bool = True
 
     @property
     def camera_names(self) -> list[str]:
@@ -134,6 +138,8 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
                          _ir(1, 300)),
     'executor': ('events', 'events (rclpy EventsExecutor) | single | multi: how callbacks '
                  'are dispatched; the tracker step has its own thread', {}),
+    'warm_up': (True, 'run the tracker on a few synthetic frames at start (loads every '
+                'compiled kernel before the first real frame)', {}),
     'tracker.algorithm': ('hjs', 'hjs | separable | joint | a registered baseline', {}),
     'tracker.particles': (100, 'particles per target (000 §VI)', _ir(1, 100_000)),
     'tracker.joint_particles': (10_000, 'joint-filter particles', _ir(1, 1_000_000)),
@@ -250,7 +256,8 @@ def declare_and_read(node: Node) -> tuple[NodeParams, RoomCalibration]:
         rescale_images=bool(v['rescale_images']), debug_images=bool(v['debug_images']),
         diagnostics_period_ns=int(round(v['diagnostics_period'] * 1e9)),
         init_ground_truth=gt, output_bag=str(v['output_bag']),
-        max_pending_sets=int(v['max_pending_sets']), executor=executor)
+        max_pending_sets=int(v['max_pending_sets']), executor=executor,
+        warm_up=bool(v['warm_up']))
     return params, calibration
 
 
