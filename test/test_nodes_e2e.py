@@ -90,10 +90,11 @@ def test_detection_parameter_reaches_the_tracker(room_calibration, context, tmp_
     # automatic detection is the default, with the release time and threshold passed on
     node = start(context, '-p', f'calibration_file:={room_calibration}',
                  '-p', 'tracker.particles:=50', '-p', 'tracker.release_time:=1.5',
-                 '-p', 'detection.threshold:=2.5')
+                 '-p', 'detection.threshold:=2.5', '-p', 'tracker.subsample:=2')
     try:
         assert node.params.tracker.detection is True
         assert node.tracker.config.detection is True and node.tracker.config.particles == 50
+        assert node.tracker.measurement.config.subsample == 2  # the fast profile's option
         assert node.tracker.detection is not None  # the automatic detection is running
         cfg = node.tracker.config.detection_config()
         assert cfg.release.timeout == 1.5 and cfg.detector.threshold == 2.5
@@ -118,6 +119,7 @@ def test_detection_parameter_reaches_the_tracker(room_calibration, context, tmp_
 
 BAD = [
     (['-p', 'tracker.particles:=0'], "'tracker.particles': value out of range"),
+    (['-p', 'tracker.subsample:=0'], "'tracker.subsample': value out of range"),
     (['-p', 'image_transport:=udp'], "image_transport: 'udp' is not one of raw, compressed"),
     (['-p', 'camera.cam0.transport:=theora'], 'camera.cam0.transport'),
     (['-p', 'sync.slop:=1'], "'sync.slop': wrong type"),

@@ -34,6 +34,8 @@ warm_up                         bool       run the pipeline on a few synthetic f
                                            loading (true)
 tracker.algorithm               string     hjs | separable | joint | registered baseline
 tracker.particles               int        particles per target (100)
+tracker.subsample               int        likelihood on every k-th image row (1; 2 =
+                                           faster, config/clear_room_fast.yaml)
 tracker.joint_particles         int        joint-filter particles (10000)
 tracker.sigma                   double     likelihood width, 000 Eq. 19 (0.12)
 tracker.d_occ                   double     occlusion penalty, 000 Eq. 26 (0.15)
@@ -142,6 +144,7 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
                 'compiled kernel before the first real frame)', {}),
     'tracker.algorithm': ('hjs', 'hjs | separable | joint | a registered baseline', {}),
     'tracker.particles': (100, 'particles per target (000 §VI)', _ir(1, 100_000)),
+    'tracker.subsample': (1, 'likelihood on every k-th image row (speed option)', _ir(1, 8)),
     'tracker.joint_particles': (10_000, 'joint-filter particles', _ir(1, 1_000_000)),
     'tracker.sigma': (0.12, 'likelihood width sigma (000 Eq. 19)', _fr(1e-4, 10.0)),
     'tracker.d_occ': (0.15, 'occlusion penalty d_occ (000 Eq. 26)', _fr(0.0, 10.0)),
@@ -233,6 +236,7 @@ def declare_and_read(node: Node) -> tuple[NodeParams, RoomCalibration]:
     tracker_values: dict[str, Any] = {
         'algorithm': str(v['tracker.algorithm']), 'particles': int(v['tracker.particles']),
         'joint_particles': int(v['tracker.joint_particles']),
+        'subsample': int(v['tracker.subsample']),
         'sigma': float(v['tracker.sigma']), 'd_occ': float(v['tracker.d_occ']),
         'mrf_radius': float(v['tracker.mrf_radius']), 'use_mrf': bool(v['tracker.use_mrf']),
         'seed': None if v['tracker.seed'] < 0 else int(v['tracker.seed']),
