@@ -63,8 +63,14 @@ def warm_up(config: TrackerConfig, *, ceiling: bool = False,
         births += len(tracker.search())
         max_tracks = max(max_tracks, len(result.tracks))
     if result is not None and result.tracks:
+        # the debug overlay; its occlusion maps need two tracks: add a twin of the first
+        track = result.tracks[0]
+        twin = replace(track, track_id=-1)
+        models = {track.track_id: tracker.models[track.track_id],
+                  -1: tracker.models[track.track_id]}
+        both = replace(result, tracks=[track, twin])
         camera = synth.calibration.cameras[cameras[0]]
-        occ, sil = occlusion_layers(tracker.measurement, camera, result, tracker.models)
+        occ, sil = occlusion_layers(tracker.measurement, camera, both, models)
         messages.debug_overlay(frame.images[camera.name], occlusion=occ, silhouettes=sil)
     return WarmUpReport(frames=frames, births=births, max_tracks=max_tracks,
                         seconds=time.perf_counter() - t0)
