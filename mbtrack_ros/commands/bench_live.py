@@ -224,8 +224,10 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
     player = None
     try:
         # the listener's subscriptions must be matched too: start the player once the
-        # tracker's people publisher sees us (the node is up), then it waits for the cameras
-        deadline = time.monotonic() + 60
+        # tracker's people publisher sees us (the node is up, its warm-up done: that can
+        # take minutes when numba recompiles after a code change), then it waits for the
+        # cameras
+        deadline = time.monotonic() + 300
         while listener.count_publishers('/tracker_node/people') == 0:
             if node.poll() is not None or time.monotonic() > deadline:
                 log.seek(0)
@@ -289,21 +291,22 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
 
 def run_offline(recording: Path, *, seed: int = 0, ground_truth: bool = False) -> dict:
     """Time ``mbtrack replay`` over the recording (automatic detection, or ``--init-from``
-    the ground truth): frames/s and the ratio to real time."""
+    the ground truth): frames/s, CPU seconds of this process and the ratio to real time."""
     from mbtrack_ros.cli import main
     from mbtrack_ros.recording.bag import RecordingReader
 
     with RecordingReader(recording / 'bag') as reader:
         frames = reader.frame_count
     with tempfile.TemporaryDirectory() as tmp:
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         extra = ['--init-from', str(recording / 'ground_truth.csv')] if ground_truth else []
         code = main(['replay', str(recording), '--out', tmp, '--seed', str(seed), *extra])
         wall = time.perf_counter() - t0
+        cpu = time.process_time() - c0
     if code != 0:
         raise RuntimeError(f'mbtrack replay exited with {code}')
-    return {'frames': frames, 'wall_seconds': wall, 'frames_per_second': frames / wall,
-            'x_real_time': frames / wall / FPS}
+    return {'frames': frames, 'wall_seconds': wall, 'cpu_seconds': cpu,
+            'frames_per_second': frames / wall, 'x_real_time': frames / wall / FPS}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -319,6 +322,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--live-no-sim-time', action='store_true',
                         help='run tracker_node without use_sim_time (it then does not '
                              'subscribe to /clock; its outputs use message stamps anyway)')
+    parser.add_argument('--live-no-warm-up', action='store_true',
+                        help='start tracker_node with warm_up:=false (the start-up backlog '
+                             'as it was before the warm-up)')
     parser.add_argument('--live-ground-truth', action='store_true',
                         help='start tracks from the ground truth (node init_ground_truth, '
                              'replay --init-from) instead of the automatic detection')
@@ -352,7 +358,8 @@ def main_live(args: argparse.Namespace) -> int:
             make_recording(recording, frames=args.live_frames, seed=seed)
         load0 = os.getloadavg()
         live = run_live(recording, seed=seed, use_sim_time=not args.live_no_sim_time,
-                        ground_truth=args.live_ground_truth)
+                        ground_truth=args.live_ground_truth,
+                        node_args=('-p', 'warm_up:=false') if args.live_no_warm_up else ())
         load1 = os.getloadavg()
         offline = run_offline(recording, seed=seed, ground_truth=args.live_ground_truth)
     except (LatencyError, RuntimeError, OSError, SynthError, BagError,
@@ -381,12 +388,13 @@ def main_live(args: argparse.Namespace) -> int:
           f'= {live.cpu_percent:.0f} % of one core')
     print(f'offline replay: {offline["frames"]} frames in {offline["wall_seconds"]:.1f} s = '
           f'{offline["frames_per_second"]:.1f} frames/s = {offline["x_real_time"]:.2f}x real '
-          f'time')
+          f'time (CPU {offline["cpu_seconds"]:.1f} s)')
     print(f'load average before / after the live run: {load0[0]:.2f} / {load1[0]:.2f}')
     if args.json is not None:
         doc = {'live': asdict(live), 'offline': offline, 'loadavg_before': load0,
                'loadavg_after': load1, 'seed': seed, 'use_sim_time': not args.live_no_sim_time,
-               'ground_truth': bool(args.live_ground_truth)}
+               'ground_truth': bool(args.live_ground_truth),
+               'warm_up': not args.live_no_warm_up}
         try:
             args.json.write_text(json.dumps(doc, indent=1), encoding='utf-8')
         except OSError as err:

@@ -65,8 +65,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                         help='output directory (created)')
     parser.add_argument('--params', type=Path, default=None, metavar='NODE.yaml',
                         help='take the tracker settings (tracker.*, detection.threshold) '
-                             'from a tracker_node parameter file, e.g. '
-                             'config/clear_room_fast.yaml; the options below override it')
+                             'from a tracker_node parameter file (config/*.yaml); the '
+                             'options below override it')
     parser.add_argument('--algorithm', default=None,
                         help='hjs (default), separable, joint, or a registered baseline')
     parser.add_argument('--particles', type=int, default=None, metavar='N',
@@ -80,8 +80,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument('--d-occ', type=float, default=None,
                         help='occlusion penalty d_occ (default 0.15)')
     parser.add_argument('--subsample', type=int, default=None, metavar='K',
-                        help='likelihood on every K-th image row (default 1; 2 is faster, '
-                             'see config/clear_room_fast.yaml)')
+                        help='likelihood on every K-th image row (default 1; a speed option '
+                             'that costs accuracy)')
     parser.add_argument('--init-from', type=Path, default=None, metavar='GROUND_TRUTH.csv',
                         help='start tracks from this ground truth (models from key views)')
     parser.add_argument('--eval', type=Path, default=None, metavar='GROUND_TRUTH.csv',

@@ -34,8 +34,9 @@ warm_up                         bool       run the pipeline on a few synthetic f
                                            loading (true)
 tracker.algorithm               string     hjs | separable | joint | registered baseline
 tracker.particles               int        particles per target (100)
-tracker.subsample               int        likelihood on every k-th image row (1; 2 =
-                                           faster, config/clear_room_fast.yaml)
+tracker.subsample               int        likelihood on every k-th image row (1; a speed
+                                           option that costs accuracy, see
+                                           docs/live_measurements.md)
 tracker.joint_particles         int        joint-filter particles (10000)
 tracker.sigma                   double     likelihood width, 000 Eq. 19 (0.12)
 tracker.d_occ                   double     occlusion penalty, 000 Eq. 26 (0.15)
