@@ -446,6 +446,34 @@ def test_bag_player_loops_and_publishes_clock(recording, context):
     assert sum(back) >= 1  # the clock restarted with the loop
 
 
+def test_bag_player_waits_for_the_clock_subscribers(recording, context):
+    """clock_subscribers: the player does not start before /clock has that many matched
+    subscribers (a latency listener that missed the first /clock timed the wrong frames)."""
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import Image
+
+    from mbtrack_ros.nodes.bag_player import BagPlayer
+
+    player = BagPlayer(cli_args=['--ros-args', '-p', f'bag:={recording}',
+                                 '-p', 'wait_for_subscribers:=true',
+                                 '-p', 'clock_subscribers:=2', '-p', 'subscriber_timeout:=2.0'],
+                       context=context)
+    warnings = []
+    player.get_logger = lambda: type('L', (), {'warning': lambda self, m: warnings.append(m)})()
+    listener = rclpy.create_node('clock_listener', context=context)
+    subs = [listener.create_subscription(Image, '/cam0/image_raw', lambda m: None, 10),
+            listener.create_subscription(Clock, '/clock', lambda m: None, 10)]
+    try:
+        player._wait_subscribers()  # one /clock subscriber of two: waits, then says so
+        assert len(warnings) == 1 and 'fewer than 2' in warnings[0]
+        subs.append(listener.create_subscription(Clock, '/clock', lambda m: None, 10))
+        player._wait_subscribers()
+        assert len(warnings) == 1  # now both are matched
+    finally:
+        player.destroy_node()
+        listener.destroy_node()
+
+
 def test_replay_writes_output_bag(recording, tmp_path):
     """`mbtrack replay` writes OUTDIR/tracks.mcap; its people agree with tracks.csv."""
     from rosbags.highlevel import AnyReader

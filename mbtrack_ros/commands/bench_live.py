@@ -237,7 +237,10 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
         player = subprocess.Popen(
             [sys.executable, '-m', 'mbtrack_ros.nodes.bag_player', '--ros-args',
              '-p', f'bag:={recording}', '-p', f'rate:={rate}',
-             '-p', 'wait_for_subscribers:=true', '-p', 'start_delay:=1.0'],
+             '-p', 'wait_for_subscribers:=true', '-p', 'start_delay:=1.0',
+             # our /clock reader too: a listener that missed the first /clock messages timed
+             # only later frames and took a frame ~15 for frame 0 (docs/live_measurements.md)
+             '-p', f'clock_subscribers:={2 if use_sim_time else 1}'],
             cwd=REPO, env=env, stdout=player_log, stderr=subprocess.STDOUT, text=True)
         cpu0, wall0 = cpu_seconds(node.pid), time.monotonic()
         if player.wait(timeout=timeout) != 0:
