@@ -188,3 +188,15 @@ def test_live_replay_differs_with_another_seed(recording, tmp_path):
     diffs = [np.hypot(a[s][t][0] - b[s][t][0], a[s][t][1] - b[s][t][1])
              for s in a if s in b for t in a[s] if t in b[s]]
     assert diffs and max(diffs) > 0.01
+
+
+def test_bench_offline_speed_runs_the_fast_profile(recording, capsys):
+    """`mbtrack bench --live` also times the offline replay with the fast profile: its
+    parameter file reaches the replay (fewer particles in the replay's own line)."""
+    from mbtrack_ros.commands.bench_live import FAST_PROFILE, run_offline
+
+    fast = run_offline(recording, seed=SEED, params=FAST_PROFILE)
+    assert fast['frames'] == FRAMES and fast['params'] == str(FAST_PROFILE)
+    assert '(hjs, N=50)' in capsys.readouterr().err  # the profile's particle count
+    assert fast['cpu_seconds'] > 0
+    assert fast['x_real_time'] == pytest.approx(FRAMES / fast['wall_seconds'] / 15.0)

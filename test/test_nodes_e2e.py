@@ -90,10 +90,11 @@ def test_detection_parameter_reaches_the_tracker(room_calibration, context, tmp_
     # automatic detection is the default, with the release time and threshold passed on
     node = start(context, '-p', f'calibration_file:={room_calibration}',
                  '-p', 'tracker.particles:=50', '-p', 'tracker.release_time:=1.5',
-                 '-p', 'detection.threshold:=2.5')
+                 '-p', 'detection.threshold:=2.5', '-p', 'tracker.subsample:=2')
     try:
         assert node.params.tracker.detection is True
         assert node.tracker.config.detection is True and node.tracker.config.particles == 50
+        assert node.tracker.measurement.config.subsample == 2  # the fast profile's option
         assert node.tracker.detection is not None  # the automatic detection is running
         cfg = node.tracker.config.detection_config()
         assert cfg.release.timeout == 1.5 and cfg.detector.threshold == 2.5
@@ -118,6 +119,7 @@ def test_detection_parameter_reaches_the_tracker(room_calibration, context, tmp_
 
 BAD = [
     (['-p', 'tracker.particles:=0'], "'tracker.particles': value out of range"),
+    (['-p', 'tracker.subsample:=0'], "'tracker.subsample': value out of range"),
     (['-p', 'image_transport:=udp'], "image_transport: 'udp' is not one of raw, compressed"),
     (['-p', 'camera.cam0.transport:=theora'], 'camera.cam0.transport'),
     (['-p', 'sync.slop:=1'], "'sync.slop': wrong type"),
@@ -442,6 +444,34 @@ def test_bag_player_loops_and_publishes_clock(recording, context):
     assert clocks and min(clocks) == first and max(clocks) <= last
     back = [b < a for a, b in zip(clocks, clocks[1:])]
     assert sum(back) >= 1  # the clock restarted with the loop
+
+
+def test_bag_player_waits_for_the_clock_subscribers(recording, context):
+    """clock_subscribers: the player does not start before /clock has that many matched
+    subscribers (a latency listener that missed the first /clock timed the wrong frames)."""
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import Image
+
+    from mbtrack_ros.nodes.bag_player import BagPlayer
+
+    player = BagPlayer(cli_args=['--ros-args', '-p', f'bag:={recording}',
+                                 '-p', 'wait_for_subscribers:=true',
+                                 '-p', 'clock_subscribers:=2', '-p', 'subscriber_timeout:=2.0'],
+                       context=context)
+    warnings = []
+    player.get_logger = lambda: type('L', (), {'warning': lambda self, m: warnings.append(m)})()
+    listener = rclpy.create_node('clock_listener', context=context)
+    subs = [listener.create_subscription(Image, '/cam0/image_raw', lambda m: None, 10),
+            listener.create_subscription(Clock, '/clock', lambda m: None, 10)]
+    try:
+        player._wait_subscribers()  # one /clock subscriber of two: waits, then says so
+        assert len(warnings) == 1 and 'fewer than 2' in warnings[0]
+        subs.append(listener.create_subscription(Clock, '/clock', lambda m: None, 10))
+        player._wait_subscribers()
+        assert len(warnings) == 1  # now both are matched
+    finally:
+        player.destroy_node()
+        listener.destroy_node()
 
 
 def test_replay_writes_output_bag(recording, tmp_path):

@@ -41,6 +41,7 @@ FPS = 15.0
 # the player's last log line: how long publishing one stamp's messages took
 _BURST = re.compile(r"one stamp's messages took p50 (?P<p50>[\d.]+) ms, p95 (?P<p95>[\d.]+) ms")
 REPO = Path(__file__).resolve().parents[2]
+FAST_PROFILE = REPO / 'config' / 'clear_room_fast.yaml'  # tracker_node parameters
 
 
 class LatencyError(ValueError):
@@ -224,8 +225,10 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
     player = None
     try:
         # the listener's subscriptions must be matched too: start the player once the
-        # tracker's people publisher sees us (the node is up), then it waits for the cameras
-        deadline = time.monotonic() + 60
+        # tracker's people publisher sees us (the node is up, its warm-up done: that can
+        # take minutes when numba recompiles after a code change), then it waits for the
+        # cameras
+        deadline = time.monotonic() + 300
         while listener.count_publishers('/tracker_node/people') == 0:
             if node.poll() is not None or time.monotonic() > deadline:
                 log.seek(0)
@@ -234,7 +237,10 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
         player = subprocess.Popen(
             [sys.executable, '-m', 'mbtrack_ros.nodes.bag_player', '--ros-args',
              '-p', f'bag:={recording}', '-p', f'rate:={rate}',
-             '-p', 'wait_for_subscribers:=true', '-p', 'start_delay:=1.0'],
+             '-p', 'wait_for_subscribers:=true', '-p', 'start_delay:=1.0',
+             # our /clock reader too: a listener that missed the first /clock messages timed
+             # only later frames and took a frame ~15 for frame 0 (docs/live_measurements.md)
+             '-p', f'clock_subscribers:={2 if use_sim_time else 1}'],
             cwd=REPO, env=env, stdout=player_log, stderr=subprocess.STDOUT, text=True)
         cpu0, wall0 = cpu_seconds(node.pid), time.monotonic()
         if player.wait(timeout=timeout) != 0:
@@ -287,23 +293,29 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
         latency_series=tuple(zip(((stamps - first) / 1e9).tolist(), lat.tolist())))
 
 
-def run_offline(recording: Path, *, seed: int = 0, ground_truth: bool = False) -> dict:
+def run_offline(recording: Path, *, seed: int = 0, ground_truth: bool = False,
+                params: Path | None = None) -> dict:
     """Time ``mbtrack replay`` over the recording (automatic detection, or ``--init-from``
-    the ground truth): frames/s and the ratio to real time."""
+    the ground truth; ``params``: a tracker_node parameter file, e.g. the fast profile):
+    frames/s, CPU seconds of this process and the ratio to real time."""
     from mbtrack_ros.cli import main
     from mbtrack_ros.recording.bag import RecordingReader
 
     with RecordingReader(recording / 'bag') as reader:
         frames = reader.frame_count
     with tempfile.TemporaryDirectory() as tmp:
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         extra = ['--init-from', str(recording / 'ground_truth.csv')] if ground_truth else []
+        if params is not None:
+            extra += ['--params', str(params)]
         code = main(['replay', str(recording), '--out', tmp, '--seed', str(seed), *extra])
         wall = time.perf_counter() - t0
+        cpu = time.process_time() - c0
     if code != 0:
         raise RuntimeError(f'mbtrack replay exited with {code}')
-    return {'frames': frames, 'wall_seconds': wall, 'frames_per_second': frames / wall,
-            'x_real_time': frames / wall / FPS}
+    return {'frames': frames, 'wall_seconds': wall, 'cpu_seconds': cpu,
+            'frames_per_second': frames / wall, 'x_real_time': frames / wall / FPS,
+            'params': None if params is None else str(params)}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -319,6 +331,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--live-no-sim-time', action='store_true',
                         help='run tracker_node without use_sim_time (it then does not '
                              'subscribe to /clock; its outputs use message stamps anyway)')
+    parser.add_argument('--live-no-warm-up', action='store_true',
+                        help='start tracker_node with warm_up:=false (the start-up backlog '
+                             'as it was before the warm-up)')
     parser.add_argument('--live-ground-truth', action='store_true',
                         help='start tracks from the ground truth (node init_ground_truth, '
                              'replay --init-from) instead of the automatic detection')
@@ -352,9 +367,14 @@ def main_live(args: argparse.Namespace) -> int:
             make_recording(recording, frames=args.live_frames, seed=seed)
         load0 = os.getloadavg()
         live = run_live(recording, seed=seed, use_sim_time=not args.live_no_sim_time,
-                        ground_truth=args.live_ground_truth)
+                        ground_truth=args.live_ground_truth,
+                        node_args=('-p', 'warm_up:=false') if args.live_no_warm_up else ())
         load1 = os.getloadavg()
         offline = run_offline(recording, seed=seed, ground_truth=args.live_ground_truth)
+        fast = None
+        if FAST_PROFILE.is_file():  # a source checkout: the fast profile too
+            fast = run_offline(recording, seed=seed, ground_truth=args.live_ground_truth,
+                               params=FAST_PROFILE)
     except (LatencyError, RuntimeError, OSError, SynthError, BagError,
             subprocess.TimeoutExpired) as err:
         return _error(str(err))
@@ -379,14 +399,18 @@ def main_live(args: argparse.Namespace) -> int:
           'of a stamp)')
     print(f'tracker_node CPU: {live.cpu_seconds:.1f} s over {live.wall_seconds:.1f} s '
           f'= {live.cpu_percent:.0f} % of one core')
-    print(f'offline replay: {offline["frames"]} frames in {offline["wall_seconds"]:.1f} s = '
-          f'{offline["frames_per_second"]:.1f} frames/s = {offline["x_real_time"]:.2f}x real '
-          f'time')
+    for name, off in (('default', offline), (f'fast profile {FAST_PROFILE.name}', fast)):
+        if off is not None:
+            print(f'offline replay ({name}): {off["frames"]} frames in '
+                  f'{off["wall_seconds"]:.1f} s = {off["frames_per_second"]:.1f} frames/s = '
+                  f'{off["x_real_time"]:.2f}x real time (CPU {off["cpu_seconds"]:.1f} s)')
     print(f'load average before / after the live run: {load0[0]:.2f} / {load1[0]:.2f}')
     if args.json is not None:
-        doc = {'live': asdict(live), 'offline': offline, 'loadavg_before': load0,
+        doc = {'live': asdict(live), 'offline': offline, 'offline_fast': fast,
+               'loadavg_before': load0,
                'loadavg_after': load1, 'seed': seed, 'use_sim_time': not args.live_no_sim_time,
-               'ground_truth': bool(args.live_ground_truth)}
+               'ground_truth': bool(args.live_ground_truth),
+               'warm_up': not args.live_no_warm_up}
         try:
             args.json.write_text(json.dumps(doc, indent=1), encoding='utf-8')
         except OSError as err:

@@ -30,6 +30,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from mbtrack_ros.core.camera import CalibrationError, RoomCalibration
 from mbtrack_ros.core.filters import FilterError
@@ -62,16 +63,25 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                         help='room calibration (default: BAG/calibration.yaml)')
     parser.add_argument('--out', type=Path, required=True, metavar='OUTDIR',
                         help='output directory (created)')
-    parser.add_argument('--algorithm', default='hjs',
+    parser.add_argument('--params', type=Path, default=None, metavar='NODE.yaml',
+                        help='take the tracker settings (tracker.*, detection.threshold) '
+                             'from a tracker_node parameter file (config/*.yaml); the '
+                             'options below override it')
+    parser.add_argument('--algorithm', default=None,
                         help='hjs (default), separable, joint, or a registered baseline')
-    parser.add_argument('--particles', type=int, default=100, metavar='N',
+    parser.add_argument('--particles', type=int, default=None, metavar='N',
                         help='particles per person (default 100)')
-    parser.add_argument('--joint-particles', type=int, default=10_000, metavar='N',
+    parser.add_argument('--joint-particles', type=int, default=None, metavar='N',
                         help='joint particles of --algorithm joint (default 10000)')
     parser.add_argument('--no-mrf', action='store_true',
                         help='disable the spatial-exclusion MRF prior (ablation)')
-    parser.add_argument('--sigma', type=float, default=0.12, help='likelihood width sigma')
-    parser.add_argument('--d-occ', type=float, default=0.15, help='occlusion penalty d_occ')
+    parser.add_argument('--sigma', type=float, default=None,
+                        help='likelihood width sigma (default 0.12)')
+    parser.add_argument('--d-occ', type=float, default=None,
+                        help='occlusion penalty d_occ (default 0.15)')
+    parser.add_argument('--subsample', type=int, default=None, metavar='K',
+                        help='likelihood on every K-th image row (default 1; a speed option '
+                             'that costs accuracy)')
     parser.add_argument('--init-from', type=Path, default=None, metavar='GROUND_TRUTH.csv',
                         help='start tracks from this ground truth (models from key views)')
     parser.add_argument('--eval', type=Path, default=None, metavar='GROUND_TRUTH.csv',
@@ -107,14 +117,46 @@ def _resolve_inputs(args: argparse.Namespace) -> tuple[Path, RoomCalibration]:
     return bag, calibration
 
 
+# tracker_node parameter (under ``tracker_node: ros__parameters:``) -> TrackerConfig field;
+# ``tracker.seed`` is left to ``--seed`` (a replay is always seeded)
+_NODE_TRACKER_KEYS = {f'tracker.{k}': k for k in (
+    'algorithm', 'particles', 'joint_particles', 'sigma', 'd_occ', 'mrf_radius', 'use_mrf',
+    'release_time', 'subsample')}
+_NODE_TRACKER_KEYS['detection.threshold'] = 'detection_threshold'
+
+
+def tracker_values_from_params(path: Path) -> dict:
+    """TrackerConfig values of a tracker_node parameter file (its ``tracker.*`` and
+    ``detection.threshold``); raises TrackerError on an unreadable file or unknown key."""
+    try:
+        doc = yaml.safe_load(Path(path).read_text())
+        params = doc['tracker_node']['ros__parameters']
+    except (OSError, yaml.YAMLError, KeyError, TypeError) as err:
+        raise TrackerError(f'{path}: not a tracker_node parameter file ({err})') from err
+    flat: dict = {}
+    for section in ('tracker', 'detection'):
+        for key, value in (params.get(section) or {}).items():
+            flat[f'{section}.{key}'] = value
+    unknown = sorted(k for k in flat if k.startswith('tracker.') and k != 'tracker.seed'
+                     and k not in _NODE_TRACKER_KEYS)
+    if unknown:
+        raise TrackerError(f'{path}: unknown tracker parameter(s) {", ".join(unknown)}')
+    return {field: flat[key] for key, field in _NODE_TRACKER_KEYS.items() if key in flat}
+
+
 def _config(args: argparse.Namespace) -> TrackerConfig:
     if args.max_frames is not None and args.max_frames < 1:
         raise _UserError(f'--max-frames must be >= 1, got {args.max_frames}')
     try:
-        return TrackerConfig(algorithm=args.algorithm, particles=args.particles,
-                             joint_particles=args.joint_particles, sigma=args.sigma,
-                             d_occ=args.d_occ, use_mrf=not args.no_mrf, seed=args.seed,
-                             detection=args.init_from is None)
+        values = tracker_values_from_params(args.params) if args.params is not None else {}
+        for name in ('algorithm', 'particles', 'joint_particles', 'sigma', 'd_occ',
+                     'subsample'):
+            if getattr(args, name) is not None:  # an explicit option beats the file
+                values[name] = getattr(args, name)
+        if args.no_mrf:
+            values['use_mrf'] = False
+        values.update(seed=args.seed, detection=args.init_from is None)
+        return TrackerConfig.from_dict(values)
     except TrackerError as err:
         raise _UserError(str(err)) from err
 

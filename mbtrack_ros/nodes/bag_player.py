@@ -13,7 +13,10 @@ Parameters: ``bag`` (rosbag2 directory, or a recording directory with ``bag/`` i
 required), ``rate`` (playback speed factor, 1.0), ``loop`` (restart at the end, false),
 ``exit_when_done`` (true), ``publish_clock`` (true), ``topics`` (only these; default all),
 ``start_delay`` (s before the first message, 0.5), ``wait_for_subscribers`` (wait up to
-``subscriber_timeout`` s, default 30, until every image topic has a subscriber, false).
+``subscriber_timeout`` s, default 30, until every image topic has a subscriber, false),
+``clock_subscribers`` (with ``wait_for_subscribers``, also wait until ``/clock`` has this many
+matched subscribers, 0: a tracker with ``use_sim_time`` plus any listener that times
+frames by their ``/clock``, so that none misses the first ones).
 """
 from __future__ import annotations
 
@@ -88,6 +91,12 @@ class BagPlayer(Node):
                                          0.0, 3600.0))
         self.wait_for_subscribers = bool(declare(
             'wait_for_subscribers', False, 'wait until every image topic has a subscriber'))
+        self.clock_subscribers = int(declare(
+            'clock_subscribers', 0, 'with wait_for_subscribers: matched /clock subscribers '
+            'to wait for'))
+        if self.clock_subscribers < 0:
+            raise PlayerError(f'parameter clock_subscribers: must be >= 0, got '
+                              f'{self.clock_subscribers}')
         self.subscriber_timeout = float(declare(
             'subscriber_timeout', 30.0, 'longest wait for subscribers, s', 0.0, 3600.0))
         topics = [t for t in declare('topics', [''], 'topics to play (default all)') if t]
@@ -123,10 +132,13 @@ class BagPlayer(Node):
         images = [p for c, p in self._pubs.items()
                   if any(x.topic == c and x.msgtype in IMAGE_TYPES for x in self._conns)]
         while time.monotonic() < deadline and not self._stop.is_set():
-            if all(p.get_subscription_count() > 0 for p in images):
+            clock_ok = self._clock is None or \
+                self._clock.get_subscription_count() >= self.clock_subscribers
+            if clock_ok and all(p.get_subscription_count() > 0 for p in images):
                 return
             time.sleep(0.05)
-        self.get_logger().warning('not every image topic has a subscriber; playing anyway')
+        self.get_logger().warning('not every image topic has a subscriber (or /clock has '
+                                  f'fewer than {self.clock_subscribers}); playing anyway')
 
     def play(self) -> None:
         """Publish every message at its (scaled) time; returns when done or stopped."""

@@ -29,8 +29,14 @@ max_pending_sets                int        frame sets queued for the tracker; th
                                            it stays this far behind (15 = 1 s at 15 Hz)
 executor                        string     ``events`` (rclpy EventsExecutor, default),
                                            ``single`` or ``multi`` (Python executors)
+warm_up                         bool       run the pipeline on a few synthetic frames at
+                                           start so the first real frames pay no kernel
+                                           loading (true)
 tracker.algorithm               string     hjs | separable | joint | registered baseline
 tracker.particles               int        particles per target (100)
+tracker.subsample               int        likelihood on every k-th image row (1; a speed
+                                           option that costs accuracy, see
+                                           docs/live_measurements.md)
 tracker.joint_particles         int        joint-filter particles (10000)
 tracker.sigma                   double     likelihood width, 000 Eq. 19 (0.12)
 tracker.d_occ                   double     occlusion penalty, 000 Eq. 26 (0.15)
@@ -100,6 +106,7 @@ class NodeParams:
     output_bag: str
     max_pending_sets: int
     executor: str = 'events'
+    warm_up: bool = True
 
     @property
     def camera_names(self) -> list[str]:
@@ -134,8 +141,11 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
                          _ir(1, 300)),
     'executor': ('events', 'events (rclpy EventsExecutor) | single | multi: how callbacks '
                  'are dispatched; the tracker step has its own thread', {}),
+    'warm_up': (True, 'run the tracker on a few synthetic frames at start (loads every '
+                'compiled kernel before the first real frame)', {}),
     'tracker.algorithm': ('hjs', 'hjs | separable | joint | a registered baseline', {}),
     'tracker.particles': (100, 'particles per target (000 §VI)', _ir(1, 100_000)),
+    'tracker.subsample': (1, 'likelihood on every k-th image row (speed option)', _ir(1, 8)),
     'tracker.joint_particles': (10_000, 'joint-filter particles', _ir(1, 1_000_000)),
     'tracker.sigma': (0.12, 'likelihood width sigma (000 Eq. 19)', _fr(1e-4, 10.0)),
     'tracker.d_occ': (0.15, 'occlusion penalty d_occ (000 Eq. 26)', _fr(0.0, 10.0)),
@@ -227,6 +237,7 @@ def declare_and_read(node: Node) -> tuple[NodeParams, RoomCalibration]:
     tracker_values: dict[str, Any] = {
         'algorithm': str(v['tracker.algorithm']), 'particles': int(v['tracker.particles']),
         'joint_particles': int(v['tracker.joint_particles']),
+        'subsample': int(v['tracker.subsample']),
         'sigma': float(v['tracker.sigma']), 'd_occ': float(v['tracker.d_occ']),
         'mrf_radius': float(v['tracker.mrf_radius']), 'use_mrf': bool(v['tracker.use_mrf']),
         'seed': None if v['tracker.seed'] < 0 else int(v['tracker.seed']),
@@ -250,7 +261,8 @@ def declare_and_read(node: Node) -> tuple[NodeParams, RoomCalibration]:
         rescale_images=bool(v['rescale_images']), debug_images=bool(v['debug_images']),
         diagnostics_period_ns=int(round(v['diagnostics_period'] * 1e9)),
         init_ground_truth=gt, output_bag=str(v['output_bag']),
-        max_pending_sets=int(v['max_pending_sets']), executor=executor)
+        max_pending_sets=int(v['max_pending_sets']), executor=executor,
+        warm_up=bool(v['warm_up']))
     return params, calibration
 
 

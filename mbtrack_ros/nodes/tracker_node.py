@@ -175,6 +175,8 @@ class TrackerNode(Node):
             raise ParamsError(str(err)) from err
         if getattr(self.tracker, 'detection', None) is not None:
             self.tracker.detection.prepare()  # one-off work now, not at the bootstrap frame
+        if p.warm_up:  # before any subscription: a player waiting for us waits for this too
+            self._warm_up()
         self.sync = FrameSetSynchronizer(p.camera_names, p.slop_ns, p.timeout_ns)
         self._lock = threading.Lock()  # synchroniser, frame-set queue and counters
         self._wake = threading.Condition(self._lock)  # a frame set was queued, or closing
@@ -248,6 +250,23 @@ class TrackerNode(Node):
         self.get_logger().info(
             f'tracking with {p.tracker.algorithm} on {len(p.cameras)} camera(s): '
             + ', '.join(f'{c.name} <- {c.image_topic} ({c.transport})' for c in p.cameras))
+
+    def _warm_up(self) -> None:
+        """Load every compiled kernel of the step now (:func:`warm_up`, a throwaway
+        tracker): without it the first frame sets with people queued up behind kernel
+        loading (docs/live_measurements.md)."""
+        from mbtrack_ros.core.detection.detector import is_ceiling
+        from mbtrack_ros.nodes.warmup import warm_up
+
+        ceiling = any(is_ceiling(c) for c in self.calibration.cameras.values())
+        try:
+            report = warm_up(self.params.tracker, ceiling=ceiling)
+        except Exception as err:  # noqa: BLE001 - a failed warm-up only costs latency
+            self.get_logger().warning(f'warm-up skipped: {type(err).__name__}: {err}')
+            return
+        self.get_logger().info(
+            f'warm-up: {report.frames} synthetic frame sets, {report.births} track(s) '
+            f'started, in {report.seconds:.1f} s')
 
     # -- hooks ----------------------------------------------------------------------------
     def start_track(self, model: PersonModel, state: np.ndarray, stamp_ns: int) -> int | None:

@@ -1,0 +1,102 @@
+"""Issue 5: the speed options: ``TrackerConfig.subsample`` is validated and reaches the
+likelihood; ``mbtrack replay --params`` reads a tracker_node parameter file; the fast profile
+(config/clear_room_fast.yaml) loads in the node and the replay."""
+from __future__ import annotations
+
+import os
+
+import pytest
+
+os.environ.setdefault('ROS_DOMAIN_ID', str(100 + os.getpid() % 100))
+
+import rclpy  # noqa: E402
+from rclpy.context import Context  # noqa: E402
+
+from conftest import REPO, make_room  # noqa: E402
+from mbtrack_ros.core.tracker import Tracker, TrackerConfig, TrackerError  # noqa: E402
+
+FAST = REPO / 'config' / 'clear_room_fast.yaml'
+
+
+def test_subsample_is_validated_and_reaches_the_likelihood():
+    calibration = make_room()
+    for bad in (0, -1, 1.5, True):
+        with pytest.raises(TrackerError, match='subsample'):
+            TrackerConfig(subsample=bad)
+    tracker = Tracker(calibration, TrackerConfig(subsample=3))
+    assert tracker.measurement.config.subsample == 3
+    assert Tracker(calibration, TrackerConfig()).measurement.config.subsample == 1
+
+
+def test_replay_options_beat_the_params_file(tmp_path):
+    import argparse
+
+    from mbtrack_ros.commands import replay
+
+    parser = argparse.ArgumentParser()
+    replay.add_parser(parser.add_subparsers())
+
+    def config(*extra: str) -> TrackerConfig:
+        return replay._config(parser.parse_args(['replay', 'REC', '--out', str(tmp_path),
+                                                 *extra]))
+
+    params = tmp_path / 'node.yaml'
+    params.write_text('tracker_node:\n  ros__parameters:\n    tracker:\n      particles: 50\n'
+                      '      subsample: 2\n      seed: 9\n    detection:\n      threshold: 1.5\n')
+    assert config() == TrackerConfig(seed=0, detection=True)  # defaults unchanged
+    fast = config('--params', str(params))
+    assert (fast.particles, fast.subsample, fast.seed) == (50, 2, 0)  # --seed rules
+    assert fast.detection_threshold == 1.5
+    mixed = config('--params', str(params), '--particles', '70', '--seed', '3')
+    assert (mixed.particles, mixed.subsample, mixed.seed) == (70, 2, 3)
+    assert config('--subsample', '3').subsample == 3
+
+
+def test_replay_params_file_refuses_unknown_keys(tmp_path):
+    from mbtrack_ros.commands.replay import tracker_values_from_params
+
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('tracker_node:\n  ros__parameters:\n    tracker:\n      subsampel: 2\n')
+    with pytest.raises(TrackerError, match='subsampel'):
+        tracker_values_from_params(bad)
+    with pytest.raises(TrackerError, match='not a tracker_node parameter file'):
+        tracker_values_from_params(tmp_path / 'missing.yaml')
+
+
+def test_fast_profile_is_the_default_with_half_the_particles():
+    from mbtrack_ros.commands.replay import tracker_values_from_params
+
+    fast = tracker_values_from_params(FAST)
+    default = tracker_values_from_params(REPO / 'config' / 'clear_room.yaml')
+    assert {k for k in fast.keys() | default.keys() if fast.get(k) != default.get(k)} == \
+        {'particles'}
+    assert fast['particles'] == default['particles'] // 2
+
+
+def test_fast_profile_loads_in_the_node_and_the_replay(tmp_path):
+    import argparse
+
+    from mbtrack_ros.commands import replay
+    from mbtrack_ros.nodes.tracker_node import TrackerNode
+    from mbtrack_ros.synth.room import default_room, make_calibration
+
+    calib = tmp_path / 'calibration.yaml'
+    make_calibration(default_room()).save(calib)
+    context = Context()
+    rclpy.init(context=context)
+    try:
+        node = TrackerNode(cli_args=['--ros-args', '--params-file', str(FAST),
+                                     '-p', f'calibration_file:={calib}', '-p', 'warm_up:=false'],
+                           context=context, step_thread=False)
+        try:
+            node_config = node.tracker.config
+        finally:
+            node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+    parser = argparse.ArgumentParser()
+    replay.add_parser(parser.add_subparsers())
+    replay_config = replay._config(parser.parse_args(
+        ['replay', 'REC', '--out', str(tmp_path), '--params', str(FAST)]))
+    assert node_config.particles == replay_config.particles == 50
+    assert node_config.subsample == replay_config.subsample == 1
