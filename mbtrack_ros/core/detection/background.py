@@ -149,26 +149,25 @@ def clean_mask(mask: np.ndarray, *, open_size: int = 3, close_size: int = 5,
 def _median_kernel(stack: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
     """Per-pixel median of N frames (N, H, W, C) float32 -> (H, W, C) float32, exactly as
     ``np.median(stack, axis=0)`` (mean of the two middle values for even N): each pixel's
-    N values are sorted by insertion (N is a handful of bootstrap frames)."""
-    n, h, w, c = stack.shape
-    out = np.empty((h, w, c), np.float32)
+    N values (a handful of bootstrap frames) go through a branch-free bubble sort."""
+    n = stack.shape[0]
+    flat = stack.reshape(n, -1)
+    out = np.empty(flat.shape[1], np.float32)
     buf = np.empty(n, np.float32)
     half = n // 2
-    for i in range(h):
-        for j in range(w):
-            for k in range(c):
-                for a in range(n):
-                    v = stack[a, i, j, k]
-                    b = a
-                    while b > 0 and buf[b - 1] > v:
-                        buf[b] = buf[b - 1]
-                        b -= 1
-                    buf[b] = v
-                if n % 2 == 1:
-                    out[i, j, k] = buf[half]
-                else:
-                    out[i, j, k] = (buf[half - 1] + buf[half]) / np.float32(2.0)
-    return out
+    for q in range(flat.shape[1]):
+        for a in range(n):
+            buf[a] = flat[a, q]
+        for a in range(n):
+            for b in range(n - 1 - a):
+                lo = min(buf[b], buf[b + 1])
+                buf[b + 1] = max(buf[b], buf[b + 1])
+                buf[b] = lo
+        if n % 2 == 1:
+            out[q] = buf[half]
+        else:
+            out[q] = (buf[half - 1] + buf[half]) / np.float32(2.0)
+    return out.reshape(stack.shape[1:])
 
 
 def median_frame(frames: Sequence[np.ndarray]) -> np.ndarray:
