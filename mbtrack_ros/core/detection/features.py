@@ -465,10 +465,11 @@ def contour_loglik_spans(edge_map: EdgeMap, spans: Spans, body_width: np.ndarray
 
 @njit(cache=True, nogil=True)
 def _symmetry_kernel(colour: np.ndarray, row: np.ndarray, x0: np.ndarray, x1: np.ndarray,
-                     part: np.ndarray, offsets: np.ndarray, torso: int, bins: int,
-                     min_pixels: int) -> np.ndarray:  # pragma: no cover - compiled
-    """Left/right torso histogram distances; ``colour`` (H, W) are the merged bins
-    ``0..bins-1``. A span's pixels left of its centre column count left, right of it
+                     part: np.ndarray, offsets: np.ndarray, torso: int, merge: np.ndarray,
+                     bins: int, min_pixels: int) -> np.ndarray:  # pragma: no cover
+    """Left/right torso histogram distances; ``colour`` (H, W) are the 8x8x8 bins, merged
+    to ``bins`` through the table ``merge`` (512,) at the pixels visited (not over the
+    whole image). A span's pixels left of its centre column count left, right of it
     right, the centre pixel of an odd span neither."""
     n = offsets.size - 1
     out = np.full(n, np.nan)
@@ -492,10 +493,10 @@ def _symmetry_kernel(colour: np.ndarray, row: np.ndarray, x0: np.ndarray, x1: np
             hi = min(b, w)
             # 2x + 1 < a + b (left of the centre), 2x + 1 > a + b (right of it)
             for x in range(lo, min(hi, (a + b) // 2)):
-                left[colour[r, x]] += 1.0
+                left[merge[colour[r, x]]] += 1.0
                 nl += 1.0
             for x in range(max(lo, (a + b + 1) // 2), hi):
-                right[colour[r, x]] += 1.0
+                right[merge[colour[r, x]]] += 1.0
                 nr += 1.0
         if nl >= min_pixels and nr >= min_pixels:
             d = 0.0
@@ -522,14 +523,13 @@ def colour_symmetry(image: np.ndarray, spans: Spans, *, levels: int = 4,
         if image.ndim != 3 or image.shape[2] != 3 or image.dtype != np.uint8:
             raise DetectionError(f'expected an (H, W, 3) uint8 RGB image, got {image.shape}')
         bins = quantize(image)
-    # the 8x8x8 bins merged to levels^3 once per image (not once per visited pixel)
-    q = np.asarray(bins, np.int64)
+    q = np.arange(512)                      # 8x8x8 bin -> levels^3 bin
     f = 8 // levels
-    merged = (((q >> 6) // f) * levels + ((q >> 3) & 7) // f) * levels + (q & 7) // f
-    return _symmetry_kernel(np.ascontiguousarray(merged),
+    merge = (((q >> 6) // f) * levels + ((q >> 3) & 7) // f) * levels + (q & 7) // f
+    return _symmetry_kernel(np.ascontiguousarray(bins, dtype=np.int16),
                             np.ascontiguousarray(spans.row, np.int64),
                             np.ascontiguousarray(spans.x0, np.int64),
                             np.ascontiguousarray(spans.x1, np.int64),
                             np.ascontiguousarray(spans.part, np.int64),
                             np.ascontiguousarray(spans.offsets, np.int64), TORSO,
-                            levels ** 3, min_pixels)
+                            merge, levels ** 3, min_pixels)
