@@ -3,6 +3,7 @@ recounting only the hypotheses it can change, the compiled median) against the
 straightforward computation on small cases."""
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
 from conftest import make_room
@@ -11,8 +12,6 @@ from mbtrack_ros.core.detection.detector import _max_span_width
 from mbtrack_ros.core.detection.features import (
     EdgeMap, ForegroundIntegral, colour_symmetry, contour_loglik_spans)
 from mbtrack_ros.core.detection.people import PeopleCue, PeopleCueConfig
-
-import cv2
 
 
 def _frames(room, rng, n_frames: int = 4) -> list[dict[str, np.ndarray]]:
@@ -123,7 +122,8 @@ def test_median_frame_equals_numpy_median():
     for n in (1, 2, 5, 6):
         frames = [rng.integers(0, 256, (7, 9, 3)).astype(np.float32) for _ in range(n)]
         frames[0][0, 0] = frames[-1][0, 0]                          # ties
-        frames.append(frames[0].copy()) if n == 5 else None
+        if n == 5:
+            frames.append(frames[0].copy())                         # a repeated frame
         ref = np.median(np.stack(frames), axis=0).astype(np.float32)
         out = median_frame(frames)
         assert out.dtype == np.float32 and out.shape == ref.shape
