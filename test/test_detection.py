@@ -621,7 +621,7 @@ def test_prefix_sums_equal_numpy_cumsum():
 
 
 def test_colour_symmetry_equals_numpy_histograms():
-    """The kernel (colours merged per visited pixel) equals a plain per-silhouette version."""
+    """The kernel (colours merged once per image) equals a plain per-silhouette version."""
     rng = np.random.default_rng(8)
     calib = make_room()
     cam = calib.cameras['cam1']

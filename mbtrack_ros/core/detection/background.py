@@ -146,6 +146,36 @@ def clean_mask(mask: np.ndarray, *, open_size: int = 3, close_size: int = 5,
 
 
 @njit(cache=True, nogil=True)
+def _median_kernel(stack: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
+    """Per-pixel median of N frames (N, H, W, C) float32 -> (H, W, C) float32, exactly as
+    ``np.median(stack, axis=0)`` (mean of the two middle values for even N): each pixel's
+    N values (a handful of bootstrap frames) go through a branch-free bubble sort."""
+    n = stack.shape[0]
+    flat = stack.reshape(n, -1)
+    out = np.empty(flat.shape[1], np.float32)
+    buf = np.empty(n, np.float32)
+    half = n // 2
+    for q in range(flat.shape[1]):
+        for a in range(n):
+            buf[a] = flat[a, q]
+        for a in range(n):
+            for b in range(n - 1 - a):
+                lo = min(buf[b], buf[b + 1])
+                buf[b + 1] = max(buf[b], buf[b + 1])
+                buf[b] = lo
+        if n % 2 == 1:
+            out[q] = buf[half]
+        else:
+            out[q] = (buf[half - 1] + buf[half]) / np.float32(2.0)
+    return out.reshape(stack.shape[1:])
+
+
+def median_frame(frames: Sequence[np.ndarray]) -> np.ndarray:
+    """Per-pixel median (H, W, C) float32 of float32 frames (H, W, C) (compiled)."""
+    return _median_kernel(np.ascontiguousarray(np.stack(frames), dtype=np.float32))
+
+
+@njit(cache=True, nogil=True)
 def _foreground_kernel(ycc: np.ndarray, bg: np.ndarray, gain: float, luma: float,
                        chroma: float, shadow_lo: float, shadow_hi: float
                        ) -> np.ndarray:  # pragma: no cover - compiled
@@ -386,11 +416,11 @@ class BackgroundModel:
             raise DetectionError('bootstrap needs at least one frame')
         for i, f in enumerate(frames):
             _check_image(f, frames[0].shape[:2], f'{self.name} bootstrap frame {i}')
-        stack = np.stack([_to_ycc(f) for f in frames])
-        self._bg = np.median(stack, axis=0).astype(np.float32)
+        ycc = [_to_ycc(f) for f in frames]
+        self._bg = median_frame(ycc)
         self._pending = []
         self._motion = np.zeros(self._bg.shape[:2], np.float32)
-        self._prev_y = stack[-1, ..., 0]
+        self._prev_y = ycc[-1][..., 0]
         self._unknown = None
 
     # -- per frame ------------------------------------------------------------------------
@@ -443,7 +473,7 @@ class BackgroundModel:
                 self._pending.append(ycc)
             self._seen += 1
             if len(self._pending) >= cfg.bootstrap_frames:
-                self._bg = np.median(np.stack(self._pending), axis=0).astype(np.float32)
+                self._bg = median_frame(self._pending)
                 self._pending = []
                 self._motion = np.zeros(y.shape, np.float32)
             self._prev_y = y

@@ -465,15 +465,15 @@ def contour_loglik_spans(edge_map: EdgeMap, spans: Spans, body_width: np.ndarray
 
 @njit(cache=True, nogil=True)
 def _symmetry_kernel(colour: np.ndarray, row: np.ndarray, x0: np.ndarray, x1: np.ndarray,
-                     part: np.ndarray, offsets: np.ndarray, torso: int, levels: int,
-                     min_pixels: int) -> np.ndarray:  # pragma: no cover - compiled
+                     part: np.ndarray, offsets: np.ndarray, torso: int, merge: np.ndarray,
+                     bins: int, min_pixels: int) -> np.ndarray:  # pragma: no cover
     """Left/right torso histogram distances; ``colour`` (H, W) are the 8x8x8 bins, merged
-    to ``levels`` per channel at the pixels visited (not over the whole image)."""
+    to ``bins`` through the table ``merge`` (512,) at the pixels visited (not over the
+    whole image). A span's pixels left of its centre column count left, right of it
+    right, the centre pixel of an odd span neither."""
     n = offsets.size - 1
     out = np.full(n, np.nan)
     h, w = colour.shape
-    f = 8 // levels
-    bins = levels * levels * levels
     left = np.zeros(bins)
     right = np.zeros(bins)
     for i in range(n):
@@ -489,16 +489,15 @@ def _symmetry_kernel(colour: np.ndarray, row: np.ndarray, x0: np.ndarray, x1: np
                 continue
             a = x0[s]
             b = x1[s]
-            mid2 = a + b  # twice the span centre
-            for x in range(max(a, 0), min(b, w)):
-                q = np.int64(colour[r, x])
-                c = (((q >> 6) // f) * levels + ((q >> 3) & 7) // f) * levels + (q & 7) // f
-                if 2 * x + 1 < mid2:
-                    left[c] += 1.0
-                    nl += 1.0
-                elif 2 * x + 1 > mid2:
-                    right[c] += 1.0
-                    nr += 1.0
+            lo = max(a, 0)
+            hi = min(b, w)
+            # 2x + 1 < a + b (left of the centre), 2x + 1 > a + b (right of it)
+            for x in range(lo, min(hi, (a + b) // 2)):
+                left[merge[colour[r, x]]] += 1.0
+                nl += 1.0
+            for x in range(max(lo, (a + b + 1) // 2), hi):
+                right[merge[colour[r, x]]] += 1.0
+                nr += 1.0
         if nl >= min_pixels and nr >= min_pixels:
             d = 0.0
             for c in range(bins):
@@ -524,10 +523,13 @@ def colour_symmetry(image: np.ndarray, spans: Spans, *, levels: int = 4,
         if image.ndim != 3 or image.shape[2] != 3 or image.dtype != np.uint8:
             raise DetectionError(f'expected an (H, W, 3) uint8 RGB image, got {image.shape}')
         bins = quantize(image)
+    q = np.arange(512)                      # 8x8x8 bin -> levels^3 bin
+    f = 8 // levels
+    merge = (((q >> 6) // f) * levels + ((q >> 3) & 7) // f) * levels + (q & 7) // f
     return _symmetry_kernel(np.ascontiguousarray(bins, dtype=np.int16),
                             np.ascontiguousarray(spans.row, np.int64),
                             np.ascontiguousarray(spans.x0, np.int64),
                             np.ascontiguousarray(spans.x1, np.int64),
                             np.ascontiguousarray(spans.part, np.int64),
                             np.ascontiguousarray(spans.offsets, np.int64), TORSO,
-                            levels, min_pixels)
+                            merge, levels ** 3, min_pixels)

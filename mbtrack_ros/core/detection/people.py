@@ -51,13 +51,13 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from mbtrack_ros.core.camera import RoomCalibration
+from mbtrack_ros.core.camera import Camera, RoomCalibration
 from mbtrack_ros.core.detection import DetectionError
 from mbtrack_ros.core.detection.detector import (
     _grid, _max_span_width, _nms, _states, is_ceiling)
 from mbtrack_ros.core.detection.features import (
-    EdgeMap, ForegroundIntegral, colour_symmetry, contour_loglik_spans)
-from mbtrack_ros.core.shape import BodyShape, rasterize
+    EdgeMap, ForegroundIntegral, Spans, colour_symmetry, contour_loglik_spans)
+from mbtrack_ros.core.shape import BodyShape, Silhouettes, rasterize
 
 __all__ = ['PeopleCue', 'PeopleCueConfig']
 
@@ -146,6 +146,8 @@ class PeopleCue:
         self.shape = BodyShape(height=cfg.height, width=cfg.width)
         self._sils = {n: rasterize(calibration.cameras[n], self.states, self.shape)
                       for n in self.cameras}
+        self._seen = {n: _SeenHypotheses.of(self._sils[n], cfg, calibration.cameras[n])
+                      for n in self.cameras}
 
     @staticmethod
     def _kernel(radius: int) -> np.ndarray:
@@ -166,9 +168,9 @@ class PeopleCue:
         return xy, mean, motion
 
     def _evidence(self, frames: Sequence[Mapping[str, np.ndarray]]
-                  ) -> tuple[np.ndarray, np.ndarray, dict[str, tuple[np.ndarray, np.ndarray]]]:
-        """Places, mean z-score, and per camera (moving pixels (H, W) bool, (n_or * P,)
-        seen flags) when there are several frame sets."""
+                  ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+        """Places, mean z-score, and per camera the moving pixels (H, W) bool when there
+        are several frame sets."""
         cfg = self.config
         frames = list(frames)
         if not frames:
@@ -189,15 +191,14 @@ class PeopleCue:
                     raise DetectionError(
                         f'camera {name!r}: image {f[name].shape[1]}x{f[name].shape[0]} '
                         f'differs from the calibration {cam.width}x{cam.height}')
-            sil = self._sils[name]
+            seen_hyp = self._seen[name]     # unseen hypotheses score -inf: not computed
             edges = EdgeMap.from_image(image)          # whole image: no background needed
-            con, _ = contour_loglik_spans(edges, sil, _max_span_width(sil))      # 003 Eq. 5
-            sym = colour_symmetry(image, sil)
-            resp = con + cfg.w_symmetry * np.where(np.isfinite(sym), 1.0 - sym, 0.0)
-            min_area = cfg.min_area * cam.width * cam.height / (320.0 * 240.0)
-            sees = (sil.area >= cfg.min_visible * np.maximum(sil.full_area, 1)) \
-                & (sil.area >= min_area)
-            resp = np.where(sees, resp, -np.inf).reshape(n_or, m).max(axis=0)
+            con, _ = contour_loglik_spans(edges, seen_hyp.spans, seen_hyp.width)  # 003 Eq. 5
+            sym = colour_symmetry(image, seen_hyp.spans)
+            resp = np.full(n_or * m, -np.inf)
+            resp[seen_hyp.index] = con + cfg.w_symmetry * np.where(np.isfinite(sym),
+                                                                   1.0 - sym, 0.0)
+            resp = resp.reshape(n_or, m).max(axis=0)
             seen = np.isfinite(resp)
             if seen.sum() < 8:
                 continue
@@ -215,22 +216,34 @@ class PeopleCue:
                     prev = cur
                 if cfg.motion_dilation > 0:      # limbs move, the body between them not
                     moved = cv2.dilate(moved, self._kernel(cfg.motion_dilation))
-                moved_by_cam[name] = (moved.astype(bool), sees)
+                moved_by_cam[name] = moved.astype(bool)
         need = min(cfg.min_views, max(len(self.cameras), 1))
         mean = np.where(views >= need, total / np.maximum(views, 1), -np.inf)
         return self.xy[:m], mean, moved_by_cam
 
-    def _motion(self, moved_by_cam: Mapping[str, tuple[np.ndarray, np.ndarray]]
-                ) -> np.ndarray:
-        """(P,) smallest moving fraction of each place over the cameras that see it."""
+    def _coverage(self, name: str, moved: np.ndarray) -> np.ndarray:
+        """(n_or * P,) moving fraction of every hypothesis in a camera, ``-inf`` where the
+        camera does not see it."""
+        seen_hyp = self._seen[name]
+        cov = np.full(len(self.states), -np.inf)
+        cov[seen_hyp.index] = ForegroundIntegral(moved).coverage(seen_hyp.spans)[0]
+        return cov
+
+    def _min_over_cameras(self, cov_by_cam: Mapping[str, np.ndarray]) -> np.ndarray:
+        """(P,) smallest moving fraction of each place (best orientation per camera) over
+        the cameras that see it; 0 where none does."""
         m = self.n_places
         n_or = len(self.config.orientations)
         motion = np.full(m, np.inf)
-        for name, (moved, sees) in moved_by_cam.items():
-            cov, _, _ = ForegroundIntegral(moved).coverage(self._sils[name])
-            cov = np.where(sees, cov, -np.inf).reshape(n_or, m).max(axis=0)
+        for cov in cov_by_cam.values():
+            cov = cov.reshape(n_or, m).max(axis=0)
             motion = np.where(np.isfinite(cov), np.minimum(motion, cov), motion)
         return np.where(np.isfinite(motion), motion, 0.0)
+
+    def _motion(self, moved_by_cam: Mapping[str, np.ndarray]) -> np.ndarray:
+        """(P,) smallest moving fraction of each place over the cameras that see it."""
+        return self._min_over_cameras({n: self._coverage(n, mv)
+                                       for n, mv in moved_by_cam.items()})
 
     def places(self, frames: Sequence[Mapping[str, np.ndarray]]) -> np.ndarray:
         """(K, 2) floor positions of person-like places, most moving first (at most
@@ -239,7 +252,9 @@ class PeopleCue:
         With several frame sets the places are chosen greedily with explaining-away: the
         moving pixels inside a chosen place's region no longer count for the others, so
         that a person's motion does not also make the places on his lines of sight (which
-        see him in one camera and something else in another) person-like.
+        see him in one camera and something else in another) person-like. After each
+        choice only the hypotheses whose box meets the pixels just explained are counted
+        again (the others' coverage cannot change).
         """
         cfg = self.config
         xy, score, moved = self._evidence(frames)
@@ -250,10 +265,11 @@ class PeopleCue:
             good = np.flatnonzero(ok)
             keep = _nms(xy[good], score[good], cfg.nms_radius, cfg.max_people)
             return xy[good[keep]]
-        moved = {n: (mv.copy(), sees) for n, (mv, sees) in moved.items()}
+        moved = {n: mv.copy() for n, mv in moved.items()}
+        cov = {n: self._coverage(n, mv) for n, mv in moved.items()}
         chosen: list[int] = []
         while len(chosen) < cfg.max_people:
-            motion = self._motion(moved)
+            motion = self._min_over_cameras(cov)
             cand = ok & (motion >= cfg.min_motion)
             if chosen:
                 d = np.linalg.norm(xy[:, None] - xy[chosen][None], axis=2).min(axis=1)
@@ -262,9 +278,23 @@ class PeopleCue:
                 break
             best = int(np.flatnonzero(cand)[np.argmax(motion[cand])])
             chosen.append(best)
-            for name, (mv, _) in moved.items():     # explained: not evidence for others
-                mv &= ~self._region(name, xy[best:best + 1], cfg.region_height,
-                                    cfg.region_width)
+            if len(chosen) == cfg.max_people:
+                break
+            for name, mv in moved.items():     # explained: not evidence for others
+                explained = mv & self._region(name, xy[best:best + 1], cfg.region_height,
+                                              cfg.region_width)
+                if not explained.any():
+                    continue
+                mv &= ~explained
+                seen_hyp = self._seen[name]
+                rows = np.flatnonzero(explained.any(axis=1))
+                cols = np.flatnonzero(explained.any(axis=0))
+                bx = seen_hyp.bbox
+                hit = (bx[:, 0] <= cols[-1]) & (bx[:, 2] > cols[0]) \
+                    & (bx[:, 1] <= rows[-1]) & (bx[:, 3] > rows[0])
+                if hit.any():
+                    sub = _take(seen_hyp.spans, np.flatnonzero(hit))
+                    cov[name][seen_hyp.index[hit]] = ForegroundIntegral(mv).coverage(sub)[0]
         return xy[chosen] if chosen else np.zeros((0, 2))
 
     def _region(self, name: str, xy: np.ndarray, height: float, width: float,
@@ -302,3 +332,43 @@ class PeopleCue:
                 core = self._region(name, xy, cfg.height, cfg.core_width, 0) & body
                 out[name] = (region | body, body, core)
         return out
+
+
+def _take(spans: Spans, index: np.ndarray) -> Spans:
+    """The silhouettes ``index`` (K,) of ``spans`` as :class:`Spans` with contiguous int64
+    arrays (what the compiled kernels take, so that they are converted once)."""
+    off = np.asarray(spans.offsets, np.int64)
+    start = off[index]
+    count = off[index + 1] - start
+    offsets = np.zeros(len(index) + 1, np.int64)
+    np.cumsum(count, out=offsets[1:])
+    at = np.repeat(start - offsets[:-1], count) + np.arange(offsets[-1])
+    take = (lambda a: np.asarray(a)[at].astype(np.int64, copy=False))
+    return Spans(row=take(spans.row), x0=take(spans.x0), x1=take(spans.x1),
+                 part=take(spans.part), offsets=offsets)
+
+@dataclass(frozen=True)
+class _SeenHypotheses:
+    """The hypotheses a camera sees (``min_visible`` of the silhouette inside the image and
+    at least ``min_area`` pixels): fixed geometry, so selected once.
+
+    Attributes:
+        index: (K,) indices into the (n_or * P,) hypotheses.
+        spans: their silhouettes.
+        width: (K,) projected body width (widest span), pixels.
+        bbox: (K, 4) ``x0, y0, x1, y1`` (exclusive) of their spans.
+    """
+
+    index: np.ndarray
+    spans: Spans
+    width: np.ndarray
+    bbox: np.ndarray
+
+    @classmethod
+    def of(cls, sil: Silhouettes, cfg: PeopleCueConfig, cam: Camera) -> _SeenHypotheses:
+        min_area = cfg.min_area * cam.width * cam.height / (320.0 * 240.0)
+        sees = (sil.area >= cfg.min_visible * np.maximum(sil.full_area, 1)) \
+            & (sil.area >= min_area)
+        index = np.flatnonzero(sees)
+        spans = _take(sil, index)
+        return cls(index, spans, _max_span_width(spans), np.asarray(sil.bbox)[index])

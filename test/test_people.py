@@ -1,0 +1,133 @@
+"""The people cue's fast bootstrap path (seen hypotheses selected once, explaining-away
+recounting only the hypotheses it can change, the compiled median) against the
+straightforward computation on small cases."""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from conftest import make_room
+from mbtrack_ros.core.detection.background import median_frame
+from mbtrack_ros.core.detection.detector import _max_span_width
+from mbtrack_ros.core.detection.features import (
+    EdgeMap, ForegroundIntegral, colour_symmetry, contour_loglik_spans)
+from mbtrack_ros.core.detection.people import PeopleCue, PeopleCueConfig
+
+
+def _frames(room, rng, n_frames: int = 4) -> list[dict[str, np.ndarray]]:
+    """Textured static rooms with a few patches of changing noise (motion) per camera."""
+    static = {n: cv2.GaussianBlur(rng.integers(0, 256, (c.height, c.width, 3), np.uint8),
+                                  (5, 5), 0) for n, c in room.cameras.items()}
+    patches = {n: [(int(rng.integers(10, c.height - 50)), int(rng.integers(10, c.width - 30)))
+                   for _ in range(3)] for n, c in room.cameras.items()}
+    frames = []
+    for _ in range(n_frames):
+        fs = {}
+        for n, im in static.items():
+            im = im.copy()
+            for y, x in patches[n]:
+                im[y:y + 40, x:x + 20] = rng.integers(0, 256, (40, 20, 3), np.uint8)
+            fs[n] = im
+        frames.append(fs)
+    return frames
+
+
+def _straightforward(cue: PeopleCue, frames) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Scores of every hypothesis, then the greedy choice recounting all of them after
+    each explained place (the cue before the fast path)."""
+    cfg = cue.config
+    m, n_or = cue.n_places, len(cfg.orientations)
+    total, views = np.zeros(m), np.zeros(m, np.int64)
+    moved_by_cam = {}
+    for name in cue.cameras:
+        cam, sil, image = cue.calibration.cameras[name], cue._sils[name], frames[-1][name]
+        con, _ = contour_loglik_spans(EdgeMap.from_image(image), sil, _max_span_width(sil))
+        sym = colour_symmetry(image, sil)
+        resp = con + cfg.w_symmetry * np.where(np.isfinite(sym), 1.0 - sym, 0.0)
+        min_area = cfg.min_area * cam.width * cam.height / (320.0 * 240.0)
+        sees = (sil.area >= cfg.min_visible * np.maximum(sil.full_area, 1)) \
+            & (sil.area >= min_area)
+        resp = np.where(sees, resp, -np.inf).reshape(n_or, m).max(axis=0)
+        seen = np.isfinite(resp)
+        med = np.median(resp[seen])
+        mad = 1.4826 * np.median(np.abs(resp[seen] - med))
+        total += np.where(seen, (resp - med) / max(mad, 1e-6), 0.0)
+        views += seen
+        moved = np.zeros((cam.height, cam.width), np.uint8)
+        for a, b in zip(frames[:-1], frames[1:]):
+            d = cv2.absdiff(cv2.cvtColor(b[name], cv2.COLOR_RGB2GRAY),
+                            cv2.cvtColor(a[name], cv2.COLOR_RGB2GRAY))
+            moved |= (d > cfg.motion_threshold).view(np.uint8)
+        moved = cv2.dilate(moved, cue._kernel(cfg.motion_dilation)).astype(bool)
+        moved_by_cam[name] = (moved, sees)
+    score = np.where(views >= min(cfg.min_views, len(cue.cameras)),
+                     total / np.maximum(views, 1), -np.inf)
+
+    def motion_of(moved_by_cam):
+        motion = np.full(m, np.inf)
+        for name, (moved, sees) in moved_by_cam.items():
+            cov, _, _ = ForegroundIntegral(moved).coverage(cue._sils[name])
+            cov = np.where(sees, cov, -np.inf).reshape(n_or, m).max(axis=0)
+            motion = np.where(np.isfinite(cov), np.minimum(motion, cov), motion)
+        return np.where(np.isfinite(motion), motion, 0.0)
+
+    xy = cue.xy[:m]
+    ok = np.isfinite(score) & (score >= cfg.min_score)
+    chosen: list[int] = []
+    while len(chosen) < cfg.max_people:
+        motion = motion_of(moved_by_cam)
+        cand = ok & (motion >= cfg.min_motion)
+        if chosen:
+            cand &= np.linalg.norm(xy[:, None] - xy[chosen][None], axis=2).min(axis=1) \
+                >= cfg.nms_radius
+        if not cand.any():
+            break
+        chosen.append(int(np.flatnonzero(cand)[np.argmax(motion[cand])]))
+        for name, (mv, _) in moved_by_cam.items():
+            mv &= ~cue._region(name, xy[chosen[-1]:chosen[-1] + 1], cfg.region_height,
+                               cfg.region_width)
+    return score, motion_of({n: (mv, s) for n, (mv, s) in moved_by_cam.items()}), \
+        xy[chosen]
+
+
+def test_fast_places_equal_the_straightforward_greedy_choice():
+    room = make_room(n_cameras=3)
+    rng = np.random.default_rng(5)
+    # low thresholds: many candidates, several explaining-away rounds
+    cue = PeopleCue(room, PeopleCueConfig(spacing=0.25, min_views=2, min_motion=0.01,
+                                          min_score=-1.0, max_people=5, nms_radius=0.5))
+    frames = _frames(room, rng)
+    score, _, places = _straightforward(cue, frames)
+    _, fast_score, _ = cue.score(frames)
+    np.testing.assert_array_equal(fast_score, score)
+    fast = cue.places(frames)
+    assert len(places) >= 3                  # the greedy loop really ran several rounds
+    np.testing.assert_array_equal(fast, places)
+
+
+def test_seen_hypotheses_boxes_hold_their_spans():
+    """The explaining-away update skips hypotheses by box: every span must lie inside."""
+    cue = PeopleCue(make_room(n_cameras=2), PeopleCueConfig(spacing=0.3))
+    for name in cue.cameras:
+        seen = cue._seen[name]
+        owner = np.repeat(np.arange(len(seen.index)), np.diff(seen.spans.offsets))
+        box = seen.bbox[owner]
+        assert len(seen.index) > 0
+        assert np.all((seen.spans.row >= box[:, 1]) & (seen.spans.row < box[:, 3]))
+        assert np.all((seen.spans.x0 >= box[:, 0]) & (seen.spans.x1 <= box[:, 2]))
+
+
+def test_median_frame_equals_numpy_median():
+    rng = np.random.default_rng(2)
+    for n in (1, 2, 5, 6):
+        frames = [rng.integers(0, 256, (7, 9, 3)).astype(np.float32) for _ in range(n)]
+        frames[0][0, 0] = frames[-1][0, 0]                          # ties
+        if n == 5:
+            frames.append(frames[0].copy())                         # a repeated frame
+        ref = np.median(np.stack(frames), axis=0).astype(np.float32)
+        out = median_frame(frames)
+        assert out.dtype == np.float32 and out.shape == ref.shape
+        np.testing.assert_array_equal(out, ref)
+    noninteger = [rng.normal(size=(4, 5, 3)).astype(np.float32) for _ in range(4)]
+    np.testing.assert_array_equal(median_frame(noninteger),
+                                  np.median(np.stack(noninteger), axis=0).astype(np.float32))
