@@ -4,6 +4,7 @@
     .venv/bin/python docs/detection_eval.py report OUT REC            # causes of switches
     .venv/bin/python docs/detection_eval.py table OUT REC [OUT REC]   # one row per run
     .venv/bin/python docs/detection_eval.py lag OUT REC [OUT REC]     # track-person distance
+    .venv/bin/python docs/detection_eval.py decisions OUT REC [OUT REC]  # moves right?
 
 ``run`` steps :class:`~mbtrack_ros.core.tracker.Tracker` with ``detection=True`` exactly as
 ``mbtrack replay REC --out OUT --eval REC/ground_truth.csv --seed S`` does (same
@@ -18,6 +19,10 @@ entering / release latencies. ``table`` prints the rows of docs/detection.md. ``
 the distance from each ground-truth person to the nearest reported track (all frames, and
 for people walking faster than 1 m/s the lag along the walking direction) and, per switch,
 whether the old track was reported at the switch frame (not: hidden or ended).
+``decisions`` checks each move, hidden move, id reuse and drop of the identity check
+against the ground truth: was the person at the detection the one the track (for a reuse:
+the released track) was matched to in the 15 matched frames before (same / other /
+unmatched: the track followed nobody)?
 """
 from __future__ import annotations
 
@@ -65,8 +70,8 @@ def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False) -> None:
                            'reason': 'support' if not supported[k] else 'existence'})
         return ended
 
-    def logged_duplicates(self, stamp, ids, xy):
-        ended = duplicates(self, stamp, ids, xy)
+    def logged_duplicates(self, stamp, ids, xy, shown_since=None):
+        ended = duplicates(self, stamp, ids, xy, shown_since)
         events.extend({'kind': 'end', 'frame': frame['index'], 'id': int(t),
                        'reason': 'duplicate'} for t in ended)
         return ended
@@ -292,6 +297,35 @@ def lag(pairs: list[tuple[Path, Path]]) -> None:
               f'{np.nanmedian(along[walk]):.3f} m | {hidden} / {off} |')
 
 
+def decisions(pairs: list[tuple[Path, Path]]) -> None:
+    total: dict[tuple[str, str], int] = {}
+    for out, rec in pairs:
+        tracks, truth, events, _ = _load(out, rec)
+        d = clear_mot(tracks, truth).matches_detail
+        s0 = min(r.stamp_ns for r in truth)
+        frames = np.round((d.stamp_ns.astype(np.int64) - s0) / (1e9 / FPS)).astype(int)
+        gt: dict[int, list] = {}
+        for r in truth:
+            gt.setdefault(r.frame, []).append(r)
+        counts: dict[tuple[str, str], int] = {}
+        for e in events:
+            words = e['action'].split() if e['kind'] == 'decision' else []
+            if not words or words[0] not in ('move', 'drop', 'reuse') or not gt.get(e['frame']):
+                continue
+            f = e['frame']
+            tid = int(words[1] if words[0] != 'drop' else e['action'].split('track ')[1].split()[0])
+            at = min(gt[f], key=lambda r: np.hypot(r.x - e['xy'][0], r.y - e['xy'][1])).person_id
+            sel = (d.track_id == tid) & (frames < f) & (frames >= f - 60)
+            before = d.person_id[sel][-15:]
+            who = None if not before.size else int(np.bincount(before).argmax())
+            kind = words[0] + (' hidden' if 'hidden' in e['action'] else '')
+            key = (kind, 'same' if who == at else 'unmatched' if who is None else 'other')
+            counts[key] = counts.get(key, 0) + 1
+            total[key] = total.get(key, 0) + 1
+        print(out.name, ', '.join(f'{k} {v}: {n}' for (k, v), n in sorted(counts.items())))
+    print('all', ', '.join(f'{k} {v}: {n}' for (k, v), n in sorted(total.items())))
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest='cmd', required=True)
@@ -306,8 +340,8 @@ def main(argv: list[str] | None = None) -> int:
     s.add_argument('rec', type=Path)
     t = sub.add_parser('table')
     t.add_argument('pairs', type=Path, nargs='+')
-    g = sub.add_parser('lag')
-    g.add_argument('pairs', type=Path, nargs='+')
+    for name in ('lag', 'decisions'):
+        sub.add_parser(name).add_argument('pairs', type=Path, nargs='+')
     args = p.parse_args(argv)
     if args.cmd == 'run':
         run(args.rec, args.out, args.seed, args.no_people_cue)
@@ -316,7 +350,8 @@ def main(argv: list[str] | None = None) -> int:
     else:
         if len(args.pairs) % 2:
             p.error(f'{args.cmd} needs OUT REC pairs')
-        (table if args.cmd == 'table' else lag)(list(zip(args.pairs[::2], args.pairs[1::2])))
+        {'table': table, 'lag': lag, 'decisions': decisions}[args.cmd](
+            list(zip(args.pairs[::2], args.pairs[1::2])))
     return 0
 
 
