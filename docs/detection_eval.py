@@ -3,6 +3,8 @@
     .venv/bin/python docs/detection_eval.py run REC OUT [--seed S] [--no-people-cue]
     .venv/bin/python docs/detection_eval.py report OUT REC            # causes of switches
     .venv/bin/python docs/detection_eval.py table OUT REC [OUT REC]   # one row per run
+    .venv/bin/python docs/detection_eval.py lag OUT REC [OUT REC]     # track-person distance
+    .venv/bin/python docs/detection_eval.py decisions OUT REC [OUT REC]  # moves right?
 
 ``run`` steps :class:`~mbtrack_ros.core.tracker.Tracker` with ``detection=True`` exactly as
 ``mbtrack replay REC --out OUT --eval REC/ground_truth.csv --seed S`` does (same
@@ -13,7 +15,14 @@ duplicate) and every decision on a confirmed detection next to a track
 ``report`` lists, per identity switch of the CLEAR MOT matching, the person, the old and
 new track, where the old track was, how it ended and where the new one was born; the
 false births (farther than 0.5 m from every person; door and screen flagged) and the
-entering / release latencies. ``table`` prints the rows of docs/detection.md.
+entering / release latencies. ``table`` prints the rows of docs/detection.md. ``lag`` gives
+the distance from each ground-truth person to the nearest reported track (all frames, and
+for people walking faster than 1 m/s the lag along the walking direction) and, per switch,
+whether the old track was reported at the switch frame (not: hidden or ended).
+``decisions`` checks each move, hidden move, id reuse and drop of the identity check
+against the ground truth: was the person at the detection the one the track (for a reuse:
+the released track) was matched to in the 15 matched frames before (same / other /
+unmatched: the track followed nobody)?
 """
 from __future__ import annotations
 
@@ -61,8 +70,8 @@ def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False) -> None:
                            'reason': 'support' if not supported[k] else 'existence'})
         return ended
 
-    def logged_duplicates(self, stamp, ids, xy):
-        ended = duplicates(self, stamp, ids, xy)
+    def logged_duplicates(self, stamp, ids, xy, shown_since=None):
+        ended = duplicates(self, stamp, ids, xy, shown_since)
         events.extend({'kind': 'end', 'frame': frame['index'], 'id': int(t),
                        'reason': 'duplicate'} for t in ended)
         return ended
@@ -77,16 +86,16 @@ def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False) -> None:
             bg = replace(tracker.detection.config.background, people=None,
                          bootstrap_frames=10, bootstrap_stride=4)
             tracker.detection.background = BackgroundBank(bg, calibration=cal)
-        known = set()
+        live: set[int] = set()
         for fs in reader.frames():
             frame['index'] = fs.index
             result = tracker.step(fs.stamp_ns, {c: im for c, im in fs.images.items()
                                                 if c in cal.cameras})
             for d in tracker.detection.decisions:
                 events.append({'kind': 'decision', 'frame': fs.index, **d})
-            for tid in sorted(set(tracker.track_ids) - known):
+            for tid in sorted(set(tracker.track_ids) - live):   # new, or a released id reused
                 events.append({'kind': 'birth', 'frame': fs.index, 'id': int(tid)})
-            known |= set(tracker.track_ids)
+            live = set(tracker.track_ids)
             rows.extend(TrackRow(stamp_ns=fs.stamp_ns, frame=fs.index, track_id=t.track_id,
                                  x=float(t.mean[0]), y=float(t.mean[1]),
                                  existence=t.existence) for t in result.tracks)
@@ -110,7 +119,13 @@ def _analyse(out: Path, rec: Path) -> dict:
     tracks, truth, events, last = _load(out, rec)
     res = clear_mot(tracks, truth)
     d = res.matches_detail
-    ends = {e['id']: e for e in events if e['kind'] == 'end'}
+    ends: dict[int, list] = {}          # id -> its end events (an id can be reused)
+    for e in events:
+        if e['kind'] == 'end':
+            ends.setdefault(e['id'], []).append(e)
+
+    def end_after(tid, f):
+        return next((e for e in ends.get(tid, []) if e['frame'] >= f), None)
     gt: dict[int, list] = {}
     for r in truth:
         gt.setdefault(r.frame, []).append(r)
@@ -146,7 +161,7 @@ def _analyse(out: Path, rec: Path) -> dict:
                 me = [r for r in gt.get(old.frame, []) if r.person_id == p]
                 other = nearest(old.frame, old.x, old.y, exclude=p)
                 new0 = by_track[int(tid[k])][0]
-                e = ends.get(prev)
+                e = end_after(prev, prev_f)
                 if f - prev_f > 20 and not me:
                     cause = 'person absent from the ground truth in between'
                 elif e is not None and e['frame'] < f - 3:
@@ -172,14 +187,15 @@ def _analyse(out: Path, rec: Path) -> dict:
         if prow[-1].frame < last - 30 and floor:
             tail = tid[-30:]
             tail = tail[tail >= 0]
-            e = ends.get(int(np.bincount(tail).argmax())) if tail.size else None
+            e = end_after(int(np.bincount(tail).argmax()), frame_of(st[-30:][0])) \
+                if tail.size else None
             if e:
                 leave.append((e['frame'] - floor[-1]) / FPS)
     for tid, rows in sorted(by_track.items()):
         r0 = rows[0]
         dist, pid = nearest(r0.frame, r0.x, r0.y)
         if dist > 0.5:
-            e = ends.get(tid)
+            e = end_after(tid, r0.frame)
             births.append({'track': tid, 'frame': r0.frame, 'xy': (r0.x, r0.y),
                            'person': pid, 'distance': dist, 'life': rows[-1].frame
                            - r0.frame + 1, 'end': e['reason'] if e else 'alive',
@@ -227,6 +243,89 @@ def table(pairs: list[tuple[Path, Path]]) -> None:
               f'{sum(b["screen"] for b in fb)}) | {span(a["enter"])} | {span(a["leave"])} |')
 
 
+def lag(pairs: list[tuple[Path, Path]]) -> None:
+    print('| run | person-frames | distance median | p90 | > 0.3 m | > 0.5 m | walking > 1 m/s: '
+          'median | lag along | switches: old track not reported / reported > 0.5 m off |')
+    print('| --- | --- | --- | --- | --- | --- | --- | --- | --- |')
+    for out, rec in pairs:
+        tracks, truth, _, _ = _load(out, rec)
+        at: dict[int, list] = {}
+        for t in tracks:
+            at.setdefault(t.frame, []).append((t.x, t.y))
+        people: dict[int, list] = {}
+        for r in truth:
+            people.setdefault(r.person_id, []).append((r.frame, r.x, r.y))
+        dist, speed, along = [], [], []
+        for rows in people.values():
+            a = np.array(sorted(rows))
+            for i in range(1, len(a) - 1):
+                f = int(a[i, 0])
+                if a[i + 1, 0] - a[i - 1, 0] != 2 or f not in at:
+                    continue
+                v = (a[i + 1, 1:] - a[i - 1, 1:]) * FPS / 2.0        # central difference
+                d = np.array(at[f]) - a[i, 1:]
+                k = int(np.argmin(np.hypot(d[:, 0], d[:, 1])))
+                sp = float(np.hypot(*v))
+                dist.append(float(np.hypot(*d[k])))
+                speed.append(sp)
+                along.append(-float(d[k] @ v) / sp if sp > 1.0 else np.nan)
+        dist, speed, along = np.array(dist), np.array(speed), np.array(along)
+        walk = speed > 1.0
+        res = clear_mot(tracks, truth)
+        d = res.matches_detail
+        s0 = min(r.stamp_ns for r in truth)
+        shown = {(t.frame, t.track_id): (t.x, t.y) for t in tracks}
+        where = {(r.frame, r.person_id): (r.x, r.y) for r in truth}
+        hidden = off = 0
+        for p in np.unique(d.person_id):
+            sel = d.person_id == p
+            prev = -1
+            for tid, st in zip(d.track_id[sel], d.stamp_ns[sel]):
+                if tid < 0:
+                    continue
+                if prev >= 0 and tid != prev:
+                    f = int(round((int(st) - s0) / (1e9 / FPS)))
+                    o = shown.get((f, prev))
+                    if o is None:
+                        hidden += 1
+                    elif np.hypot(o[0] - where[(f, p)][0], o[1] - where[(f, p)][1]) > 0.5:
+                        off += 1
+                prev = int(tid)
+        print(f'| {out.name} | {len(dist)} | {np.median(dist):.3f} m | '
+              f'{np.percentile(dist, 90):.3f} m | {100 * np.mean(dist > 0.3):.1f} % | '
+              f'{100 * np.mean(dist > 0.5):.1f} % | {np.median(dist[walk]):.3f} m | '
+              f'{np.nanmedian(along[walk]):.3f} m | {hidden} / {off} |')
+
+
+def decisions(pairs: list[tuple[Path, Path]]) -> None:
+    total: dict[tuple[str, str], int] = {}
+    for out, rec in pairs:
+        tracks, truth, events, _ = _load(out, rec)
+        d = clear_mot(tracks, truth).matches_detail
+        s0 = min(r.stamp_ns for r in truth)
+        frames = np.round((d.stamp_ns.astype(np.int64) - s0) / (1e9 / FPS)).astype(int)
+        gt: dict[int, list] = {}
+        for r in truth:
+            gt.setdefault(r.frame, []).append(r)
+        counts: dict[tuple[str, str], int] = {}
+        for e in events:
+            words = e['action'].split() if e['kind'] == 'decision' else []
+            if not words or words[0] not in ('move', 'drop', 'reuse') or not gt.get(e['frame']):
+                continue
+            f = e['frame']
+            tid = int(words[1] if words[0] != 'drop' else e['action'].split('track ')[1].split()[0])
+            at = min(gt[f], key=lambda r: np.hypot(r.x - e['xy'][0], r.y - e['xy'][1])).person_id
+            sel = (d.track_id == tid) & (frames < f) & (frames >= f - 60)
+            before = d.person_id[sel][-15:]
+            who = None if not before.size else int(np.bincount(before).argmax())
+            kind = words[0] + (' hidden' if 'hidden' in e['action'] else '')
+            key = (kind, 'same' if who == at else 'unmatched' if who is None else 'other')
+            counts[key] = counts.get(key, 0) + 1
+            total[key] = total.get(key, 0) + 1
+        print(out.name, ', '.join(f'{k} {v}: {n}' for (k, v), n in sorted(counts.items())))
+    print('all', ', '.join(f'{k} {v}: {n}' for (k, v), n in sorted(total.items())))
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest='cmd', required=True)
@@ -241,6 +340,8 @@ def main(argv: list[str] | None = None) -> int:
     s.add_argument('rec', type=Path)
     t = sub.add_parser('table')
     t.add_argument('pairs', type=Path, nargs='+')
+    for name in ('lag', 'decisions'):
+        sub.add_parser(name).add_argument('pairs', type=Path, nargs='+')
     args = p.parse_args(argv)
     if args.cmd == 'run':
         run(args.rec, args.out, args.seed, args.no_people_cue)
@@ -248,8 +349,9 @@ def main(argv: list[str] | None = None) -> int:
         report(args.out, args.rec)
     else:
         if len(args.pairs) % 2:
-            p.error('table needs OUT REC pairs')
-        table(list(zip(args.pairs[::2], args.pairs[1::2])))
+            p.error(f'{args.cmd} needs OUT REC pairs')
+        {'table': table, 'lag': lag, 'decisions': decisions}[args.cmd](
+            list(zip(args.pairs[::2], args.pairs[1::2])))
     return 0
 
 

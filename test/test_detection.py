@@ -402,6 +402,25 @@ def test_duplicate_tracks_release_the_younger_after_the_merge_time():
     assert rel.duplicates(0, [1, 2], np.array([[0.0, 0.0], [1.0, 0.0]])) == []
 
 
+def test_duplicate_tracks_release_the_one_reported_for_the_shorter_time():
+    """With the stamps since which each track has been reported without a break, the pair's
+    track hidden (or born) last is released: here the older id 1, hidden at frame 2 while
+    track 7 (born at frame 0) was reported; equal stamps fall back to the larger id."""
+    rel = Releaser(make_room(), ReleaseConfig(merge_radius=0.35, merge_time=0.5))
+    hidden_at = int(round(2 * 1e9 / FPS))
+    out = {}
+    for k in range(20):
+        stamp = int(round(k * 1e9 / FPS))
+        xy = np.array([[2.0, 2.0], [2.2, 2.0], [4.0, 4.0]])
+        for tid in rel.duplicates(stamp, [1, 7, 3], xy, shown_since=[hidden_at, 0, 0]):
+            out.setdefault(tid, k)
+    assert out == {1: int(np.ceil(0.5 * FPS))}
+    rel = Releaser(make_room(), ReleaseConfig(merge_radius=0.35, merge_time=0.0))
+    assert rel.duplicates(0, [1, 7], np.zeros((2, 2)), shown_since=[5, 5]) == [7]
+    with pytest.raises(DetectionError):
+        rel.duplicates(0, [1, 7], np.zeros((2, 2)), shown_since=[5])
+
+
 def test_auto_detection_tracks_with_side_cameras_and_rejects_bad_images():
     from mbtrack_ros.core.detection.manager import AutoDetection
 
@@ -722,3 +741,71 @@ def test_step_reuses_the_filters_colour_bins_and_defers_the_background_update():
         assert not any(m.pending for m in models.values())
         assert all(ev.motion is not None for ev in evidence.values())
     assert checked > 0
+
+
+@pytest.mark.parametrize('hidden_rule', [True, False])
+def test_a_hidden_track_beside_a_detection_is_moved_there_instead_of_a_birth(
+        monkeypatch, hidden_rule):
+    """A track 0.8 m off its person whose existence fell below the report threshold (it lost
+    its person): the person's detection moves that track (same id) whatever the appearance
+    gain (``relocate_hidden``); without the rule a second track is born (and released
+    later as a duplicate)."""
+    from dataclasses import replace
+
+    from mbtrack_ros.core.detection.manager import AutoDetection
+
+    rng = np.random.default_rng(3)
+    calib = make_room()
+    bgs = backgrounds(calib)
+    tracker = _detecting_tracker(calib, bgs, seed=2)
+    walker = lambda k: [person(2.0 + 0.02 * k, 2.6, theta=0.0)]   # noqa: E731
+    res = _track_painted(tracker, calib, bgs, rng, 36, walker)
+    assert tracker.track_ids == [1]
+    det = tracker.detection
+    # the appearance gain can never move a track; track 1 counts as hidden
+    det.config = replace(det.config, relocate_margin=1e9, relocate_hidden=hidden_rule)
+    monkeypatch.setattr(AutoDetection, 'reported', lambda self, tid: False)
+    state = res[-1].tracks[0].mean.copy()
+    state[1] += 0.8
+    tracker.relocate_track(1, state)
+    actions = []
+    for k in range(36, 50):
+        tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, walker(k), rng))
+        actions += [d['action'] for d in det.decisions]
+    if hidden_rule:
+        assert tracker.track_ids == [1] and 'move 1 (hidden)' in actions
+        assert 'birth' not in actions
+        mean = tracker.filter._particles[1].mean(axis=0)
+        assert np.hypot(mean[0] - (2.0 + 0.02 * 49), mean[1] - 2.6) < 0.3
+    else:
+        assert 'birth' in actions and not any(a.startswith('move') for a in actions)
+
+
+@pytest.mark.parametrize('reuse_time, place, reused', [
+    (2.0, (2.5, 2.5), True), (0.0, (2.5, 2.5), False), (2.0, (4.6, 4.5), False)])
+def test_a_person_re_found_soon_after_the_release_gets_the_released_id(
+        reuse_time, place, reused):
+    """A standing person vanishes (their track is released after the 1 s timeout) and is
+    detected again at the same place 0.3 s later: within ``reuse_time`` the new track takes
+    the released id; with ``reuse_time`` 0, or in the entry zone (the person left the room
+    and somebody else comes in), a new id is issued."""
+    from dataclasses import replace
+
+    rng = np.random.default_rng(5)
+    calib = make_room()
+    bgs = backgrounds(calib)
+    tracker = _detecting_tracker(calib, bgs, seed=4)
+    det = tracker.detection
+    det.config = replace(det.config, reuse_time=reuse_time)
+    stand = [person(*place, theta=0.0)]
+    ended_at, ids = None, []
+    for k in range(60):
+        gone = 12 <= k < 12 + 15 + 5 if ended_at is None else k < ended_at + 5
+        r = tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, [] if gone else stand,
+                                                          rng))
+        if r.ended and ended_at is None:
+            assert r.ended == [1]
+            ended_at = k
+        ids.append(sorted(tracker.track_ids))
+    assert ended_at is not None and ids[ended_at] == []
+    assert ids[-1] == ([1] if reused else [2])

@@ -3,7 +3,8 @@
 ::
 
     tracker = Tracker(calibration, TrackerConfig(algorithm='hjs'), rng=np.random.default_rng(0))
-    tid = tracker.add_track(model, state, stamp_ns)    # ids 1, 2, ... never reused
+    tid = tracker.add_track(model, state, stamp_ns)    # ids 1, 2, ... never reused (unless
+                                                       # the opt-in detection reuse_time > 0)
     result = tracker.step(stamp_ns, images)            # FrameResult (core/state.py)
 
 Time comes only from the integer nanosecond stamps: each step predicts over
@@ -206,15 +207,17 @@ class Tracker:
     def last_stamp_ns(self) -> int | None:
         return self._last_stamp
 
-    def add_track(self, model, state: np.ndarray, stamp_ns: int) -> int:
-        """Start a track for ``model`` at ``state`` (6,) observed at ``stamp_ns``.
+    def add_track(self, model, state: np.ndarray, stamp_ns: int,
+                  track_id: int | None = None) -> int:
+        """Start a track for ``model`` at ``state`` (6,) observed at ``stamp_ns``
+        (``track_id``: restart a released track's id, e.g. its person re-found).
 
         If the tracker has already processed a later or earlier frame, the state is moved to
         the tracker's current time with its own velocity (constant-velocity extrapolation),
         so that the next :meth:`step` predicts it over the right interval.
 
         Returns:
-            the new track id (1, 2, ...; never reused).
+            the track id (1, 2, ...; a new one unless ``track_id`` is given).
         """
         s = np.asarray(state, dtype=np.float64).reshape(-1)
         if s.shape != (STATE_DIM,) or not np.all(np.isfinite(s)):
@@ -225,12 +228,16 @@ class Tracker:
         elif stamp_ns != self._last_stamp:
             s = s.copy()
             s[[X, Y]] += s[[VX, VY]] * (self._last_stamp - stamp_ns) / 1e9
-        track_id = self._next_id
+        reused = track_id is not None
+        if reused and (int(track_id) in self._models or not 0 < int(track_id) < self._next_id):
+            raise TrackerError(f'track id {track_id} is live or was never issued')
+        track_id = int(track_id) if reused else self._next_id
         try:
             self.filter.add(track_id, model, s, self.rng)
         except FilterError as err:
             raise TrackerError(str(err)) from err
-        self._next_id += 1
+        if not reused:
+            self._next_id += 1
         self._heights[track_id] = float(getattr(model, 'height', float('nan')))
         self._models[track_id] = model
         if self.detection is not None:
@@ -345,5 +352,6 @@ class Tracker:
                 self.relocate_track(birth.track_id, birth.state)
                 changed.append(int(birth.track_id))
             else:
-                changed.append(self.add_track(birth.model, birth.state, stamp_ns))
+                changed.append(self.add_track(birth.model, birth.state, stamp_ns,
+                                              track_id=birth.track_id))
         return changed

@@ -61,6 +61,21 @@ class AutoDetectionConfig:
         relocate_interval: seconds after a track was born or moved during which such a
             detection does not move it again but is dropped (in a crowd at the door a
             young model explains several people about equally well: the track would hop).
+        relocate_hidden: a confirmed detection that would start a new track within
+            ``relocate_radius`` of a track that is not reported (existence below the
+            report threshold: it lost its person) moves that track instead, whatever the
+            appearance gain (the nearest such track not born or moved within
+            ``relocate_interval``; docs/detection.md: most identity switches on clear-room
+            were a birth beside a hidden track).
+        reuse_time, reuse_radius: a new track born within ``reuse_radius`` metres of where
+            a track was released less than ``reuse_time`` seconds ago (outside the entry
+            zones) takes that track's id (the released track's person re-found); 0
+            disables, the default: the ROS interface promises ids that are never reused
+            within a run (a released id has had its deletion markers), so this is an
+            opt-in for offline evaluation.
+        duplicate_by_reporting: of two tracks on one person (release ``merge_radius``,
+            ``merge_time``) release the one reported without a break for the shorter time
+            (born, moved or hidden later) instead of the younger one.
     """
 
     background: BackgroundConfig = field(default_factory=BackgroundConfig)
@@ -76,10 +91,16 @@ class AutoDetectionConfig:
     relocate_radius: float = 1.0
     relocate_margin: float = -3.0
     relocate_interval: float = 2.0
+    relocate_hidden: bool = True
+    reuse_time: float = 0.0
+    reuse_radius: float = 1.0
+    duplicate_by_reporting: bool = True
 
     def __post_init__(self) -> None:
         if not self.relocate_radius >= 0 or not np.isfinite(self.relocate_margin):
             raise DetectionError('relocate_radius must be >= 0 and relocate_margin finite')
+        if not (self.reuse_time >= 0 and self.reuse_radius >= 0):
+            raise DetectionError('reuse_time and reuse_radius must be >= 0')
         if not self.sigma > 0 or not self.clutter_distance > 0:
             raise DetectionError('sigma and clutter_distance must be > 0')
         if self.visibility_particles < 1:
@@ -119,6 +140,8 @@ class AutoDetection:
         self.timings: dict[str, float] = {}
         self.decisions: list[dict] = []    # per frame: what happened to confirmed detections
         self._placed: dict[int, int] = {}  # track id -> stamp of its birth or last move
+        self._released: dict[int, tuple[int, np.ndarray]] = {}  # id -> (stamp, floor xy)
+        self._shown_since: dict[int, int] = {}  # id -> birth, move or last hidden stamp
         self._pending: tuple | None = None  # what search() needs from the last update()
         self.side = [n for n, c in calibration.cameras.items() if not is_ceiling(c)]
         self.ceiling = [n for n in calibration.cameras if n not in self.side]
@@ -136,6 +159,8 @@ class AutoDetection:
         """Forget per-track state and unconfirmed candidates (keeps the background)."""
         self.aux.clear()
         self._placed.clear()
+        self._released.clear()
+        self._shown_since.clear()
         self.detector.reset()
         self._last_stamp = None
         self._pending = None
@@ -238,11 +263,14 @@ class AutoDetection:
             if evidence:  # 4. release (only once the background exists)
                 ids = [t.track_id for t in tracks]
                 ended = self.releaser.update(stamp_ns, ids, supported, existence)
-                ended += [i for i in self.releaser.duplicates(stamp_ns, ids, means[:, [X, Y]])
-                          if i not in ended]
+                shown = [self._shown_since.get(i, 0) if cfg.duplicate_by_reporting else 0
+                         for i in ids]
+                ended += [i for i in self.releaser.duplicates(stamp_ns, ids, means[:, [X, Y]],
+                                                              shown) if i not in ended]
         for tid in ended:
             self.aux.pop(tid, None)
             self._placed.pop(tid, None)
+            self._shown_since.pop(tid, None)
         t3 = time.perf_counter()
         self.timings = {'detect_render': t1 - t0, 'detect_background': t2 - t1,
                         'detect_existence': t3 - t2}
@@ -262,6 +290,10 @@ class AutoDetection:
         t3 = time.perf_counter()
         births: list[Birth] = []
         self.decisions = []
+        self._remember_released(stamp_ns, tracks, means, ended)
+        for t in tracks:          # reported without a break since (for the duplicate rule)
+            if t.track_id not in ended and not self.reported(t.track_id):
+                self._shown_since[t.track_id] = stamp_ns
         if evidence:
             keep = [k for k, t in enumerate(tracks) if t.track_id not in ended]
             confirmed = self.detector.step(evidence, track_xy=means[keep][:, [X, Y]],
@@ -309,6 +341,7 @@ class AutoDetection:
         self.aux[int(track_id)] = TrackAuxiliary(self.config.existence)
         if stamp_ns is not None:
             self._placed[int(track_id)] = int(stamp_ns)
+            self._shown_since[int(track_id)] = int(stamp_ns)
 
     def reported(self, track_id: int) -> bool:
         aux = self.aux.get(int(track_id))
@@ -352,23 +385,82 @@ class AutoDetection:
             info.setdefault('near', []).append((int(tid), round(d, 2), round(gain, 3)))
             if gain > cfg.relocate_margin and (best is None or gain > best[1]):
                 best = (k, gain)
+        hidden = False
+        if best is None and cfg.relocate_hidden:
+            best = self._nearest_hidden(det, tracks, keep, means, models, moved, stamp_ns)
+            hidden = best is not None
         if best is None:
-            info['action'] = 'birth'
+            reused = self._reusable(det, stamp_ns, models)
+            info['action'] = 'birth' if reused is None else f'reuse {reused}'
             self.decisions.append(info)
-            return Birth(model=model, state=state, detection=det)
+            return Birth(model=model, state=state, detection=det, track_id=reused)
         tid = tracks[best[0]].track_id
         since = self._placed.get(tid)
-        if since is not None and (int(stamp_ns) - since) / 1e9 < cfg.relocate_interval:
+        if not hidden and since is not None \
+                and (int(stamp_ns) - since) / 1e9 < cfg.relocate_interval:
             info['action'] = f'drop (track {tid} placed recently)'
             self.decisions.append(info)
             return None
-        info['action'] = f'move {tid}'
+        info['action'] = f'move {tid}' + (' (hidden)' if hidden else '')
         self.decisions.append(info)
         self._placed[tid] = int(stamp_ns)
+        self._shown_since[tid] = int(stamp_ns)
         moved.add(tid)
         self.releaser.forget(tid)
         self.aux[tid] = TrackAuxiliary(cfg.existence)
         return Birth(model=models[tid], state=state, detection=det, track_id=tid)
+
+    def _nearest_hidden(self, det: Detection, tracks: Sequence[TrackEstimate],
+                        keep: Sequence[int], means: np.ndarray,
+                        models: Mapping[int, PersonModel], moved: set[int], stamp_ns: int
+                        ) -> tuple[int, float] | None:
+        """(index, distance) of the nearest unreported track within ``relocate_radius`` of
+        the detection (a track whose existence fell below the report threshold), or None.
+        Not a track born or moved within ``relocate_interval``: hidden again so soon, its
+        model does not explain the person there."""
+        best = None
+        for k in keep:
+            tid = tracks[k].track_id
+            if tid in moved or tid not in models or self.reported(tid):
+                continue
+            since = self._placed.get(tid)
+            if since is not None \
+                    and (int(stamp_ns) - since) / 1e9 < self.config.relocate_interval:
+                continue
+            d = float(np.hypot(*(means[k, [X, Y]] - det.xy)))
+            if d <= self.config.relocate_radius and (best is None or d < best[1]):
+                best = (k, d)
+        return best
+
+    def _remember_released(self, stamp_ns: int, tracks: Sequence[TrackEstimate],
+                           means: np.ndarray, ended: Sequence[int]) -> None:
+        """Keep where and when the tracks released this frame were, for ``reuse_time``
+        (not those released in an entry zone: their person left the room)."""
+        horizon = int(self.config.reuse_time * 1e9)
+        self._released = {t: v for t, v in self._released.items()
+                          if int(stamp_ns) - v[0] < horizon}
+        if horizon <= 0:
+            return
+        for k, t in enumerate(tracks):
+            x, y = means[k, [X, Y]]
+            if t.track_id in ended and not any(z[0] <= x <= z[2] and z[1] <= y <= z[3]
+                                               for z in self.calibration.entry_zones):
+                self._released[int(t.track_id)] = (int(stamp_ns), np.array([x, y]))
+
+    def _reusable(self, det: Detection, stamp_ns: int, models: Mapping[int, PersonModel]
+                  ) -> int | None:
+        """The id of the track released nearest the detection, within ``reuse_radius``
+        metres and ``reuse_time`` seconds, not live (and forgets it), or None."""
+        best = None
+        for tid, (stamp, xy) in self._released.items():
+            d = float(np.hypot(*(xy - det.xy)))
+            if tid not in models and d <= self.config.reuse_radius \
+                    and (best is None or d < best[1]):
+                best = (tid, d)
+        if best is None:
+            return None
+        del self._released[best[0]]
+        return best[0]
 
     def _explains(self, model: PersonModel, track: np.ndarray, candidate: np.ndarray,
                   evidence: Mapping[str, FrameEvidence]) -> float:

@@ -86,7 +86,9 @@ class ReleaseConfig:
         existence_threshold: existence below this also counts as unsupported (0 disables).
         merge_radius, merge_time: two tracks closer than ``merge_radius`` metres for
             ``merge_time`` seconds follow the same person; the younger one (larger id) is
-            released (a person re-detected next to a lagging track).
+            released (a person re-detected next to a lagging track), or, when the caller
+            gives the stamps since which each track has been reported without a break,
+            the one reported for the shorter time (see :meth:`Releaser.duplicates`).
     """
 
     timeout: float = 1.0
@@ -188,16 +190,25 @@ class Releaser:
                 del self._since[tid]
         return ended
 
-    def duplicates(self, stamp_ns: int, ids: Sequence[int], xy: np.ndarray) -> list[int]:
-        """Ids of younger tracks that shadowed an older one for ``merge_time`` seconds.
+    def duplicates(self, stamp_ns: int, ids: Sequence[int], xy: np.ndarray,
+                   shown_since: Sequence[int] | None = None) -> list[int]:
+        """Ids of tracks that shadowed another one for ``merge_time`` seconds: of each
+        such pair the younger one (larger id), or with ``shown_since`` the one reported
+        without a break for the shorter time (later stamp; ties: the larger id). A track
+        that was hidden (existence below the report threshold) while a new one took its
+        person over is then the one released: the person's reported identity stays.
 
         Args:
             stamp_ns: frame stamp; ids: K track ids; xy: (K, 2) floor positions, metres.
+            shown_since: optional (K,) stamps since which each track has been reported
+                without a break (its birth, last move or last hidden frame).
         """
         cfg = self.config
         xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-        if len(ids) != len(xy):
-            raise DetectionError('ids and positions must have the same length')
+        if len(ids) != len(xy) or (shown_since is not None and len(shown_since) != len(ids)):
+            raise DetectionError('ids, positions and shown_since must have the same length')
+        rank = {int(i): (0 if shown_since is None else int(shown_since[k]), int(i))
+                for k, i in enumerate(ids)}
         close = set()
         if len(ids) > 1:
             d = np.linalg.norm(xy[:, None] - xy[None], axis=2)
@@ -208,9 +219,9 @@ class Releaser:
         for p in close:
             since = self._close.setdefault(p, int(stamp_ns))
             if (int(stamp_ns) - since) / 1e9 >= cfg.merge_time:
-                out.add(p[1])
+                out.add(max(p, key=rank.__getitem__))
         for p in list(self._close):
-            if p[1] in out:
+            if p[0] in out or p[1] in out:
                 del self._close[p]
         return sorted(out)
 
