@@ -41,6 +41,18 @@ def rng() -> np.random.Generator:
 REPO = Path(__file__).resolve().parents[1]
 
 
+@pytest.fixture
+def context():
+    """A fresh rclpy context for one test's nodes (shut down after it)."""
+    import rclpy
+    from rclpy.context import Context
+
+    ctx = Context()
+    rclpy.init(context=ctx)
+    yield ctx
+    rclpy.try_shutdown(context=ctx)
+
+
 @contextmanager
 def playing(recording: Path, nodes: list, context, *, rate: float, threads: int,
             timeout: float):

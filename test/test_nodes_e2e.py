@@ -16,7 +16,6 @@ import yaml
 os.environ['ROS_DOMAIN_ID'] = str(100 + os.getpid() % 100)
 
 import rclpy  # noqa: E402
-from rclpy.context import Context  # noqa: E402
 from rclpy.executors import MultiThreadedExecutor  # noqa: E402
 from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
 
@@ -35,14 +34,6 @@ def room_calibration(tmp_path_factory) -> Path:
     path = tmp_path_factory.mktemp('calib') / 'calibration.yaml'
     make_calibration(default_room()).save(path)
     return path
-
-
-@pytest.fixture
-def context():
-    ctx = Context()
-    rclpy.init(context=ctx)
-    yield ctx
-    rclpy.try_shutdown(context=ctx)
 
 
 def flatten(doc: dict, prefix: str = '') -> dict:

@@ -8,9 +8,6 @@ import pytest
 
 os.environ.setdefault('ROS_DOMAIN_ID', str(100 + os.getpid() % 100))
 
-import rclpy  # noqa: E402
-from rclpy.context import Context  # noqa: E402
-
 from mbtrack_ros.core.tracker import Tracker, TrackerConfig  # noqa: E402
 from mbtrack_ros.synth.generator import Synthesizer  # noqa: E402
 
@@ -44,14 +41,6 @@ def test_warm_up_runs_the_whole_pipeline_and_changes_nothing(frames):
     assert report.births >= 1 and report.max_tracks >= 1 and report.frames == 14
     assert after == before
     assert any(tracks for _, tracks in before)  # the comparison covers tracked frames
-
-
-@pytest.fixture
-def context():
-    ctx = Context()
-    rclpy.init(context=ctx)
-    yield ctx
-    rclpy.try_shutdown(context=ctx)
 
 
 def test_node_warm_up_keeps_ids_and_outputs(frames, tmp_path, context):
