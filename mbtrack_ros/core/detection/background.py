@@ -339,18 +339,19 @@ class BackgroundModel:
     @property
     def unknown(self) -> np.ndarray:
         """(H, W) bool pixels not yet known (never seen empty, not learnt)."""
-        self.update_pending()
-        if self._unknown is None:
-            return np.zeros(self.shape or (0, 0), bool)
-        return (self._unknown & _UNKNOWN) > 0
+        return self._flagged(_UNKNOWN)
 
     @property
     def possible_foreground(self) -> np.ndarray:
         """(H, W) bool not-yet-known pixels that count as foreground (a possible person)."""
+        return self._flagged(_POSSIBLE)
+
+    def _flagged(self, flag: int) -> np.ndarray:
+        """(H, W) bool pixels carrying a not-yet-known ``flag`` (after a pending update)."""
         self.update_pending()
         if self._unknown is None:
             return np.zeros(self.shape or (0, 0), bool)
-        return (self._unknown & _POSSIBLE) > 0
+        return (self._unknown & flag) > 0
 
     def set_unknown(self, mask: np.ndarray, *, foreground: np.ndarray | None = None,
                     core: np.ndarray | None = None) -> None:

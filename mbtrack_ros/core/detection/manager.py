@@ -18,6 +18,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -118,6 +119,19 @@ class Birth:
     track_id: int | None = None
 
 
+class _Pending(NamedTuple):
+    """What :meth:`AutoDetection.search` needs from the last :meth:`AutoDetection.update`."""
+
+    stamp_ns: int
+    images: Mapping[str, np.ndarray]
+    tracks: Sequence[TrackEstimate]
+    models: Mapping[int, PersonModel]
+    means: np.ndarray
+    shapes: list
+    evidence: dict
+    ended: list
+
+
 class AutoDetection:
     """Per-frame background, detection, acquisition, release and existence bookkeeping.
 
@@ -142,7 +156,7 @@ class AutoDetection:
         self._placed: dict[int, int] = {}  # track id -> stamp of its birth or last move
         self._released: dict[int, tuple[int, np.ndarray]] = {}  # id -> (stamp, floor xy)
         self._shown_since: dict[int, int] = {}  # id -> birth, move or last hidden stamp
-        self._pending: tuple | None = None  # what search() needs from the last update()
+        self._pending: _Pending | None = None  # what search() needs from the last update()
         self.side = [n for n, c in calibration.cameras.items() if not is_ceiling(c)]
         self.ceiling = [n for n in calibration.cameras if n not in self.side]
 
@@ -274,8 +288,8 @@ class AutoDetection:
         t3 = time.perf_counter()
         self.timings = {'detect_render': t1 - t0, 'detect_background': t2 - t1,
                         'detect_existence': t3 - t2}
-        self._pending = (int(stamp_ns), images, tracks, models, means, shapes, evidence,
-                         ended)
+        self._pending = _Pending(int(stamp_ns), images, tracks, models, means, shapes,
+                                 evidence, ended)
         return ended
 
     def search(self) -> list[Birth]:
@@ -325,7 +339,7 @@ class AutoDetection:
         t0 = time.perf_counter()
         self.background.update_pending()
         if self._pending is not None:
-            for name, ev in self._pending[6].items():
+            for name, ev in self._pending.evidence.items():
                 if ev.motion is None:
                     ev.motion = self.background.models[name].presence()
         self.timings['detect_background_update'] = time.perf_counter() - t0
@@ -395,9 +409,7 @@ class AutoDetection:
             self.decisions.append(info)
             return Birth(model=model, state=state, detection=det, track_id=reused)
         tid = tracks[best[0]].track_id
-        since = self._placed.get(tid)
-        if not hidden and since is not None \
-                and (int(stamp_ns) - since) / 1e9 < cfg.relocate_interval:
+        if not hidden and self._placed_recently(tid, stamp_ns):
             info['action'] = f'drop (track {tid} placed recently)'
             self.decisions.append(info)
             return None
@@ -409,6 +421,12 @@ class AutoDetection:
         self.releaser.forget(tid)
         self.aux[tid] = TrackAuxiliary(cfg.existence)
         return Birth(model=models[tid], state=state, detection=det, track_id=tid)
+
+    def _placed_recently(self, track_id: int, stamp_ns: int) -> bool:
+        """The track was born or moved less than ``relocate_interval`` before ``stamp_ns``."""
+        since = self._placed.get(track_id)
+        return since is not None \
+            and (int(stamp_ns) - since) / 1e9 < self.config.relocate_interval
 
     def _nearest_hidden(self, det: Detection, tracks: Sequence[TrackEstimate],
                         keep: Sequence[int], means: np.ndarray,
@@ -423,9 +441,7 @@ class AutoDetection:
             tid = tracks[k].track_id
             if tid in moved or tid not in models or self.reported(tid):
                 continue
-            since = self._placed.get(tid)
-            if since is not None \
-                    and (int(stamp_ns) - since) / 1e9 < self.config.relocate_interval:
+            if self._placed_recently(tid, stamp_ns):
                 continue
             d = float(np.hypot(*(means[k, [X, Y]] - det.xy)))
             if d <= self.config.relocate_radius and (best is None or d < best[1]):
