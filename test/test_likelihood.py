@@ -418,4 +418,4 @@ def test_reused_workspaces_equal_fresh_ones_and_are_left_zero():
             assert any(np.any(np.abs(la) > 0) for la in a.loglik)
     # the kept buffers are back at zero (m_fg and b_bg; w* is scratch)
     (mfg, bbg, _), = reused._workspaces._free
-    assert mfg.shape[2] >= 3 and not np.any(mfg) and not np.any(bbg)
+    assert mfg.shape[0] >= 6 and not np.any(mfg) and not np.any(bbg)

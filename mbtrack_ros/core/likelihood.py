@@ -153,11 +153,11 @@ class _Workspaces:
             ) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
         with self._lock:
             ws = self._free.pop() if self._free else None
-        if ws is None or (ws[1].shape[0] < height or ws[1].shape[1] < width
-                          or ws[1].shape[2] < channels):
+        if ws is None or (ws[1].shape[0] < channels or ws[1].shape[1] < height
+                          or ws[1].shape[2] < width):
             old = ws[1].shape if ws is not None else (0, 0, 0)
-            shape = (max(height, old[0]), max(width, old[1]), max(channels, old[2], 1))
-            ws = (np.zeros(shape[:2] + (2 * shape[2],)), np.zeros(shape), np.empty(shape))
+            shape = (max(channels, old[0], 1), max(height, old[1]), max(width, old[2]))
+            ws = (np.zeros((2 * shape[0],) + shape[1:]), np.zeros(shape), np.empty(shape))
         yield ws
         with self._lock:
             self._free.append(ws)
