@@ -6,7 +6,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from mbtrack_ros.core.dynamics import DynamicsError, MotionConfig, predict
+from mbtrack_ros.core.dynamics import DynamicsError, MotionConfig, _move, predict
 from mbtrack_ros.core.filters import (
     FilterConfig, FilterError, HJSFilter, JointFilter, SeparableFilter, TrackingFilter,
     summarize_particles)
@@ -174,6 +174,8 @@ def test_predict_equals_numpy_version_bit_for_bit(seed):
         assert a_rng.random() == b_rng.random()
         if floor is not None and dt >= 0.5:
             assert np.all((b[:, 0] >= -2.0) & (b[:, 0] <= 2.5))
+    # noise off, dt 0 and no floor use the same compiled pass (contiguous empty arrays)
+    assert len(_move.signatures) == 1
 
 
 def test_dynamics_bad_input():
@@ -184,6 +186,8 @@ def test_dynamics_bad_input():
         predict(np.zeros((3, 6)), -0.1, MotionConfig(), rng)
     with pytest.raises(DynamicsError):
         MotionConfig(velocity_noise=-1.0)
+    with pytest.raises(DynamicsError, match='floor'):
+        predict(np.zeros((3, 6)), 0.1, MotionConfig(), rng, floor=(0.0, 1.0))
 
 
 # -- filters with a stand-in measurement model ------------------------------------------------

@@ -66,7 +66,8 @@ class MotionConfig:
             raise DynamicsError(f'motion max_speed must be > 0, got {self.max_speed}')
 
 
-_NO_DRAWS = np.zeros((0, 2))
+_NO_DRAWS = np.zeros((0, 2))     # a noise that is off (contiguous: one compiled version)
+_NO_DRAWS_1D = np.zeros(0)
 
 
 @njit(cache=True, nogil=True)
@@ -140,8 +141,8 @@ def predict(particles: np.ndarray, dt: float, config: MotionConfig,
         (N, 6) float64 new states (a new array).
 
     The random numbers are drawn first, in a fixed order (velocity, position, orientation
-    noise, sitting flips), then one numba pass moves the particles (5x faster than the
-    numpy expressions at 100 particles, same results bit for bit).
+    noise, sitting flips), then one numba pass moves the particles (a fifth of the CPU time of
+    the numpy expressions at 100 particles, same results bit for bit).
     """
     p = np.asarray(particles, dtype=np.float64)
     if p.ndim != 2 or p.shape[1] != STATE_DIM:
@@ -155,7 +156,7 @@ def predict(particles: np.ndarray, dt: float, config: MotionConfig,
     sq = np.sqrt(dt)
     decay = float(np.exp(-config.velocity_damping * dt)) if config.velocity_damping > 0 else 1.0
     dv = dp = _NO_DRAWS
-    dtheta = flip_u = _NO_DRAWS[:, 0]
+    dtheta = flip_u = _NO_DRAWS_1D
     flip_p = 0.0
     if config.velocity_noise > 0:
         dv = rng.normal(0.0, config.velocity_noise * sq, size=(n, 2))
@@ -167,7 +168,9 @@ def predict(particles: np.ndarray, dt: float, config: MotionConfig,
         if config.sit_flip_rate > 0:
             flip_u = rng.random(n)
             flip_p = float(-np.expm1(-config.sit_flip_rate * dt))
-    bounds = _NO_DRAWS[:, 0] if floor is None else np.asarray(floor, dtype=np.float64)
+    bounds = _NO_DRAWS_1D if floor is None else np.asarray(floor, dtype=np.float64)
+    if floor is not None and bounds.shape != (4,):
+        raise DynamicsError(f'floor must be (x_min, y_min, x_max, y_max), got {floor!r}')
     _move(out, float(dt), decay, dv, float(config.max_speed), dp, bool(dt > 0),
           float(config.orientation_speed), dtheta, flip_u, flip_p, bounds)
     return out
