@@ -6,7 +6,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from mbtrack_ros.core.dynamics import DynamicsError, MotionConfig, predict
+from mbtrack_ros.core.dynamics import DynamicsError, MotionConfig, _move, predict
 from mbtrack_ros.core.filters import (
     FilterConfig, FilterError, HJSFilter, JointFilter, SeparableFilter, TrackingFilter,
     summarize_particles)
@@ -109,6 +109,75 @@ def test_floor_reflection():
     np.testing.assert_allclose(out[0, :4], [1.0, 1.0, 1.0, 3.0])  # one bounce off y = 0
 
 
+def _predict_numpy(particles, dt, config, rng, floor=None):
+    """The motion model as plain numpy expressions (the straightforward version of
+    predict(), which draws the same random numbers in the same order)."""
+    out = particles.copy()
+    n = out.shape[0]
+    sq = np.sqrt(dt)
+    if config.velocity_damping > 0:
+        out[:, [2, 3]] *= np.exp(-config.velocity_damping * dt)
+    if config.velocity_noise > 0:
+        out[:, [2, 3]] += rng.normal(0.0, config.velocity_noise * sq, size=(n, 2))
+    speed = np.hypot(out[:, 2], out[:, 3])
+    too_fast = speed > config.max_speed
+    out[too_fast, 2:4] *= (config.max_speed / speed[too_fast])[:, None]
+    speed = np.minimum(speed, config.max_speed)
+    out[:, [0, 1]] += out[:, [2, 3]] * dt
+    if config.position_noise > 0:
+        out[:, [0, 1]] += rng.normal(0.0, config.position_noise * sq, size=(n, 2))
+    if dt > 0:
+        base = np.where(speed > config.orientation_speed, np.arctan2(out[:, 3], out[:, 2]),
+                        out[:, 4])
+        if config.orientation_noise > 0:
+            base = base + rng.normal(0.0, config.orientation_noise * sq, size=n)
+        out[:, 4] = np.mod(base + np.pi, 2.0 * np.pi) - np.pi
+        if config.sit_flip_rate > 0:
+            flip = rng.random(n) < -np.expm1(-config.sit_flip_rate * dt)
+            out[flip, 5] = 1.0 - out[flip, 5]
+    if floor is not None:
+        for axis, lo, hi in ((0, floor[0], floor[2]), (1, floor[1], floor[3])):
+            p, v = out[:, axis], out[:, axis + 2]
+            width = hi - lo
+            q = np.mod(p - lo, 2.0 * width)
+            q = np.where(q > width, 2.0 * width - q, q)
+            odd = (np.mod(np.floor((p - lo) / width), 2.0) == 1.0) & ((p < lo) | (p > hi))
+            v[odd] *= -1.0
+            out[:, axis] = lo + q
+    return out
+
+
+@pytest.mark.parametrize('seed', range(6))
+def test_predict_equals_numpy_version_bit_for_bit(seed):
+    """The one-pass numba motion model gives exactly the numpy expressions' states and
+    leaves the generator in the same state (same draws in the same order)."""
+    rng = np.random.default_rng(seed)
+    for trial in range(20):
+        cfg = MotionConfig(velocity_noise=float(rng.choice([0.0, 0.6, 3.0])),
+                           position_noise=float(rng.choice([0.0, 0.15])),
+                           orientation_noise=float(rng.choice([0.0, 1.0])),
+                           sit_flip_rate=float(rng.choice([0.0, 0.05, 20.0])),
+                           max_speed=float(rng.choice([0.5, 3.0])),
+                           velocity_damping=float(rng.choice([0.0, 0.7])))
+        n = int(rng.integers(1, 120))
+        p = np.zeros((n, 6))
+        p[:, :2] = rng.uniform(-4.0, 4.0, (n, 2))
+        p[:, 2:4] = rng.normal(0.0, 1.0, (n, 2))
+        p[:, 4] = rng.uniform(-3.2, 3.2, n)
+        p[:, 5] = rng.integers(0, 2, n)
+        dt = float(rng.choice([0.0, 1 / 15, 0.5, 3.0]))
+        floor = None if trial % 3 == 0 else (-2.0, -1.5, 2.5, 3.0)
+        a_rng, b_rng = np.random.default_rng(trial), np.random.default_rng(trial)
+        a = _predict_numpy(p, dt, cfg, a_rng, floor)
+        b = predict(p, dt, cfg, b_rng, floor=floor)
+        np.testing.assert_array_equal(b, a)
+        assert a_rng.random() == b_rng.random()
+        if floor is not None and dt >= 0.5:
+            assert np.all((b[:, 0] >= -2.0) & (b[:, 0] <= 2.5))
+    # noise off, dt 0 and no floor use the same compiled pass (contiguous empty arrays)
+    assert len(_move.signatures) == 1
+
+
 def test_dynamics_bad_input():
     rng = np.random.default_rng(0)
     with pytest.raises(DynamicsError):
@@ -117,6 +186,8 @@ def test_dynamics_bad_input():
         predict(np.zeros((3, 6)), -0.1, MotionConfig(), rng)
     with pytest.raises(DynamicsError):
         MotionConfig(velocity_noise=-1.0)
+    with pytest.raises(DynamicsError, match='floor'):
+        predict(np.zeros((3, 6)), 0.1, MotionConfig(), rng, floor=(0.0, 1.0))
 
 
 # -- filters with a stand-in measurement model ------------------------------------------------

