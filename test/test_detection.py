@@ -626,6 +626,49 @@ def test_deferred_search_gives_the_same_tracks_as_the_full_step():
     assert any(runs[1]) and not any(runs[1][:4])  # born after entering, not before
 
 
+def test_foreground_overlapped_with_the_filter_gives_the_same_tracks_and_background():
+    """Tracker.step starts the foreground on the detection's worker before the filter and
+    joins it in update(): the same tracks, background models and motion as extracting it
+    within update(); a step that fails in the filter leaves the background as if that
+    frame set had not been seen."""
+    calib = make_room()
+    bgs = backgrounds(calib)
+    frames = [paint(calib, bgs, [person(1.5 + 0.05 * k, 2.8, theta=0.0)] if k >= 3 else [],
+                    np.random.default_rng(k)) for k in range(14)]
+    failing = 9
+    runs, banks = [], []
+    for variant in ('inline', 'overlapped', 'failed'):
+        tracker = _detecting_tracker(calib, bgs, seed=1)
+        if variant == 'inline':
+            tracker.detection.start_foreground = lambda images: None
+        rows = []
+        for k, images in enumerate(frames):
+            stamp = int(round(k * 1e9 / FPS))
+            if variant == 'failed' and k == failing:
+                real = tracker.filter.step
+
+                def broken(*args, **kwargs):
+                    raise RuntimeError('filter failed')
+                tracker.filter.step = broken
+                with pytest.raises(RuntimeError):
+                    tracker.step(stamp, images)
+                tracker.filter.step = real
+                continue
+            if variant != 'failed' and k == failing:
+                continue  # the frame set the failing run loses
+            res = tracker.step(stamp, images)
+            rows.append([(t.track_id, *np.round(t.mean[:2], 9), t.existence)
+                         for t in res.tracks])
+        runs.append(rows)
+        banks.append(tracker.detection.background.models)
+    assert runs[0] == runs[1] == runs[2]
+    assert any(runs[0])  # someone was tracked
+    for name, model in banks[0].items():
+        for other in banks[1:]:
+            np.testing.assert_array_equal(model.background_ycc, other[name].background_ycc)
+            np.testing.assert_array_equal(model.presence(), other[name].presence())
+
+
 # -- fast paths against their straightforward versions -----------------------------------
 def test_prefix_sums_equal_numpy_cumsum():
     rng = np.random.default_rng(4)

@@ -288,7 +288,9 @@ class Tracker:
         as tracks from the next frame on, so the search does not change this frame's
         result: with ``search=False`` it is left for :meth:`search`, which a node calls
         after publishing the result (lower latency, the same outputs); a search left
-        pending runs at the start of the next step.
+        pending runs at the start of the next step. The frame's foreground (003 §4.2) does
+        not depend on the filter: it runs on the detection's worker thread while the filter
+        runs (:meth:`AutoDetection.start_foreground`; the same outputs).
 
         Args:
             stamp_ns: frame stamp, integer nanoseconds; must not go backwards.
@@ -305,11 +307,18 @@ class Tracker:
                                f'{self._last_stamp} ns; reset the tracker')
         dt = 0.0 if self._last_stamp is None else (stamp_ns - self._last_stamp) / 1e9
         t0 = time.perf_counter()
-        seen = images if self.detection is None else self.detection.tracking_images(images)
-        self.measurement.set_images(seen)
-        t1 = time.perf_counter()
-        updates = self.filter.step(dt, self.measurement, seen, self.rng)
-        t2 = time.perf_counter()
+        if self.detection is not None:  # the foreground runs on a worker during the filter
+            self.detection.start_foreground(images)
+        try:
+            seen = images if self.detection is None else self.detection.tracking_images(images)
+            self.measurement.set_images(seen)
+            t1 = time.perf_counter()
+            updates = self.filter.step(dt, self.measurement, seen, self.rng)
+            t2 = time.perf_counter()
+        except BaseException:
+            if self.detection is not None:
+                self.detection.abandon()
+            raise
         self._last_stamp = stamp_ns
         tracks = []
         for tid in sorted(updates):

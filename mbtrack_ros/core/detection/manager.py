@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -157,6 +158,8 @@ class AutoDetection:
         self._released: dict[int, tuple[int, np.ndarray]] = {}  # id -> (stamp, floor xy)
         self._shown_since: dict[int, int] = {}  # id -> birth, move or last hidden stamp
         self._pending: _Pending | None = None  # what search() needs from the last update()
+        self._worker: ThreadPoolExecutor | None = None  # one thread: background, search
+        self._foreground: tuple[list[str], Future] | None = None  # start_foreground()'s job
         self.side = [n for n, c in calibration.cameras.items() if not is_ceiling(c)]
         self.ceiling = [n for n in calibration.cameras if n not in self.side]
 
@@ -171,6 +174,7 @@ class AutoDetection:
 
     def reset(self) -> None:
         """Forget per-track state and unconfirmed candidates (keeps the background)."""
+        self.abandon()
         self.aux.clear()
         self._placed.clear()
         self._released.clear()
@@ -180,6 +184,54 @@ class AutoDetection:
         self._pending = None
 
     # -- per frame ------------------------------------------------------------------------
+    def start_foreground(self, images: Mapping[str, np.ndarray]) -> None:
+        """Start the foreground extraction of a frame set (003 §4.2) on the detection's
+        worker thread; :meth:`update` of the same frame set joins it.
+
+        The foreground of frame t needs the background model after the (deferred) update of
+        frame t-1 and the images, not the tracks of frame t (their silhouettes only keep the
+        model update off people, :meth:`BackgroundBank.exclude_pending`), so a tracker starts
+        it before its filter step and the two overlap (the numba kernels and OpenCV release
+        the GIL); the results are those of extracting it within :meth:`update`. The caller
+        must call :meth:`update` (or :meth:`abandon`) before touching the background."""
+        self.abandon()
+        names = [n for n in images if n in self.calibration.cameras]
+        job = self._executor().submit(self.background.apply, {n: images[n] for n in names},
+                                      defer=True)
+        self._foreground = (names, job)
+
+    def abandon(self) -> None:
+        """Wait for a foreground started by :meth:`start_foreground` whose frame set will not
+        be updated (its step failed) and drop its deferred background update."""
+        if self._foreground is not None:
+            _, job = self._foreground
+            self._foreground = None
+            try:
+                job.result()
+            except Exception:  # noqa: BLE001 - the frame set is abandoned anyway
+                pass
+            self.background.drop_pending()
+
+    def _executor(self) -> ThreadPoolExecutor:
+        if self._worker is None:
+            self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix='detection')
+        return self._worker
+
+    def _take_foreground(self, images: Mapping[str, np.ndarray], names: list[str]
+                         ) -> dict[str, np.ndarray]:
+        """The foreground masks of the frame set: joined from :meth:`start_foreground`, or
+        extracted now (model update deferred)."""
+        if self._foreground is not None:
+            started, job = self._foreground
+            self._foreground = None
+            if started != names:
+                self._foreground = (started, job)
+                self.abandon()
+                raise DetectionError(f'update() got cameras {names}, the foreground was '
+                                     f'started for {started}')
+            return job.result()
+        return self.background.apply({n: images[n] for n in names}, defer=True)
+
     def step(self, stamp_ns: int, images: Mapping[str, np.ndarray],
              tracks: Sequence[TrackEstimate], models: Mapping[int, PersonModel]
              ) -> tuple[list[int], list[Birth]]:
@@ -244,7 +296,8 @@ class AutoDetection:
         t1 = time.perf_counter()
         # 2. background and foreground
         # the model update (and with it the motion the detector needs) waits for search()
-        fg = self.background.apply({n: images[n] for n in names}, exclude=masks, defer=True)
+        fg = self._take_foreground(images, names)
+        self.background.exclude_pending(masks)
         known_bins = dict(bins or {})
         evidence = {n: FrameEvidence(images[n], fg[n], masks[n], _bins=known_bins.get(n))
                     for n in fg}
