@@ -300,10 +300,9 @@ class Tracker:
 
         With ``config.pipeline_search`` the search of this frame runs on that worker while
         the next frame is filtered (:meth:`AutoDetection.start_search`), and its people
-        become tracks in the next step right after that step's result is computed
-        (:meth:`AutoDetection.finish_search`): one frame later than without, at a fixed
-        point, so the outputs do not depend on the threads' timing; ``search`` is then
-        ignored and :meth:`search` does nothing.
+        become tracks in the next :meth:`search` (after the next frame's result,
+        :meth:`AutoDetection.finish_search`): one frame later than without, at a fixed
+        point, so the outputs do not depend on the threads' timing.
 
         Args:
             stamp_ns: frame stamp, integer nanoseconds; must not go backwards.
@@ -353,18 +352,9 @@ class Tracker:
                 self.remove_track(tid)
             tracks = [t for t in tracks
                       if t.track_id not in ended and self.detection.reported(t.track_id)]
-            if self.config.pipeline_search:
-                # the previous frame's search (003 §4.1) ran on the worker during this
-                # frame's filter: its people become tracks now, after this frame's result,
-                # then this frame's search starts (the result is fixed: timing-independent)
-                found_stamp, births = self.detection.finish_search()
-                self._place(births, found_stamp)
-                self.detection.start_search(born=[
-                    (self._now(b.state, found_stamp), b.model.shape) for b in births])
-            else:
-                self._search_pending = True
-                if search:
-                    self.search()
+            self._search_pending = True
+            if search:
+                self.search()
             timings.update(self.detection.timings)
         timings['total'] = time.perf_counter() - t0
         return FrameResult(stamp_ns=stamp_ns, tracks=tracks, ended=ended, timings=timings)
@@ -372,12 +362,21 @@ class Tracker:
     def search(self) -> list[int]:
         """The detection search and acquisition of the last step (003 §4.1-4.2), if pending:
         new people become tracks, re-found ones move their track. Returns the ids of the
-        tracks started or moved. With ``pipeline_search`` the step itself starts and
-        settles the search (this returns [])."""
+        tracks started or moved.
+
+        With ``pipeline_search``: the people found by the previous step's search, which ran
+        on the detection's worker during this step's filter, become tracks, then this step's
+        search starts on the worker (its people come with the next call)."""
         if not self._search_pending or self.detection is None:
             return []
         self._search_pending = False
-        return self._place(self.detection.search(), self._last_stamp)
+        if not self.config.pipeline_search:
+            return self._place(self.detection.search(), self._last_stamp)
+        found_stamp, births = self.detection.finish_search()
+        changed = self._place(births, found_stamp)
+        self.detection.start_search(born=[(self._now(b.state, found_stamp), b.model.shape)
+                                          for b in births])
+        return changed
 
     def _place(self, births: list, stamp_ns: int | None) -> list[int]:
         """Start the tracks of ``births`` found in the frame set at ``stamp_ns`` and move

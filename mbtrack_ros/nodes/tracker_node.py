@@ -416,7 +416,8 @@ class TrackerNode(Node):
         # existence and visibility (001); its search for new people (003 §4.1) only adds
         # tracks for the next frame, so it runs after publishing (same outputs, the
         # latency of the frame set does not include it); with tracker.pipeline_search
-        # the step runs it on the detection's worker and search() does nothing
+        # search() adds the people of the previous frame's search, which ran on the
+        # detection's worker, and starts this frame's there
         t0 = time.perf_counter()
         try:
             result = self.tracker.step(fs.stamp_ns, fs.images, search=False)

@@ -185,8 +185,12 @@ class AutoDetection:
         """Forget per-track state and unconfirmed candidates (keeps the background)."""
         self.abandon()
         if self._searching is not None:  # its people belong to the time before the reset
-            self._searching[1].result()
+            _, job = self._searching
             self._searching = None
+            try:
+                job.result()
+            except Exception:  # noqa: BLE001 - dropped with the rest of the search
+                pass
         self.aux.clear()
         self._placed.clear()
         self._released.clear()
