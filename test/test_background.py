@@ -275,6 +275,7 @@ def test_deferred_update_gives_the_same_foreground_model_and_motion():
     bg = scene(rng)
     cfg = BackgroundConfig(bootstrap_frames=3, static_frames=4)
     now, later = BackgroundBank(cfg), BackgroundBank(cfg)
+    masked_later = BackgroundBank(cfg)  # exclusion handed in after the foreground
     for k in range(14):
         frame = noisy(bg, rng)
         x = 10 + 8 * k                          # a person walking, then standing still
@@ -283,9 +284,12 @@ def test_deferred_update_gives_the_same_foreground_model_and_motion():
         exclude[20:60, 100:140] = k % 3 == 0    # a track covering pixels now and then
         a = now.apply({'c': frame}, exclude={'c': exclude})
         b = later.apply({'c': frame}, exclude={'c': exclude}, defer=True)
-        assert a.keys() == b.keys()
+        c = masked_later.apply({'c': frame}, defer=True)
+        masked_later.exclude_pending({'c': exclude})
+        assert a.keys() == b.keys() == c.keys()
         for name in a:
             np.testing.assert_array_equal(a[name], b[name])
+            np.testing.assert_array_equal(a[name], c[name])
         if later.models['c'].ready and k > cfg.bootstrap_frames:
             assert later.models['c'].pending
             if k % 2:                           # else left for the next apply
@@ -298,6 +302,9 @@ def test_deferred_update_gives_the_same_foreground_model_and_motion():
             np.testing.assert_array_equal(m_now.presence(), m_later.presence())
             np.testing.assert_array_equal(m_now.background_ycc, m_later.background_ycc)
             assert not m_later.pending
+            m_masked = masked_later.models['c']
+            np.testing.assert_array_equal(m_now.presence(), m_masked.presence())
+            np.testing.assert_array_equal(m_now.background_ycc, m_masked.background_ycc)
     assert now.models['c'].ready and now.models['c'].presence().any()
 
 

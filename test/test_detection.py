@@ -438,11 +438,11 @@ def test_auto_detection_tracks_with_side_cameras_and_rejects_bad_images():
 
 
 # -- tracker integration -----------------------------------------------------------------
-def _detecting_tracker(calib, bgs, seed):
+def _detecting_tracker(calib, bgs, seed, **config):
     """A Tracker with automatic detection, background bootstrapped from ``bgs``."""
     from mbtrack_ros.core.tracker import Tracker, TrackerConfig
 
-    tracker = Tracker(calib, TrackerConfig(detection=True, particles=50, seed=seed),
+    tracker = Tracker(calib, TrackerConfig(detection=True, particles=50, seed=seed, **config),
                       rng=np.random.default_rng(seed))
     tracker.detection.bootstrap({n: [bgs[n]] for n in calib.cameras})
     return tracker
@@ -626,6 +626,106 @@ def test_deferred_search_gives_the_same_tracks_as_the_full_step():
     assert any(runs[1]) and not any(runs[1][:4])  # born after entering, not before
 
 
+def test_foreground_overlapped_with_the_filter_gives_the_same_tracks_and_background():
+    """Tracker.step starts the foreground on the detection's worker before the filter and
+    joins it in update(): the same tracks, background models and motion as extracting it
+    within update(); a step that fails in the filter leaves the background as if that
+    frame set had not been seen."""
+    calib = make_room()
+    bgs = backgrounds(calib)
+    frames = [paint(calib, bgs, [person(1.5 + 0.05 * k, 2.8, theta=0.0)] if k >= 3 else [],
+                    np.random.default_rng(k)) for k in range(14)]
+    failing = 9
+    runs, banks = [], []
+    for variant in ('inline', 'overlapped', 'failed'):
+        tracker = _detecting_tracker(calib, bgs, seed=1)
+        if variant == 'inline':
+            tracker.detection.start_foreground = lambda images: None
+        rows = []
+        for k, images in enumerate(frames):
+            stamp = int(round(k * 1e9 / FPS))
+            if variant == 'failed' and k == failing:
+                real = tracker.filter.step
+
+                def broken(*args, **kwargs):
+                    raise RuntimeError('filter failed')
+                tracker.filter.step = broken
+                with pytest.raises(RuntimeError):
+                    tracker.step(stamp, images)
+                tracker.filter.step = real
+                continue
+            if variant != 'failed' and k == failing:
+                continue  # the frame set the failing run loses
+            res = tracker.step(stamp, images)
+            rows.append([(t.track_id, *np.round(t.mean[:2], 9), t.existence)
+                         for t in res.tracks])
+        runs.append(rows)
+        banks.append(tracker.detection.background.models)
+    assert runs[0] == runs[1] == runs[2]
+    assert any(runs[0])  # someone was tracked
+    for name, model in banks[0].items():
+        for other in banks[1:]:
+            np.testing.assert_array_equal(model.background_ycc, other[name].background_ycc)
+            np.testing.assert_array_equal(model.presence(), other[name].presence())
+
+
+def test_pipelined_search_is_timing_independent_and_starts_people_one_frame_later():
+    """pipeline_search: the search of frame t runs on the worker while frame t+1 is
+    filtered and its people are added after frame t+1's result. Whatever the threads'
+    timing (random sleeps in the worker's part and in the filter) and whether the caller
+    runs step() or step(search=False) + search(), the tracks are the same; the person
+    appears one frame later than with the serial search; the detector and the acquisition
+    run on the worker, the decisions on the tracks (_identify) on the caller's thread."""
+    import threading
+    import time
+
+    calib = make_room()
+    bgs = backgrounds(calib)
+    frames = [paint(calib, bgs, [person(1.5 + 0.05 * k, 2.8, theta=0.0)] if k >= 3 else [],
+                  np.random.default_rng(k)) for k in range(16)]
+    runs, threads = {}, {'find': set(), 'identify': set()}
+    for variant in ('serial', 'pipelined', 'pipelined_slow', 'pipelined_deferred'):
+        tracker = _detecting_tracker(calib, bgs, seed=1,
+                                     pipeline_search=variant != 'serial')
+        det = tracker.detection
+        if variant == 'pipelined_slow':
+            jitter = np.random.default_rng(5)
+            find, identify, step = det._find, det._identify, tracker.filter.step
+
+            def slow_find(*args, **kwargs):
+                time.sleep(jitter.uniform(0, 0.03))
+                threads['find'].add(threading.current_thread().name)
+                return find(*args, **kwargs)
+
+            def watched_identify(*args, **kwargs):
+                threads['identify'].add(threading.current_thread().name)
+                return identify(*args, **kwargs)
+
+            def slow_step(*args, **kwargs):
+                time.sleep(jitter.uniform(0, 0.03))
+                return step(*args, **kwargs)
+            det._find, det._identify, tracker.filter.step = slow_find, watched_identify, \
+                slow_step
+        rows = []
+        for k, images in enumerate(frames):
+            deferred = variant == 'pipelined_deferred'
+            res = tracker.step(int(round(k * 1e9 / FPS)), images, search=not deferred)
+            if deferred:
+                tracker.search()
+                assert tracker.search() == []  # one search per step
+            rows.append([(t.track_id, *np.round(t.mean[:2], 9), t.existence)
+                         for t in res.tracks])
+        runs[variant] = rows
+    assert runs['pipelined'] == runs['pipelined_slow'] == runs['pipelined_deferred']
+    first = {v: next(k for k, r in enumerate(rows) if r) for v, rows in runs.items()}
+    assert first['pipelined'] == first['serial'] + 1
+    assert runs['pipelined'][-1][0][0] == runs['serial'][-1][0][0] == 1
+    assert np.hypot(*np.subtract(runs['pipelined'][-1][0][1:3],
+                                 runs['serial'][-1][0][1:3])) < 0.25
+    assert threads['find'] and threading.main_thread().name not in threads['find']
+    assert threads['identify'] == {threading.main_thread().name}
+
+
 # -- fast paths against their straightforward versions -----------------------------------
 def test_prefix_sums_equal_numpy_cumsum():
     rng = np.random.default_rng(4)
@@ -727,7 +827,7 @@ def test_step_reuses_the_filters_colour_bins_and_defers_the_background_update():
                        else [], np.random.default_rng(k))
         tracker.step(int(round(k * 1e9 / FPS)), images, search=False)
         pending = tracker.detection._pending
-        evidence = pending[6] if pending else {}
+        evidence = pending.evidence if pending else {}
         bins = tracker.measurement.frame_bins()
         for name in set(evidence) & set(bins):
             assert evidence[name].bins is bins[name]

@@ -80,20 +80,23 @@ def recording(tmp_path_factory) -> Path:
                     frames=FRAMES, width=160, height=120)
 
 
-def offline_tracks(recording: Path, out: Path, seed: int) -> dict[int, dict[int, tuple]]:
+def offline_tracks(recording: Path, out: Path, seed: int, *, pipeline_search: bool = False
+                   ) -> dict[int, dict[int, tuple]]:
     """stamp -> {track id: (x, y)} from `mbtrack replay` (automatic detection)."""
     from mbtrack_ros.cli import main
     from mbtrack_ros.recording.csvfiles import read_tracks
 
-    assert main(['replay', str(recording), '--out', str(out), '--seed', str(seed)]) == 0
+    extra = ['--pipeline-search'] if pipeline_search else []
+    assert main(['replay', str(recording), '--out', str(out), '--seed', str(seed),
+                 *extra]) == 0
     tracks: dict[int, dict[int, tuple]] = {}
     for r in read_tracks(out / 'tracks.csv'):
         tracks.setdefault(r.stamp_ns, {})[r.track_id] = (r.x, r.y)
     return tracks
 
 
-def live_tracks(recording: Path, seed: int, *, sync_timeout: float = 5.0
-                ) -> tuple[dict[int, dict[int, tuple]], dict]:
+def live_tracks(recording: Path, seed: int, *, sync_timeout: float = 5.0,
+                pipeline_search: bool = False) -> tuple[dict[int, dict[int, tuple]], dict]:
     """bag_player (own process) -> DDS -> tracker_node (in process) -> DDS -> ~/tracks."""
     import rclpy
     from rclpy.context import Context
@@ -121,7 +124,8 @@ def live_tracks(recording: Path, seed: int, *, sync_timeout: float = 5.0
             # (GIL, first numba compilation) while another camera runs 3 frames ahead; the
             # set would then go out incomplete and the tracks differ from the offline replay
             '-p', 'image_reliability:=reliable', '-p', 'max_pending_sets:=100',
-            '-p', 'use_sim_time:=true', '-p', f'sync.timeout:={sync_timeout}'])
+            '-p', 'use_sim_time:=true', '-p', f'sync.timeout:={sync_timeout}',
+            '-p', f'tracker.pipeline_search:={str(pipeline_search).lower()}'])
     except Exception:
         rclpy.try_shutdown(context=context)
         raise
@@ -154,11 +158,14 @@ def live_tracks(recording: Path, seed: int, *, sync_timeout: float = 5.0
 
 
 @pytest.mark.ros
-def test_live_replay_equals_offline_replay(recording, tmp_path):
+@pytest.mark.parametrize('pipeline_search', [False, True])
+def test_live_replay_equals_offline_replay(recording, tmp_path, pipeline_search):
     """Same bag, same seed: every frame set arrives live, and per stamp the live ~/tracks
-    have the same ids as `mbtrack replay` with positions within 1 cm."""
-    offline = offline_tracks(recording, tmp_path / 'offline', SEED)
-    live, counters = live_tracks(recording, SEED)
+    have the same ids as `mbtrack replay` with positions within 1 cm (also with the search
+    pipelined on the worker thread: its people are added at a fixed point of the step)."""
+    offline = offline_tracks(recording, tmp_path / 'offline', SEED,
+                             pipeline_search=pipeline_search)
+    live, counters = live_tracks(recording, SEED, pipeline_search=pipeline_search)
     # every frame set complete and tracked: nothing dropped, nothing timed out, no reset
     assert (counters['dropped_sets'], counters['dropped_frames'], counters['incomplete'],
             counters['resets']) == (0, 0, 0, 0), counters

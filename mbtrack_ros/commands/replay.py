@@ -82,6 +82,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument('--subsample', type=int, default=None, metavar='K',
                         help='likelihood on every K-th image row (default 1; a speed option '
                              'that costs accuracy)')
+    parser.add_argument('--pipeline-search', action='store_true',
+                        help='search frame t for new people while frame t+1 is filtered '
+                             '(people start one frame later; TrackerConfig.pipeline_search)')
     parser.add_argument('--init-from', type=Path, default=None, metavar='GROUND_TRUTH.csv',
                         help='start tracks from this ground truth (models from key views)')
     parser.add_argument('--eval', type=Path, default=None, metavar='GROUND_TRUTH.csv',
@@ -121,7 +124,7 @@ def _resolve_inputs(args: argparse.Namespace) -> tuple[Path, RoomCalibration]:
 # ``tracker.seed`` is left to ``--seed`` (a replay is always seeded)
 _NODE_TRACKER_KEYS = {f'tracker.{k}': k for k in (
     'algorithm', 'particles', 'joint_particles', 'sigma', 'd_occ', 'mrf_radius', 'use_mrf',
-    'release_time', 'subsample')}
+    'release_time', 'subsample', 'pipeline_search')}
 _NODE_TRACKER_KEYS['detection.threshold'] = 'detection_threshold'
 
 
@@ -155,6 +158,8 @@ def _config(args: argparse.Namespace) -> TrackerConfig:
                 values[name] = getattr(args, name)
         if args.no_mrf:
             values['use_mrf'] = False
+        if args.pipeline_search:
+            values['pipeline_search'] = True
         values.update(seed=args.seed, detection=args.init_from is None)
         return TrackerConfig.from_dict(values)
     except TrackerError as err:

@@ -60,6 +60,10 @@ class TrackerConfig:
         subsample: the likelihood reads every k-th image row of the silhouettes (1: all
             rows; a speed option: 2 saved ~6 % of the CPU and cost MOTA on clear-room,
             docs/live_measurements.md).
+        pipeline_search: with detection, run the search for new people of frame t on the
+            detection's worker thread while frame t+1 is filtered, and add its people after
+            frame t+1's result (one frame later than without; deterministic, the same live
+            and offline). See :meth:`Tracker.step`.
     """
 
     algorithm: str = 'hjs'
@@ -80,6 +84,7 @@ class TrackerConfig:
     release_time: float = 1.0
     detection_threshold: float | None = None
     subsample: int = 1
+    pipeline_search: bool = False
 
     def __post_init__(self) -> None:
         def bad(msg: str) -> None:
@@ -103,8 +108,9 @@ class TrackerConfig:
             bad(f'mrf_epsilon must be in (0, 1], got {self.mrf_epsilon!r}')
         if not isinstance(self.motion, MotionConfig):
             bad('motion must be a MotionConfig')
-        if not isinstance(self.detection, (bool, np.bool_)):
-            bad(f'detection must be true or false, got {self.detection!r}')
+        for name in ('detection', 'pipeline_search'):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                bad(f'{name} must be true or false, got {getattr(self, name)!r}')
         if not (isinstance(self.release_time, (int, float)) and np.isfinite(self.release_time)
                 and self.release_time > 0):
             bad(f'release_time must be a finite number of seconds > 0, '
@@ -288,7 +294,15 @@ class Tracker:
         as tracks from the next frame on, so the search does not change this frame's
         result: with ``search=False`` it is left for :meth:`search`, which a node calls
         after publishing the result (lower latency, the same outputs); a search left
-        pending runs at the start of the next step.
+        pending runs at the start of the next step. The frame's foreground (003 §4.2) does
+        not depend on the filter: it runs on the detection's worker thread while the filter
+        runs (:meth:`AutoDetection.start_foreground`; the same outputs).
+
+        With ``config.pipeline_search`` the search of this frame runs on that worker while
+        the next frame is filtered (:meth:`AutoDetection.start_search`), and its people
+        become tracks in the next :meth:`search` (after the next frame's result,
+        :meth:`AutoDetection.finish_search`): one frame later than without, at a fixed
+        point, so the outputs do not depend on the threads' timing.
 
         Args:
             stamp_ns: frame stamp, integer nanoseconds; must not go backwards.
@@ -305,11 +319,18 @@ class Tracker:
                                f'{self._last_stamp} ns; reset the tracker')
         dt = 0.0 if self._last_stamp is None else (stamp_ns - self._last_stamp) / 1e9
         t0 = time.perf_counter()
-        seen = images if self.detection is None else self.detection.tracking_images(images)
-        self.measurement.set_images(seen)
-        t1 = time.perf_counter()
-        updates = self.filter.step(dt, self.measurement, seen, self.rng)
-        t2 = time.perf_counter()
+        if self.detection is not None:  # the foreground runs on a worker during the filter
+            self.detection.start_foreground(images)
+        try:
+            seen = images if self.detection is None else self.detection.tracking_images(images)
+            self.measurement.set_images(seen)
+            t1 = time.perf_counter()
+            updates = self.filter.step(dt, self.measurement, seen, self.rng)
+            t2 = time.perf_counter()
+        except BaseException:
+            if self.detection is not None:
+                self.detection.abandon()
+            raise
         self._last_stamp = stamp_ns
         tracks = []
         for tid in sorted(updates):
@@ -341,17 +362,41 @@ class Tracker:
     def search(self) -> list[int]:
         """The detection search and acquisition of the last step (003 §4.1-4.2), if pending:
         new people become tracks, re-found ones move their track. Returns the ids of the
-        tracks started or moved."""
+        tracks started or moved.
+
+        With ``pipeline_search``: the people found by the previous step's search, which ran
+        on the detection's worker during this step's filter, become tracks, then this step's
+        search starts on the worker (its people come with the next call)."""
         if not self._search_pending or self.detection is None:
             return []
         self._search_pending = False
-        stamp_ns = self._last_stamp
+        if not self.config.pipeline_search:
+            return self._place(self.detection.search(), self._last_stamp)
+        found_stamp, births = self.detection.finish_search()
+        changed = self._place(births, found_stamp)
+        self.detection.start_search(born=[(self._now(b.state, found_stamp), b.model.shape)
+                                          for b in births])
+        return changed
+
+    def _place(self, births: list, stamp_ns: int | None) -> list[int]:
+        """Start the tracks of ``births`` found in the frame set at ``stamp_ns`` and move
+        the re-found ones (their states moved to the current time with their velocity);
+        returns the ids started or moved."""
         changed = []
-        for birth in self.detection.search():
+        for birth in births:
             if birth.track_id is not None and birth.track_id in self._models:
-                self.relocate_track(birth.track_id, birth.state)
+                self.relocate_track(birth.track_id, self._now(birth.state, stamp_ns))
                 changed.append(int(birth.track_id))
             else:
                 changed.append(self.add_track(birth.model, birth.state, stamp_ns,
                                               track_id=birth.track_id))
         return changed
+
+    def _now(self, state: np.ndarray, stamp_ns: int | None) -> np.ndarray:
+        """A state (6,) observed at ``stamp_ns`` moved to the last frame's time with its own
+        velocity (constant-velocity extrapolation, as :meth:`add_track`)."""
+        if stamp_ns is None or stamp_ns == self._last_stamp:
+            return state
+        s = np.array(state, dtype=np.float64)
+        s[[X, Y]] += s[[VX, VY]] * (self._last_stamp - stamp_ns) / 1e9
+        return s

@@ -37,6 +37,9 @@ tracker.particles               int        particles per target (100)
 tracker.subsample               int        likelihood on every k-th image row (1; a speed
                                            option that costs accuracy, see
                                            docs/live_measurements.md)
+tracker.pipeline_search         bool       search frame t for new people on a worker
+                                           thread while frame t+1 is filtered (false;
+                                           people start one frame later)
 tracker.joint_particles         int        joint-filter particles (10000)
 tracker.sigma                   double     likelihood width, 000 Eq. 19 (0.12)
 tracker.d_occ                   double     occlusion penalty, 000 Eq. 26 (0.15)
@@ -146,6 +149,9 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
     'tracker.algorithm': ('hjs', 'hjs | separable | joint | a registered baseline', {}),
     'tracker.particles': (100, 'particles per target (000 §VI)', _ir(1, 100_000)),
     'tracker.subsample': (1, 'likelihood on every k-th image row (speed option)', _ir(1, 8)),
+    'tracker.pipeline_search': (False, 'search frame t for new people on a worker thread '
+                                'while frame t+1 is filtered (TrackerConfig.pipeline_search)',
+                                {}),
     'tracker.joint_particles': (10_000, 'joint-filter particles', _ir(1, 1_000_000)),
     'tracker.sigma': (0.12, 'likelihood width sigma (000 Eq. 19)', _fr(1e-4, 10.0)),
     'tracker.d_occ': (0.15, 'occlusion penalty d_occ (000 Eq. 26)', _fr(0.0, 10.0)),
@@ -238,6 +244,7 @@ def declare_and_read(node: Node) -> tuple[NodeParams, RoomCalibration]:
         'algorithm': str(v['tracker.algorithm']), 'particles': int(v['tracker.particles']),
         'joint_particles': int(v['tracker.joint_particles']),
         'subsample': int(v['tracker.subsample']),
+        'pipeline_search': bool(v['tracker.pipeline_search']),
         'sigma': float(v['tracker.sigma']), 'd_occ': float(v['tracker.d_occ']),
         'mrf_radius': float(v['tracker.mrf_radius']), 'use_mrf': bool(v['tracker.use_mrf']),
         'seed': None if v['tracker.seed'] < 0 else int(v['tracker.seed']),

@@ -415,7 +415,9 @@ class TrackerNode(Node):
         # with detection enabled, Tracker.step also releases tracks (003 §4.3) and updates
         # existence and visibility (001); its search for new people (003 §4.1) only adds
         # tracks for the next frame, so it runs after publishing (same outputs, the
-        # latency of the frame set does not include it)
+        # latency of the frame set does not include it); with tracker.pipeline_search
+        # search() adds the people of the previous frame's search, which ran on the
+        # detection's worker, and starts this frame's there
         t0 = time.perf_counter()
         try:
             result = self.tracker.step(fs.stamp_ns, fs.images, search=False)

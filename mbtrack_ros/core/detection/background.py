@@ -549,6 +549,22 @@ class BackgroundModel:
             self._deferred = None
             self._update(ycc, exclude, fg)
 
+    def exclude_pending(self, exclude: np.ndarray | None) -> None:
+        """Set the exclusion mask (H, W) bool of the deferred update, if one is pending.
+
+        The foreground of a frame does not depend on the exclusion (the tracks' silhouettes
+        only keep the model update off people), so a caller may run :meth:`apply` before the
+        frame's tracks are known and hand their silhouettes in here afterwards."""
+        if self._deferred is not None:
+            ycc, _, fg = self._deferred
+            self._deferred = (ycc, exclude, fg)
+
+    def drop_pending(self) -> None:
+        """Forget a deferred update (its frame was abandoned) and the foreground test it
+        would have consumed."""
+        self._deferred = None
+        self._raw = None
+
 
 class BackgroundBank:
     """One :class:`BackgroundModel` per camera, created on first sight of a camera.
@@ -631,3 +647,15 @@ class BackgroundBank:
         """Run the model updates deferred by ``apply(..., defer=True)``."""
         for model in self.models.values():
             model.update_pending()
+
+    def exclude_pending(self, exclude: Mapping[str, np.ndarray]) -> None:
+        """Exclusion masks by camera for the deferred updates (see
+        :meth:`BackgroundModel.exclude_pending`): ``apply(images, defer=True)`` followed by
+        this gives the same models as ``apply(images, exclude=exclude, defer=True)``."""
+        for name, model in self.models.items():
+            model.exclude_pending(exclude.get(name))
+
+    def drop_pending(self) -> None:
+        """Forget the deferred updates (see :meth:`BackgroundModel.drop_pending`)."""
+        for model in self.models.values():
+            model.drop_pending()

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -132,6 +133,14 @@ class _Pending(NamedTuple):
     ended: list
 
 
+class _Found(NamedTuple):
+    """What the compute part of the search found on a pending frame (:meth:`AutoDetection
+    ._find`): confirmed detections with their acquired models, and its timings."""
+
+    acquired: list[tuple[Detection, PersonModel]]
+    timings: dict[str, float]
+
+
 class AutoDetection:
     """Per-frame background, detection, acquisition, release and existence bookkeeping.
 
@@ -157,6 +166,9 @@ class AutoDetection:
         self._released: dict[int, tuple[int, np.ndarray]] = {}  # id -> (stamp, floor xy)
         self._shown_since: dict[int, int] = {}  # id -> birth, move or last hidden stamp
         self._pending: _Pending | None = None  # what search() needs from the last update()
+        self._worker: ThreadPoolExecutor | None = None  # one thread: background, search
+        self._foreground: tuple[list[str], Future] | None = None  # start_foreground()'s job
+        self._searching: tuple[_Pending, Future] | None = None    # start_search()'s job
         self.side = [n for n, c in calibration.cameras.items() if not is_ceiling(c)]
         self.ceiling = [n for n in calibration.cameras if n not in self.side]
 
@@ -171,6 +183,14 @@ class AutoDetection:
 
     def reset(self) -> None:
         """Forget per-track state and unconfirmed candidates (keeps the background)."""
+        self.abandon()
+        if self._searching is not None:  # its people belong to the time before the reset
+            _, job = self._searching
+            self._searching = None
+            try:
+                job.result()
+            except Exception:  # noqa: BLE001 - dropped with the rest of the search
+                pass
         self.aux.clear()
         self._placed.clear()
         self._released.clear()
@@ -180,6 +200,54 @@ class AutoDetection:
         self._pending = None
 
     # -- per frame ------------------------------------------------------------------------
+    def start_foreground(self, images: Mapping[str, np.ndarray]) -> None:
+        """Start the foreground extraction of a frame set (003 §4.2) on the detection's
+        worker thread; :meth:`update` of the same frame set joins it.
+
+        The foreground of frame t needs the background model after the (deferred) update of
+        frame t-1 and the images, not the tracks of frame t (their silhouettes only keep the
+        model update off people, :meth:`BackgroundBank.exclude_pending`), so a tracker starts
+        it before its filter step and the two overlap (the numba kernels and OpenCV release
+        the GIL); the results are those of extracting it within :meth:`update`. The caller
+        must call :meth:`update` (or :meth:`abandon`) before touching the background."""
+        self.abandon()
+        names = [n for n in images if n in self.calibration.cameras]
+        job = self._executor().submit(self.background.apply, {n: images[n] for n in names},
+                                      defer=True)
+        self._foreground = (names, job)
+
+    def abandon(self) -> None:
+        """Wait for a foreground started by :meth:`start_foreground` whose frame set will not
+        be updated (its step failed) and drop its deferred background update."""
+        if self._foreground is not None:
+            _, job = self._foreground
+            self._foreground = None
+            try:
+                job.result()
+            except Exception:  # noqa: BLE001 - the frame set is abandoned anyway
+                pass
+            self.background.drop_pending()
+
+    def _executor(self) -> ThreadPoolExecutor:
+        if self._worker is None:
+            self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix='detection')
+        return self._worker
+
+    def _take_foreground(self, images: Mapping[str, np.ndarray], names: list[str]
+                         ) -> dict[str, np.ndarray]:
+        """The foreground masks of the frame set: joined from :meth:`start_foreground`, or
+        extracted now (model update deferred)."""
+        if self._foreground is not None:
+            started, job = self._foreground
+            self._foreground = None
+            if started != names:
+                self._foreground = (started, job)
+                self.abandon()
+                raise DetectionError(f'update() got cameras {names}, the foreground was '
+                                     f'started for {started}')
+            return job.result()
+        return self.background.apply({n: images[n] for n in names}, defer=True)
+
     def step(self, stamp_ns: int, images: Mapping[str, np.ndarray],
              tracks: Sequence[TrackEstimate], models: Mapping[int, PersonModel]
              ) -> tuple[list[int], list[Birth]]:
@@ -244,7 +312,8 @@ class AutoDetection:
         t1 = time.perf_counter()
         # 2. background and foreground
         # the model update (and with it the motion the detector needs) waits for search()
-        fg = self.background.apply({n: images[n] for n in names}, exclude=masks, defer=True)
+        fg = self._take_foreground(images, names)
+        self.background.exclude_pending(masks)
         known_bins = dict(bins or {})
         evidence = {n: FrameEvidence(images[n], fg[n], masks[n], _bins=known_bins.get(n))
                     for n in fg}
@@ -285,6 +354,7 @@ class AutoDetection:
             self.aux.pop(tid, None)
             self._placed.pop(tid, None)
             self._shown_since.pop(tid, None)
+        self._note_reporting(stamp_ns, tracks, means, ended)
         t3 = time.perf_counter()
         self.timings = {'detect_render': t1 - t0, 'detect_background': t2 - t1,
                         'detect_existence': t3 - t2}
@@ -294,38 +364,93 @@ class AutoDetection:
 
     def search(self) -> list[Birth]:
         """Detection and acquisition (003 §4.1-4.2) on the frame set of the last
-        :meth:`update`: the people to add, new or re-found (at most once per update)."""
+        :meth:`update`: the people to add, new or re-found (at most once per update).
+
+        Two parts: :meth:`_find` (background update, detector, acquisition: state of the
+        background and the detector only, and the pending frame) and :meth:`_settle` (which
+        detection is whose: the tracks' bookkeeping). :meth:`start_search` runs the first on
+        the worker thread, :meth:`finish_search` the second."""
         self.update_background()
         if self._pending is None:
             return []
-        stamp_ns, images, tracks, models, means, shapes, evidence, ended = self._pending
-        self._pending = None
-        cfg = self.config
-        t3 = time.perf_counter()
-        births: list[Birth] = []
-        self.decisions = []
-        self._remember_released(stamp_ns, tracks, means, ended)
-        for t in tracks:          # reported without a break since (for the duplicate rule)
-            if t.track_id not in ended and not self.reported(t.track_id):
-                self._shown_since[t.track_id] = stamp_ns
-        if evidence:
-            keep = [k for k, t in enumerate(tracks) if t.track_id not in ended]
-            confirmed = self.detector.step(evidence, track_xy=means[keep][:, [X, Y]],
-                                           stamp_ns=stamp_ns)
-            moved: set[int] = set()
+        pending, self._pending = self._pending, None
+        return self._settle(pending, self._find(pending))
+
+    def start_search(self, born: Sequence[tuple[np.ndarray, BodyShape]] = ()) -> None:
+        """Start the search of the last :meth:`update` on the worker thread (the deferred
+        background update, then :meth:`_find`); :meth:`finish_search` settles it.
+
+        ``born``: (state (6,), shape) of people who became tracks after that update (the
+        previous search's): excluded from this search like the frame's tracks. Until
+        :meth:`finish_search` the caller must not touch the background or the detector;
+        :meth:`update` and :meth:`start_foreground` of the next frame may run (the worker
+        runs jobs in order, so the next foreground sees the updated background)."""
+        if self._pending is None:
+            return
+        pending, self._pending = self._pending, None
+        job = self._executor().submit(self._update_and_find, pending, list(born))
+        self._searching = (pending, job)
+
+    def finish_search(self) -> tuple[int | None, list[Birth]]:
+        """(stamp of the searched frame set, its people to add) of :meth:`start_search`,
+        waiting for it; (None, []) when none was started."""
+        if self._searching is None:
+            return None, []
+        pending, job = self._searching
+        self._searching = None
+        return pending.stamp_ns, self._settle(pending, job.result())
+
+    def _update_and_find(self, pending: _Pending, born: list) -> _Found:
+        """The worker's part of a pipelined search: background update, then :meth:`_find`."""
+        spent = self._update_background(pending)
+        found = self._find(pending, born)
+        found.timings['detect_background_update'] = spent
+        return found
+
+    def _find(self, pending: _Pending, born: Sequence[tuple[np.ndarray, BodyShape]] = ()
+              ) -> _Found:
+        """Detections confirmed on the pending frame set away from its tracks (and from
+        ``born``) and their acquired models (003 §4.1-4.2); a detection that cannot be
+        acquired goes back to the detector. Reads only the pending frame and changes only
+        the detector, so it may run on the worker while the next frame is filtered."""
+        t0 = time.perf_counter()
+        acquired: list[tuple[Detection, PersonModel]] = []
+        if pending.evidence:
+            keep = [k for k, t in enumerate(pending.tracks) if t.track_id not in pending.ended]
+            others = pending.means[keep]
+            other_shapes = [pending.shapes[k] for k in keep]
+            if born:
+                others = np.concatenate([others, np.array([b[0] for b in born])])
+                other_shapes = other_shapes + [b[1] for b in born]
+            confirmed = self.detector.step(pending.evidence, track_xy=others[:, [X, Y]],
+                                           stamp_ns=pending.stamp_ns)
             for det in confirmed:
-                model = acquire(det, images, self.calibration, others=means[keep],
-                                other_shapes=[shapes[k] for k in keep],
-                                config=cfg.acquisition)
+                model = acquire(det, pending.images, self.calibration, others=others,
+                                other_shapes=other_shapes, config=self.config.acquisition)
                 if model is None:
                     self.detector.requeue(det)
-                    continue
+                else:
+                    acquired.append((det, model))
+        return _Found(acquired, {'detect_find': time.perf_counter() - t0})
+
+    def _settle(self, pending: _Pending, found: _Found) -> list[Birth]:
+        """Births and moves from the detections of :meth:`_find` (:meth:`_identify`), in
+        the order found; the tracks' bookkeeping is changed here only (main thread)."""
+        stamp_ns, _, tracks, models, means, _, evidence, ended = pending
+        t0 = time.perf_counter()
+        births: list[Birth] = []
+        self.decisions = []
+        if evidence:
+            keep = [k for k, t in enumerate(tracks) if t.track_id not in ended]
+            moved: set[int] = set()
+            for det, model in found.acquired:
                 birth = self._identify(det, model, tracks, keep, means, models, evidence,
                                        moved, stamp_ns)
                 if birth is not None:
                     births.append(birth)
-        t4 = time.perf_counter()
-        self.timings['detect_search'] = t4 - t3
+        self.timings.update(found.timings)
+        self.timings['detect_search'] = found.timings['detect_find'] \
+            + time.perf_counter() - t0
         self.timings['detect'] = sum(self.timings.get(k, 0.0) for k in (
             'detect_render', 'detect_background', 'detect_existence',
             'detect_background_update', 'detect_search'))
@@ -336,13 +461,18 @@ class AutoDetection:
         that it does not delay the frame's result, and the recent motion it gives to the
         frame's evidence (the detector's proof that a detection is no ghost). :meth:`search`
         runs it first; the results are those of updating within :meth:`update`."""
+        self.timings['detect_background_update'] = self._update_background(self._pending)
+
+    def _update_background(self, pending: _Pending | None) -> float:
+        """Run the deferred background update and fill ``pending``'s evidence motion;
+        returns the seconds spent."""
         t0 = time.perf_counter()
         self.background.update_pending()
-        if self._pending is not None:
-            for name, ev in self._pending.evidence.items():
+        if pending is not None:
+            for name, ev in pending.evidence.items():
                 if ev.motion is None:
                     ev.motion = self.background.models[name].presence()
-        self.timings['detect_background_update'] = time.perf_counter() - t0
+        return time.perf_counter() - t0
 
     def tracking_images(self, images: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
         """The images the tracking filter should use: the side cameras only (003 §5: the
@@ -447,6 +577,16 @@ class AutoDetection:
             if d <= self.config.relocate_radius and (best is None or d < best[1]):
                 best = (k, d)
         return best
+
+    def _note_reporting(self, stamp_ns: int, tracks: Sequence[TrackEstimate],
+                        means: np.ndarray, ended: Sequence[int]) -> None:
+        """After a frame's release: where the released tracks were (``reuse_time``) and
+        the tracks not reported now (reported without a break since, for the duplicate
+        rule)."""
+        self._remember_released(stamp_ns, tracks, means, ended)
+        for t in tracks:
+            if t.track_id not in ended and not self.reported(t.track_id):
+                self._shown_since[t.track_id] = int(stamp_ns)
 
     def _remember_released(self, stamp_ns: int, tracks: Sequence[TrackEstimate],
                            means: np.ndarray, ended: Sequence[int]) -> None:
