@@ -19,6 +19,105 @@ N_BINS = 512
 N_PARTS = 3
 
 
+# -- camera and appearance helpers ------------------------------------------------------------
+@njit(cache=True, nogil=True)
+def project_points(points, rot, t, kmat, dist):
+    """Pinhole projection with plumb_bob distortion of points (M, 3) -> (M, 2) pixels.
+
+    The arithmetic of OpenCV's ``projectPoints`` in its order (world -> camera with ``rot``,
+    divide by z (1 if z == 0), radial k1 k2 k3 and tangential p1 p2 terms, then K), so that
+    with ``rot`` the matrix OpenCV rebuilds from the Rodrigues vector the pixels are the
+    same bits. Points behind the camera are not masked here (see :meth:`Camera.project`).
+    """
+    n = points.shape[0]
+    out = np.empty((n, 2))
+    fx = kmat[0, 0]
+    fy = kmat[1, 1]
+    cx = kmat[0, 2]
+    cy = kmat[1, 2]
+    k1 = dist[0]
+    k2 = dist[1]
+    p1 = dist[2]
+    p2 = dist[3]
+    k3 = dist[4]
+    for i in range(n):
+        px = points[i, 0]
+        py = points[i, 1]
+        pz = points[i, 2]
+        xc = rot[0, 0] * px + rot[0, 1] * py + rot[0, 2] * pz + t[0]
+        yc = rot[1, 0] * px + rot[1, 1] * py + rot[1, 2] * pz + t[1]
+        zc = rot[2, 0] * px + rot[2, 1] * py + rot[2, 2] * pz + t[2]
+        iz = 1.0 / zc if zc != 0.0 else 1.0
+        x = xc * iz
+        y = yc * iz
+        r2 = x * x + y * y
+        r4 = r2 * r2
+        r6 = r4 * r2
+        a1 = 2 * x * y
+        a2 = r2 + 2 * x * x
+        a3 = r2 + 2 * y * y
+        cdist = 1 + k1 * r2 + k2 * r4 + k3 * r6
+        # OpenCV's rational and thin-prism terms, all zero for plumb_bob (kept for the order)
+        icdist2 = 1.0 / (1 + 0.0 * r2 + 0.0 * r4 + 0.0 * r6)
+        xd = x * cdist * icdist2 + p1 * a1 + p2 * a2 + 0.0 * r2 + 0.0 * r4
+        yd = y * cdist * icdist2 + p1 * a3 + p2 * a1 + 0.0 * r2 + 0.0 * r4
+        out[i, 0] = xd * fx + cx
+        out[i, 1] = yd * fy + cy
+    return out
+
+
+@njit(cache=True, nogil=True)
+def quantize_rgb(image):
+    """(H, W, 3) C-contiguous uint8 RGB -> (H, W) int16 bins
+    ``(r >> 5) * 64 + (g >> 5) * 8 + (b >> 5)`` (one pass over the flat pixels)."""
+    h, w = image.shape[0], image.shape[1]
+    flat = image.reshape(h * w * 3)
+    out = np.empty(h * w, np.int16)
+    for i in range(h * w):
+        out[i] = (flat[3 * i] >> 5) * 64 + (flat[3 * i + 1] >> 5) * 8 + (flat[3 * i + 2] >> 5)
+    return out.reshape(h, w)
+
+
+@njit(cache=True, nogil=True)
+def _wrap_angle(a):
+    return np.mod(a + np.pi, 2.0 * np.pi) - np.pi
+
+
+@njit(cache=True, nogil=True)
+def nearest_two_views(rel, target, view_angles, n_views, va, vb, wa):
+    """003 Eq. 1-2 for relative angles rel (N,) of models target (N,): the two key views of
+    ``view_angles[target[i], :n_views[target[i]]]`` nearest in wrapped angle (ties to the
+    lower index, as a stable sort) into va, vb (N,) int64, and the weight of va
+    ``d_b / (d_a + d_b)`` (1 if both are 0) into wa (N,); a model with one key view: itself.
+    """
+    for i in range(rel.shape[0]):
+        k = target[i]
+        nv = n_views[k]
+        if nv == 1:
+            va[i] = 0
+            vb[i] = 0
+            wa[i] = 1.0
+            continue
+        ia = -1
+        ib = -1
+        da = np.inf
+        db = np.inf
+        for v in range(nv):
+            d = np.abs(_wrap_angle(rel[i] - view_angles[k, v]))
+            if ia < 0 or d < da:
+                ib = ia
+                db = da
+                ia = v
+                da = d
+            elif ib < 0 or d < db:
+                ib = v
+                db = d
+        total = da + db
+        va[i] = ia
+        vb[i] = ib
+        wa[i] = db / total if total > 0 else 1.0
+
+
 # -- rasterisation ----------------------------------------------------------------------------
 @njit(cache=True, nogil=True)
 def outline_points(end_px, end_depth, sitting, frac, half, parts, hip, width, scale, focal):

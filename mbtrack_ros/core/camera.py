@@ -23,6 +23,8 @@ import cv2
 import numpy as np
 import yaml
 
+from mbtrack_ros.core import _kernels
+
 __all__ = ['CalibrationError', 'Camera', 'RoomCalibration', 'look_at']
 
 
@@ -84,6 +86,11 @@ class Camera:
             object.__setattr__(self, 'frame_id', f'{self.name}_optical_frame')
         if self.K[0, 0] <= 0 or self.K[1, 1] <= 0:
             raise CalibrationError(f'{self.name}.K: focal lengths must be positive')
+        # the rotation matrix OpenCV's projectPoints rebuilds from the Rodrigues vector
+        # (differs from R in the last bits); project() uses it to give the same pixels
+        rvec, _ = cv2.Rodrigues(R)
+        object.__setattr__(self, '_projection_rotation', np.ascontiguousarray(
+            cv2.Rodrigues(rvec)[0], dtype=np.float64))
 
     # -- geometry -------------------------------------------------------------------------
     @property
@@ -122,9 +129,8 @@ class Camera:
         flat = points.reshape(-1, 3)
         if flat.shape[0] == 0:
             return np.zeros(points.shape[:-1] + (2,))
-        rvec, _ = cv2.Rodrigues(self.R)
-        pixels, _ = cv2.projectPoints(flat, rvec, self.t, self.K, self.dist)
-        pixels = pixels.reshape(-1, 2)
+        pixels = _kernels.project_points(np.ascontiguousarray(flat), self._projection_rotation,
+                                         self.t, self.K, self.dist)
         pixels[self.depth(flat) <= 1e-6] = np.nan
         return pixels.reshape(points.shape[:-1] + (2,))
 
