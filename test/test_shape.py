@@ -173,3 +173,39 @@ def test_row_step_and_errors():
         rasterize(cam, np.zeros((2, 6)), [BodyShape()])
     with pytest.raises(ShapeError):
         rasterize(cam, _state(), BodyShape(), row_step=0)
+
+
+def test_fused_outline_matches_projection_then_outline(rng):
+    """silhouette_outline's one-pass kernel against the straightforward composition:
+    Camera.project of the axis ends, then outline_points with width_scale of the relative
+    orientation and Camera.distance of the body centre (bit for bit)."""
+    from mbtrack_ros.core import _kernels
+    R, t = look_at((0.3, -3.0, 2.5), (0.5, 1.0, 0.8))
+    cams = [_camera(), Camera('d', 160, 120, [[110, 0, 79.3], [0, 104, 60.6], [0, 0, 1]],
+                              [-0.21, 0.04, 0.001, -0.0007, 0.012], R, t)]
+    n = 4000
+    states = np.zeros((n, 6))
+    states[:, :2] = rng.uniform(-5, 5, (n, 2))          # some behind / beside the cameras
+    states[:, THETA] = rng.uniform(-4, 4, n)
+    states[:, SIT] = rng.random(n) < 0.3
+    heights = rng.uniform(1.5, 1.9, n)
+    widths = rng.uniform(0.4, 0.6, n)
+    shape = BodyShape()
+    for cam in cams:
+        got = silhouette_outline(cam, states, shape, heights=heights, widths=widths)
+        sitting = states[:, SIT] >= 0.5
+        zb = np.where(sitting, shape.chair_height, 0.0)
+        zt = np.where(sitting, shape.chair_height + (1.0 - shape.hip_fraction) * heights,
+                      heights)
+        ends = np.stack([np.stack([states[:, X], states[:, Y], zb], 1),
+                         np.stack([states[:, X], states[:, Y], zt], 1)], 1)
+        rel = states[:, THETA] - cam.viewing_angle(states[:, :2])
+        ref = _kernels.outline_points(
+            np.ascontiguousarray(cam.project(ends)), cam.depth(ends), sitting,
+            shape.fractions, shape.half_widths, shape.segment_parts, shape.hip_fraction,
+            widths, width_scale(rel), cam.focal)
+        centre = np.stack([states[:, X], states[:, Y], 0.5 * (zb + zt)], axis=1)
+        ref = ref + (np.where(ref[3], cam.distance(centre), np.inf),)
+        assert 0 < got[3].sum() < n
+        for a, b in zip(got, ref):
+            assert np.array_equal(a, b)

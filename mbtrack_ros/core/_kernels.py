@@ -21,48 +21,41 @@ N_PARTS = 3
 
 # -- camera and appearance helpers ------------------------------------------------------------
 @njit(cache=True, nogil=True)
-def project_points(points, rot, t, kmat, dist):
-    """Pinhole projection with plumb_bob distortion of points (M, 3) -> (M, 2) pixels.
+def _project_one(px, py, pz, rot, t, kmat, dist):
+    """One world point -> distorted pixel (u, v): the arithmetic of OpenCV's
+    ``projectPoints`` in its order (world -> camera with ``rot``, divide by z (1 if z == 0),
+    radial k1 k2 k3 and tangential p1 p2 terms, then K), so that with ``rot`` the matrix
+    OpenCV rebuilds from the Rodrigues vector the pixels are the same bits."""
+    xc = rot[0, 0] * px + rot[0, 1] * py + rot[0, 2] * pz + t[0]
+    yc = rot[1, 0] * px + rot[1, 1] * py + rot[1, 2] * pz + t[1]
+    zc = rot[2, 0] * px + rot[2, 1] * py + rot[2, 2] * pz + t[2]
+    iz = 1.0 / zc if zc != 0.0 else 1.0
+    x = xc * iz
+    y = yc * iz
+    r2 = x * x + y * y
+    r4 = r2 * r2
+    r6 = r4 * r2
+    a1 = 2 * x * y
+    a2 = r2 + 2 * x * x
+    a3 = r2 + 2 * y * y
+    cdist = 1 + dist[0] * r2 + dist[1] * r4 + dist[4] * r6
+    # OpenCV's rational and thin-prism terms, all zero for plumb_bob (kept for the order)
+    icdist2 = 1.0 / (1 + 0.0 * r2 + 0.0 * r4 + 0.0 * r6)
+    xd = x * cdist * icdist2 + dist[2] * a1 + dist[3] * a2 + 0.0 * r2 + 0.0 * r4
+    yd = y * cdist * icdist2 + dist[2] * a3 + dist[3] * a1 + 0.0 * r2 + 0.0 * r4
+    return xd * kmat[0, 0] + kmat[0, 2], yd * kmat[1, 1] + kmat[1, 2]
 
-    The arithmetic of OpenCV's ``projectPoints`` in its order (world -> camera with ``rot``,
-    divide by z (1 if z == 0), radial k1 k2 k3 and tangential p1 p2 terms, then K), so that
-    with ``rot`` the matrix OpenCV rebuilds from the Rodrigues vector the pixels are the
-    same bits. Points behind the camera are not masked here (see :meth:`Camera.project`).
+
+@njit(cache=True, nogil=True)
+def project_points(points, rot, t, kmat, dist):
+    """Pinhole projection with plumb_bob distortion of points (M, 3) -> (M, 2) pixels
+    (:func:`_project_one`); points behind the camera are masked by :meth:`Camera.project`.
     """
     n = points.shape[0]
     out = np.empty((n, 2))
-    fx = kmat[0, 0]
-    fy = kmat[1, 1]
-    cx = kmat[0, 2]
-    cy = kmat[1, 2]
-    k1 = dist[0]
-    k2 = dist[1]
-    p1 = dist[2]
-    p2 = dist[3]
-    k3 = dist[4]
     for i in range(n):
-        px = points[i, 0]
-        py = points[i, 1]
-        pz = points[i, 2]
-        xc = rot[0, 0] * px + rot[0, 1] * py + rot[0, 2] * pz + t[0]
-        yc = rot[1, 0] * px + rot[1, 1] * py + rot[1, 2] * pz + t[1]
-        zc = rot[2, 0] * px + rot[2, 1] * py + rot[2, 2] * pz + t[2]
-        iz = 1.0 / zc if zc != 0.0 else 1.0
-        x = xc * iz
-        y = yc * iz
-        r2 = x * x + y * y
-        r4 = r2 * r2
-        r6 = r4 * r2
-        a1 = 2 * x * y
-        a2 = r2 + 2 * x * x
-        a3 = r2 + 2 * y * y
-        cdist = 1 + k1 * r2 + k2 * r4 + k3 * r6
-        # OpenCV's rational and thin-prism terms, all zero for plumb_bob (kept for the order)
-        icdist2 = 1.0 / (1 + 0.0 * r2 + 0.0 * r4 + 0.0 * r6)
-        xd = x * cdist * icdist2 + p1 * a1 + p2 * a2 + 0.0 * r2 + 0.0 * r4
-        yd = y * cdist * icdist2 + p1 * a3 + p2 * a1 + 0.0 * r2 + 0.0 * r4
-        out[i, 0] = xd * fx + cx
-        out[i, 1] = yd * fy + cy
+        out[i, 0], out[i, 1] = _project_one(points[i, 0], points[i, 1], points[i, 2], rot, t,
+                                            kmat, dist)
     return out
 
 
@@ -120,6 +113,43 @@ def nearest_two_views(rel, target, view_angles, n_views, va, vb, wa):
 
 # -- rasterisation ----------------------------------------------------------------------------
 @njit(cache=True, nogil=True)
+def _outline_one(i, bx, by, tx, ty, d0, d1, sit, frac, half, parts, hip, width, scale, focal,
+                 left, right, seg_part):
+    """Outline of particle i from its projected axis ends (b: bottom, t: top) and their
+    depths d0, d1 into left/right[i] and seg_part[i]; False (nothing written but seg_part)
+    if an end is behind the camera or not finite. See :func:`outline_points`."""
+    npts = frac.shape[0]
+    for j in range(npts - 1):
+        seg_part[i, j] = 0 if (sit and frac[j] < hip - 1e-12) else parts[j]
+    if not (d0 > 1e-3 and d1 > 1e-3 and np.isfinite(bx) and np.isfinite(by)
+            and np.isfinite(tx) and np.isfinite(ty)):
+        return False
+    dx = tx - bx
+    dy = ty - by
+    norm = np.sqrt(dx * dx + dy * dy)
+    if norm > 1e-9:
+        nx = -dy / norm
+        ny = dx / norm
+    else:                                   # camera looking straight down the axis
+        nx = 1.0
+        ny = 0.0
+    for j in range(npts):
+        fj = frac[j]
+        if sit:
+            fj = max((fj - hip) / (1.0 - hip), 0.0)
+        dep = (1.0 - fj) * d0 + fj * d1
+        g = fj * d1 / dep
+        ax = bx + g * dx
+        ay = by + g * dy
+        off = half[j] * width * focal / dep * scale
+        left[i, j, 0] = ax - nx * off
+        left[i, j, 1] = ay - ny * off
+        right[i, j, 0] = ax + nx * off
+        right[i, j, 1] = ay + ny * off
+    return True
+
+
+@njit(cache=True, nogil=True)
 def outline_points(end_px, end_depth, sitting, frac, half, parts, hip, width, scale, focal):
     """Outline points left/right of the body axis at the profile heights (003 §2.1).
 
@@ -150,42 +180,60 @@ def outline_points(end_px, end_depth, sitting, frac, half, parts, hip, width, sc
     seg_part = np.empty((n, npts - 1), np.int8)
     valid = np.zeros(n, np.bool_)
     for i in range(n):
-        sit = sitting[i]
-        for j in range(npts - 1):
-            seg_part[i, j] = 0 if (sit and frac[j] < hip - 1e-12) else parts[j]
-        bx = end_px[i, 0, 0]
-        by = end_px[i, 0, 1]
-        tx = end_px[i, 1, 0]
-        ty = end_px[i, 1, 1]
+        valid[i] = _outline_one(i, end_px[i, 0, 0], end_px[i, 0, 1], end_px[i, 1, 0],
+                                end_px[i, 1, 1], end_depth[i, 0], end_depth[i, 1], sitting[i],
+                                frac, half, parts, hip, width[i], scale[i], focal, left, right,
+                                seg_part)
+    return left, right, seg_part, valid
+
+
+@njit(cache=True, nogil=True)
+def body_outline(ends, end_depth, theta, sitting, frac, half, parts, hip, width, rot, t, kmat,
+                 dist, centre, focal):
+    """:func:`outline_points` with the projection and the per-particle camera geometry in the
+    same pass (the same operations as ``Camera.project``, ``Camera.viewing_angle``,
+    ``width_scale`` and ``Camera.distance`` one particle at a time).
+
+    Args:
+        ends: (N, 2, 3) world bottom / top axis points; end_depth (N, 2) their optical
+            depths (``Camera.depth``); theta (N,) body orientations; rot, t, kmat, dist the
+            camera (see :func:`_project_one`), centre (3,) its centre.
+        the rest as :func:`outline_points`.
+
+    Returns:
+        left, right, seg_part, valid as :func:`outline_points`, and distance (N,) from the
+        camera centre to the middle of the axis (+inf if not valid).
+    """
+    n = ends.shape[0]
+    npts = frac.shape[0]
+    left = np.zeros((n, npts, 2))
+    right = np.zeros((n, npts, 2))
+    seg_part = np.empty((n, npts - 1), np.int8)
+    valid = np.zeros(n, np.bool_)
+    distance = np.empty(n)
+    for i in range(n):
+        x = ends[i, 0, 0]
+        y = ends[i, 0, 1]
         d0 = end_depth[i, 0]
         d1 = end_depth[i, 1]
-        if not (d0 > 1e-3 and d1 > 1e-3 and np.isfinite(bx) and np.isfinite(by)
-                and np.isfinite(tx) and np.isfinite(ty)):
-            continue
-        valid[i] = True
-        dx = tx - bx
-        dy = ty - by
-        norm = np.sqrt(dx * dx + dy * dy)
-        if norm > 1e-9:
-            nx = -dy / norm
-            ny = dx / norm
-        else:                                   # camera looking straight down the axis
-            nx = 1.0
-            ny = 0.0
-        for j in range(npts):
-            fj = frac[j]
-            if sit:
-                fj = max((fj - hip) / (1.0 - hip), 0.0)
-            dep = (1.0 - fj) * d0 + fj * d1
-            g = fj * d1 / dep
-            ax = bx + g * dx
-            ay = by + g * dy
-            off = half[j] * width[i] * focal / dep * scale[i]
-            left[i, j, 0] = ax - nx * off
-            left[i, j, 1] = ay - ny * off
-            right[i, j, 0] = ax + nx * off
-            right[i, j, 1] = ay + ny * off
-    return left, right, seg_part, valid
+        bx = by = tx = ty = np.nan          # Camera.project: NaN behind the camera
+        if d0 > 1e-6:
+            bx, by = _project_one(x, y, ends[i, 0, 2], rot, t, kmat, dist)
+        if d1 > 1e-6:
+            tx, ty = _project_one(ends[i, 1, 0], ends[i, 1, 1], ends[i, 1, 2], rot, t, kmat,
+                                  dist)
+        rel = theta[i] - np.arctan2(centre[1] - y, centre[0] - x)
+        scale = 0.7 + 0.3 * np.abs(np.cos(rel))           # width_scale, 003 §2.1
+        valid[i] = _outline_one(i, bx, by, tx, ty, d0, d1, sitting[i], frac, half, parts, hip,
+                                width[i], scale, focal, left, right, seg_part)
+        if valid[i]:
+            ex = x - centre[0]
+            ey = y - centre[1]
+            ez = 0.5 * (ends[i, 0, 2] + ends[i, 1, 2]) - centre[2]
+            distance[i] = np.sqrt(ex * ex + ey * ey + ez * ez)
+        else:
+            distance[i] = np.inf
+    return left, right, seg_part, valid, distance
 
 
 @njit(cache=True, nogil=True)
