@@ -289,3 +289,25 @@ def test_view_weights_match_per_model_version():
             ref = _interpolation_numpy(m.view_angles, rel[sel])
             for got, want in zip((va[c, sel], vb[c, sel], wa[c, sel]), ref):
                 np.testing.assert_array_equal(got, want)
+
+
+def test_completed_histograms_cache_follows_view_changes():
+    rng = np.random.default_rng(7)
+    hists = rng.random((3, 3, 512))
+    hists[1, 2] = 0.0                                   # legs never seen in view 1
+    model = PersonModel(1.7, 0.5, [0.0, 1.0, 2.5], hists)
+    fresh = lambda m: m._complete()                     # noqa: E731 (uncached)
+    first = model.completed_histograms()
+    np.testing.assert_array_equal(first, fresh(model))
+    np.testing.assert_array_equal(first[1, 2], model.histograms[0, 2])   # from the nearest
+    first[:] = 0.0                                       # a returned copy: cache unharmed
+    np.testing.assert_array_equal(model.completed_histograms(), fresh(model))
+    model.view_angles[0] = -0.8                          # in place: view 2 is now nearer
+    np.testing.assert_array_equal(model.completed_histograms()[1, 2],
+                                  model.histograms[2, 2])
+    model.histograms[2, 2, :] = 0.0                      # in place: donor lost its legs
+    model.histograms[2, 2, 5] = 1.0
+    np.testing.assert_array_equal(model.completed_histograms(), fresh(model))
+    model.add_view(-2.0, rng.random((3, 512)))
+    assert model.completed_histograms().shape == (4, 3, 512)
+    np.testing.assert_array_equal(model.completed_histograms(), fresh(model))

@@ -119,13 +119,29 @@ class PersonModel:
         is; for key views 90 degrees apart both forms coincide.) One key view -> itself.
         """
         va, vb, wa = self.interpolation_weights(rel_angles)
-        hists = self.completed_histograms()
+        hists = self._completed()
         return (wa[:, None, None] * hists[va] + (1.0 - wa)[:, None, None] * hists[vb])
 
     def completed_histograms(self) -> np.ndarray:
         """Key views (V, 3, 512) with parts never seen in a view (e.g. the legs of a view
         acquired while sitting) taken from the angularly nearest view that has them, so
         that interpolated part histograms stay normalised."""
+        return self._completed().copy()
+
+    def _completed(self) -> np.ndarray:
+        """:meth:`completed_histograms` (not to be modified), recomputed only when the key
+        views changed: the views it was made from are kept and compared by value, so
+        in-place edits of ``histograms`` / ``view_angles`` are seen too."""
+        cache = getattr(self, '_completed_cache', None)
+        if (cache is None or cache[0].shape != self.histograms.shape
+                or cache[1].shape != self.view_angles.shape
+                or not np.array_equal(cache[0], self.histograms)
+                or not np.array_equal(cache[1], self.view_angles)):
+            cache = (self.histograms.copy(), self.view_angles.copy(), self._complete())
+            self._completed_cache = cache
+        return cache[2]
+
+    def _complete(self) -> np.ndarray:
         hists = self.histograms.copy()
         seen = hists.sum(axis=2) > 0                               # (V, 3)
         if seen.all() or self.view_angles.size < 2:
@@ -270,8 +286,7 @@ def key_view_stack(models: Sequence[PersonModel]) -> np.ndarray:
     vmax = max((m.view_angles.size for m in models), default=1)
     key = np.zeros((len(models), max(vmax, 1), N_PARTS * N_BINS))
     for k, m in enumerate(models):
-        key[k, :m.view_angles.size] = m.completed_histograms().reshape(
-            m.view_angles.size, -1)
+        key[k, :m.view_angles.size] = m._completed().reshape(m.view_angles.size, -1)
     return key
 
 
