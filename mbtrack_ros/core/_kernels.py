@@ -236,56 +236,31 @@ def body_outline(ends, end_depth, theta, sitting, frac, half, parts, hip, width,
     return left, right, seg_part, valid, distance
 
 
-@njit(cache=True, nogil=True)
-def _quad_edges(i, j, left, right, edges):
-    """Edges of the convex quad of segment j of particle i -> edges (4, 4) rows
-    ``(y_top, y_bottom, x_at_top, dx/dy)`` (horizontal edges get y_top == y_bottom) and
-    the quad's y range.
+@njit(cache=True, nogil=True, inline='always')
+def _edge(ax, ay, bx, by):
+    """One edge of a convex quad -> ``(y_top, y_bottom, x_at_top, dx/dy)`` (horizontal edges
+    get y_top == y_bottom), kept in registers by the caller.
 
     Each edge is parametrised from its sorted end points, so two quads sharing an edge get
     bit-identical crossings: with the half-open rules ``y_top <= y < y_bottom`` and
     ``ceil(xl) <= c < ceil(xr)`` neighbouring quads never claim the same pixel.
     """
-    ylo = np.inf
-    yhi = -np.inf
-    for e in range(4):
-        # vertices in order left[j], right[j], right[j + 1], left[j + 1]
-        if e == 0:
-            ax, ay, bx, by = left[i, j, 0], left[i, j, 1], right[i, j, 0], right[i, j, 1]
-        elif e == 1:
-            ax, ay = right[i, j, 0], right[i, j, 1]
-            bx, by = right[i, j + 1, 0], right[i, j + 1, 1]
-        elif e == 2:
-            ax, ay = right[i, j + 1, 0], right[i, j + 1, 1]
-            bx, by = left[i, j + 1, 0], left[i, j + 1, 1]
-        else:
-            ax, ay, bx, by = left[i, j + 1, 0], left[i, j + 1, 1], left[i, j, 0], left[i, j, 1]
-        if ay > by or (ay == by and ax > bx):
-            ax, bx = bx, ax
-            ay, by = by, ay
-        edges[e, 0] = ay
-        edges[e, 1] = by
-        edges[e, 2] = ax
-        edges[e, 3] = (bx - ax) / (by - ay) if by > ay else 0.0
-        ylo = min(ylo, ay)
-        yhi = max(yhi, by)
-    return ylo, yhi
+    if ay > by or (ay == by and ax > bx):
+        ax, bx = bx, ax
+        ay, by = by, ay
+    return ay, by, ax, (bx - ax) / (by - ay) if by > ay else 0.0
 
 
-@njit(cache=True, nogil=True)
-def _row_interval(y, edges):
-    """Scanline ``y`` against a convex quad's edges -> (xl, xr, hit)."""
-    xl = np.inf
-    xr = -np.inf
-    hit = False
-    for e in range(4):
-        if edges[e, 0] <= y < edges[e, 1]:
-            x = edges[e, 2] + (y - edges[e, 0]) * edges[e, 3]
-            if x < xl:
-                xl = x
-            if x > xr:
-                xr = x
-            hit = True
+@njit(cache=True, nogil=True, inline='always')
+def _cross(y, edge, xl, xr, hit):
+    """Scanline ``y`` against one edge: widen the interval (xl, xr); hit if it crosses."""
+    if edge[0] <= y < edge[1]:
+        x = edge[2] + (y - edge[0]) * edge[3]
+        if x < xl:
+            xl = x
+        if x > xr:
+            xr = x
+        hit = True
     return xl, xr, hit
 
 
@@ -295,7 +270,7 @@ def rasterize_quads(left, right, seg_part, valid, width, height, row_step, row_l
 
     Every profile segment j of a particle is the convex quad left[j], right[j],
     right[j + 1], left[j + 1]; a pixel belongs to it when its centre (integer coordinates)
-    is inside (half-open rules, see :func:`_row_interval`), so neighbouring quads never
+    is inside (half-open rules, see :func:`_edge`), so neighbouring quads never
     share a pixel. One span per quad and row.
 
     Args:
@@ -315,7 +290,6 @@ def rasterize_quads(left, right, seg_part, valid, width, height, row_step, row_l
     """
     n = left.shape[0]
     nseg = left.shape[1] - 1
-    edges = np.empty((4, 4))
     ub = 0                                   # rows inside the image: bounds the span count
     for i in range(n):
         if not valid[i]:
@@ -357,14 +331,25 @@ def rasterize_quads(left, right, seg_part, valid, width, height, row_step, row_l
             q = seg_part[i, j]
             if q == 0:
                 continue
-            ylo, yhi = _quad_edges(i, j, left, right, edges)
+            # vertices in order left[j], right[j], right[j + 1], left[j + 1]
+            e0 = _edge(left[i, j, 0], left[i, j, 1], right[i, j, 0], right[i, j, 1])
+            e1 = _edge(right[i, j, 0], right[i, j, 1], right[i, j + 1, 0], right[i, j + 1, 1])
+            e2 = _edge(right[i, j + 1, 0], right[i, j + 1, 1], left[i, j + 1, 0],
+                       left[i, j + 1, 1])
+            e3 = _edge(left[i, j + 1, 0], left[i, j + 1, 1], left[i, j, 0], left[i, j, 1])
+            ylo = min(min(e0[0], e1[0]), min(e2[0], e3[0]))
+            yhi = max(max(e0[1], e1[1]), max(e2[1], e3[1]))
             r0 = max(int(np.ceil(ylo)), -row_limit)
             r1 = min(int(np.ceil(yhi)), height + row_limit)
             if row_step > 1:
                 r0 = r0 + (-r0) % row_step
             qa = 0
             for r in range(r0, r1, row_step):
-                xl, xr, hit = _row_interval(float(r), edges)
+                y = float(r)
+                xl, xr, hit = _cross(y, e0, np.inf, -np.inf, False)
+                xl, xr, hit = _cross(y, e1, xl, xr, hit)
+                xl, xr, hit = _cross(y, e2, xl, xr, hit)
+                xl, xr, hit = _cross(y, e3, xl, xr, hit)
                 if not hit:
                     continue
                 c0 = int(np.ceil(xl))
