@@ -1,4 +1,5 @@
-"""Filter speed tools of docs/live_measurements.md, "Filter speed (h-filt)".
+"""Filter speed tools of docs/live_measurements.md, "Filter speed (h-filt)" and "Filter
+speed, outside the kernel (h-filt2)".
 
 Usage (PYTHONPATH=<tree> /work/main/.venv/bin/python docs/filter_bench.py ...):
   capture REC FRAMES OUT.pkl    pickle HJSFilter.step's inputs (particles, weights, models,
@@ -16,6 +17,9 @@ Usage (PYTHONPATH=<tree> /work/main/.venv/bin/python docs/filter_bench.py ...):
   balance CAPS.pkl              per-camera kernel CPU (one thread) and the time two threads
                                 need for the four kernels, cameras in calibration order or
                                 longest first by the previous frame's times
+  outside CAPS.pkl REPS         MeasurementModel.hjs on one thread over the captures: CPU per
+                                frame, of it in hjs_camera_ws and the rest (outside the
+                                kernel), ms p50; run it with the old and the new tree in turn
   predict                       CPU per predict() call on 100 particles (2000 calls)
   profile REC FRAMES OUT.json   step_profile.py plus process CPU time and the filter's track
                                 count per frame
@@ -216,6 +220,37 @@ def balance(caps: str) -> None:
         print(f'{name}: {np.median(v):.2f} / {np.percentile(v, 95):.2f} ms p50 / p95')
 
 
+def outside(caps: str, reps: str) -> None:
+    d = pickle.load(open(caps, 'rb'))
+    mm = _model(d, threads=1)
+    spent, orig = [0.0], _kernels.hjs_camera_ws
+
+    def timed(*a):
+        t0 = time.thread_time()
+        r = orig(*a)
+        spent[0] += time.thread_time() - t0
+        return r
+
+    _kernels.hjs_camera_ws = timed
+    total, kern = [], []
+    for rep in range(int(reps) + 1):                 # the first pass warms up
+        for c in d['caps']:
+            ids = list(c['particles'])
+            spent[0] = 0.0
+            t0 = time.thread_time()
+            mm.set_images(c['images'])
+            mm.hjs([c['particles'][t] for t in ids], [np.exp(c['logw'][t]) for t in ids],
+                   [c['models'][t] for t in ids])
+            if rep:
+                total.append(time.thread_time() - t0)
+                kern.append(spent[0])
+    _kernels.hjs_camera_ws = orig
+    total, kern = np.array(total) * 1e3, np.array(kern) * 1e3
+    print(f'hjs CPU ms per frame p50 {np.median(total):.2f}: kernel {np.median(kern):.2f}, '
+          f'outside the kernel {np.median(total - kern):.2f} '
+          f'(p95 {np.percentile(total - kern, 95):.2f})')
+
+
 def predict() -> None:
     from mbtrack_ros.core.dynamics import MotionConfig
     from mbtrack_ros.core.dynamics import predict as move
@@ -258,4 +293,5 @@ def table(*paths: str) -> None:
 
 if __name__ == '__main__':
     dict(capture=capture, step=step, compare=compare, kernel=kernel, balance=balance,
-         predict=predict, profile=profile, table=table)[sys.argv[1]](*sys.argv[2:])
+         outside=outside, predict=predict, profile=profile,
+         table=table)[sys.argv[1]](*sys.argv[2:])

@@ -6,7 +6,8 @@ import pytest
 
 from mbtrack_ros.core.appearance import (AppearanceError, PersonModel,
                                          bhattacharyya_distance_sq, model_from_images,
-                                         part_histograms, quantize, single_target_loglik)
+                                         part_histograms, quantize, relative_angle,
+                                         single_target_loglik, view_weights)
 from mbtrack_ros.core.camera import Camera, RoomCalibration, look_at
 from mbtrack_ros.core.shape import BodyShape, rasterize, render_labels
 from mbtrack_ros.core.state import THETA, X, Y
@@ -223,3 +224,90 @@ def test_key_view_loglik_equals_interpolated_histograms():
         lazy = key_view_loglik(bins, sil, key, target, va[c], vb[c], wa[c])
         assert np.any(plain < -0.1)
         np.testing.assert_allclose(lazy, plain, rtol=0, atol=1e-12)
+
+
+def _quantize_numpy(image):
+    q = image >> 5
+    return (q[..., 0].astype(np.int16) * 64 + q[..., 1].astype(np.int16) * 8
+            + q[..., 2].astype(np.int16))
+
+
+def test_quantize_matches_numpy_version():
+    img = np.random.default_rng(4).integers(0, 256, (37, 80, 3), dtype=np.uint8)
+    for view in (img, img[:, ::3], img[::-1]):           # contiguous and strided
+        got = quantize(view)
+        assert got.dtype == np.int16 and got.shape == view.shape[:2]
+        np.testing.assert_array_equal(got, _quantize_numpy(view))
+
+
+def _interpolation_numpy(view_angles, rel):
+    """The straightforward version: sort the wrapped distances to all key views."""
+    wrap = lambda a: (a + np.pi) % (2.0 * np.pi) - np.pi   # noqa: E731
+    if view_angles.size == 1:
+        zero = np.zeros(rel.size, np.int64)
+        return zero, zero, np.ones(rel.size)
+    dist = np.abs(wrap(rel[:, None] - view_angles[None, :]))
+    idx = np.argsort(dist, axis=1, kind='stable')[:, :2]
+    da = np.take_along_axis(dist, idx[:, :1], axis=1)[:, 0]
+    db = np.take_along_axis(dist, idx[:, 1:2], axis=1)[:, 0]
+    total = da + db
+    wa = np.where(total > 0, db / np.where(total > 0, total, 1.0), 1.0)
+    return idx[:, 0], idx[:, 1], wa
+
+
+def test_interpolation_weights_match_sorting_version():
+    rng = np.random.default_rng(5)
+    for n_views in (1, 2, 3, 5, 8):
+        model = PersonModel(1.7, 0.5, rng.uniform(-np.pi, np.pi, n_views),
+                            rng.random((n_views, 3, 512)))
+        rel = rng.uniform(-7, 7, 500)
+        rel[:20] = model.view_angles[rng.integers(0, n_views, 20)]     # on a key view
+        got = model.interpolation_weights(rel)
+        for a, b in zip(got, _interpolation_numpy(model.view_angles, rel)):
+            np.testing.assert_array_equal(a, b)
+    # ties go to the lower index, as a stable sort: 0 is equally far from +-pi/2
+    model = PersonModel(1.7, 0.5, [np.pi / 2, 0.3, -np.pi / 2], np.ones((3, 3, 512)))
+    va, vb, wa = model.interpolation_weights(np.array([0.0, np.pi]))
+    np.testing.assert_array_equal(va, [1, 0])
+    np.testing.assert_array_equal(vb, [0, 2])
+
+
+def test_view_weights_match_per_model_version():
+    rng = np.random.default_rng(6)
+    cams = [_camera('a'), _camera('b', eye=(3.0, 2.0, 2.5))]
+    models = [PersonModel(1.7, 0.5, rng.uniform(-np.pi, np.pi, v), rng.random((v, 3, 512)))
+              for v in (1, 4, 2)]
+    states = np.zeros((300, 6))
+    states[:, :2] = rng.uniform(-2, 2, (300, 2))
+    states[:, THETA] = rng.uniform(-np.pi, np.pi, 300)
+    target = rng.integers(0, 3, 300)
+    va, vb, wa = view_weights(cams, states, target, models)
+    for c, cam in enumerate(cams):
+        rel = relative_angle(states[:, THETA], cam.viewing_angle(states[:, [X, Y]]))
+        for k, m in enumerate(models):
+            sel = target == k
+            ref = _interpolation_numpy(m.view_angles, rel[sel])
+            for got, want in zip((va[c, sel], vb[c, sel], wa[c, sel]), ref):
+                np.testing.assert_array_equal(got, want)
+
+
+def test_completed_histograms_cache_follows_view_changes():
+    rng = np.random.default_rng(7)
+    hists = rng.random((3, 3, 512))
+    hists[1, 2] = 0.0                                   # legs never seen in view 1
+    model = PersonModel(1.7, 0.5, [0.0, 1.0, 2.5], hists)
+    fresh = lambda m: m._complete()                     # noqa: E731 (uncached)
+    first = model.completed_histograms()
+    np.testing.assert_array_equal(first, fresh(model))
+    np.testing.assert_array_equal(first[1, 2], model.histograms[0, 2])   # from the nearest
+    first[:] = 0.0                                       # a returned copy: cache unharmed
+    np.testing.assert_array_equal(model.completed_histograms(), fresh(model))
+    model.view_angles[0] = -0.8                          # in place: view 2 is now nearer
+    np.testing.assert_array_equal(model.completed_histograms()[1, 2],
+                                  model.histograms[2, 2])
+    model.histograms[2, 2, :] = 0.0                      # in place: donor lost its legs
+    model.histograms[2, 2, 5] = 1.0
+    np.testing.assert_array_equal(model.completed_histograms(), fresh(model))
+    model.add_view(-2.0, rng.random((3, 512)))
+    assert model.completed_histograms().shape == (4, 3, 512)
+    np.testing.assert_array_equal(model.completed_histograms(), fresh(model))

@@ -76,3 +76,25 @@ def test_missing_calibration_file(tmp_path):
 def test_not_a_rotation_is_refused():
     with pytest.raises(CalibrationError, match='rotation'):
         Camera('c', 10, 10, np.eye(3), [0] * 5, np.diag([1.0, 1.0, -1.0]), [0, 0, 0])
+
+
+def test_projection_matches_opencv_project_points_bit_for_bit(room, rng):
+    """The numba projection against cv2.projectPoints (the straightforward version), with
+    and without distortion, including points behind the camera (NaN there)."""
+    import cv2
+    cams = list(room.cameras.values())
+    R, t = look_at((0.3, -3.0, 2.5), (0.5, 1.0, 0.8))
+    cams.append(Camera('d', 320, 240, [[210, 0, 158.7], [0, 205, 121.2], [0, 0, 1]],
+                       [-0.21, 0.04, 0.001, -0.0007, 0.012], R, t))
+    pts = np.column_stack([rng.uniform(-4, 6, 5000), rng.uniform(-4, 6, 5000),
+                           rng.uniform(-0.5, 3.0, 5000)])
+    for cam in cams:
+        rvec, _ = cv2.Rodrigues(cam.R)
+        ref, _ = cv2.projectPoints(pts, rvec, cam.t, cam.K, cam.dist)
+        ref = ref.reshape(-1, 2)
+        ref[cam.depth(pts) <= 1e-6] = np.nan
+        got = cam.project(pts)
+        assert np.array_equal(got, ref, equal_nan=True), cam.name
+        assert np.isnan(got).any() and np.isfinite(got).any()
+        assert np.array_equal(cam.project(pts.reshape(50, 100, 3)), got.reshape(50, 100, 2),
+                              equal_nan=True)

@@ -173,3 +173,92 @@ def test_row_step_and_errors():
         rasterize(cam, np.zeros((2, 6)), [BodyShape()])
     with pytest.raises(ShapeError):
         rasterize(cam, _state(), BodyShape(), row_step=0)
+
+
+def test_fused_outline_matches_projection_then_outline(rng):
+    """silhouette_outline's one-pass kernel against the straightforward composition:
+    Camera.project of the axis ends, then outline_points with width_scale of the relative
+    orientation and Camera.distance of the body centre (bit for bit)."""
+    from mbtrack_ros.core import _kernels
+    R, t = look_at((0.3, -3.0, 2.5), (0.5, 1.0, 0.8))
+    cams = [_camera(), Camera('d', 160, 120, [[110, 0, 79.3], [0, 104, 60.6], [0, 0, 1]],
+                              [-0.21, 0.04, 0.001, -0.0007, 0.012], R, t)]
+    n = 4000
+    states = np.zeros((n, 6))
+    states[:, :2] = rng.uniform(-5, 5, (n, 2))          # some behind / beside the cameras
+    states[:, THETA] = rng.uniform(-4, 4, n)
+    states[:, SIT] = rng.random(n) < 0.3
+    heights = rng.uniform(1.5, 1.9, n)
+    widths = rng.uniform(0.4, 0.6, n)
+    shape = BodyShape()
+    for cam in cams:
+        got = silhouette_outline(cam, states, shape, heights=heights, widths=widths)
+        sitting = states[:, SIT] >= 0.5
+        zb = np.where(sitting, shape.chair_height, 0.0)
+        zt = np.where(sitting, shape.chair_height + (1.0 - shape.hip_fraction) * heights,
+                      heights)
+        ends = np.stack([np.stack([states[:, X], states[:, Y], zb], 1),
+                         np.stack([states[:, X], states[:, Y], zt], 1)], 1)
+        rel = states[:, THETA] - cam.viewing_angle(states[:, :2])
+        ref = _kernels.outline_points(
+            np.ascontiguousarray(cam.project(ends)), cam.depth(ends), sitting,
+            shape.fractions, shape.half_widths, shape.segment_parts, shape.hip_fraction,
+            widths, width_scale(rel), cam.focal)
+        centre = np.stack([states[:, X], states[:, Y], 0.5 * (zb + zt)], axis=1)
+        ref = ref + (np.where(ref[3], cam.distance(centre), np.inf),)
+        assert 0 < got[3].sum() < n
+        for a, b in zip(got, ref):
+            assert np.array_equal(a, b)
+
+
+def _raster_reference(left, right, seg_part, valid, width, height):
+    """Straightforward scan conversion (Python loops): per quad and row, the crossings of
+    the edges ``y_top <= y < y_bottom`` parametrised from their sorted end points, pixels
+    ``ceil(xl) <= c < ceil(xr)`` clipped to the image; spans, areas and span counts."""
+    spans, area, count = [], [], []
+    for i in range(left.shape[0]):
+        mine = []
+        for j in range(left.shape[1] - 1):
+            if not valid[i] or seg_part[i, j] == 0:
+                continue
+            quad = [left[i, j], right[i, j], right[i, j + 1], left[i, j + 1]]
+            edges = []
+            for a, b in zip(quad, quad[1:] + quad[:1]):
+                if a[1] > b[1] or (a[1] == b[1] and a[0] > b[0]):
+                    a, b = b, a
+                edges.append((a[1], b[1], a[0], (b[0] - a[0]) / (b[1] - a[1])
+                              if b[1] > a[1] else 0.0))
+            for r in range(int(np.ceil(min(e[0] for e in edges))),
+                           int(np.ceil(max(e[1] for e in edges)))):
+                xs = [e[2] + (r - e[0]) * e[3] for e in edges if e[0] <= r < e[1]]
+                if not xs or not 0 <= r < height:
+                    continue
+                c0 = max(int(np.ceil(min(xs))), 0)
+                c1 = min(int(np.ceil(max(xs))), width)
+                if c1 > c0:
+                    mine.append((r, c0, c1, seg_part[i, j]))
+        spans += mine
+        area.append(sum(c1 - c0 for _, c0, c1, _ in mine))
+        count.append(len(mine))
+    return np.array(spans, np.int64).reshape(-1, 4), np.array(area), np.array(count)
+
+
+def test_rasterize_quads_matches_straightforward_scan(rng):
+    from mbtrack_ros.core import _kernels
+    cam = _camera()
+    n = 150
+    states = np.zeros((n, 6))
+    states[:, :2] = rng.uniform(-3, 3, (n, 2))
+    states[:, THETA] = rng.uniform(-4, 4, n)
+    states[:, SIT] = rng.random(n) < 0.3
+    left, right, seg_part, valid, _ = silhouette_outline(cam, states, BodyShape())
+    left[:5] = np.round(left[:5])                 # vertices on pixel centres: the edge rules
+    right[:5] = np.round(right[:5])
+    row, x0, x1, part, offsets, area, *_ = _kernels.rasterize_quads(
+        left, right, seg_part, valid, cam.width, cam.height, 1, 10 * cam.height)
+    spans, ref_area, ref_count = _raster_reference(left, right, seg_part, valid, cam.width,
+                                                   cam.height)
+    got = np.column_stack([row, x0, x1, part]).astype(np.int64)
+    assert spans.shape[0] > 100 and np.array_equal(got, spans)
+    np.testing.assert_array_equal(area, ref_area)
+    np.testing.assert_array_equal(np.diff(offsets), ref_count)

@@ -19,7 +19,136 @@ N_BINS = 512
 N_PARTS = 3
 
 
+# -- camera and appearance helpers ------------------------------------------------------------
+@njit(cache=True, nogil=True)
+def _project_one(px, py, pz, rot, t, kmat, dist):
+    """One world point -> distorted pixel (u, v): the arithmetic of OpenCV's
+    ``projectPoints`` in its order (world -> camera with ``rot``, divide by z (1 if z == 0),
+    radial k1 k2 k3 and tangential p1 p2 terms, then K), so that with ``rot`` the matrix
+    OpenCV rebuilds from the Rodrigues vector the pixels are the same bits."""
+    xc = rot[0, 0] * px + rot[0, 1] * py + rot[0, 2] * pz + t[0]
+    yc = rot[1, 0] * px + rot[1, 1] * py + rot[1, 2] * pz + t[1]
+    zc = rot[2, 0] * px + rot[2, 1] * py + rot[2, 2] * pz + t[2]
+    iz = 1.0 / zc if zc != 0.0 else 1.0
+    x = xc * iz
+    y = yc * iz
+    r2 = x * x + y * y
+    r4 = r2 * r2
+    r6 = r4 * r2
+    a1 = 2 * x * y
+    a2 = r2 + 2 * x * x
+    a3 = r2 + 2 * y * y
+    cdist = 1 + dist[0] * r2 + dist[1] * r4 + dist[4] * r6
+    # OpenCV's rational and thin-prism terms, all zero for plumb_bob (kept for the order)
+    icdist2 = 1.0 / (1 + 0.0 * r2 + 0.0 * r4 + 0.0 * r6)
+    xd = x * cdist * icdist2 + dist[2] * a1 + dist[3] * a2 + 0.0 * r2 + 0.0 * r4
+    yd = y * cdist * icdist2 + dist[2] * a3 + dist[3] * a1 + 0.0 * r2 + 0.0 * r4
+    return xd * kmat[0, 0] + kmat[0, 2], yd * kmat[1, 1] + kmat[1, 2]
+
+
+@njit(cache=True, nogil=True)
+def project_points(points, rot, t, kmat, dist):
+    """Pinhole projection with plumb_bob distortion of points (M, 3) -> (M, 2) pixels
+    (:func:`_project_one`); points behind the camera are masked by :meth:`Camera.project`.
+    """
+    n = points.shape[0]
+    out = np.empty((n, 2))
+    for i in range(n):
+        out[i, 0], out[i, 1] = _project_one(points[i, 0], points[i, 1], points[i, 2], rot, t,
+                                            kmat, dist)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def quantize_rgb(image):
+    """(H, W, 3) C-contiguous uint8 RGB -> (H, W) int16 bins
+    ``(r >> 5) * 64 + (g >> 5) * 8 + (b >> 5)`` (one pass over the flat pixels)."""
+    h, w = image.shape[0], image.shape[1]
+    flat = image.reshape(h * w * 3)
+    out = np.empty(h * w, np.int16)
+    for i in range(h * w):
+        out[i] = (flat[3 * i] >> 5) * 64 + (flat[3 * i + 1] >> 5) * 8 + (flat[3 * i + 2] >> 5)
+    return out.reshape(h, w)
+
+
+@njit(cache=True, nogil=True)
+def _wrap_angle(a):
+    return np.mod(a + np.pi, 2.0 * np.pi) - np.pi
+
+
+@njit(cache=True, nogil=True)
+def nearest_two_views(rel, target, view_angles, n_views, va, vb, wa):
+    """003 Eq. 1-2 for relative angles rel (N,) of models target (N,): the two key views of
+    ``view_angles[target[i], :n_views[target[i]]]`` nearest in wrapped angle (ties to the
+    lower index, as a stable sort) into va, vb (N,) int64, and the weight of va
+    ``d_b / (d_a + d_b)`` (1 if both are 0) into wa (N,); a model with one key view: itself.
+    """
+    for i in range(rel.shape[0]):
+        k = target[i]
+        nv = n_views[k]
+        if nv == 1:
+            va[i] = 0
+            vb[i] = 0
+            wa[i] = 1.0
+            continue
+        ia = -1
+        ib = -1
+        da = np.inf
+        db = np.inf
+        for v in range(nv):
+            d = np.abs(_wrap_angle(rel[i] - view_angles[k, v]))
+            if ia < 0 or d < da:
+                ib = ia
+                db = da
+                ia = v
+                da = d
+            elif ib < 0 or d < db:
+                ib = v
+                db = d
+        total = da + db
+        va[i] = ia
+        vb[i] = ib
+        wa[i] = db / total if total > 0 else 1.0
+
+
 # -- rasterisation ----------------------------------------------------------------------------
+@njit(cache=True, nogil=True)
+def _outline_one(i, bx, by, tx, ty, d0, d1, sit, frac, half, parts, hip, width, scale, focal,
+                 left, right, seg_part):
+    """Outline of particle i from its projected axis ends (b: bottom, t: top) and their
+    depths d0, d1 into left/right[i] and seg_part[i]; False (nothing written but seg_part)
+    if an end is behind the camera or not finite. See :func:`outline_points`."""
+    npts = frac.shape[0]
+    for j in range(npts - 1):
+        seg_part[i, j] = 0 if (sit and frac[j] < hip - 1e-12) else parts[j]
+    if not (d0 > 1e-3 and d1 > 1e-3 and np.isfinite(bx) and np.isfinite(by)
+            and np.isfinite(tx) and np.isfinite(ty)):
+        return False
+    dx = tx - bx
+    dy = ty - by
+    norm = np.sqrt(dx * dx + dy * dy)
+    if norm > 1e-9:
+        nx = -dy / norm
+        ny = dx / norm
+    else:                                   # camera looking straight down the axis
+        nx = 1.0
+        ny = 0.0
+    for j in range(npts):
+        fj = frac[j]
+        if sit:
+            fj = max((fj - hip) / (1.0 - hip), 0.0)
+        dep = (1.0 - fj) * d0 + fj * d1
+        g = fj * d1 / dep
+        ax = bx + g * dx
+        ay = by + g * dy
+        off = half[j] * width * focal / dep * scale
+        left[i, j, 0] = ax - nx * off
+        left[i, j, 1] = ay - ny * off
+        right[i, j, 0] = ax + nx * off
+        right[i, j, 1] = ay + ny * off
+    return True
+
+
 @njit(cache=True, nogil=True)
 def outline_points(end_px, end_depth, sitting, frac, half, parts, hip, width, scale, focal):
     """Outline points left/right of the body axis at the profile heights (003 §2.1).
@@ -51,94 +180,87 @@ def outline_points(end_px, end_depth, sitting, frac, half, parts, hip, width, sc
     seg_part = np.empty((n, npts - 1), np.int8)
     valid = np.zeros(n, np.bool_)
     for i in range(n):
-        sit = sitting[i]
-        for j in range(npts - 1):
-            seg_part[i, j] = 0 if (sit and frac[j] < hip - 1e-12) else parts[j]
-        bx = end_px[i, 0, 0]
-        by = end_px[i, 0, 1]
-        tx = end_px[i, 1, 0]
-        ty = end_px[i, 1, 1]
-        d0 = end_depth[i, 0]
-        d1 = end_depth[i, 1]
-        if not (d0 > 1e-3 and d1 > 1e-3 and np.isfinite(bx) and np.isfinite(by)
-                and np.isfinite(tx) and np.isfinite(ty)):
-            continue
-        valid[i] = True
-        dx = tx - bx
-        dy = ty - by
-        norm = np.sqrt(dx * dx + dy * dy)
-        if norm > 1e-9:
-            nx = -dy / norm
-            ny = dx / norm
-        else:                                   # camera looking straight down the axis
-            nx = 1.0
-            ny = 0.0
-        for j in range(npts):
-            fj = frac[j]
-            if sit:
-                fj = max((fj - hip) / (1.0 - hip), 0.0)
-            dep = (1.0 - fj) * d0 + fj * d1
-            g = fj * d1 / dep
-            ax = bx + g * dx
-            ay = by + g * dy
-            off = half[j] * width[i] * focal / dep * scale[i]
-            left[i, j, 0] = ax - nx * off
-            left[i, j, 1] = ay - ny * off
-            right[i, j, 0] = ax + nx * off
-            right[i, j, 1] = ay + ny * off
+        valid[i] = _outline_one(i, end_px[i, 0, 0], end_px[i, 0, 1], end_px[i, 1, 0],
+                                end_px[i, 1, 1], end_depth[i, 0], end_depth[i, 1], sitting[i],
+                                frac, half, parts, hip, width[i], scale[i], focal, left, right,
+                                seg_part)
     return left, right, seg_part, valid
 
 
 @njit(cache=True, nogil=True)
-def _quad_edges(i, j, left, right, edges):
-    """Edges of the convex quad of segment j of particle i -> edges (4, 4) rows
-    ``(y_top, y_bottom, x_at_top, dx/dy)`` (horizontal edges get y_top == y_bottom) and
-    the quad's y range.
+def body_outline(ends, end_depth, theta, sitting, frac, half, parts, hip, width, rot, t, kmat,
+                 dist, centre, focal):
+    """:func:`outline_points` with the projection and the per-particle camera geometry in the
+    same pass (the same operations as ``Camera.project``, ``Camera.viewing_angle``,
+    ``width_scale`` and ``Camera.distance`` one particle at a time).
+
+    Args:
+        ends: (N, 2, 3) world bottom / top axis points; end_depth (N, 2) their optical
+            depths (``Camera.depth``); theta (N,) body orientations; rot, t, kmat, dist the
+            camera (see :func:`_project_one`), centre (3,) its centre.
+        the rest as :func:`outline_points`.
+
+    Returns:
+        left, right, seg_part, valid as :func:`outline_points`, and distance (N,) from the
+        camera centre to the middle of the axis (+inf if not valid).
+    """
+    n = ends.shape[0]
+    npts = frac.shape[0]
+    left = np.zeros((n, npts, 2))
+    right = np.zeros((n, npts, 2))
+    seg_part = np.empty((n, npts - 1), np.int8)
+    valid = np.zeros(n, np.bool_)
+    distance = np.empty(n)
+    for i in range(n):
+        x = ends[i, 0, 0]
+        y = ends[i, 0, 1]
+        d0 = end_depth[i, 0]
+        d1 = end_depth[i, 1]
+        bx = by = tx = ty = np.nan          # Camera.project: NaN behind the camera
+        if d0 > 1e-6:
+            bx, by = _project_one(x, y, ends[i, 0, 2], rot, t, kmat, dist)
+        if d1 > 1e-6:
+            tx, ty = _project_one(ends[i, 1, 0], ends[i, 1, 1], ends[i, 1, 2], rot, t, kmat,
+                                  dist)
+        rel = theta[i] - np.arctan2(centre[1] - y, centre[0] - x)
+        scale = 0.7 + 0.3 * np.abs(np.cos(rel))           # width_scale, 003 §2.1
+        valid[i] = _outline_one(i, bx, by, tx, ty, d0, d1, sitting[i], frac, half, parts, hip,
+                                width[i], scale, focal, left, right, seg_part)
+        if valid[i]:
+            ex = x - centre[0]
+            ey = y - centre[1]
+            ez = 0.5 * (ends[i, 0, 2] + ends[i, 1, 2]) - centre[2]
+            distance[i] = np.sqrt(ex * ex + ey * ey + ez * ez)
+        else:
+            distance[i] = np.inf
+    return left, right, seg_part, valid, distance
+
+
+@njit(cache=True, nogil=True, inline='always')
+def _edge(ax, ay, bx, by):
+    """One edge of a convex quad -> ``(y_top, y_bottom, x_at_top, dx/dy)`` (horizontal edges
+    get y_top == y_bottom), kept in registers by the caller.
 
     Each edge is parametrised from its sorted end points, so two quads sharing an edge get
     bit-identical crossings: with the half-open rules ``y_top <= y < y_bottom`` and
     ``ceil(xl) <= c < ceil(xr)`` neighbouring quads never claim the same pixel.
     """
-    ylo = np.inf
-    yhi = -np.inf
-    for e in range(4):
-        # vertices in order left[j], right[j], right[j + 1], left[j + 1]
-        if e == 0:
-            ax, ay, bx, by = left[i, j, 0], left[i, j, 1], right[i, j, 0], right[i, j, 1]
-        elif e == 1:
-            ax, ay = right[i, j, 0], right[i, j, 1]
-            bx, by = right[i, j + 1, 0], right[i, j + 1, 1]
-        elif e == 2:
-            ax, ay = right[i, j + 1, 0], right[i, j + 1, 1]
-            bx, by = left[i, j + 1, 0], left[i, j + 1, 1]
-        else:
-            ax, ay, bx, by = left[i, j + 1, 0], left[i, j + 1, 1], left[i, j, 0], left[i, j, 1]
-        if ay > by or (ay == by and ax > bx):
-            ax, bx = bx, ax
-            ay, by = by, ay
-        edges[e, 0] = ay
-        edges[e, 1] = by
-        edges[e, 2] = ax
-        edges[e, 3] = (bx - ax) / (by - ay) if by > ay else 0.0
-        ylo = min(ylo, ay)
-        yhi = max(yhi, by)
-    return ylo, yhi
+    if ay > by or (ay == by and ax > bx):
+        ax, bx = bx, ax
+        ay, by = by, ay
+    return ay, by, ax, (bx - ax) / (by - ay) if by > ay else 0.0
 
 
-@njit(cache=True, nogil=True)
-def _row_interval(y, edges):
-    """Scanline ``y`` against a convex quad's edges -> (xl, xr, hit)."""
-    xl = np.inf
-    xr = -np.inf
-    hit = False
-    for e in range(4):
-        if edges[e, 0] <= y < edges[e, 1]:
-            x = edges[e, 2] + (y - edges[e, 0]) * edges[e, 3]
-            if x < xl:
-                xl = x
-            if x > xr:
-                xr = x
-            hit = True
+@njit(cache=True, nogil=True, inline='always')
+def _cross(y, edge, xl, xr, hit):
+    """Scanline ``y`` against one edge: widen the interval (xl, xr); hit if it crosses."""
+    if edge[0] <= y < edge[1]:
+        x = edge[2] + (y - edge[0]) * edge[3]
+        if x < xl:
+            xl = x
+        if x > xr:
+            xr = x
+        hit = True
     return xl, xr, hit
 
 
@@ -148,7 +270,7 @@ def rasterize_quads(left, right, seg_part, valid, width, height, row_step, row_l
 
     Every profile segment j of a particle is the convex quad left[j], right[j],
     right[j + 1], left[j + 1]; a pixel belongs to it when its centre (integer coordinates)
-    is inside (half-open rules, see :func:`_row_interval`), so neighbouring quads never
+    is inside (half-open rules, see :func:`_edge`), so neighbouring quads never
     share a pixel. One span per quad and row.
 
     Args:
@@ -168,7 +290,6 @@ def rasterize_quads(left, right, seg_part, valid, width, height, row_step, row_l
     """
     n = left.shape[0]
     nseg = left.shape[1] - 1
-    edges = np.empty((4, 4))
     ub = 0                                   # rows inside the image: bounds the span count
     for i in range(n):
         if not valid[i]:
@@ -210,14 +331,25 @@ def rasterize_quads(left, right, seg_part, valid, width, height, row_step, row_l
             q = seg_part[i, j]
             if q == 0:
                 continue
-            ylo, yhi = _quad_edges(i, j, left, right, edges)
+            # vertices in order left[j], right[j], right[j + 1], left[j + 1]
+            e0 = _edge(left[i, j, 0], left[i, j, 1], right[i, j, 0], right[i, j, 1])
+            e1 = _edge(right[i, j, 0], right[i, j, 1], right[i, j + 1, 0], right[i, j + 1, 1])
+            e2 = _edge(right[i, j + 1, 0], right[i, j + 1, 1], left[i, j + 1, 0],
+                       left[i, j + 1, 1])
+            e3 = _edge(left[i, j + 1, 0], left[i, j + 1, 1], left[i, j, 0], left[i, j, 1])
+            ylo = min(min(e0[0], e1[0]), min(e2[0], e3[0]))
+            yhi = max(max(e0[1], e1[1]), max(e2[1], e3[1]))
             r0 = max(int(np.ceil(ylo)), -row_limit)
             r1 = min(int(np.ceil(yhi)), height + row_limit)
             if row_step > 1:
                 r0 = r0 + (-r0) % row_step
             qa = 0
             for r in range(r0, r1, row_step):
-                xl, xr, hit = _row_interval(float(r), edges)
+                y = float(r)
+                xl, xr, hit = _cross(y, e0, np.inf, -np.inf, False)
+                xl, xr, hit = _cross(y, e1, xl, xr, hit)
+                xl, xr, hit = _cross(y, e2, xl, xr, hit)
+                xl, xr, hit = _cross(y, e3, xl, xr, hit)
                 if not hit:
                     continue
                 c0 = int(np.ceil(xl))

@@ -38,9 +38,7 @@ def quantize(image: np.ndarray) -> np.ndarray:
     if image.ndim != 3 or image.shape[2] != 3 or image.dtype != np.uint8:
         raise AppearanceError(
             f'expected an (H, W, 3) uint8 RGB image, got {image.shape} {image.dtype}')
-    q = image >> 5
-    return (q[..., 0].astype(np.int16) * 64 + q[..., 1].astype(np.int16) * 8
-            + q[..., 2].astype(np.int16))
+    return _kernels.quantize_rgb(np.ascontiguousarray(image))
 
 
 def _wrap(angle: np.ndarray) -> np.ndarray:
@@ -121,13 +119,29 @@ class PersonModel:
         is; for key views 90 degrees apart both forms coincide.) One key view -> itself.
         """
         va, vb, wa = self.interpolation_weights(rel_angles)
-        hists = self.completed_histograms()
+        hists = self._completed()
         return (wa[:, None, None] * hists[va] + (1.0 - wa)[:, None, None] * hists[vb])
 
     def completed_histograms(self) -> np.ndarray:
         """Key views (V, 3, 512) with parts never seen in a view (e.g. the legs of a view
         acquired while sitting) taken from the angularly nearest view that has them, so
         that interpolated part histograms stay normalised."""
+        return self._completed().copy()
+
+    def _completed(self) -> np.ndarray:
+        """:meth:`completed_histograms` (not to be modified), recomputed only when the key
+        views changed: the views it was made from are kept and compared by value, so
+        in-place edits of ``histograms`` / ``view_angles`` are seen too."""
+        cache = getattr(self, '_completed_cache', None)
+        if (cache is None or cache[0].shape != self.histograms.shape
+                or cache[1].shape != self.view_angles.shape
+                or not np.array_equal(cache[0], self.histograms)
+                or not np.array_equal(cache[1], self.view_angles)):
+            cache = (self.histograms.copy(), self.view_angles.copy(), self._complete())
+            self._completed_cache = cache
+        return cache[2]
+
+    def _complete(self) -> np.ndarray:
         hists = self.histograms.copy()
         seen = hists.sum(axis=2) > 0                               # (V, 3)
         if seen.all() or self.view_angles.size < 2:
@@ -145,17 +159,13 @@ class PersonModel:
         :meth:`interpolate` (the likelihood kernels mix histograms lazily with them)."""
         if self.view_angles.size == 0:
             raise AppearanceError('person model has no key views')
-        rel = np.atleast_1d(np.asarray(rel_angles, dtype=np.float64))
-        if self.view_angles.size == 1:
-            zero = np.zeros(rel.size, np.int64)
-            return zero, zero.copy(), np.ones(rel.size)
-        dist = np.abs(_wrap(rel[:, None] - self.view_angles[None, :]))  # (N, V)
-        idx = np.argsort(dist, axis=1)[:, :2]
-        da = np.take_along_axis(dist, idx[:, :1], axis=1)[:, 0]
-        db = np.take_along_axis(dist, idx[:, 1:2], axis=1)[:, 0]
-        total = da + db
-        wa = np.where(total > 0, db / np.where(total > 0, total, 1.0), 1.0)
-        return idx[:, 0].astype(np.int64), idx[:, 1].astype(np.int64), wa
+        rel = np.ascontiguousarray(np.atleast_1d(np.asarray(rel_angles, dtype=np.float64)))
+        va = np.empty(rel.size, np.int64)
+        vb = np.empty(rel.size, np.int64)
+        wa = np.empty(rel.size)
+        _kernels.nearest_two_views(rel, np.zeros(rel.size, np.int64), self.view_angles[None],
+                                   np.array([self.view_angles.size]), va, vb, wa)
+        return va, vb, wa
 
     def add_view(self, angle: float, hists: np.ndarray, *,
                  merge_angle: float = MERGE_ANGLE) -> None:
@@ -276,8 +286,7 @@ def key_view_stack(models: Sequence[PersonModel]) -> np.ndarray:
     vmax = max((m.view_angles.size for m in models), default=1)
     key = np.zeros((len(models), max(vmax, 1), N_PARTS * N_BINS))
     for k, m in enumerate(models):
-        key[k, :m.view_angles.size] = m.completed_histograms().reshape(
-            m.view_angles.size, -1)
+        key[k, :m.view_angles.size] = m._completed().reshape(m.view_angles.size, -1)
     return key
 
 
@@ -285,21 +294,25 @@ def view_weights(cameras: Sequence[Camera], states: np.ndarray, target: np.ndarr
                  models: Sequence[PersonModel]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per camera and state, the two key views and the weight of the first (va, vb, wa),
     each (C, P) (003 Eq. 1-2), for the relative viewing angles of states (P, 6) of the
-    models ``models[target]`` in C cameras (one interpolation call per model)."""
+    models ``models[target]`` in C cameras (one numba pass per camera, no per-model work
+    beyond stacking the key-view angles)."""
     shape = (len(cameras), states.shape[0])
-    rel = np.empty(shape)
-    for c, cam in enumerate(cameras):
-        rel[c] = relative_angle(states[:, THETA], cam.viewing_angle(states[:, [X, Y]]))
     va = np.zeros(shape, np.int64)
     vb = np.zeros(shape, np.int64)
     wa = np.ones(shape)
+    if not shape[0] or not shape[1]:
+        return va, vb, wa
+    n_views = np.array([m.view_angles.size for m in models], np.int64)
+    if np.any(n_views == 0):
+        raise AppearanceError('person model has no key views')
+    angles = np.zeros((len(models), int(n_views.max())))
     for k, m in enumerate(models):
-        sel = target == k
-        if np.any(sel) and shape[0]:
-            a, b, w = m.interpolation_weights(rel[:, sel].ravel())
-            va[:, sel] = a.reshape(shape[0], -1)
-            vb[:, sel] = b.reshape(shape[0], -1)
-            wa[:, sel] = w.reshape(shape[0], -1)
+        angles[k, :n_views[k]] = m.view_angles
+    target = np.ascontiguousarray(target, np.int64)
+    xy = states[:, [X, Y]]
+    for c, cam in enumerate(cameras):
+        rel = relative_angle(states[:, THETA], cam.viewing_angle(xy))
+        _kernels.nearest_two_views(rel, target, angles, n_views, va[c], vb[c], wa[c])
     return va, vb, wa
 
 

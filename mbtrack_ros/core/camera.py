@@ -23,6 +23,8 @@ import cv2
 import numpy as np
 import yaml
 
+from mbtrack_ros.core import _kernels
+
 __all__ = ['CalibrationError', 'Camera', 'RoomCalibration', 'look_at']
 
 
@@ -84,12 +86,24 @@ class Camera:
             object.__setattr__(self, 'frame_id', f'{self.name}_optical_frame')
         if self.K[0, 0] <= 0 or self.K[1, 1] <= 0:
             raise CalibrationError(f'{self.name}.K: focal lengths must be positive')
+        # the rotation matrix OpenCV's projectPoints rebuilds from the Rodrigues vector
+        # (differs from R in the last bits); project() uses it to give the same pixels
+        rvec, _ = cv2.Rodrigues(R)
+        object.__setattr__(self, '_projection_rotation', np.ascontiguousarray(
+            cv2.Rodrigues(rvec)[0], dtype=np.float64))
+        object.__setattr__(self, '_center', -R.T @ self.t)
 
     # -- geometry -------------------------------------------------------------------------
     @property
     def center(self) -> np.ndarray:
         """Camera centre in world coordinates, (3,) metres: ``C = -R^T t``."""
-        return -self.R.T @ self.t
+        return self._center.copy()
+
+    @property
+    def projection_parameters(self) -> tuple[np.ndarray, ...]:
+        """``(rotation, t, K, dist, centre)`` as the numba projection takes them (the rotation
+        OpenCV rebuilds from the Rodrigues vector of R)."""
+        return self._projection_rotation, self.t, self.K, self.dist, self._center
 
     @property
     def focal(self) -> float:
@@ -111,7 +125,7 @@ class Camera:
 
         This is the camera closeness ``<_u`` used for depth ordering (HJS Eq. 20).
         """
-        return np.linalg.norm(np.asarray(points, dtype=np.float64) - self.center, axis=-1)
+        return np.linalg.norm(np.asarray(points, dtype=np.float64) - self._center, axis=-1)
 
     def project(self, points: np.ndarray) -> np.ndarray:
         """Project world points (..., 3) to distorted pixel coordinates (..., 2).
@@ -122,9 +136,8 @@ class Camera:
         flat = points.reshape(-1, 3)
         if flat.shape[0] == 0:
             return np.zeros(points.shape[:-1] + (2,))
-        rvec, _ = cv2.Rodrigues(self.R)
-        pixels, _ = cv2.projectPoints(flat, rvec, self.t, self.K, self.dist)
-        pixels = pixels.reshape(-1, 2)
+        pixels = _kernels.project_points(np.ascontiguousarray(flat),
+                                         *self.projection_parameters[:4])
         pixels[self.depth(flat) <= 1e-6] = np.nan
         return pixels.reshape(points.shape[:-1] + (2,))
 
@@ -167,7 +180,7 @@ class Camera:
         camera under the relative angle ``o - viewing_angle(xy)`` (0 = facing the camera).
         """
         xy = np.asarray(xy, dtype=np.float64)
-        c = self.center
+        c = self._center
         return np.arctan2(c[1] - xy[..., 1], c[0] - xy[..., 0])
 
     def in_image(self, pixels: np.ndarray, margin: float = 0.0) -> np.ndarray:

@@ -312,14 +312,16 @@ class MeasurementModel:
 
     # -- HJS --------------------------------------------------------------------------------
     def _hjs_camera(self, camera: str, states: np.ndarray, target: np.ndarray,
-                    prior: np.ndarray, key: np.ndarray, views: tuple[np.ndarray, ...],
-                    models: Sequence[PersonModel], *, separable: bool, record: bool,
-                    timings: dict[str, float]):
+                    prior: np.ndarray, key: np.ndarray, models: Sequence[PersonModel], *,
+                    separable: bool, record: bool, timings: dict[str, float]):
         """000 Algorithm 1 "update" in one camera for the stacked particles of all targets
-        (states (P, 6), target (P,), normalised priors (P,), key views (K, V, 1536), the
-        camera's key-view interpolation (va, vb, wa) (P,))."""
+        (states (P, 6), target (P,), normalised priors (P,), key views (K, V, 1536)); the
+        camera's key-view interpolation is computed here, in the camera's thread."""
+        t0 = time.perf_counter()
+        va, vb, wa = (v[0] for v in view_weights([self._camera(camera)], states, target,
+                                                 models))
+        timings['models'] = timings.get('models', 0.0) + time.perf_counter() - t0
         sil = self._prepare(camera, states, target, models, timings)
-        va, vb, wa = views
         n_targets = key.shape[0]
         t0 = time.perf_counter()
         order = np.argsort(sil.distance, kind='stable')
@@ -348,17 +350,15 @@ class MeasurementModel:
         return sil, fc, bc, vis, rec, pix_offsets
 
     def _stack(self, parts: list[np.ndarray], priors: list[np.ndarray],
-               models: Sequence[PersonModel], cameras: Sequence[str]
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict]:
-        """The K targets' particles stacked: states (P, 6), target (P,), prior (P,), the key
-        views (K, V, 1536) and, per camera name, the key-view interpolation (va, vb, wa)."""
+               models: Sequence[PersonModel]
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The K targets' particles stacked: states (P, 6), target (P,), prior (P,) and the
+        key views (K, V, 1536)."""
         states = np.concatenate(parts, axis=0) if parts else np.zeros((0, STATE_DIM))
         target = np.repeat(np.arange(len(parts), dtype=np.int64),
                            [p.shape[0] for p in parts])
         prior = np.concatenate(priors) if priors else np.zeros(0)
-        va, vb, wa = view_weights([self._camera(c) for c in cameras], states, target, models)
-        views = {c: (va[i], vb[i], wa[i]) for i, c in enumerate(cameras)}
-        return states, target, prior, key_view_stack(models), views
+        return states, target, prior, key_view_stack(models)
 
     def _evaluate(self, particles: Sequence[np.ndarray], weights: Sequence[np.ndarray] | None,
                   models: Sequence[PersonModel], *, separable: bool,
@@ -379,13 +379,12 @@ class MeasurementModel:
         cams = [(c, name) for c, name in enumerate(self.camera_names)
                 if name in self._images and parts]
         t0 = time.perf_counter()
-        states, target, prior, key, views = self._stack(parts, priors, models,
-                                                        [name for _, name in cams])
+        states, target, prior, key = self._stack(parts, priors, models)
         timings['models'] = time.perf_counter() - t0
 
         def one(name: str):
             own: dict[str, float] = {}
-            out = self._hjs_camera(name, states, target, prior, key, views[name], models,
+            out = self._hjs_camera(name, states, target, prior, key, models,
                                    separable=separable, record=False, timings=own)
             return out, own
 
@@ -463,10 +462,10 @@ class MeasurementModel:
         parts = self._check_targets(particles, models)
         priors = [_normalised_priors(w, p.shape[0], k, False)
                   for k, (w, p) in enumerate(zip(weights, parts))]
-        states, target, prior, key, views = self._stack(parts, priors, models, [camera])
+        states, target, prior, key = self._stack(parts, priors, models)
         sil, fc, bc, vis, rec, pix = self._hjs_camera(
-            camera, states, target, prior, key, views[camera], models, separable=False,
-            record=True, timings={})
+            camera, states, target, prior, key, models, separable=False, record=True,
+            timings={})
         w_star = np.zeros((len(sil), sil.height, sil.width))
         for p in range(len(sil)):
             q = int(pix[p])

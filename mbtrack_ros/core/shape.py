@@ -238,16 +238,14 @@ def silhouette_outline(camera: Camera, states: np.ndarray, shape: BodyShape, *,
     ends[:, 1, 2] = zt
     # 003 §2.1: project the bottom and top points; the axis points in between lie on the
     # image segment joining them (perspective-correct placement in the kernel, which also
-    # drops the leg segments and rescales the profile heights of sitting particles)
-    end_px = np.ascontiguousarray(camera.project(ends))        # (N, 2, 2)
+    # drops the leg segments and rescales the profile heights of sitting particles); one
+    # numba pass projects the ends (Camera.project), takes s(o) of the orientation relative
+    # to the camera (width_scale) and the camera distance of the body centre
     end_depth = camera.depth(ends)                             # (N, 2), linear in z
-    rel = states[:, THETA] - camera.viewing_angle(states[:, :2])
-    left, right, seg_part, valid = _kernels.outline_points(
-        end_px, end_depth, sitting, shape.fractions, shape.half_widths, shape.segment_parts,
-        float(hip), w, width_scale(rel), camera.focal)
-    centre = np.stack([states[:, X], states[:, Y], 0.5 * (zb + zt)], axis=1)
-    distance = np.where(valid, camera.distance(centre), np.inf)
-    return left, right, seg_part, valid, distance
+    return _kernels.body_outline(
+        ends, end_depth, np.ascontiguousarray(states[:, THETA]), sitting, shape.fractions,
+        shape.half_widths, shape.segment_parts, float(hip), w, *camera.projection_parameters,
+        camera.focal)
 
 
 def rasterize(camera: Camera, states: np.ndarray, shape: BodyShape | Sequence[BodyShape], *,
