@@ -9,7 +9,7 @@
 ``run`` steps :class:`~mbtrack_ros.core.tracker.Tracker` with ``detection=True`` exactly as
 ``mbtrack replay REC --out OUT --eval REC/ground_truth.csv --seed S`` does (same
 configuration, same random generator, so the same tracks.csv) and also writes
-OUT/events.json: every birth, every release with its reason (support, existence,
+OUT/events.json: every birth, every release with its reason (support, spare, existence,
 duplicate) and every decision on a confirmed detection next to a track
 (``AutoDetection.decisions``: birth / move / drop, with the appearance gain).
 ``report`` lists, per identity switch of the CLEAR MOT matching, the person, the old and
@@ -66,8 +66,10 @@ def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False) -> None:
         ended = update(self, stamp, ids, supported, existence)
         for tid in ended:
             k = list(ids).index(tid)
+            spare = k < len(self.spare) and self.spare[k]
             events.append({'kind': 'end', 'frame': frame['index'], 'id': int(tid),
-                           'reason': 'support' if not supported[k] else 'existence'})
+                           'reason': 'spare' if spare else 'support' if not supported[k]
+                           else 'existence'})
         return ended
 
     def logged_duplicates(self, stamp, ids, xy, shown_since=None):

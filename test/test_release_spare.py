@@ -1,0 +1,100 @@
+"""Spare tracks: a track whose silhouette explains no foreground that the other tracks do
+not is released (release.spare_tracks, ReleaseConfig.spare_support)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mbtrack_ros.core.detection import DetectionError
+from mbtrack_ros.core.detection.detector import FrameEvidence
+from mbtrack_ros.core.detection.release import ReleaseConfig, Releaser, spare_tracks
+from mbtrack_ros.core.shape import BodyShape, rasterize
+
+from conftest import make_room
+
+FPS = 15
+SHAPE = BodyShape(1.75, 0.5)
+
+
+def _states(xy) -> np.ndarray:
+    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    return np.c_[xy, np.zeros((len(xy), 4))]
+
+
+def _scene(room, people, tracks):
+    """Per camera: the foreground of the people's silhouettes, the tracks' silhouettes."""
+    fgs, sils = [], []
+    for cam in room.cameras.values():
+        bodies = rasterize(cam, _states(people), SHAPE)
+        fgs.append(np.any([bodies.mask(i) > 0 for i in range(len(people))], axis=0))
+        sils.append(rasterize(cam, _states(tracks), SHAPE))
+    return fgs, sils
+
+
+def _straightforward_support(fgs, sils, k):
+    """Exclusive support of every track with per-track masks (no spans arithmetic)."""
+    total, seen = np.zeros(k), np.zeros(k)
+    for fg, sil in zip(fgs, sils):
+        masks = np.array([sil.mask(i) > 0 for i in range(k)])
+        alone = masks & (masks.sum(axis=0) == 1)[None]
+        area = masks.sum(axis=(1, 2))
+        sees = area >= 1
+        total += np.where(sees, (alone & fg[None]).sum(axis=(1, 2)) / np.maximum(area, 1), 0)
+        seen += sees
+    return total / np.maximum(seen, 1)
+
+
+def test_exclusive_support_equals_the_per_pixel_count():
+    room = make_room(160, 120, 4)
+    people = [(2.0, 2.0), (2.45, 2.2), (4.0, 3.0)]
+    tracks = [(2.0, 2.05), (2.5, 2.2), (2.3, 1.9), (4.1, 3.0), (1.0, 4.0)]
+    fgs, sils = _scene(room, people, tracks)
+    spare, support = spare_tracks(fgs, sils, min_support=0.0)
+    assert not spare.any()
+    assert np.allclose(support, _straightforward_support(fgs, sils, len(tracks)))
+
+
+def test_a_spare_track_beside_a_tracked_person_is_found_and_the_tracked_one_kept():
+    room = make_room(160, 120, 4)
+    # one person at (2.5, 2.5) with its track; a second track 0.4 m away on the same person
+    fgs, sils = _scene(room, [(2.5, 2.5)], [(2.5, 2.5), (2.9, 2.5)])
+    spare, support = spare_tracks(fgs, sils, min_support=0.18)
+    assert spare.tolist() == [False, True]
+    assert support[0] > 0.5 and support[1] < 0.18
+    # two people side by side, each with its track: neither is spare
+    fgs, sils = _scene(room, [(2.5, 2.5), (2.95, 2.5)], [(2.5, 2.5), (2.95, 2.5)])
+    spare, support = spare_tracks(fgs, sils, min_support=0.18)
+    assert not spare.any() and np.all(support > 0.18)
+    # two tracks on one spot explain nothing exclusively: one of them is spare, not both
+    fgs, sils = _scene(room, [(2.5, 2.5)], [(2.5, 2.5), (2.5, 2.5)])
+    spare, _ = spare_tracks(fgs, sils, min_support=0.18)
+    assert spare.sum() == 1
+    # a track without foreground far from the others on the floor (but overlapping one in
+    # some camera's image) is left to the plain support rule when a radius is given
+    far = [(2.5, 2.5), (4.5, 1.0)]
+    fgs, sils = _scene(room, [(2.5, 2.5)], far)
+    spare, support = spare_tracks(fgs, sils, min_support=0.18, xy=np.array(far), radius=1.0)
+    assert not spare.any() and support[1] == 0.0
+    assert spare_tracks(fgs, sils, min_support=0.18)[0].tolist() == [False, True]
+
+
+def test_the_releaser_ends_a_spare_track_after_the_timeout_only_when_enabled():
+    room = make_room(160, 120, 4)
+    # 0.3 m off the person: plainly supported (coverage 0.36-0.42 >= min_coverage 0.3)
+    fgs, sils = _scene(room, [(2.5, 2.5)], [(2.5, 2.5), (2.8, 2.5)])
+    image = np.zeros((120, 160, 3), np.uint8)
+    evidence = {n: FrameEvidence(image, fg) for n, fg in zip(room.cameras, fgs)}
+    silhouettes = dict(zip(room.cameras, sils))
+    for spare_support, expected in ((0.18, {2: int(np.ceil(1.0 * FPS))}), (0.0, {})):
+        rel = Releaser(room, ReleaseConfig(timeout=1.0, spare_support=spare_support))
+        ended = {}
+        for k in range(30):
+            supported, _ = rel.support(evidence, silhouettes)
+            for tid in rel.update(int(round(k * 1e9 / FPS)), [1, 2], supported):
+                ended.setdefault(tid, k)
+        assert ended == expected
+        assert rel.spare.tolist() == [False, spare_support > 0]
+    with pytest.raises(DetectionError):
+        ReleaseConfig(spare_support=1.5)
+    with pytest.raises(DetectionError):
+        ReleaseConfig(spare_radius=-1.0)
