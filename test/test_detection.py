@@ -809,3 +809,137 @@ def test_a_person_re_found_soon_after_the_release_gets_the_released_id(
         ids.append(sorted(tracker.track_ids))
     assert ended_at is not None and ids[ended_at] == []
     assert ids[-1] == ([1] if reused else [2])
+
+
+# -- swaps between close tracks (identity.py) ---------------------------------------------
+RED = (SKIN, (200, 40, 40), (200, 200, 200))
+
+
+def _two_people_and_models(calib, bgs, rng):
+    """Two differently dressed people 0.6 m apart, the frame's colour bins per side camera
+    and each person's model acquired from a frame where they stand alone."""
+    from mbtrack_ros.core.appearance import model_from_images
+
+    a, b = person(2.5, 2.3, theta=0.0), person(2.5, 2.9, theta=0.0, colours=RED)
+    side = {n: c for n, c in calib.cameras.items() if not is_ceiling(c)}
+    models = {1: model_from_images({n: im for n, im in paint(calib, bgs, [a], rng).items()
+                                    if n in side}, calib, a[0], 1.8, 0.5),
+              2: model_from_images({n: im for n, im in paint(calib, bgs, [b], rng).items()
+                                    if n in side}, calib, b[0], 1.8, 0.5)}
+    bins = {n: quantize(im) for n, im in paint(calib, bgs, [a, b], rng).items() if n in side}
+    return a[0], b[0], side, models, bins
+
+
+def test_arbitration_swaps_crossed_tracks_back_after_consecutive_votes():
+    """Tracks 1 and 2 on each other's person: the crossed assignment wins in every camera,
+    and the pair is swapped on the ``frames``-th consecutive frame (not before); tracks on
+    their own people are never swapped; a pair that was never close, or cameras where a
+    track is hidden, are not arbitrated."""
+    from mbtrack_ros.core.detection.identity import SwapConfig, arbitrate, pair_gains
+
+    calib = make_room()
+    sa, sb, side, models, bins = _two_people_and_models(calib, backgrounds(calib),
+                                                        np.random.default_rng(1))
+    cfg = SwapConfig(frames=3)
+    seen = [{n: 1.0 for n in side}] * 2
+    gains = pair_gains([(models[1], models[2])] * 2, np.stack([[sb, sa], [sa, sb]]), side,
+                       bins, 0.12)
+    assert np.all(gains[0] > cfg.margin)                 # crossed: swap wins in every camera
+    np.testing.assert_allclose(gains[1], -gains[0])      # straight: the opposite
+    gain = float(np.mean(gains[0]))
+
+    def run(states, visible=seen, frames=4, config=cfg):
+        memory, out = {}, []
+        for k in range(frames):
+            swaps, memory = arbitrate(k * 66_666_667, [1, 2], states, visible, models,
+                                      side, bins, memory, config, 0.12)
+            out.append(swaps)
+        return out, memory
+
+    out, memory = run(np.stack([sb, sa]))
+    assert [len(s) for s in out] == [0, 0, 1, 0]
+    assert (out[2][0].a, out[2][0].b) == (1, 2) and out[2][0].gain > cfg.margin
+    out, memory = run(np.stack([sa, sb]))
+    assert not any(out) and memory[(1, 2)].votes == 0
+    far = np.stack([sb, sa]) + np.array([[0, 0.3, 0, 0, 0, 0], [0, -0.3, 0, 0, 0, 0]])
+    out, memory = run(far)                                           # 1.2 m apart
+    assert not any(out) and memory == {}
+    hidden = [{n: 1.0 for n in side}, {n: 0.3 for n in side}]
+    out, _ = run(np.stack([sb, sa]), visible=hidden)
+    assert not any(out)
+    out, _ = run(np.stack([sb, sa]), config=SwapConfig(enabled=False))
+    assert not any(out)
+    for bad in ({'frames': 0}, {'close_radius': -1.0}, {'min_visible': 1.5}):
+        with pytest.raises(DetectionError, match='swap'):
+            SwapConfig(**bad)
+
+
+def test_batched_pair_gains_equal_one_likelihood_call_per_hypothesis():
+    """pair_gains (all pairs in one rasterisation and one lazy key-view likelihood call per
+    camera) equals 003 Eq. 3 evaluated hypothesis by hypothesis with the interpolated
+    model histograms (appearance_loglik), also for pairs sharing a track and for a
+    silhouette half out of the image (NaN)."""
+    from mbtrack_ros.core.detection.identity import appearance_loglik, pair_gains
+
+    calib = make_room()
+    sa, sb, side, models, bins = _two_people_and_models(calib, backgrounds(calib),
+                                                        np.random.default_rng(2))
+    sc = sa.copy()
+    sc[[0, 1, 4]] = (0.35, 0.35, 1.0)                     # in a corner: out of some views
+    pairs = [(models[1], models[2]), (models[2], models[1]), (models[1], models[2])]
+    states = np.stack([[sa, sb], [sb, sa + [0.1, 0, 0, 0, 0.5, 0]], [sc, sb]])
+    got = pair_gains(pairs, states, side, bins, 0.12)
+    for p, ((ma, mb), (s1, s2)) in enumerate(zip(pairs, states)):
+        for c, (n, cam) in enumerate(side.items()):
+            la = appearance_loglik(ma, np.stack([s1, s2]), cam, bins[n], 0.12)
+            lb = appearance_loglik(mb, np.stack([s1, s2]), cam, bins[n], 0.12)
+            if la is None or lb is None:
+                assert np.isnan(got[p, c])
+            else:
+                assert got[p, c] == pytest.approx((la[1] + lb[0]) - (la[0] + lb[1]), abs=1e-9)
+    assert np.isnan(got[2]).any() and np.isfinite(got[:2]).all()
+
+
+@pytest.mark.parametrize('enabled', [True, False])
+def test_tracker_swaps_two_close_tracks_back_to_their_people(enabled):
+    """Two differently dressed people stand 0.6 m apart, then walk apart; as they start,
+    their tracks are put on each other's person (an identity swap). With the arbitration
+    the tracks are swapped back once (ids follow their people again); without it track 2
+    follows person 1 and person 2 gets a new track."""
+    from dataclasses import replace
+
+    from mbtrack_ros.core.detection.identity import SwapConfig
+
+    rng = np.random.default_rng(6)
+    calib = make_room()
+    bgs = backgrounds(calib)
+    tracker = _detecting_tracker(calib, bgs, seed=5)
+    det = tracker.detection
+    det.config = replace(det.config, swap=SwapConfig(enabled=enabled))
+
+    def at(k):   # still until frame 12, then walking apart along y at 0.9 m/s
+        d = 0.06 * max(k - 12, 0)
+        return [person(2.5, 2.3 - d, theta=-np.pi / 2),
+                person(2.5, 2.9 + d, theta=np.pi / 2, colours=RED)]
+
+    res = _track_painted(tracker, calib, bgs, rng, 13, lambda k: at(k)[:1] if k < 4 else at(k))
+    assert tracker.track_ids == [1, 2]
+    mean = {t.track_id: t.mean.copy() for t in res[-1].tracks}
+    for tid, (state, _, _) in zip((1, 2), at(12)):
+        assert np.linalg.norm(mean[tid][:2] - state[:2]) < 0.2
+    mean[1][3], mean[2][3] = -0.9, 0.9
+    tracker.relocate_track(1, mean[2])                # the swap: each on the other person
+    tracker.relocate_track(2, mean[1])
+    actions = []
+    for k in range(13, 30):
+        r = tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, at(k), rng))
+        actions += [d['action'] for d in det.decisions]
+    final = {t.track_id: t.mean[:2] for t in r.tracks}
+    a, b = (p[0][:2] for p in at(29))
+    if enabled:
+        assert actions.count('swap 1 2') == 1 and 'birth' not in actions
+        assert sorted(final) == [1, 2]
+        assert np.linalg.norm(final[1] - a) < 0.2 and np.linalg.norm(final[2] - b) < 0.2
+    else:
+        assert not any(x.startswith('swap') for x in actions)
+        assert np.linalg.norm(final[2] - a) < 0.2 and 1 not in final
