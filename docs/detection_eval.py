@@ -1,7 +1,6 @@
 """Identity-switch analysis of automatic detection on a recording (docs/detection.md).
 
     .venv/bin/python docs/detection_eval.py run REC OUT [--seed S] [--no-people-cue]
-        [--swap KEY=VALUE ...] [--set KEY=VALUE ...]     # SwapConfig / AutoDetectionConfig
     .venv/bin/python docs/detection_eval.py report OUT REC            # causes of switches
     .venv/bin/python docs/detection_eval.py table OUT REC [OUT REC]   # one row per run
     .venv/bin/python docs/detection_eval.py lag OUT REC [OUT REC]     # track-person distance
@@ -12,8 +11,7 @@
 configuration, same random generator, so the same tracks.csv) and also writes
 OUT/events.json: every birth, every release with its reason (support, existence,
 duplicate) and every decision on a confirmed detection next to a track
-(``AutoDetection.decisions``: birth / move / drop / swap, with the appearance gain) and
-the gain of every pair compared by the swap arbitration (``pair``; core/detection/identity.py).
+(``AutoDetection.decisions``: birth / move / drop, with the appearance gain).
 ``report`` lists, per identity switch of the CLEAR MOT matching, the person, the old and
 new track, where the old track was, how it ended and where the new one was born; the
 false births (farther than 0.5 m from every person; door and screen flagged) and the
@@ -24,9 +22,7 @@ whether the old track was reported at the switch frame (not: hidden or ended).
 ``decisions`` checks each move, hidden move, id reuse and drop of the identity check
 against the ground truth: was the person at the detection the one the track (for a reuse:
 the released track) was matched to in the 15 matched frames before (same / other /
-unmatched: the track followed nobody)? A swap of two close tracks (identity.py) counts
-once per track: is the person at its new place the one it followed before, and the one
-nearest its first reported place (whose appearance its model holds)?
+unmatched: the track followed nobody)?
 """
 from __future__ import annotations
 
@@ -34,7 +30,6 @@ import argparse
 from dataclasses import replace
 import json
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -60,8 +55,7 @@ def _screen(x: float, y: float) -> bool:
     return x > 5.2 and 1.4 < y < 3.6
 
 
-def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False,
-        swap: dict | None = None, settings: dict | None = None) -> None:
+def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False) -> None:
     out.mkdir(parents=True, exist_ok=True)
     cal = RoomCalibration.load(rec / 'calibration.yaml')
     events: list[dict] = []
@@ -88,22 +82,6 @@ def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False,
     with RecordingReader(rec / 'bag') as reader:
         cal = cal.subset([n for n in cal.names if n in reader.cameras])
         tracker = Tracker(cal, TrackerConfig(seed=seed, detection=True))
-        det = tracker.detection
-        if swap:   # SwapConfig fields to override (--swap KEY=VALUE)
-            det.config = replace(det.config, swap=replace(det.config.swap, **swap))
-        if settings:   # AutoDetectionConfig fields to override (--set KEY=VALUE)
-            det.config = replace(det.config, **settings)
-        cost = {'wall': 0.0, 'cpu': 0.0}        # swap arbitration time (identity.py)
-        arbitrate = det._arbitrate
-
-        def timed_arbitrate(*args):
-            w, c = time.perf_counter(), time.process_time()
-            births = arbitrate(*args)
-            cost['wall'] += time.perf_counter() - w
-            cost['cpu'] += time.process_time() - c
-            return births
-
-        det._arbitrate = timed_arbitrate
         if no_people_cue:  # the bootstrap before issue 6: every pixel learnt, 10 x 4 frames
             bg = replace(tracker.detection.config.background, people=None,
                          bootstrap_frames=10, bootstrap_stride=4)
@@ -113,12 +91,8 @@ def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False,
             frame['index'] = fs.index
             result = tracker.step(fs.stamp_ns, {c: im for c, im in fs.images.items()
                                                 if c in cal.cameras})
-            for d in det.decisions:
+            for d in tracker.detection.decisions:
                 events.append({'kind': 'decision', 'frame': fs.index, **d})
-            for (a, b), m in det._pairs.items():    # swap arbitration: gains compared
-                if np.isfinite(m.gain):
-                    events.append({'kind': 'pair', 'frame': fs.index, 'a': a, 'b': b,
-                                   'gain': round(float(m.gain), 3)})
             for tid in sorted(set(tracker.track_ids) - live):   # new, or a released id reused
                 events.append({'kind': 'birth', 'frame': fs.index, 'id': int(tid)})
             live = set(tracker.track_ids)
@@ -129,9 +103,7 @@ def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False,
     (out / 'events.json').write_text(json.dumps(events), encoding='utf-8')
     res = clear_mot(rows, read_ground_truth(rec / 'ground_truth.csv'))
     print(f'MOTA {100 * res.mota:.1f} % MOTP {res.motp_mm:.0f} mm mismatches '
-          f'{res.mismatches} people {res.persons} tracks {res.tracks}; swap arbitration '
-          f'{1e3 * cost["wall"] / (frame["index"] + 1):.2f} ms wall / '
-          f'{1e3 * cost["cpu"] / (frame["index"] + 1):.2f} ms CPU per frame')
+          f'{res.mismatches} people {res.persons} tracks {res.tracks}')
 
 
 def _load(out: Path, rec: Path):
@@ -336,34 +308,20 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
         for r in truth:
             gt.setdefault(r.frame, []).append(r)
         counts: dict[tuple[str, str], int] = {}
-        born: dict[int, int] = {}   # track -> the person nearest its first reported place
-        for t in tracks:
-            if t.track_id not in born and gt.get(t.frame):
-                born[t.track_id] = min(gt[t.frame], key=lambda r: np.hypot(
-                    r.x - t.x, r.y - t.y)).person_id
         for e in events:
             words = e['action'].split() if e['kind'] == 'decision' else []
-            if not words or words[0] not in ('move', 'drop', 'reuse', 'swap') \
-                    or not gt.get(e['frame']):
+            if not words or words[0] not in ('move', 'drop', 'reuse') or not gt.get(e['frame']):
                 continue
             f = e['frame']
             tid = int(words[1] if words[0] != 'drop' else e['action'].split('track ')[1].split()[0])
-            # a swap moves track words[1] to xy and track words[2] to xy_other
-            placed = [(tid, e['xy'])] + ([(int(words[2]), e['xy_other'])]
-                                         if words[0] == 'swap' else [])
-            for tid, xy in placed:
-                at = min(gt[f], key=lambda r: np.hypot(r.x - xy[0], r.y - xy[1])).person_id
-                sel = (d.track_id == tid) & (frames < f) & (frames >= f - 60)
-                before = d.person_id[sel][-15:]
-                who = None if not before.size else int(np.bincount(before).argmax())
-                kind = words[0] + (' hidden' if 'hidden' in e['action'] else '')
-                key = (kind, 'same' if who == at else 'unmatched' if who is None else 'other')
-                counts[key] = counts.get(key, 0) + 1
-                total[key] = total.get(key, 0) + 1
-                if words[0] == 'swap':   # also: to the person its model was acquired from?
-                    key = ('swap to model person', 'yes' if born.get(tid) == at else 'no')
-                    counts[key] = counts.get(key, 0) + 1
-                    total[key] = total.get(key, 0) + 1
+            at = min(gt[f], key=lambda r: np.hypot(r.x - e['xy'][0], r.y - e['xy'][1])).person_id
+            sel = (d.track_id == tid) & (frames < f) & (frames >= f - 60)
+            before = d.person_id[sel][-15:]
+            who = None if not before.size else int(np.bincount(before).argmax())
+            kind = words[0] + (' hidden' if 'hidden' in e['action'] else '')
+            key = (kind, 'same' if who == at else 'unmatched' if who is None else 'other')
+            counts[key] = counts.get(key, 0) + 1
+            total[key] = total.get(key, 0) + 1
         print(out.name, ', '.join(f'{k} {v}: {n}' for (k, v), n in sorted(counts.items())))
     print('all', ', '.join(f'{k} {v}: {n}' for (k, v), n in sorted(total.items())))
 
@@ -377,10 +335,6 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument('--seed', type=int, default=0)
     r.add_argument('--no-people-cue', action='store_true',
                    help='background bootstrap without the people cue (10 frames, stride 4)')
-    r.add_argument('--swap', action='append', default=[], metavar='KEY=VALUE',
-                   help='override a SwapConfig field (identity.py), e.g. frames=1000000')
-    r.add_argument('--set', action='append', default=[], metavar='KEY=VALUE',
-                   help='override an AutoDetectionConfig field, e.g. relocate_margin=0.0')
     s = sub.add_parser('report')
     s.add_argument('out', type=Path)
     s.add_argument('rec', type=Path)
@@ -390,15 +344,7 @@ def main(argv: list[str] | None = None) -> int:
         sub.add_parser(name).add_argument('pairs', type=Path, nargs='+')
     args = p.parse_args(argv)
     if args.cmd == 'run':
-        def values(items):
-            out = {}
-            for item in items:
-                key, _, v = item.partition('=')
-                out[key] = v.lower() == 'true' if v.lower() in ('true', 'false') \
-                    else float(v) if '.' in v or 'e' in v else int(v)
-            return out
-        run(args.rec, args.out, args.seed, args.no_people_cue, values(args.swap),
-            values(args.set))
+        run(args.rec, args.out, args.seed, args.no_people_cue)
     elif args.cmd == 'report':
         report(args.out, args.rec)
     else:

@@ -24,15 +24,14 @@ import numpy as np
 
 from mbtrack_ros.core import _kernels
 from mbtrack_ros.core.appearance import (
-    PersonModel, key_view_loglik, key_view_stack, quantize, view_weights)
+    PersonModel, key_view_loglik, key_view_stack, quantize, relative_angle,
+    single_target_loglik, view_weights)
 from mbtrack_ros.core.camera import RoomCalibration
 from mbtrack_ros.core.detection import DetectionError
 from mbtrack_ros.core.detection.acquisition import AcquisitionConfig, acquire
 from mbtrack_ros.core.detection.background import BackgroundBank, BackgroundConfig
 from mbtrack_ros.core.detection.detector import (
     Detection, Detector, DetectorConfig, FrameEvidence, is_ceiling)
-from mbtrack_ros.core.detection.identity import (
-    PairMemory, SwapConfig, appearance_loglik, arbitrate)
 from mbtrack_ros.core.detection.release import ReleaseConfig, Releaser
 from mbtrack_ros.core.existence import AuxiliaryConfig, TrackAuxiliary, predictive_loglik
 from mbtrack_ros.core.shape import BodyShape, rasterize
@@ -78,8 +77,6 @@ class AutoDetectionConfig:
         duplicate_by_reporting: of two tracks on one person (release ``merge_radius``,
             ``merge_time``) release the one reported without a break for the shorter time
             (born, moved or hidden later) instead of the younger one.
-        swap: appearance arbitration of swaps between two close reported tracks
-            (:mod:`~mbtrack_ros.core.detection.identity`).
     """
 
     background: BackgroundConfig = field(default_factory=BackgroundConfig)
@@ -99,7 +96,6 @@ class AutoDetectionConfig:
     reuse_time: float = 0.0
     reuse_radius: float = 1.0
     duplicate_by_reporting: bool = True
-    swap: SwapConfig = field(default_factory=SwapConfig)
 
     def __post_init__(self) -> None:
         if not self.relocate_radius >= 0 or not np.isfinite(self.relocate_margin):
@@ -115,12 +111,11 @@ class AutoDetectionConfig:
 @dataclass
 class Birth:
     """A new person to add to the tracker, or (``track_id`` set) a current track that
-    drifted off its person and must be restarted at the detection (None: at the state of
-    the track it swapped people with), keeping its id."""
+    drifted off its person and must be restarted at the detection, keeping its id."""
 
     model: PersonModel
     state: np.ndarray
-    detection: Detection | None
+    detection: Detection
     track_id: int | None = None
 
 
@@ -161,7 +156,6 @@ class AutoDetection:
         self._placed: dict[int, int] = {}  # track id -> stamp of its birth or last move
         self._released: dict[int, tuple[int, np.ndarray]] = {}  # id -> (stamp, floor xy)
         self._shown_since: dict[int, int] = {}  # id -> birth, move or last hidden stamp
-        self._pairs: dict[tuple[int, int], PairMemory] = {}  # swap arbitration memory
         self._pending: _Pending | None = None  # what search() needs from the last update()
         self.side = [n for n, c in calibration.cameras.items() if not is_ceiling(c)]
         self.ceiling = [n for n in calibration.cameras if n not in self.side]
@@ -181,7 +175,6 @@ class AutoDetection:
         self._placed.clear()
         self._released.clear()
         self._shown_since.clear()
-        self._pairs = {}
         self.detector.reset()
         self._last_stamp = None
         self._pending = None
@@ -331,7 +324,6 @@ class AutoDetection:
                                        moved, stamp_ns)
                 if birth is not None:
                     births.append(birth)
-            births += self._arbitrate(stamp_ns, tracks, keep, means, models, evidence, moved)
         t4 = time.perf_counter()
         self.timings['detect_search'] = t4 - t3
         self.timings['detect'] = sum(self.timings.get(k, 0.0) for k in (
@@ -430,36 +422,6 @@ class AutoDetection:
         self.aux[tid] = TrackAuxiliary(cfg.existence)
         return Birth(model=models[tid], state=state, detection=det, track_id=tid)
 
-    def _arbitrate(self, stamp_ns: int, tracks: Sequence[TrackEstimate], keep: Sequence[int],
-                   means: np.ndarray, models: Mapping[int, PersonModel],
-                   evidence: Mapping[str, FrameEvidence], moved: set[int]) -> list[Birth]:
-        """Swaps between close reported tracks (:func:`identity.arbitrate`) as relocations:
-        each track of a swapped pair restarts at the other's state, with its own id, model
-        and existence."""
-        sel = [k for k in keep if tracks[k].track_id not in moved
-               and tracks[k].track_id in models and self.reported(tracks[k].track_id)]
-        cams = {n: self.calibration.cameras[n] for n in self.side if n in evidence}
-        swaps, self._pairs = arbitrate(
-            stamp_ns, [tracks[k].track_id for k in sel], means[sel],
-            [tracks[k].visible_fraction for k in sel], models, cams,
-            {n: evidence[n].bins for n in cams}, self._pairs, self.config.swap,
-            self.config.sigma)
-        births = []
-        row = {tracks[k].track_id: k for k in sel}
-        for sw in swaps:
-            ka, kb = row[sw.a], row[sw.b]
-            self.decisions.append({'xy': tuple(float(v) for v in means[kb, [X, Y]]),
-                                   'xy_other': tuple(float(v) for v in means[ka, [X, Y]]),
-                                   'score': float(sw.gain), 'action': f'swap {sw.a} {sw.b}'})
-            births += [Birth(model=models[sw.a], state=means[kb].copy(), detection=None,
-                             track_id=sw.a),
-                       Birth(model=models[sw.b], state=means[ka].copy(), detection=None,
-                             track_id=sw.b)]
-            if sw.a in self.aux and sw.b in self.aux:   # existence and visibility follow
-                self.aux[sw.a], self.aux[sw.b] = self.aux[sw.b], self.aux[sw.a]
-            moved.update((sw.a, sw.b))
-        return births
-
     def _placed_recently(self, track_id: int, stamp_ns: int) -> bool:
         """The track was born or moved less than ``relocate_interval`` before ``stamp_ns``."""
         since = self._placed.get(track_id)
@@ -520,16 +482,21 @@ class AutoDetection:
                   evidence: Mapping[str, FrameEvidence]) -> float:
         """Mean over side cameras of ``log p(y_c | candidate) - log p(y_c | track)`` under
         the track's appearance model (003 Eq. 3), cameras seeing both silhouettes only."""
+        cfg = self.config
         states = np.stack([track, candidate]).astype(np.float64)
         states[1, THETA] = track[THETA]
         gains = []
         for n in self.side:
             if n not in evidence:
                 continue
-            ll = appearance_loglik(model, states, self.calibration.cameras[n],
-                                   evidence[n].bins, self.config.sigma)
-            if ll is not None:
-                gains.append(float(ll[1] - ll[0]))
+            cam = self.calibration.cameras[n]
+            sil = rasterize(cam, states, model.shape)
+            if np.any(sil.area < 0.5 * np.maximum(sil.full_area, 1)) or np.any(sil.area <= 0):
+                continue
+            rel = relative_angle(states[:, THETA], cam.viewing_angle(states[:, [X, Y]]))
+            ll = single_target_loglik(evidence[n].bins, sil, model.interpolate(rel),
+                                      sigma=cfg.sigma)
+            gains.append(float(ll[1] - ll[0]))
         return float(np.mean(gains)) if gains else float('-inf')
 
     @staticmethod
