@@ -72,6 +72,14 @@ def test_bench_live_bad_frames_is_a_one_line_error(capsys):
     assert err == ['mbtrack bench: error: --live-frames must be >= 30, got 5']
 
 
+@pytest.mark.parametrize('param', ['tracker.pipeline_search=true', ':=1'])
+def test_bench_live_bad_node_param_is_a_one_line_error(capsys, param):
+    from mbtrack_ros.cli import main
+    assert main(['bench', '--live', '--live-param', param]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f'mbtrack bench: error: --live-param must be NAME:=VALUE, got {param!r}']
+
+
 # -- live vs offline ---------------------------------------------------------------------
 @pytest.fixture(scope='module')
 def recording(tmp_path_factory) -> Path:

@@ -337,6 +337,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--live-ground-truth', action='store_true',
                         help='start tracks from the ground truth (node init_ground_truth, '
                              'replay --init-from) instead of the automatic detection')
+    parser.add_argument('--live-param', action='append', default=[], metavar='NAME:=VALUE',
+                        help='a tracker_node parameter for the live run, as after ros-args '
+                             '-p (repeatable), e.g. tracker.pipeline_search:=true')
+    parser.add_argument('--live-no-offline', action='store_true',
+                        help='skip the offline replays after the live run')
 
 
 def _error(message: str) -> int:
@@ -348,6 +353,12 @@ def main_live(args: argparse.Namespace) -> int:
     """``mbtrack bench --live``: run, print a summary, optionally write JSON."""
     if args.live_frames < 30:
         return _error(f'--live-frames must be >= 30, got {args.live_frames}')
+    bad = [p for p in args.live_param if ':=' not in p or p.startswith(':=')]
+    if bad:
+        return _error(f'--live-param must be NAME:=VALUE, got {bad[0]!r}')
+    node_args: tuple[str, ...] = ('-p', 'warm_up:=false') if args.live_no_warm_up else ()
+    for param in args.live_param:
+        node_args += ('-p', param)
     from mbtrack_ros.recording.bag import BagError
     from mbtrack_ros.synth.errors import SynthError
 
@@ -367,12 +378,12 @@ def main_live(args: argparse.Namespace) -> int:
             make_recording(recording, frames=args.live_frames, seed=seed)
         load0 = os.getloadavg()
         live = run_live(recording, seed=seed, use_sim_time=not args.live_no_sim_time,
-                        ground_truth=args.live_ground_truth,
-                        node_args=('-p', 'warm_up:=false') if args.live_no_warm_up else ())
+                        ground_truth=args.live_ground_truth, node_args=node_args)
         load1 = os.getloadavg()
-        offline = run_offline(recording, seed=seed, ground_truth=args.live_ground_truth)
-        fast = None
-        if FAST_PROFILE.is_file():  # a source checkout: the fast profile too
+        offline = fast = None
+        if not args.live_no_offline:
+            offline = run_offline(recording, seed=seed, ground_truth=args.live_ground_truth)
+        if FAST_PROFILE.is_file() and not args.live_no_offline:  # a source checkout
             fast = run_offline(recording, seed=seed, ground_truth=args.live_ground_truth,
                                params=FAST_PROFILE)
     except (LatencyError, RuntimeError, OSError, SynthError, BagError,
@@ -410,7 +421,7 @@ def main_live(args: argparse.Namespace) -> int:
                'loadavg_before': load0,
                'loadavg_after': load1, 'seed': seed, 'use_sim_time': not args.live_no_sim_time,
                'ground_truth': bool(args.live_ground_truth),
-               'warm_up': not args.live_no_warm_up}
+               'warm_up': not args.live_no_warm_up, 'node_params': list(args.live_param)}
         try:
             args.json.write_text(json.dumps(doc, indent=1), encoding='utf-8')
         except OSError as err:
