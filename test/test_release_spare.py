@@ -85,7 +85,8 @@ def test_the_releaser_ends_a_spare_track_after_the_timeout_only_when_enabled():
     image = np.zeros((120, 160, 3), np.uint8)
     evidence = {n: FrameEvidence(image, fg) for n, fg in zip(room.cameras, fgs)}
     silhouettes = dict(zip(room.cameras, sils))
-    for spare_support, expected in ((0.18, {2: int(np.ceil(1.0 * FPS))}), (0.0, {})):
+    default = ReleaseConfig().spare_support  # on by default
+    for spare_support, expected in ((default, {2: int(np.ceil(1.0 * FPS))}), (0.0, {})):
         rel = Releaser(room, ReleaseConfig(timeout=1.0, spare_support=spare_support))
         ended = {}
         for k in range(30):

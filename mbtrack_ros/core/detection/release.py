@@ -175,7 +175,9 @@ class ReleaseConfig:
             with another track this close on the floor (metres) can be spare, when the
             caller gives the states. Measured on the tracks of main 74aa73e on cr1 (door
             crowd), tracker seed 0: 5th percentile / median 0.27 / 0.66 for tracks matched
-            to a person, 0.06 / 0.26 for unmatched (false positive) ones.
+            to a person, 0.06 / 0.26 for unmatched (false positive) ones. 0.25 (not 0.18)
+            had the better totals on six clear-room recordings x two tracker seeds
+            (docs/detection.md, "Spare tracks and release").
     """
 
     timeout: float = 1.0
@@ -186,7 +188,7 @@ class ReleaseConfig:
     existence_threshold: float = 0.1
     merge_radius: float = 0.35
     merge_time: float = 0.5
-    spare_support: float = 0.18
+    spare_support: float = 0.25
     spare_radius: float = 1.0
 
     def __post_init__(self) -> None:
