@@ -55,7 +55,8 @@ def _screen(x: float, y: float) -> bool:
     return x > 5.2 and 1.4 < y < 3.6
 
 
-def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False) -> None:
+def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False,
+        release: dict[str, float] | None = None) -> None:
     out.mkdir(parents=True, exist_ok=True)
     cal = RoomCalibration.load(rec / 'calibration.yaml')
     events: list[dict] = []
@@ -84,6 +85,9 @@ def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False) -> None:
     with RecordingReader(rec / 'bag') as reader:
         cal = cal.subset([n for n in cal.names if n in reader.cameras])
         tracker = Tracker(cal, TrackerConfig(seed=seed, detection=True))
+        if release:  # ReleaseConfig fields overridden, e.g. spare_support=0 (no spare rule)
+            det = tracker.detection
+            det.releaser = release_module.Releaser(cal, replace(det.releaser.config, **release))
         if no_people_cue:  # the bootstrap before issue 6: every pixel learnt, 10 x 4 frames
             bg = replace(tracker.detection.config.background, people=None,
                          bootstrap_frames=10, bootstrap_stride=4)
@@ -344,9 +348,15 @@ def main(argv: list[str] | None = None) -> int:
     t.add_argument('pairs', type=Path, nargs='+')
     for name in ('lag', 'decisions'):
         sub.add_parser(name).add_argument('pairs', type=Path, nargs='+')
+    r.add_argument('--release', action='append', default=[], metavar='FIELD=VALUE',
+                   help='override a ReleaseConfig field (repeatable), e.g. spare_support=0')
     args = p.parse_args(argv)
     if args.cmd == 'run':
-        run(args.rec, args.out, args.seed, args.no_people_cue)
+        try:
+            release = {k: float(v) for k, v in (a.split('=', 1) for a in args.release)}
+        except ValueError:
+            p.error(f'--release needs FIELD=NUMBER, got {args.release}')
+        run(args.rec, args.out, args.seed, args.no_people_cue, release)
     elif args.cmd == 'report':
         report(args.out, args.rec)
     else:
