@@ -249,6 +249,23 @@ def table(pairs: list[tuple[Path, Path]]) -> None:
               f'{sum(b["screen"] for b in fb)}) | {span(a["enter"])} | {span(a["leave"])} |')
 
 
+def totals(pairs: list[tuple[Path, Path]]) -> None:
+    """One line over all runs: mean MOTA, misses, false positives and mismatches summed,
+    release delays (> 1.5 s, > 5 s, median) and the longest release per recording."""
+    runs = [_analyse(out, rec) | {'rec': rec.name} for out, rec in pairs]
+    res = [a['result'] for a in runs]
+    leave = sorted(v for a in runs for v in a['leave'])
+    longest: dict[str, float] = {}
+    for a in runs:
+        longest[a['rec']] = max([longest.get(a['rec'], -np.inf), *a['leave']])
+    median = f'{np.median(leave):.2f} s' if leave else '-'
+    print(f'{len(runs)} runs: mean MOTA {100 * np.mean([r.mota for r in res]):.2f} %, misses '
+          f'{sum(r.misses for r in res)}, false pos {sum(r.false_positives for r in res)}, '
+          f'mismatches {sum(r.mismatches for r in res)}; releases {len(leave)}: > 1.5 s '
+          f'{sum(v > 1.5 for v in leave)}, > 5 s {sum(v > 5 for v in leave)}, median {median}; '
+          'longest per recording ' + ', '.join(f'{k} {v:.1f} s' for k, v in longest.items()))
+
+
 def lag(pairs: list[tuple[Path, Path]]) -> None:
     print('| run | person-frames | distance median | p90 | > 0.3 m | > 0.5 m | walking > 1 m/s: '
           'median | lag along | switches: old track not reported / reported > 0.5 m off |')
@@ -346,7 +363,7 @@ def main(argv: list[str] | None = None) -> int:
     s.add_argument('rec', type=Path)
     t = sub.add_parser('table')
     t.add_argument('pairs', type=Path, nargs='+')
-    for name in ('lag', 'decisions'):
+    for name in ('lag', 'decisions', 'totals'):
         sub.add_parser(name).add_argument('pairs', type=Path, nargs='+')
     r.add_argument('--release', action='append', default=[], metavar='FIELD=VALUE',
                    help='override a ReleaseConfig field (repeatable), e.g. spare_support=0')
@@ -362,7 +379,7 @@ def main(argv: list[str] | None = None) -> int:
     else:
         if len(args.pairs) % 2:
             p.error(f'{args.cmd} needs OUT REC pairs')
-        {'table': table, 'lag': lag, 'decisions': decisions}[args.cmd](
+        {'table': table, 'lag': lag, 'decisions': decisions, 'totals': totals}[args.cmd](
             list(zip(args.pairs[::2], args.pairs[1::2])))
     return 0
 
