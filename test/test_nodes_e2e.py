@@ -81,7 +81,8 @@ def test_detection_parameter_reaches_the_tracker(room_calibration, context, tmp_
     # automatic detection is the default, with the release time and threshold passed on
     node = start(context, '-p', f'calibration_file:={room_calibration}',
                  '-p', 'tracker.particles:=50', '-p', 'tracker.release_time:=1.5',
-                 '-p', 'detection.threshold:=2.5', '-p', 'tracker.subsample:=2')
+                 '-p', 'detection.threshold:=2.5', '-p', 'tracker.subsample:=2',
+                 '-p', 'detection.spare_support:=0.0')
     try:
         assert node.params.tracker.detection is True
         assert node.tracker.config.detection is True and node.tracker.config.particles == 50
@@ -89,6 +90,8 @@ def test_detection_parameter_reaches_the_tracker(room_calibration, context, tmp_
         assert node.tracker.detection is not None  # the automatic detection is running
         cfg = node.tracker.config.detection_config()
         assert cfg.release.timeout == 1.5 and cfg.detector.threshold == 2.5
+        assert cfg.release.spare_support == 0.0  # the spare-track rule switched off
+        assert node.tracker.detection.releaser.config.spare_support == 0.0
     finally:
         node.destroy_node()
     node = start(context, '-p', f'calibration_file:={room_calibration}',

@@ -158,6 +158,7 @@ def test_same_seed_same_result():
     ({'motion': 3}, 'motion'),
     ({'release_time': 0.0}, 'release_time'),
     ({'detection_threshold': float('inf')}, 'detection_threshold'),
+    ({'spare_support': 1.5}, 'spare_support'),
 ])
 def test_config_validation(kw, msg):
     with pytest.raises(TrackerError, match=msg):

@@ -52,6 +52,9 @@ class TrackerConfig:
         init_velocity_spread: m/s, spread of a new track's velocities.
         seed: seed of the default random generator (None = fresh entropy).
         release_time: s without foreground support before a track is released (003 §4.3).
+        spare_support: exclusive support below which a track overlapping another one is
+            spare and released like an unsupported one (``ReleaseConfig.spare_support``;
+            None: its default, 0: off).
         detection_threshold: smallest combined log response of a detection (None: the
             detector's default).
         detection: automatic detection, model acquisition and release of people (003 §4)
@@ -83,6 +86,7 @@ class TrackerConfig:
     detection: bool = False
     release_time: float = 1.0
     detection_threshold: float | None = None
+    spare_support: float | None = None
     subsample: int = 1
     pipeline_search: bool = False
 
@@ -119,6 +123,9 @@ class TrackerConfig:
                 isinstance(self.detection_threshold, (int, float))
                 and np.isfinite(self.detection_threshold)):
             bad(f'detection_threshold must be a finite number, got {self.detection_threshold!r}')
+        if self.spare_support is not None and not (
+                isinstance(self.spare_support, (int, float)) and 0 <= self.spare_support <= 1):
+            bad(f'spare_support must be a number in [0, 1], got {self.spare_support!r}')
         if self.seed is not None and (isinstance(self.seed, bool)
                                       or not isinstance(self.seed, (int, np.integer))):
             bad(f'seed must be an integer or None, got {self.seed!r}')
@@ -131,9 +138,10 @@ class TrackerConfig:
 
         detector = DetectorConfig() if self.detection_threshold is None else \
             replace(DetectorConfig(), threshold=float(self.detection_threshold))
-        return AutoDetectionConfig(
-            detector=detector, release=replace(ReleaseConfig(), timeout=float(self.release_time)),
-            sigma=float(self.sigma))
+        release = replace(ReleaseConfig(), timeout=float(self.release_time))
+        if self.spare_support is not None:
+            release = replace(release, spare_support=float(self.spare_support))
+        return AutoDetectionConfig(detector=detector, release=release, sigma=float(self.sigma))
 
     def filter_config(self) -> FilterConfig:
         """The particle-filter parameters of this configuration."""

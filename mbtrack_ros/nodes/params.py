@@ -53,6 +53,9 @@ detection.enabled               bool       automatic detection, model acquisitio
                                            init_ground_truth (true)
 detection.threshold             double     smallest combined log response of a new
                                            detection (1.0)
+detection.spare_support         double     exclusive support below which a track that
+                                           overlaps another one is released as spare;
+                                           0 = off (0.25)
 ==============================  =========  =================================================
 """
 from __future__ import annotations
@@ -67,6 +70,7 @@ from rclpy.exceptions import (
 from rclpy.node import Node
 
 from mbtrack_ros.core.camera import CalibrationError, RoomCalibration
+from mbtrack_ros.core.detection.release import ReleaseConfig
 from mbtrack_ros.core.tracker import TrackerConfig, TrackerError
 
 __all__ = ['EXECUTORS', 'RELIABILITIES', 'TRANSPORTS', 'CameraInput', 'NodeParams', 'ParamsError',
@@ -164,6 +168,10 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
                           '(TrackerConfig.detection); off when init_ground_truth is set', {}),
     'detection.threshold': (1.0, 'smallest combined log response of a new detection',
                             _fr(-100.0, 100.0)),
+    'detection.spare_support': (ReleaseConfig().spare_support, 'exclusive foreground support '
+                                'below which a track that overlaps another one is released as '
+                                'spare (ReleaseConfig.spare_support); 0 = off',
+                                _fr(0.0, 1.0)),
 }
 
 
@@ -252,6 +260,7 @@ def declare_and_read(node: Node) -> tuple[NodeParams, RoomCalibration]:
         'detection': bool(v['detection.enabled']) and not gt,  # ground truth starts tracks
         'release_time': float(v['tracker.release_time']),
         'detection_threshold': float(v['detection.threshold']),
+        'spare_support': float(v['detection.spare_support']),
     }
     known = {f.name for f in fields(TrackerConfig)}
     try:
