@@ -266,6 +266,29 @@ def totals(pairs: list[tuple[Path, Path]]) -> None:
           'longest per recording ' + ', '.join(f'{k} {v:.1f} s' for k, v in longest.items()))
 
 
+def spares(pairs: list[tuple[Path, Path]]) -> None:
+    """Each release by the spare-track rule against the CLEAR-MOT matching of the track in
+    the second (15 frames) before: matched to a person in more than 10 of them, in some, or
+    in none (a track that followed nobody, which the rule should end)."""
+    total: dict[str, int] = {}
+    for out, rec in pairs:
+        tracks, truth, events, _ = _load(out, rec)
+        d = clear_mot(tracks, truth).matches_detail
+        s0 = min(r.stamp_ns for r in truth)
+        frames = np.round((d.stamp_ns.astype(np.int64) - s0) / (1e9 / FPS)).astype(int)
+        matched = {(int(f), int(t)) for f, t, p in zip(frames, d.track_id, d.person_id)
+                   if t >= 0 and p >= 0}
+        found = []
+        for e in events:
+            if e['kind'] == 'end' and e['reason'] == 'spare':
+                n = sum((g, e['id']) in matched for g in range(e['frame'] - 15, e['frame']))
+                kind = 'matched' if n > 10 else 'partly matched' if n else 'unmatched'
+                total[kind] = total.get(kind, 0) + 1
+                found.append(f"{e['id']}@{e['frame']}: {kind}")
+        print(f'{out.name}: ' + (', '.join(found) or 'no spare releases'))
+    print('total:', ', '.join(f'{k} {v}' for k, v in sorted(total.items())) or 'none')
+
+
 def lag(pairs: list[tuple[Path, Path]]) -> None:
     print('| run | person-frames | distance median | p90 | > 0.3 m | > 0.5 m | walking > 1 m/s: '
           'median | lag along | switches: old track not reported / reported > 0.5 m off |')
@@ -363,7 +386,7 @@ def main(argv: list[str] | None = None) -> int:
     s.add_argument('rec', type=Path)
     t = sub.add_parser('table')
     t.add_argument('pairs', type=Path, nargs='+')
-    for name in ('lag', 'decisions', 'totals'):
+    for name in ('lag', 'decisions', 'totals', 'spares'):
         sub.add_parser(name).add_argument('pairs', type=Path, nargs='+')
     r.add_argument('--release', action='append', default=[], metavar='FIELD=VALUE',
                    help='override a ReleaseConfig field (repeatable), e.g. spare_support=0')
@@ -379,7 +402,8 @@ def main(argv: list[str] | None = None) -> int:
     else:
         if len(args.pairs) % 2:
             p.error(f'{args.cmd} needs OUT REC pairs')
-        {'table': table, 'lag': lag, 'decisions': decisions, 'totals': totals}[args.cmd](
+        {'table': table, 'lag': lag, 'decisions': decisions, 'totals': totals,
+         'spares': spares}[args.cmd](
             list(zip(args.pairs[::2], args.pairs[1::2])))
     return 0
 

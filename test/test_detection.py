@@ -520,24 +520,42 @@ def _track_painted(tracker, calib, bgs, rng, frames, people_at):
     return out
 
 
-def test_tracker_moves_a_drifted_track_back_instead_of_a_second_birth():
-    """A track 0.8 m off its person: the person is re-detected beside it; the track's own
-    appearance model explains the detection better than its place, so the track is moved
-    (same id) and no second track is born on the person."""
+def _walker(k):
+    """One person walking along y = 2.6 m, 0.3 m/s."""
+    return [person(2.0 + 0.02 * k, 2.6, theta=0.0)]
+
+
+def _drifted_walker(frames, before_drift=None):
+    """:func:`_walker` tracked as track 1 for ``frames`` frames, then track 1 put 0.8 m
+    beside the person (``before_drift(tracker)`` runs just before). Returns the tracker and
+    ``step(k)``, which steps frame k and returns (result, the decisions' actions)."""
     rng = np.random.default_rng(3)
     calib = make_room()
     bgs = backgrounds(calib)
     tracker = _detecting_tracker(calib, bgs, seed=2)
-    walker = lambda k: [person(2.0 + 0.02 * k, 2.6, theta=0.0)]   # noqa: E731
-    res = _track_painted(tracker, calib, bgs, rng, 36, walker)   # > relocate_interval
+    res = _track_painted(tracker, calib, bgs, rng, frames, _walker)
     assert tracker.track_ids == [1]
-    # the track drifts: its particles are put 0.8 m beside the person
+    if before_drift is not None:
+        before_drift(tracker)
     state = res[-1].tracks[0].mean.copy()
     state[1] += 0.8
     tracker.relocate_track(1, state)
+
+    def step(k):
+        r = tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, _walker(k), rng))
+        return r, [d['action'] for d in tracker.detection.decisions]
+    return tracker, step
+
+
+def test_tracker_moves_a_drifted_track_back_instead_of_a_second_birth():
+    """A track 0.8 m off its person: the person is re-detected beside it; the track's own
+    appearance model explains the detection better than its place, so the track is moved
+    (same id) and no second track is born on the person."""
+    # tracked for 36 frames (> relocate_interval), then its particles put 0.8 m beside
+    tracker, step = _drifted_walker(36)
     ids, last = set(), None
     for k in range(36, 56):
-        r = tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, walker(k), rng))
+        r, _ = step(k)
         ids |= {t.track_id for t in r.tracks}
         last = (k, r)
     assert ids == {1} and tracker.track_ids == [1]        # never a second track
@@ -584,20 +602,10 @@ def test_bench_detection_reports_times_and_tracks_five_people_without_births():
 def test_a_track_moved_or_born_recently_is_not_moved_again_and_no_twin_is_born():
     """Within ``relocate_interval`` of a track's birth a detection that its model explains
     is dropped: neither a move (a young model in a group would hop) nor a second birth."""
-    rng = np.random.default_rng(3)
-    calib = make_room()
-    bgs = backgrounds(calib)
-    tracker = _detecting_tracker(calib, bgs, seed=2)
-    walker = lambda k: [person(2.0 + 0.02 * k, 2.6, theta=0.0)]   # noqa: E731
-    res = _track_painted(tracker, calib, bgs, rng, 8, walker)
-    assert tracker.track_ids == [1]
-    state = res[-1].tracks[0].mean.copy()
-    state[1] += 0.8
-    tracker.relocate_track(1, state)                  # drift 0.5 s after the birth
+    tracker, step = _drifted_walker(8)                # drift 0.5 s after the birth
     actions = []
     for k in range(8, 20):
-        tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, walker(k), rng))
-        actions += [d['action'] for d in tracker.detection.decisions]
+        actions += step(k)[1]
     assert tracker.track_ids == [1]
     assert any(a.startswith('drop') for a in actions)
     assert not any(a.startswith('move') or a == 'birth' for a in actions)
@@ -854,24 +862,16 @@ def test_a_hidden_track_beside_a_detection_is_moved_there_instead_of_a_birth(
 
     from mbtrack_ros.core.detection.manager import AutoDetection
 
-    rng = np.random.default_rng(3)
-    calib = make_room()
-    bgs = backgrounds(calib)
-    tracker = _detecting_tracker(calib, bgs, seed=2)
-    walker = lambda k: [person(2.0 + 0.02 * k, 2.6, theta=0.0)]   # noqa: E731
-    res = _track_painted(tracker, calib, bgs, rng, 36, walker)
-    assert tracker.track_ids == [1]
-    det = tracker.detection
-    # the appearance gain can never move a track; track 1 counts as hidden
-    det.config = replace(det.config, relocate_margin=1e9, relocate_hidden=hidden_rule)
-    monkeypatch.setattr(AutoDetection, 'reported', lambda self, tid: False)
-    state = res[-1].tracks[0].mean.copy()
-    state[1] += 0.8
-    tracker.relocate_track(1, state)
+    def hidden(tracker):
+        # the appearance gain can never move a track; track 1 counts as hidden
+        det = tracker.detection
+        det.config = replace(det.config, relocate_margin=1e9, relocate_hidden=hidden_rule)
+        monkeypatch.setattr(AutoDetection, 'reported', lambda self, tid: False)
+
+    tracker, step = _drifted_walker(36, before_drift=hidden)
     actions = []
     for k in range(36, 50):
-        tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, walker(k), rng))
-        actions += [d['action'] for d in det.decisions]
+        actions += step(k)[1]
     if hidden_rule:
         assert tracker.track_ids == [1] and 'move 1 (hidden)' in actions
         assert 'birth' not in actions

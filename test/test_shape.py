@@ -177,8 +177,8 @@ def test_row_step_and_errors():
 
 def test_fused_outline_matches_projection_then_outline(rng):
     """silhouette_outline's one-pass kernel against the straightforward composition:
-    Camera.project of the axis ends, then outline_points with width_scale of the relative
-    orientation and Camera.distance of the body centre (bit for bit)."""
+    Camera.project of the axis ends, then the outline of each particle with width_scale of
+    the relative orientation, and Camera.distance of the body centre (bit for bit)."""
     from mbtrack_ros.core import _kernels
     R, t = look_at((0.3, -3.0, 2.5), (0.5, 1.0, 0.8))
     cams = [_camera(), Camera('d', 160, 120, [[110, 0, 79.3], [0, 104, 60.6], [0, 0, 1]],
@@ -199,13 +199,17 @@ def test_fused_outline_matches_projection_then_outline(rng):
                       heights)
         ends = np.stack([np.stack([states[:, X], states[:, Y], zb], 1),
                          np.stack([states[:, X], states[:, Y], zt], 1)], 1)
-        rel = states[:, THETA] - cam.viewing_angle(states[:, :2])
-        ref = _kernels.outline_points(
-            np.ascontiguousarray(cam.project(ends)), cam.depth(ends), sitting,
-            shape.fractions, shape.half_widths, shape.segment_parts, shape.hip_fraction,
-            widths, width_scale(rel), cam.focal)
+        scale = width_scale(states[:, THETA] - cam.viewing_angle(states[:, :2]))
+        end_px, depth = cam.project(ends), cam.depth(ends)
+        npts = shape.fractions.size
+        left, right = np.zeros((n, npts, 2)), np.zeros((n, npts, 2))
+        seg_part = np.empty((n, npts - 1), np.int8)
+        valid = np.array([_kernels._outline_one(
+            i, *end_px[i, 0], *end_px[i, 1], *depth[i], bool(sitting[i]), shape.fractions,
+            shape.half_widths, shape.segment_parts, shape.hip_fraction, widths[i], scale[i],
+            cam.focal, left, right, seg_part) for i in range(n)])
         centre = np.stack([states[:, X], states[:, Y], 0.5 * (zb + zt)], axis=1)
-        ref = ref + (np.where(ref[3], cam.distance(centre), np.inf),)
+        ref = (left, right, seg_part, valid, np.where(valid, cam.distance(centre), np.inf))
         assert 0 < got[3].sum() < n
         for a, b in zip(got, ref):
             assert np.array_equal(a, b)

@@ -72,7 +72,8 @@ def quantize_rgb(image):
 
 
 @njit(cache=True, nogil=True)
-def _wrap_angle(a):
+def wrap_angle(a):
+    """An angle wrapped to [-pi, pi)."""
     return np.mod(a + np.pi, 2.0 * np.pi) - np.pi
 
 
@@ -96,7 +97,7 @@ def nearest_two_views(rel, target, view_angles, n_views, va, vb, wa):
         da = np.inf
         db = np.inf
         for v in range(nv):
-            d = np.abs(_wrap_angle(rel[i] - view_angles[k, v]))
+            d = np.abs(wrap_angle(rel[i] - view_angles[k, v]))
             if ia < 0 or d < da:
                 ib = ia
                 db = da
@@ -115,9 +116,22 @@ def nearest_two_views(rel, target, view_angles, n_views, va, vb, wa):
 @njit(cache=True, nogil=True)
 def _outline_one(i, bx, by, tx, ty, d0, d1, sit, frac, half, parts, hip, width, scale, focal,
                  left, right, seg_part):
-    """Outline of particle i from its projected axis ends (b: bottom, t: top) and their
-    depths d0, d1 into left/right[i] and seg_part[i]; False (nothing written but seg_part)
-    if an end is behind the camera or not finite. See :func:`outline_points`."""
+    """Outline points left/right of the body axis of particle i at the profile heights
+    (003 §2.1), from its projected axis ends (b: bottom, t: top) and their optical depths
+    d0, d1, into left/right[i] (P, 2) and seg_part[i] (P - 1,) (0: dropped segment).
+
+    ``frac`` (P,) profile height fractions, ``half`` (P,) half-width fractions, ``parts``
+    (P - 1,) segment parts, ``hip`` the hip height fraction, ``width`` the body width
+    (metres), ``scale`` s(o) (:func:`width_scale`), ``focal`` pixels. A standing axis runs
+    from the feet to the head top (height fraction f = frac); a sitting one from the hip to
+    the head top, f = (frac - hip) / (1 - hip) clipped at 0, and its segments below the hip
+    (the legs) are dropped. The image position of the axis point at fraction f is placed on
+    the segment with the perspective-correct fraction ``f d1 / ((1 - f) d0 + f d1)`` (exact
+    for a pinhole camera, depth being linear along the axis); offsets are half-width *
+    focal / depth * s, perpendicular to the bottom -> top image direction.
+
+    Returns False (nothing written but seg_part) if an end is behind the camera (depth <=
+    1 mm) or its image point is not finite."""
     npts = frac.shape[0]
     for j in range(npts - 1):
         seg_part[i, j] = 0 if (sit and frac[j] < hip - 1e-12) else parts[j]
@@ -150,59 +164,31 @@ def _outline_one(i, bx, by, tx, ty, d0, d1, sit, frac, half, parts, hip, width, 
 
 
 @njit(cache=True, nogil=True)
-def outline_points(end_px, end_depth, sitting, frac, half, parts, hip, width, scale, focal):
-    """Outline points left/right of the body axis at the profile heights (003 §2.1).
-
-    Args:
-        end_px: (N, 2, 2) projected bottom and top axis points; end_depth (N, 2) their
-            optical depths, metres.
-        sitting: (N,) bool; frac (P,) profile height fractions, half (P,) half-width
-            fractions, parts (P - 1,) int8 segment parts, hip the hip height fraction.
-        width: (N,) body widths, metres; scale: (N,) s(o); focal: focal length, pixels.
-
-    A standing axis runs from the feet to the head top (height fraction f = frac); a
-    sitting one from the hip to the head top, f = (frac - hip) / (1 - hip) clipped at 0,
-    and its segments below the hip (the legs) are dropped. The image position of the axis
-    point at fraction f is placed on the segment with the perspective-correct fraction
-    ``f d1 / ((1 - f) d0 + f d1)`` (exact for a pinhole camera, depth being linear along
-    the axis); offsets are half-width * focal / depth * s, perpendicular to the
-    bottom -> top image direction.
-
-    Returns:
-        left, right: (N, P, 2) image points (zeros for invalid particles); seg_part
-        (N, P - 1) int8 segment parts (0: dropped); valid (N,) bool, both axis ends in
-        front of the camera (depth > 1 mm) with finite image points.
-    """
-    n = end_px.shape[0]
-    npts = frac.shape[0]
-    left = np.zeros((n, npts, 2))
-    right = np.zeros((n, npts, 2))
-    seg_part = np.empty((n, npts - 1), np.int8)
-    valid = np.zeros(n, np.bool_)
-    for i in range(n):
-        valid[i] = _outline_one(i, end_px[i, 0, 0], end_px[i, 0, 1], end_px[i, 1, 0],
-                                end_px[i, 1, 1], end_depth[i, 0], end_depth[i, 1], sitting[i],
-                                frac, half, parts, hip, width[i], scale[i], focal, left, right,
-                                seg_part)
-    return left, right, seg_part, valid
+def width_scale(rel):
+    """003 §2.1: profile width factor s(o) = 0.7 + 0.3 |cos o| of the body orientation o
+    relative to the camera (a number or an array)."""
+    return 0.7 + 0.3 * np.abs(np.cos(rel))
 
 
 @njit(cache=True, nogil=True)
 def body_outline(ends, end_depth, theta, sitting, frac, half, parts, hip, width, rot, t, kmat,
                  dist, centre, focal):
-    """:func:`outline_points` with the projection and the per-particle camera geometry in the
-    same pass (the same operations as ``Camera.project``, ``Camera.viewing_angle``,
-    ``width_scale`` and ``Camera.distance`` one particle at a time).
+    """The body outlines of N particles in one camera (003 §2.1): per particle the projection
+    of its axis ends (the operations of ``Camera.project``), s(o) of its orientation relative
+    to the camera (``Camera.viewing_angle``, :func:`width_scale`), the outline
+    (:func:`_outline_one`) and the camera distance of the body centre (``Camera.distance``).
 
     Args:
         ends: (N, 2, 3) world bottom / top axis points; end_depth (N, 2) their optical
             depths (``Camera.depth``); theta (N,) body orientations; rot, t, kmat, dist the
             camera (see :func:`_project_one`), centre (3,) its centre.
-        the rest as :func:`outline_points`.
+        sitting (N,) bool; width (N,) body widths, metres; frac, half, parts, hip, focal as
+        :func:`_outline_one`.
 
     Returns:
-        left, right, seg_part, valid as :func:`outline_points`, and distance (N,) from the
-        camera centre to the middle of the axis (+inf if not valid).
+        left, right (N, P, 2) image points (zeros for invalid particles), seg_part
+        (N, P - 1) int8, valid (N,) bool (:func:`_outline_one`'s result), and distance
+        (N,) from the camera centre to the middle of the axis (+inf if not valid).
     """
     n = ends.shape[0]
     npts = frac.shape[0]
@@ -223,7 +209,7 @@ def body_outline(ends, end_depth, theta, sitting, frac, half, parts, hip, width,
             tx, ty = _project_one(ends[i, 1, 0], ends[i, 1, 1], ends[i, 1, 2], rot, t, kmat,
                                   dist)
         rel = theta[i] - np.arctan2(centre[1] - y, centre[0] - x)
-        scale = 0.7 + 0.3 * np.abs(np.cos(rel))           # width_scale, 003 §2.1
+        scale = width_scale(rel)
         valid[i] = _outline_one(i, bx, by, tx, ty, d0, d1, sitting[i], frac, half, parts, hip,
                                 width[i], scale, focal, left, right, seg_part)
         if valid[i]:

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from mbtrack_ros.core._kernels import wrap_angle
 from mbtrack_ros.core.state import SIT, STATE_DIM, THETA, VX, VY, X, Y
 
 __all__ = ['DynamicsError', 'MotionConfig', 'predict']
@@ -113,7 +114,7 @@ def _move(out, dt, decay, dv, max_speed, dp, turn, orientation_speed, dtheta, fl
             base = np.arctan2(vy, vx) if speed > orientation_speed else out[i, THETA]
             if dtheta.shape[0]:
                 base = base + dtheta[i]
-            out[i, THETA] = np.mod(base + np.pi, 2.0 * np.pi) - np.pi
+            out[i, THETA] = wrap_angle(base)
             if flip_u.shape[0] and flip_u[i] < flip_p:
                 out[i, SIT] = 1.0 - out[i, SIT]
         if floor.shape[0]:

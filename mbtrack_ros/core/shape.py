@@ -175,8 +175,10 @@ class Silhouettes:
 
 
 def width_scale(rel_angle: np.ndarray) -> np.ndarray:
-    """003 §2.1: profile width factor s(o) = 0.7 + 0.3 |cos o| (o relative orientation)."""
-    return 0.7 + 0.3 * np.abs(np.cos(rel_angle))
+    """003 §2.1: profile width factor s(o) = 0.7 + 0.3 |cos o| (o relative orientation);
+    the kernels' :func:`~mbtrack_ros.core._kernels.width_scale`, for any array shape."""
+    rel = np.asarray(rel_angle, dtype=np.float64)
+    return _kernels.width_scale(np.ascontiguousarray(rel.reshape(-1))).reshape(rel.shape)
 
 
 def _check_states(states: np.ndarray) -> np.ndarray:
