@@ -322,3 +322,27 @@ def test_ycc_conversion_equals_reordered_opencv_ycrcb():
         _to_ycc(strided),
         cv2.cvtColor(np.ascontiguousarray(strided), cv2.COLOR_RGB2YCrCb)
         .astype(np.float32)[..., [0, 2, 1]])
+
+
+def test_one_dilation_gives_both_exclusion_masks():
+    """_dilated_masks codes motion 1 and excluded pixels 2 and dilates once: the same
+    masks as dilating motion | exclude and exclude separately (random sparse masks, with
+    and without exclusion, with and without a kernel)."""
+    from mbtrack_ros.core.detection.background import _dilated_masks, _kernel
+
+    rng = np.random.default_rng(5)
+    for case in range(24):
+        h, w = rng.integers(5, 60, size=2)
+        moving = (rng.random((h, w)) < rng.choice([0.0, 0.01, 0.1])).astype(np.uint8)
+        exclude = None if case % 3 == 0 else rng.random((h, w)) < rng.choice([0.0, 0.02, 0.2])
+        size = int(rng.choice([1, 3, 11]))
+        k = _kernel(size)
+        frozen, occupied = _dilated_masks(moving, exclude, k)
+        either = moving | (np.zeros((h, w), np.uint8) if exclude is None
+                           else exclude.astype(np.uint8))
+        only = np.zeros((h, w), np.uint8) if exclude is None else exclude.astype(np.uint8)
+        if k is not None:
+            either, only = cv2.dilate(either, k), cv2.dilate(only, k)
+        np.testing.assert_array_equal(frozen, either)
+        np.testing.assert_array_equal(occupied, only)
+        assert frozen.dtype == occupied.dtype == np.uint8

@@ -199,6 +199,20 @@ def _foreground_kernel(ycc: np.ndarray, bg: np.ndarray, gain: float, luma: float
     return out
 
 
+def _dilated_masks(moving: np.ndarray, exclude: np.ndarray | None,
+                  kernel: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """(dilate(moving | exclude), dilate(exclude)), (H, W) uint8 0/1 each, in one dilation.
+
+    ``moving`` is (H, W) uint8 0/1, ``exclude`` (H, W) bool or None (no pixel), ``kernel``
+    the structuring element (None: no dilation). Motion is coded 1 and excluded pixels 2;
+    dilation takes the neighbourhood maximum, so the dilated code is >= 1 exactly where
+    the dilation of either mask is set and >= 2 where that of ``exclude`` is."""
+    code = moving if exclude is None else moving | (exclude.view(np.uint8) << 1)
+    if kernel is not None and code.any():
+        code = cv2.dilate(code, kernel)
+    return (code >= 1).view(np.uint8), (code >= 2).view(np.uint8)
+
+
 @njit(cache=True, nogil=True)
 def _motion_kernel(y: np.ndarray, prev: np.ndarray, motion: np.ndarray, decay: float,
                    threshold: float, persistent: float) -> np.ndarray:  # pragma: no cover
@@ -483,9 +497,8 @@ class BackgroundModel:
             self._motion = np.zeros(y.shape, np.float32)
             self._prev_y = y
         # Persistent motion: decaying accumulation of thresholded frame differences.
-        frozen = _motion_kernel(y, self._prev_y, self._motion, float(cfg.motion_decay),
+        moving = _motion_kernel(y, self._prev_y, self._motion, float(cfg.motion_decay),
                                 float(cfg.motion_threshold), float(cfg.motion_persistent))
-        moving = frozen.copy()
         self._prev_y = y
         if exclude is not None:
             exclude = np.asarray(exclude, dtype=bool)
@@ -493,15 +506,10 @@ class BackgroundModel:
                 raise DetectionError(
                     f'camera {self.name!r}: exclusion mask shape {exclude.shape} differs '
                     f'from the image {y.shape}')
-            frozen |= exclude.view(np.uint8)
-        k = _kernel(2 * cfg.mask_dilation + 1)
-        if k is not None and frozen.any():
-            frozen = cv2.dilate(frozen, k)
-        # a not-yet-known pixel is seen empty when no track covers it (motion next to a
-        # person who walks away must not keep his bootstrap place unknown: a ghost)
-        occupied = np.zeros(y.shape, np.uint8) if exclude is None else exclude.view(np.uint8)
-        if k is not None and occupied.any():
-            occupied = cv2.dilate(occupied, k)
+        # frozen: persistent motion or tracks; occupied: tracks alone (a not-yet-known pixel
+        # is seen empty when no track covers it: motion next to a person who walks away
+        # must not keep his bootstrap place unknown, a ghost); both dilated
+        frozen, occupied = _dilated_masks(moving, exclude, _kernel(2 * cfg.mask_dilation + 1))
         if self._static is None or self._static.shape != y.shape:
             self._static = np.zeros(y.shape, np.int16)
         use_fg = fg is not None

@@ -169,16 +169,19 @@ class AutoDetection:
         self._worker: ThreadPoolExecutor | None = None  # one thread: background, search
         self._foreground: tuple[list[str], Future] | None = None  # start_foreground()'s job
         self._searching: tuple[_Pending, Future] | None = None    # start_search()'s job
+        self._updating: Future | None = None  # update()'s deferred background update job
         self.side = [n for n, c in calibration.cameras.items() if not is_ceiling(c)]
         self.ceiling = [n for n in calibration.cameras if n not in self.side]
 
     def prepare(self) -> None:
         """Do the one-off work of the first frames ahead (the people cue's floor grid), so
         that a live node does not stall at the bootstrap frame."""
+        self._await_update()
         self.background.prepare()
 
     def bootstrap(self, frames: Mapping[str, Sequence[np.ndarray]]) -> None:
         """Initialise the background models from empty-room frames per camera."""
+        self._await_update()
         self.background.bootstrap(frames)
 
     def reset(self) -> None:
@@ -219,6 +222,10 @@ class AutoDetection:
     def abandon(self) -> None:
         """Wait for a foreground started by :meth:`start_foreground` whose frame set will not
         be updated (its step failed) and drop its deferred background update."""
+        try:
+            self._await_update()
+        except Exception:  # noqa: BLE001 - an earlier frame's update; this one is dropped
+            pass
         if self._foreground is not None:
             _, job = self._foreground
             self._foreground = None
@@ -227,6 +234,13 @@ class AutoDetection:
             except Exception:  # noqa: BLE001 - the frame set is abandoned anyway
                 pass
             self.background.drop_pending()
+
+    def _await_update(self) -> None:
+        """Wait for the background update that :meth:`update` started on the worker (and
+        raise its error, as running it here would). Caller's thread only."""
+        job, self._updating = self._updating, None
+        if job is not None:
+            job.result()
 
     def _executor(self) -> ThreadPoolExecutor:
         if self._worker is None:
@@ -246,6 +260,7 @@ class AutoDetection:
                 raise DetectionError(f'update() got cameras {names}, the foreground was '
                                      f'started for {started}')
             return job.result()
+        self._await_update()
         return self.background.apply({n: images[n] for n in names}, defer=True)
 
     def step(self, stamp_ns: int, images: Mapping[str, np.ndarray],
@@ -314,6 +329,9 @@ class AutoDetection:
         # the model update (and with it the motion the detector needs) waits for search()
         fg = self._take_foreground(images, names)
         self.background.exclude_pending(masks)
+        # the model update itself needs nothing of steps 3-4 and they do not read the
+        # model: it runs on the worker meanwhile (search() joins it; the same results)
+        self._updating = self._executor().submit(self.background.update_pending)
         known_bins = dict(bins or {})
         evidence = {n: FrameEvidence(images[n], fg[n], masks[n], _bins=known_bins.get(n))
                     for n in fg}
@@ -388,7 +406,8 @@ class AutoDetection:
         if self._pending is None:
             return
         pending, self._pending = self._pending, None
-        job = self._executor().submit(self._update_and_find, pending, list(born))
+        updating, self._updating = self._updating, None  # runs first on the same worker
+        job = self._executor().submit(self._update_and_find, pending, list(born), updating)
         self._searching = (pending, job)
 
     def finish_search(self) -> tuple[int | None, list[Birth]]:
@@ -400,8 +419,13 @@ class AutoDetection:
         self._searching = None
         return pending.stamp_ns, self._settle(pending, job.result())
 
-    def _update_and_find(self, pending: _Pending, born: list) -> _Found:
-        """The worker's part of a pipelined search: background update, then :meth:`_find`."""
+    def _update_and_find(self, pending: _Pending, born: list, updating: Future | None
+                         ) -> _Found:
+        """The worker's part of a pipelined search: background update, then :meth:`_find`.
+        ``updating``: :meth:`update`'s job of the same update, done before this one (the
+        worker runs its jobs in order); its error is raised here."""
+        if updating is not None:
+            updating.result()
         spent = self._update_background(pending)
         found = self._find(pending, born)
         found.timings['detect_background_update'] = spent
@@ -460,8 +484,13 @@ class AutoDetection:
         """The background model update of the last :meth:`update` (003 §4.2), deferred so
         that it does not delay the frame's result, and the recent motion it gives to the
         frame's evidence (the detector's proof that a detection is no ghost). :meth:`search`
-        runs it first; the results are those of updating within :meth:`update`."""
-        self.timings['detect_background_update'] = self._update_background(self._pending)
+        runs it first; the results are those of updating within :meth:`update`. The update
+        itself started on the worker in :meth:`update`: the time here is the wait for it and
+        the motion masks."""
+        t0 = time.perf_counter()
+        self._await_update()
+        self._update_background(self._pending)
+        self.timings['detect_background_update'] = time.perf_counter() - t0
 
     def _update_background(self, pending: _Pending | None) -> float:
         """Run the deferred background update and fill ``pending``'s evidence motion;
