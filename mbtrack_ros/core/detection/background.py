@@ -179,9 +179,14 @@ def median_frame(frames: Sequence[np.ndarray]) -> np.ndarray:
 def _foreground_kernel(ycc: np.ndarray, bg: np.ndarray, gain: float, luma: float,
                        chroma: float, shadow_lo: float, shadow_hi: float
                        ) -> np.ndarray:  # pragma: no cover - compiled
-    """Y-Cb-Cr test per pixel: (H, W) uint8 foreground (before morphology)."""
+    """Y-Cb-Cr test per pixel: (H, W) uint8 foreground (before morphology).
+
+    Most pixels match the background: their squared chroma distance is below
+    ``(chroma (1 - 1e-9))^2``, whose square root (rounded or not) is surely below
+    ``chroma``, so they are decided without the square root (the same decisions)."""
     h, w = ycc.shape[:2]
     out = np.zeros((h, w), np.uint8)
+    surely_close = (chroma * (1.0 - 1e-9)) ** 2
     for i in range(h):
         for j in range(w):
             by = max(bg[i, j, 0], 1.0)
@@ -189,7 +194,10 @@ def _foreground_kernel(ycc: np.ndarray, bg: np.ndarray, gain: float, luma: float
             y = ycc[i, j, 0]
             d1 = ycc[i, j, 1] - 128.0 - gain * (bg[i, j, 1] - 128.0)
             d2 = ycc[i, j, 2] - 128.0 - gain * (bg[i, j, 2] - 128.0)
-            dc = np.sqrt(d1 * d1 + d2 * d2)
+            s = d1 * d1 + d2 * d2
+            if abs(y - gy) <= luma and s < surely_close:
+                continue  # background: neither test fires
+            dc = np.sqrt(s)
             if abs(y - gy) > luma or dc > chroma:
                 r = y / gy
                 if shadow_lo < shadow_hi and shadow_lo <= r <= shadow_hi \
