@@ -920,8 +920,8 @@ def test_selected_silhouettes_equal_separate_rasterisations():
 def test_step_reuses_the_filters_colour_bins_and_defers_the_background_update():
     """After step(search=False) the side cameras' evidence holds the measurement model's
     quantised images (no second quantisation) and the background update is handed to the
-    detection's worker (the motion the detector needs is filled in by search(), which
-    joins it)."""
+    detection's worker at the end of update(); the motion the detector needs is waited for
+    when read (FrameEvidence.motion_integral)."""
     calib = make_room()
     bgs = backgrounds(calib)
     tracker = _detecting_tracker(calib, bgs, seed=1)
@@ -937,14 +937,15 @@ def test_step_reuses_the_filters_colour_bins_and_defers_the_background_update():
             assert evidence[name].bins is bins[name]
             np.testing.assert_array_equal(bins[name], quantize(images[name]))
             checked += 1
-        models = tracker.detection.background.models
         if evidence:
             assert tracker.detection._updating is not None
-            assert all(ev.motion is None for ev in evidence.values())
+            assert all(ev.motion is None and ev.motion_source is not None
+                       for ev in evidence.values())
         tracker.search()
-        assert tracker.detection._updating is None
-        assert not any(m.pending for m in models.values())
-        assert all(ev.motion is not None for ev in evidence.values())
+        for ev in evidence.values():
+            assert ev.motion_integral is not None and ev.motion is not None
+        # the models, once the update on the worker is done
+        assert not any(m.pending for m in tracker.detection.background.models.values())
     assert checked > 0
 
 
