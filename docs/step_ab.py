@@ -4,18 +4,13 @@ docs/live_measurements.md, "Overlapped steps (h-pipe)").
 Usage: python docs/step_ab.py RECORDING FRAMES OUT.json VARIANT [VARIANT ...]
 (environment SWITCH=seconds sets sys.setswitchinterval, the GIL hand-over interval)
 VARIANT: inline (foreground inside update, as before h-pipe), overlap (foreground on the
-worker during the filter), pipe (overlap + TrackerConfig.pipeline_search), bg_serial (overlap,
-but the background model update that update() hands to the worker since h-cpu runs at once on
-the caller's thread at the end of update(), before publishing), bg_search (overlap, that
-update runs on the caller's thread at the start of search(): the order before h-cpu),
-bg_search_worker (that update handed to the worker at the start of search()).
+worker during the filter), pipe (overlap + TrackerConfig.pipeline_search).
 Frames are read per block of 25 sets, then each variant steps the block back to back as the
 node does (step(search=False), [publish], search()); a variant's worker is drained at the
 end of its block (counted in its block wall time). Per frame: pre-publish wall (step start
 to result), post (search()), CPU of the process (all threads).
 """
 import os, sys, time, json
-from concurrent.futures import Future
 import numpy as np
 from pathlib import Path
 from mbtrack_ros.core.camera import RoomCalibration
@@ -26,69 +21,12 @@ BLOCK = 25
 if os.environ.get('SWITCH'):
     sys.setswitchinterval(float(os.environ['SWITCH']))
 room = RoomCalibration.load(rec / 'calibration.yaml')
-
-
-class AtOnce:
-    """An executor that runs a job on the caller's thread when it is submitted."""
-
-    @staticmethod
-    def submit(fn, *args, **kwargs):
-        job = Future()
-        job.set_result(fn(*args, **kwargs))
-        return job
-
-
-class AtSearch:
-    """An executor whose job runs at the next search(): on the caller's thread, or with
-    ``worker`` handed to the detection's worker there."""
-
-    def __init__(self, det, worker=False):
-        self.queued = []
-        plain = det.search
-
-        def search():
-            while self.queued:
-                job, fn, args = self.queued.pop(0)
-                if worker:
-                    inner = det._executor().submit(fn, *args)
-                    inner.add_done_callback(lambda f, job=job: job.set_result(f.result()))
-                else:
-                    job.set_result(fn(*args))
-            return plain()
-        det.search = search
-
-    def submit(self, fn, *args):
-        job = Future()
-        self.queued.append((job, fn, args))
-        return job
-
-
-def serial_update(det, executor):
-    """det.update with its one worker job (the background model update) given to
-    ``executor`` instead of the worker."""
-    plain = det.update
-
-    def update(*args, **kwargs):
-        det._executor = lambda: executor
-        try:
-            return plain(*args, **kwargs)
-        finally:
-            del det._executor
-    return update
-
-
 trackers = {}
 for v in variants:
     tr = Tracker(room, TrackerConfig(detection=True, seed=0, pipeline_search=v == 'pipe'),
                  rng=np.random.default_rng(0))
     if v == 'inline':
         tr.detection.start_foreground = lambda images: None
-    if v == 'bg_serial':
-        tr.detection.update = serial_update(tr.detection, AtOnce)
-    if v == 'bg_search':
-        tr.detection.update = serial_update(tr.detection, AtSearch(tr.detection))
-    if v == 'bg_search_worker':
-        tr.detection.update = serial_update(tr.detection, AtSearch(tr.detection, True))
     trackers[v] = tr
 out = {v: {'frames': [], 'wall': 0.0, 'cpu': 0.0} for v in variants}
 

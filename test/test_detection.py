@@ -708,70 +708,6 @@ def test_foreground_overlapped_with_the_filter_gives_the_same_tracks_and_backgro
             np.testing.assert_array_equal(model.presence(), other[name].presence())
 
 
-def test_background_update_on_the_worker_gives_the_same_tracks_and_background():
-    """update() hands the frame's background model update to the detection's worker (it
-    overlaps support, existence and release; search() joins it). With every worker job run
-    at once on the caller's thread instead, and with the worker slowed down at random,
-    the tracks, background models and motion are the same; the update runs on the worker,
-    and step(search=False) + search() gives the same as step()."""
-    import threading
-    import time
-    from concurrent.futures import Future
-
-    from mbtrack_ros.core.detection.background import BackgroundModel
-
-    class AtOnce:
-        """An executor that runs each job on the caller's thread when it is submitted."""
-
-        def submit(self, fn, *args, **kwargs):
-            job = Future()
-            try:
-                job.set_result(fn(*args, **kwargs))
-            except BaseException as err:  # noqa: BLE001 - handed to the caller as a worker would
-                job.set_exception(err)
-            return job
-
-    calib = make_room()
-    bgs = backgrounds(calib)
-    frames = [paint(calib, bgs, [person(1.5 + 0.05 * k, 2.8, theta=0.0)] if k >= 3 else [],
-                    np.random.default_rng(k)) for k in range(14)]
-    plain_update = BackgroundModel._update
-    threads = set()
-    slow = np.random.default_rng(3)
-
-    def slowed_update(self, *args, **kwargs):
-        threads.add(threading.current_thread().name)
-        time.sleep(float(slow.uniform(0.0, 0.01)))
-        return plain_update(self, *args, **kwargs)
-
-    runs, banks = [], []
-    for variant in ('at_once', 'worker', 'worker_deferred'):
-        tracker = _detecting_tracker(calib, bgs, seed=1)
-        if variant == 'at_once':
-            tracker.detection._executor = AtOnce
-        else:
-            BackgroundModel._update = slowed_update
-        try:
-            rows = []
-            for k, images in enumerate(frames):
-                res = tracker.step(int(round(k * 1e9 / FPS)), images,
-                                   search=variant != 'worker_deferred')
-                rows.append([(t.track_id, *np.round(t.mean[:2], 9), t.existence)
-                             for t in res.tracks])
-                tracker.search()
-        finally:
-            BackgroundModel._update = plain_update
-        runs.append(rows)
-        banks.append(tracker.detection.background.models)
-    assert runs[0] == runs[1] == runs[2]
-    assert any(runs[0])  # someone was tracked
-    assert threads and all(t.startswith('detection') for t in threads)
-    for name, model in banks[0].items():
-        for other in banks[1:]:
-            np.testing.assert_array_equal(model.background_ycc, other[name].background_ycc)
-            np.testing.assert_array_equal(model.presence(), other[name].presence())
-
-
 def test_pipelined_search_is_timing_independent_and_starts_people_one_frame_later():
     """pipeline_search: the search of frame t runs on the worker while frame t+1 is
     filtered and its people are added after frame t+1's result. Whatever the threads'
@@ -919,9 +855,8 @@ def test_selected_silhouettes_equal_separate_rasterisations():
 
 def test_step_reuses_the_filters_colour_bins_and_defers_the_background_update():
     """After step(search=False) the side cameras' evidence holds the measurement model's
-    quantised images (no second quantisation) and the background update is handed to the
-    detection's worker at the end of update(); the motion the detector needs is waited for
-    when read (FrameEvidence.motion_integral)."""
+    quantised images (no second quantisation) and the background update (with the motion
+    the detector needs) is pending until search()."""
     calib = make_room()
     bgs = backgrounds(calib)
     tracker = _detecting_tracker(calib, bgs, seed=1)
@@ -937,15 +872,13 @@ def test_step_reuses_the_filters_colour_bins_and_defers_the_background_update():
             assert evidence[name].bins is bins[name]
             np.testing.assert_array_equal(bins[name], quantize(images[name]))
             checked += 1
+        models = tracker.detection.background.models
         if evidence:
-            assert tracker.detection._updating is not None
-            assert all(ev.motion is None and ev.motion_source is not None
-                       for ev in evidence.values())
+            assert all(models[n].pending for n in evidence)
+            assert all(ev.motion is None for ev in evidence.values())
         tracker.search()
-        for ev in evidence.values():
-            assert ev.motion_integral is not None and ev.motion is not None
-        # the models, once the update on the worker is done
-        assert not any(m.pending for m in tracker.detection.background.models.values())
+        assert not any(m.pending for m in models.values())
+        assert all(ev.motion is not None for ev in evidence.values())
     assert checked > 0
 
 

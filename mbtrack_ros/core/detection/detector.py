@@ -31,7 +31,7 @@ sitting one inside a standing person).
 """
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -177,16 +177,12 @@ class FrameEvidence:
         foreground: (H, W) bool foreground mask.
         tracks: (H, W) bool pixels covered by the rendered silhouettes of current tracks.
         motion: (H, W) bool pixels that moved recently (None: not checked).
-        motion_source: when ``motion`` is still being computed (the background model update
-            on the detection's worker), a callable giving it; read through
-            :attr:`motion_integral`, which waits for it only then.
     """
 
     image: np.ndarray
     foreground: np.ndarray
     tracks: np.ndarray | None = None
     motion: np.ndarray | None = None
-    motion_source: Callable[[], np.ndarray | None] | None = field(default=None, repr=False)
     _motion_integral: ForegroundIntegral | None = field(default=None, repr=False)
     _integral: ForegroundIntegral | None = field(default=None, repr=False)
     _edges: EdgeMap | None = field(default=None, repr=False)
@@ -208,9 +204,6 @@ class FrameEvidence:
 
     @property
     def motion_integral(self) -> ForegroundIntegral | None:
-        if self.motion is None and self.motion_source is not None:
-            source, self.motion_source = self.motion_source, None
-            self.motion = source()
         if self.motion is None:
             return None
         if self._motion_integral is None:

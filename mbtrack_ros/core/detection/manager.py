@@ -19,7 +19,6 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
-from functools import partial
 from typing import NamedTuple
 
 import numpy as np
@@ -156,7 +155,7 @@ class AutoDetection:
         self.calibration = calibration
         self.config = cfg = config or AutoDetectionConfig()
         self.rng = rng if rng is not None else np.random.default_rng(0)
-        self._bank = BackgroundBank(cfg.background, calibration=calibration)
+        self.background = BackgroundBank(cfg.background, calibration=calibration)
         self.detector = Detector(calibration, cfg.detector)
         self.releaser = Releaser(calibration, cfg.release)
         self.aux: dict[int, TrackAuxiliary] = {}
@@ -170,36 +169,21 @@ class AutoDetection:
         self._worker: ThreadPoolExecutor | None = None  # one thread: background, search
         self._foreground: tuple[list[str], Future] | None = None  # start_foreground()'s job
         self._searching: tuple[_Pending, Future] | None = None    # start_search()'s job
-        self._updating: Future | None = None  # update()'s background model update job
-        self._motion_wait = 0.0  # seconds the search waited for that job's motion
         self.side = [n for n, c in calibration.cameras.items() if not is_ceiling(c)]
         self.ceiling = [n for n in calibration.cameras if n not in self.side]
-
-    @property
-    def background(self) -> BackgroundBank:
-        """The background models (003 §4.2), once the model update that :meth:`update` left
-        running on the worker is done (for callers on the tracker's thread)."""
-        self._await_update()
-        return self._bank
 
     def prepare(self) -> None:
         """Do the one-off work of the first frames ahead (the people cue's floor grid), so
         that a live node does not stall at the bootstrap frame."""
-        self._await_update()
-        self._bank.prepare()
+        self.background.prepare()
 
     def bootstrap(self, frames: Mapping[str, Sequence[np.ndarray]]) -> None:
         """Initialise the background models from empty-room frames per camera."""
-        self._await_update()
-        self._bank.bootstrap(frames)
+        self.background.bootstrap(frames)
 
     def reset(self) -> None:
         """Forget per-track state and unconfirmed candidates (keeps the background)."""
         self.abandon()
-        try:
-            self._await_update()
-        except Exception:  # noqa: BLE001 - the background keeps what the update did
-            pass
         if self._searching is not None:  # its people belong to the time before the reset
             _, job = self._searching
             self._searching = None
@@ -228,28 +212,21 @@ class AutoDetection:
         must call :meth:`update` (or :meth:`abandon`) before touching the background."""
         self.abandon()
         names = [n for n in images if n in self.calibration.cameras]
-        job = self._executor().submit(self._bank.apply, {n: images[n] for n in names},
+        job = self._executor().submit(self.background.apply, {n: images[n] for n in names},
                                       defer=True)
         self._foreground = (names, job)
 
     def abandon(self) -> None:
         """Wait for a foreground started by :meth:`start_foreground` whose frame set will not
         be updated (its step failed) and drop its deferred background update."""
-        if self._foreground is not None:  # queued after any background update: done too
+        if self._foreground is not None:
             _, job = self._foreground
             self._foreground = None
             try:
                 job.result()
             except Exception:  # noqa: BLE001 - the frame set is abandoned anyway
                 pass
-            self._bank.drop_pending()
-
-    def _await_update(self) -> None:
-        """Wait for the background update that :meth:`update` started on the worker (and
-        raise its error, as running it here would). Caller's thread only."""
-        job, self._updating = self._updating, None
-        if job is not None:
-            job.result()
+            self.background.drop_pending()
 
     def _executor(self) -> ThreadPoolExecutor:
         if self._worker is None:
@@ -268,11 +245,8 @@ class AutoDetection:
                 self.abandon()
                 raise DetectionError(f'update() got cameras {names}, the foreground was '
                                      f'started for {started}')
-            fg = job.result()
-            self._await_update()  # queued before the foreground: done; raises its error
-            return fg
-        self._await_update()
-        return self._bank.apply({n: images[n] for n in names}, defer=True)
+            return job.result()
+        return self.background.apply({n: images[n] for n in names}, defer=True)
 
     def step(self, stamp_ns: int, images: Mapping[str, np.ndarray],
              tracks: Sequence[TrackEstimate], models: Mapping[int, PersonModel]
@@ -337,9 +311,9 @@ class AutoDetection:
             masks[n] = mask
         t1 = time.perf_counter()
         # 2. background and foreground
-        # the model update (and with it the motion the detector needs) waits for the end
+        # the model update (and with it the motion the detector needs) waits for search()
         fg = self._take_foreground(images, names)
-        self._bank.exclude_pending(masks)
+        self.background.exclude_pending(masks)
         known_bins = dict(bins or {})
         evidence = {n: FrameEvidence(images[n], fg[n], masks[n], _bins=known_bins.get(n))
                     for n in fg}
@@ -381,18 +355,9 @@ class AutoDetection:
             self._placed.pop(tid, None)
             self._shown_since.pop(tid, None)
         self._note_reporting(stamp_ns, tracks, means, ended)
-        # 003 §4.2: the model update deferred by the foreground. Nothing of this frame's
-        # result needs it: it runs on the worker from here on (beside the search and the
-        # next frame's filter; the next foreground, queued after it, sees its result), and
-        # it gives the recent motion that the detector reads only for a refined detection
-        # (FrameEvidence.motion, waited for when read)
-        self._updating = job = self._executor().submit(self._update_models, list(evidence))
-        for n, ev in evidence.items():
-            ev.motion_source = partial(self._motion_of, job, n)
         t3 = time.perf_counter()
         self.timings = {'detect_render': t1 - t0, 'detect_background': t2 - t1,
                         'detect_existence': t3 - t2}
-        self._motion_wait = 0.0
         self._pending = _Pending(int(stamp_ns), images, tracks, models, means, shapes,
                                  evidence, ended)
         return ended
@@ -401,21 +366,19 @@ class AutoDetection:
         """Detection and acquisition (003 §4.1-4.2) on the frame set of the last
         :meth:`update`: the people to add, new or re-found (at most once per update).
 
-        Two parts: :meth:`_find` (detector, acquisition: state of the detector only, and the
-        pending frame) and :meth:`_settle` (which detection is whose: the tracks'
-        bookkeeping). :meth:`start_search` runs the first on the worker thread,
-        :meth:`finish_search` the second. The background model update that :meth:`update`
-        started on the worker may still run meanwhile: the detector waits for its motion
-        only when it reads it."""
+        Two parts: :meth:`_find` (background update, detector, acquisition: state of the
+        background and the detector only, and the pending frame) and :meth:`_settle` (which
+        detection is whose: the tracks' bookkeeping). :meth:`start_search` runs the first on
+        the worker thread, :meth:`finish_search` the second."""
+        self.update_background()
         if self._pending is None:
             return []
         pending, self._pending = self._pending, None
         return self._settle(pending, self._find(pending))
 
     def start_search(self, born: Sequence[tuple[np.ndarray, BodyShape]] = ()) -> None:
-        """Start the search of the last :meth:`update` on the worker thread (:meth:`_find`,
-        after the background update that :meth:`update` queued there); :meth:`finish_search`
-        settles it.
+        """Start the search of the last :meth:`update` on the worker thread (the deferred
+        background update, then :meth:`_find`); :meth:`finish_search` settles it.
 
         ``born``: (state (6,), shape) of people who became tracks after that update (the
         previous search's): excluded from this search like the frame's tracks. Until
@@ -425,8 +388,7 @@ class AutoDetection:
         if self._pending is None:
             return
         pending, self._pending = self._pending, None
-        updating, self._updating = self._updating, None  # runs first on the same worker
-        job = self._executor().submit(self._update_and_find, pending, list(born), updating)
+        job = self._executor().submit(self._update_and_find, pending, list(born))
         self._searching = (pending, job)
 
     def finish_search(self) -> tuple[int | None, list[Birth]]:
@@ -438,14 +400,12 @@ class AutoDetection:
         self._searching = None
         return pending.stamp_ns, self._settle(pending, job.result())
 
-    def _update_and_find(self, pending: _Pending, born: list, updating: Future | None
-                         ) -> _Found:
-        """The worker's part of a pipelined search: :meth:`_find` once ``updating``, the
-        background update that :meth:`update` queued before it, is done (the worker runs
-        its jobs in order; its error is raised here)."""
-        if updating is not None:
-            updating.result()
-        return self._find(pending, born)
+    def _update_and_find(self, pending: _Pending, born: list) -> _Found:
+        """The worker's part of a pipelined search: background update, then :meth:`_find`."""
+        spent = self._update_background(pending)
+        found = self._find(pending, born)
+        found.timings['detect_background_update'] = spent
+        return found
 
     def _find(self, pending: _Pending, born: Sequence[tuple[np.ndarray, BodyShape]] = ()
               ) -> _Found:
@@ -491,25 +451,28 @@ class AutoDetection:
         self.timings.update(found.timings)
         self.timings['detect_search'] = found.timings['detect_find'] \
             + time.perf_counter() - t0
-        self.timings['detect_background_update'] = self._motion_wait  # waits in the search
         self.timings['detect'] = sum(self.timings.get(k, 0.0) for k in (
             'detect_render', 'detect_background', 'detect_existence',
             'detect_background_update', 'detect_search'))
         return births
 
-    def _update_models(self, names: list[str]) -> dict[str, np.ndarray | None]:
-        """Worker job: the deferred background model update (003 §4.2), then the recent
-        motion of the cameras ``names`` (:meth:`BackgroundModel.presence`: the detector's
-        proof that a detection is no ghost)."""
-        self._bank.update_pending()
-        return {n: self._bank.models[n].presence() for n in names}
+    def update_background(self) -> None:
+        """The background model update of the last :meth:`update` (003 §4.2), deferred so
+        that it does not delay the frame's result, and the recent motion it gives to the
+        frame's evidence (the detector's proof that a detection is no ghost). :meth:`search`
+        runs it first; the results are those of updating within :meth:`update`."""
+        self.timings['detect_background_update'] = self._update_background(self._pending)
 
-    def _motion_of(self, job: Future, name: str) -> np.ndarray | None:
-        """Camera ``name``'s motion from an :meth:`_update_models` job (waiting for it)."""
+    def _update_background(self, pending: _Pending | None) -> float:
+        """Run the deferred background update and fill ``pending``'s evidence motion;
+        returns the seconds spent."""
         t0 = time.perf_counter()
-        motion = job.result()[name]
-        self._motion_wait += time.perf_counter() - t0
-        return motion
+        self.background.update_pending()
+        if pending is not None:
+            for name, ev in pending.evidence.items():
+                if ev.motion is None:
+                    ev.motion = self.background.models[name].presence()
+        return time.perf_counter() - t0
 
     def tracking_images(self, images: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
         """The images the tracking filter should use: the side cameras only (003 §5: the
