@@ -322,3 +322,68 @@ def test_ycc_conversion_equals_reordered_opencv_ycrcb():
         _to_ycc(strided),
         cv2.cvtColor(np.ascontiguousarray(strided), cv2.COLOR_RGB2YCrCb)
         .astype(np.float32)[..., [0, 2, 1]])
+
+
+def test_one_dilation_gives_both_exclusion_masks():
+    """_dilated_masks codes motion 1 and excluded pixels 2 and dilates once: the same
+    masks as dilating motion | exclude and exclude separately (random sparse masks, with
+    and without exclusion, with and without a kernel)."""
+    from mbtrack_ros.core.detection.background import _dilated_masks, _kernel
+
+    rng = np.random.default_rng(5)
+    for case in range(24):
+        h, w = rng.integers(5, 60, size=2)
+        moving = (rng.random((h, w)) < rng.choice([0.0, 0.01, 0.1])).astype(np.uint8)
+        exclude = None if case % 3 == 0 else rng.random((h, w)) < rng.choice([0.0, 0.02, 0.2])
+        size = int(rng.choice([1, 3, 11]))
+        k = _kernel(size)
+        frozen, occupied = _dilated_masks(moving, exclude, k)
+        either = moving | (np.zeros((h, w), np.uint8) if exclude is None
+                           else exclude.astype(np.uint8))
+        only = np.zeros((h, w), np.uint8) if exclude is None else exclude.astype(np.uint8)
+        if k is not None:
+            either, only = cv2.dilate(either, k), cv2.dilate(only, k)
+        np.testing.assert_array_equal(frozen, either)
+        np.testing.assert_array_equal(occupied, only)
+        assert frozen.dtype == occupied.dtype == np.uint8
+
+
+def test_foreground_kernel_equals_the_plain_colour_test():
+    """_foreground_kernel (which skips the square root for pixels surely close in chroma)
+    decides every pixel as the plain float64 Y-Cb-Cr test with shadows does: random
+    images and backgrounds, gains, thresholds, and chroma distances on the threshold
+    (3-4-5 offsets: distance exactly 5 or 10) and one step either side of it."""
+    from mbtrack_ros.core.detection.background import _foreground_kernel
+
+    def plain(ycc, bg, gain, luma, chroma, lo, hi):
+        ycc, bg = ycc.astype(np.float64), bg.astype(np.float64)
+        gy = gain * np.maximum(bg[..., 0], 1.0)
+        d1 = ycc[..., 1] - 128.0 - gain * (bg[..., 1] - 128.0)
+        d2 = ycc[..., 2] - 128.0 - gain * (bg[..., 2] - 128.0)
+        dc = np.sqrt(d1 * d1 + d2 * d2)
+        differs = (np.abs(ycc[..., 0] - gy) > luma) | (dc > chroma)
+        r = ycc[..., 0] / gy
+        shadow = (lo < hi) & (lo <= r) & (r <= hi) & (dc <= 0.5 * chroma)
+        return (differs & ~shadow).astype(np.uint8)
+
+    rng = np.random.default_rng(11)
+    h, w = 40, 60
+    for case in range(30):
+        bg = rng.uniform(0, 255, (h, w, 3)).astype(np.float32)
+        ycc = np.clip(bg + rng.normal(0, rng.choice([2.0, 8.0, 30.0]), (h, w, 3)),
+                      0, 255).astype(np.float32)
+        if case % 2:  # chroma offsets of exactly (3, 4) k and one float32 step around them
+            k = rng.choice([1.0, 2.0], size=(h, w))
+            nudge = rng.choice([-1, 0, 1], size=(h, w, 2))
+            bg[..., 1:] = 128.0
+            for c, base in ((1, 3.0), (2, 4.0)):
+                v = (128.0 + base * k).astype(np.float32)
+                ycc[..., c] = np.where(nudge[..., c - 1] < 0, np.nextafter(v, 0),
+                                       np.where(nudge[..., c - 1] > 0,
+                                                np.nextafter(v, 255), v))
+        gain = float(rng.choice([1.0, rng.uniform(0.5, 2.0)]))
+        chroma = float(rng.choice([5.0, 10.0, rng.uniform(1.0, 30.0)]))
+        luma = float(rng.uniform(5.0, 40.0))
+        lo, hi = (0.55, 0.92) if case % 3 else (1.0, 0.0)
+        got = _foreground_kernel(ycc, bg, gain, luma, chroma, lo, hi)
+        np.testing.assert_array_equal(got, plain(ycc, bg, gain, luma, chroma, lo, hi))

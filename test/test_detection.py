@@ -14,7 +14,7 @@ from mbtrack_ros.core.detection.detector import (
     Detection, Detector, DetectorConfig, FrameEvidence, is_ceiling)
 from mbtrack_ros.core.detection.features import (
     EdgeMap, ForegroundIntegral, Spans, colour_symmetry, contour_loglik, contour_loglik_spans,
-    outline)
+    outline, span_counts, span_coverage)
 from mbtrack_ros.core.detection.release import ReleaseConfig, Releaser, blob_coverage
 from mbtrack_ros.core.shape import TORSO, BodyShape, rasterize, render_labels
 
@@ -110,6 +110,37 @@ def test_coverage_equals_pixel_count_and_painted_fraction():
     c, _, _ = ForegroundIntegral(blob).coverage(sil)
     assert c[i] == pytest.approx(sil.part_area[i, TORSO - 1] / sil.area[i])
     assert 0.2 < c[i] < 0.8
+
+
+def test_span_counts_equal_the_prefix_sums():
+    """span_counts / span_coverage (a walk over the spans' pixels) give exactly the counts
+    and coverages of ForegroundIntegral (row prefix sums): silhouettes partly outside the
+    image, overlapping parts, empty silhouettes, with and without unknown pixels, and
+    hand-made spans beyond the image's rows and columns."""
+    rng = np.random.default_rng(4)
+    calib = make_room()
+    for case in range(12):
+        cam = calib.cameras[sorted(calib.cameras)[case % len(calib.cameras)]]
+        n = int(rng.integers(1, 9))
+        states = np.zeros((n, 6))
+        states[:, :2] = rng.uniform([-2.0, -2.0], [8.0, 7.0], (n, 2))
+        states[:, 4] = rng.uniform(-np.pi, np.pi, n)
+        states[:, 5] = rng.random(n) < 0.3
+        sil = rasterize(cam, states, BodyShape(1.75, 0.5))
+        fg = rng.random((H, W)) < rng.uniform(0.1, 0.9)
+        for unknown in (None, rng.random((H, W)) < 0.3):
+            ref = ForegroundIntegral(fg, unknown)
+            for got, want in zip(span_counts(fg, sil, unknown), ref.counts(sil)):
+                np.testing.assert_array_equal(got, want)
+            for got, want in zip(span_coverage(fg, sil, unknown), ref.coverage(sil)):
+                np.testing.assert_array_equal(got, want)
+    odd = Spans(np.array([-1, 0, 5, H, 7], np.int32), np.array([-5, 3, W - 2, 0, 9], np.int32),
+                np.array([4, 3, W + 9, 4, 9], np.int32), np.ones(5, np.int8),
+                np.array([0, 2, 2, 5], np.int64))
+    fg = rng.random((H, W)) < 0.5
+    for got, want in zip(span_counts(fg, odd), ForegroundIntegral(fg).counts(odd)):
+        np.testing.assert_array_equal(got, want)
+    assert span_counts(fg, odd)[2][2] == 2 + 0 + 0  # clipped to the image, empty span
 
 
 def test_spans_from_masks_roundtrip():

@@ -175,6 +175,27 @@ def test_row_step_and_errors():
         rasterize(cam, _state(), BodyShape(), row_step=0)
 
 
+def test_per_particle_sizes_are_checked_and_broadcast():
+    """Heights/widths given per particle ((n,) arrays, a (1,) array, a scalar or the shapes'
+    sizes) give the same silhouettes; zero, negative, NaN or infinite sizes and arrays of
+    the wrong length are refused."""
+    cam = _camera()
+    states = np.repeat(_state().reshape(1, -1), 3, axis=0)
+    states[:, 0] += [0.0, 0.4, 0.8]
+    ref = rasterize(cam, states, [BodyShape(1.6, 0.45)] * 3)
+    for h, w in ((np.full(3, 1.6), np.full(3, 0.45)), (np.array([1.6]), 0.45),
+                 (1.6, [0.45, 0.45, 0.45])):
+        got = rasterize(cam, states, BodyShape(), heights=h, widths=w)
+        for name in ('row', 'x0', 'x1', 'part', 'offsets', 'area'):
+            np.testing.assert_array_equal(getattr(got, name), getattr(ref, name))
+    for bad in (np.array([1.6, 0.0, 1.6]), np.array([1.6, -1.0, 1.6]),
+                np.array([1.6, np.nan, 1.6]), np.array([np.inf, 1.6, 1.6]), np.full(2, 1.6)):
+        with pytest.raises((ShapeError, ValueError)):
+            rasterize(cam, states, BodyShape(), heights=bad)
+        with pytest.raises((ShapeError, ValueError)):
+            rasterize(cam, states, BodyShape(), widths=bad)
+
+
 def test_fused_outline_matches_projection_then_outline(rng):
     """silhouette_outline's one-pass kernel against the straightforward composition:
     Camera.project of the axis ends, then the outline of each particle with width_scale of

@@ -179,9 +179,14 @@ def median_frame(frames: Sequence[np.ndarray]) -> np.ndarray:
 def _foreground_kernel(ycc: np.ndarray, bg: np.ndarray, gain: float, luma: float,
                        chroma: float, shadow_lo: float, shadow_hi: float
                        ) -> np.ndarray:  # pragma: no cover - compiled
-    """Y-Cb-Cr test per pixel: (H, W) uint8 foreground (before morphology)."""
+    """Y-Cb-Cr test per pixel: (H, W) uint8 foreground (before morphology).
+
+    Most pixels match the background: their squared chroma distance is below
+    ``(chroma (1 - 1e-9))^2``, whose square root (rounded or not) is surely below
+    ``chroma``, so they are decided without the square root (the same decisions)."""
     h, w = ycc.shape[:2]
     out = np.zeros((h, w), np.uint8)
+    surely_close = (chroma * (1.0 - 1e-9)) ** 2
     for i in range(h):
         for j in range(w):
             by = max(bg[i, j, 0], 1.0)
@@ -189,7 +194,10 @@ def _foreground_kernel(ycc: np.ndarray, bg: np.ndarray, gain: float, luma: float
             y = ycc[i, j, 0]
             d1 = ycc[i, j, 1] - 128.0 - gain * (bg[i, j, 1] - 128.0)
             d2 = ycc[i, j, 2] - 128.0 - gain * (bg[i, j, 2] - 128.0)
-            dc = np.sqrt(d1 * d1 + d2 * d2)
+            s = d1 * d1 + d2 * d2
+            if abs(y - gy) <= luma and s < surely_close:
+                continue  # background: neither test fires
+            dc = np.sqrt(s)
             if abs(y - gy) > luma or dc > chroma:
                 r = y / gy
                 if shadow_lo < shadow_hi and shadow_lo <= r <= shadow_hi \
@@ -197,6 +205,20 @@ def _foreground_kernel(ycc: np.ndarray, bg: np.ndarray, gain: float, luma: float
                     continue  # a shadow: darker, same chroma
                 out[i, j] = 1
     return out
+
+
+def _dilated_masks(moving: np.ndarray, exclude: np.ndarray | None,
+                  kernel: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """(dilate(moving | exclude), dilate(exclude)), (H, W) uint8 0/1 each, in one dilation.
+
+    ``moving`` is (H, W) uint8 0/1, ``exclude`` (H, W) bool or None (no pixel), ``kernel``
+    the structuring element (None: no dilation). Motion is coded 1 and excluded pixels 2;
+    dilation takes the neighbourhood maximum, so the dilated code is >= 1 exactly where
+    the dilation of either mask is set and >= 2 where that of ``exclude`` is."""
+    code = moving if exclude is None else moving | (exclude.view(np.uint8) << 1)
+    if kernel is not None and code.any():
+        code = cv2.dilate(code, kernel)
+    return (code >= 1).view(np.uint8), (code >= 2).view(np.uint8)
 
 
 @njit(cache=True, nogil=True)
@@ -483,9 +505,8 @@ class BackgroundModel:
             self._motion = np.zeros(y.shape, np.float32)
             self._prev_y = y
         # Persistent motion: decaying accumulation of thresholded frame differences.
-        frozen = _motion_kernel(y, self._prev_y, self._motion, float(cfg.motion_decay),
+        moving = _motion_kernel(y, self._prev_y, self._motion, float(cfg.motion_decay),
                                 float(cfg.motion_threshold), float(cfg.motion_persistent))
-        moving = frozen.copy()
         self._prev_y = y
         if exclude is not None:
             exclude = np.asarray(exclude, dtype=bool)
@@ -493,15 +514,10 @@ class BackgroundModel:
                 raise DetectionError(
                     f'camera {self.name!r}: exclusion mask shape {exclude.shape} differs '
                     f'from the image {y.shape}')
-            frozen |= exclude.view(np.uint8)
-        k = _kernel(2 * cfg.mask_dilation + 1)
-        if k is not None and frozen.any():
-            frozen = cv2.dilate(frozen, k)
-        # a not-yet-known pixel is seen empty when no track covers it (motion next to a
-        # person who walks away must not keep his bootstrap place unknown: a ghost)
-        occupied = np.zeros(y.shape, np.uint8) if exclude is None else exclude.view(np.uint8)
-        if k is not None and occupied.any():
-            occupied = cv2.dilate(occupied, k)
+        # frozen: persistent motion or tracks; occupied: tracks alone (a not-yet-known pixel
+        # is seen empty when no track covers it: motion next to a person who walks away
+        # must not keep his bootstrap place unknown, a ghost); both dilated
+        frozen, occupied = _dilated_masks(moving, exclude, _kernel(2 * cfg.mask_dilation + 1))
         if self._static is None or self._static.shape != y.shape:
             self._static = np.zeros(y.shape, np.int16)
         use_fg = fg is not None

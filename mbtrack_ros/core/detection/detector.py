@@ -185,7 +185,6 @@ class FrameEvidence:
     motion: np.ndarray | None = None
     _motion_integral: ForegroundIntegral | None = field(default=None, repr=False)
     _integral: ForegroundIntegral | None = field(default=None, repr=False)
-    _plain: ForegroundIntegral | None = field(default=None, repr=False)
     _edges: EdgeMap | None = field(default=None, repr=False)
     _bins: np.ndarray | None = field(default=None, repr=False)
 
@@ -202,13 +201,6 @@ class FrameEvidence:
         if self._integral is None:
             self._integral = ForegroundIntegral(self.foreground, self.tracks)
         return self._integral
-
-    @property
-    def plain(self) -> ForegroundIntegral:
-        """Prefix sums of the foreground alone (for the support of current tracks)."""
-        if self._plain is None:
-            self._plain = ForegroundIntegral(self.foreground)
-        return self._plain
 
     @property
     def motion_integral(self) -> ForegroundIntegral | None:

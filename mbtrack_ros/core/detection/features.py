@@ -33,7 +33,8 @@ from mbtrack_ros.core.detection import DetectionError
 from mbtrack_ros.core.shape import TORSO
 
 __all__ = ['EdgeMap', 'ForegroundIntegral', 'Outline', 'Spans', 'TORSO', 'colour_symmetry',
-           'contour_loglik', 'contour_loglik_spans', 'outline', 'span_count', 'span_owner']
+           'contour_loglik', 'contour_loglik_spans', 'outline', 'span_count', 'span_counts',
+           'span_coverage', 'span_owner']
 
 
 @dataclass(frozen=True)
@@ -134,10 +135,76 @@ class ForegroundIntegral:
             known: (N,) fraction of the silhouette pixels that are known (not ignored).
             area: (N,) silhouette pixels inside the image.
         """
-        fg_n, kn_n, area = self.counts(spans)
-        cov = np.where(kn_n > 0, fg_n / np.maximum(kn_n, 1.0), 0.0)
-        known = np.where(area > 0, kn_n / np.maximum(area, 1.0), 0.0)
-        return cov, known, area
+        return _coverage(*self.counts(spans))
+
+
+def span_counts(foreground: np.ndarray, spans: Spans, unknown: np.ndarray | None = None
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``ForegroundIntegral(foreground, unknown).counts(spans)`` by visiting the spans'
+    pixels instead of summing every image row: cheaper for a few silhouettes (the tracks)
+    than the prefix sums, which pay off for the detector's thousands of hypotheses."""
+    fg = np.ascontiguousarray(foreground, dtype=bool)
+    if fg.ndim != 2:
+        raise DetectionError(f'foreground mask must be (H, W), got {fg.shape}')
+    if unknown is not None and np.shape(unknown) != fg.shape:
+        raise DetectionError('unknown-pixel mask and foreground mask differ in shape')
+    unk = np.zeros((1, 1), bool) if unknown is None else \
+        np.ascontiguousarray(unknown, dtype=bool)
+    return _span_counts_kernel(
+        fg, unk, np.ascontiguousarray(spans.row, np.int64),
+        np.ascontiguousarray(spans.x0, np.int64), np.ascontiguousarray(spans.x1, np.int64),
+        np.ascontiguousarray(spans.offsets, np.int64))
+
+
+def span_coverage(foreground: np.ndarray, spans: Spans, unknown: np.ndarray | None = None
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``ForegroundIntegral(foreground, unknown).coverage(spans)`` from :func:`span_counts`."""
+    return _coverage(*span_counts(foreground, spans, unknown))
+
+
+def _coverage(fg_n: np.ndarray, kn_n: np.ndarray, area: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(coverage, known fraction, area) from the raw counts (see ForegroundIntegral)."""
+    cov = np.where(kn_n > 0, fg_n / np.maximum(kn_n, 1.0), 0.0)
+    known = np.where(area > 0, kn_n / np.maximum(area, 1.0), 0.0)
+    return cov, known, area
+
+
+@njit(cache=True, nogil=True)
+def _span_counts_kernel(fg: np.ndarray, unknown: np.ndarray, row: np.ndarray, x0: np.ndarray,
+                        x1: np.ndarray, offsets: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover
+    """Per silhouette: pixels that are foreground and known, known, inside the image (each
+    span counted on its own, clipped to the image, as in ``_coverage_kernel``); ``unknown``
+    (1, 1) means every pixel is known."""
+    h, w = fg.shape
+    all_known = unknown.shape[0] == 1 and unknown.shape[1] == 1 and (h != 1 or w != 1)
+    n = offsets.size - 1
+    fg_n = np.zeros(n)
+    kn_n = np.zeros(n)
+    area = np.zeros(n)
+    for i in range(n):
+        a_fg = 0
+        a_kn = 0
+        a_area = 0
+        for s in range(offsets[i], offsets[i + 1]):
+            r = row[s]
+            if r < 0 or r >= h:
+                continue
+            a = min(max(x0[s], 0), w)
+            b = min(max(x1[s], 0), w)
+            if b <= a:
+                continue
+            a_area += b - a
+            for c in range(a, b):
+                if all_known or not unknown[r, c]:
+                    a_kn += 1
+                    if fg[r, c]:
+                        a_fg += 1
+        fg_n[i] = a_fg
+        kn_n[i] = a_kn
+        area[i] = a_area
+    return fg_n, kn_n, area
 
 
 @njit(cache=True, nogil=True)
@@ -174,6 +241,11 @@ def _coverage_kernel(cs_fg: np.ndarray, cs_known: np.ndarray, row: np.ndarray, x
     kn_n = np.zeros(n)
     area = np.zeros(n)
     for i in range(n):
+        # integer sums in registers (exact), stored once: 20 % faster than adding to the
+        # output arrays span by span on the detector's coarse grid
+        a_fg = 0
+        a_kn = 0
+        a_area = 0
         for s in range(offsets[i], offsets[i + 1]):
             r = row[s]
             if r < 0 or r >= h:
@@ -182,9 +254,12 @@ def _coverage_kernel(cs_fg: np.ndarray, cs_known: np.ndarray, row: np.ndarray, x
             b = min(max(x1[s], 0), w)
             if b <= a:
                 continue
-            fg_n[i] += cs_fg[r, b] - cs_fg[r, a]
-            kn_n[i] += cs_known[r, b] - cs_known[r, a]
-            area[i] += b - a
+            a_fg += cs_fg[r, b] - cs_fg[r, a]
+            a_kn += cs_known[r, b] - cs_known[r, a]
+            a_area += b - a
+        fg_n[i] = a_fg
+        kn_n[i] = a_kn
+        area[i] = a_area
     return fg_n, kn_n, area
 
 

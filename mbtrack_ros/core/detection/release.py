@@ -31,7 +31,7 @@ from mbtrack_ros.core import _kernels
 from mbtrack_ros.core.camera import Camera, RoomCalibration
 from mbtrack_ros.core.detection import DetectionError
 from mbtrack_ros.core.detection.detector import FrameEvidence, is_ceiling
-from mbtrack_ros.core.detection.features import ForegroundIntegral
+from mbtrack_ros.core.detection.features import span_counts, span_coverage
 
 __all__ = ['ReleaseConfig', 'Releaser', 'blob_coverage', 'spare_tracks']
 
@@ -131,7 +131,7 @@ def spare_tracks(foregrounds: Sequence[np.ndarray], silhouettes: Sequence[object
         seen = np.zeros(k)
         shared = np.zeros(k, bool)
         for fg, sil, count, least in zip(foregrounds, silhouettes, counts, min_area):
-            own_fg, own, area = ForegroundIntegral(fg, unknown=count >= 2).counts(sil)
+            own_fg, own, area = span_counts(fg, sil, unknown=count >= 2)
             sees = (area >= least) & ~spare
             total += np.where(sees, own_fg / np.maximum(area, 1.0), 0.0)
             seen += sees
@@ -248,7 +248,7 @@ class Releaser:
                                           heights)
                 threshold = cfg.min_blob_coverage
             else:
-                cov, _, area = evidence[name].plain.coverage(sil)
+                cov, _, area = span_coverage(evidence[name].foreground, sil)
             sees = area >= cfg.min_area * cam.width * cam.height / (320.0 * 240.0)
             scale = 2.0 if blob else 1.0
             coverage[name] = np.where(sees, np.minimum(scale * cov, 1.0), np.nan)
