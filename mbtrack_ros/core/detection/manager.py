@@ -345,7 +345,14 @@ class AutoDetection:
             existence = [self.aux[t.track_id].existence for t in tracks]
             if evidence:  # 4. release (only once the background exists)
                 ids = [t.track_id for t in tracks]
-                ended = self.releaser.update(stamp_ns, ids, supported, existence)
+                ended = self.releaser.exited(ids, means[:, [X, Y]])
+                if ended:            # the others go on; the releaser forgets the exited
+                    keep = [k for k, i in enumerate(ids) if i not in ended]
+                    ended += self.releaser.update(stamp_ns, [ids[k] for k in keep],
+                                                  supported[keep],
+                                                  [existence[k] for k in keep])
+                else:
+                    ended = self.releaser.update(stamp_ns, ids, supported, existence)
                 shown = [self._shown_since.get(i, 0) if cfg.duplicate_by_reporting else 0
                          for i in ids]
                 ended += [i for i in self.releaser.duplicates(stamp_ns, ids, means[:, [X, Y]],
