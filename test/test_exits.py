@@ -183,9 +183,12 @@ def _leaver(crowd):
 
 @pytest.mark.parametrize('ceiling', [True, False])
 def test_a_person_who_walks_out_is_released_within_1_5_s(ceiling):
-    """A short synth recording (with / without the ceiling camera): the track follows the
-    person through the door and is released with the exit rule within 1.5 s of the ground
-    truth's last row (the person crossing the wall)."""
+    """A short synth recording: the track is released within 1.5 s of the ground truth's
+    last row (the person crossing the wall); with the ceiling camera it follows the person
+    through the door and the exit rule releases it (without exits the person, visible in
+    the corridor, held it at the floor edge; measured, docs/detection.md "Exits"). Without
+    the ceiling camera (seed 4) the track loses the person at the door and the support
+    timeout ends it first."""
     from mbtrack_ros.core.tracker import Tracker, TrackerConfig
     from mbtrack_ros.synth import Synthesizer
 
@@ -212,8 +215,9 @@ def test_a_person_who_walks_out_is_released_within_1_5_s(ceiling):
         if res.ended and ended is None and last_truth is not None:
             ended = frame.index
     assert len(born) == 1 and last_truth is not None
-    assert ended is not None and exited == sorted(born)
-    assert 0 <= (ended - last_truth) / synth.fps <= 1.5
+    assert ended is not None and 0 <= (ended - last_truth) / synth.fps <= 1.5
+    if ceiling:
+        assert exited == sorted(born)
     assert tracker.track_ids == []
 
 
@@ -264,3 +268,25 @@ def test_hidden_exit_particles_score_their_targets_mean_in_that_camera():
             if hidden.any():
                 np.testing.assert_allclose(g[hidden], np.mean(r[~hidden]), rtol=1e-12)
             assert hidden.any() == (name in ('cam2', 'cam3'))
+
+
+def test_no_birth_deeper_into_an_exit_than_half_the_release_margin():
+    """A confirmed detection in the doorway beyond exit_margin / 2 starts no track (it
+    would be released at once); one just inside the exit does."""
+    from mbtrack_ros.core.appearance import PersonModel
+    from mbtrack_ros.core.detection.detector import Detection, FrameEvidence
+    from mbtrack_ros.core.detection.manager import AutoDetection, _Found, _Pending
+
+    calib = make_calibration(default_room(), width=160, height=120)
+    auto = AutoDetection(calib)
+    margin = auto.config.release.exit_margin
+    image = np.zeros((120, 160, 3), np.uint8)
+    evidence = {'cam0': FrameEvidence(image, np.zeros((120, 160), bool))}
+    pending = _Pending(0, {'cam0': image}, [], {}, np.zeros((0, 6)), [], evidence, [])
+    edge = calib.floor[3]
+    found = []
+    for depth in (0.1, 0.45 * margin, 0.55 * margin, 0.4):
+        det = Detection(np.array([4.65, edge + depth, 0.0, 0.0, 0.0, 0.0]), 1.75, 0.5, 1.0)
+        found.append((det, PersonModel(1.75, 0.5)))
+    births = auto._settle(pending, _Found(found, {'detect_find': 0.0}))
+    assert [round(b.state[1] - edge, 3) for b in births] == [0.1, round(0.45 * margin, 3)]

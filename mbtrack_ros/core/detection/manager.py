@@ -450,7 +450,12 @@ class AutoDetection:
         if evidence:
             keep = [k for k, t in enumerate(tracks) if t.track_id not in ended]
             moved: set[int] = set()
+            # no birth or move deeper into an exit than half the release margin: the
+            # track would be released at once (a person still in the doorway or beyond)
+            limit = 0.5 * self.config.release.exit_margin
             for det, model in found.acquired:
+                if self.calibration.exit_depth(det.xy)[0] > limit:
+                    continue
                 birth = self._identify(det, model, tracks, keep, means, models, evidence,
                                        moved, stamp_ns)
                 if birth is not None:
