@@ -9,8 +9,8 @@
 ``run`` steps :class:`~mbtrack_ros.core.tracker.Tracker` with ``detection=True`` exactly as
 ``mbtrack replay REC --out OUT --eval REC/ground_truth.csv --seed S`` does (same
 configuration, same random generator, so the same tracks.csv) and also writes
-OUT/events.json: every birth, every release with its reason (support, spare, existence,
-duplicate) and every decision on a confirmed detection next to a track
+OUT/events.json: every birth, every release with its reason (exit, support, spare,
+existence, duplicate) and every decision on a confirmed detection next to a track
 (``AutoDetection.decisions``: birth / move / drop, with the appearance gain).
 ``report`` lists, per identity switch of the CLEAR MOT matching, the person, the old and
 new track, where the old track was, how it ended and where the new one was born; the
@@ -62,6 +62,13 @@ def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False,
     events: list[dict] = []
     frame = {'index': 0}
     update, duplicates = release_module.Releaser.update, release_module.Releaser.duplicates
+    exited = release_module.Releaser.exited
+
+    def logged_exited(self, ids, xy):
+        ended = exited(self, ids, xy)
+        events.extend({'kind': 'end', 'frame': frame['index'], 'id': int(t),
+                       'reason': 'exit'} for t in ended)
+        return ended
 
     def logged_update(self, stamp, ids, supported, existence=None):
         ended = update(self, stamp, ids, supported, existence)
@@ -81,6 +88,7 @@ def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False,
 
     release_module.Releaser.update = logged_update
     release_module.Releaser.duplicates = logged_duplicates
+    release_module.Releaser.exited = logged_exited
     rows: list[TrackRow] = []
     with RecordingReader(rec / 'bag') as reader:
         cal = cal.subset([n for n in cal.names if n in reader.cameras])
@@ -188,7 +196,11 @@ def _analyse(out: Path, rec: Path) -> dict:
         m = np.flatnonzero(tid >= 0)
         if prow[0].frame > 0 and m.size:
             enter.append((frame_of(st[m[0]]) - prow[0].frame) / FPS)
-        floor = [r.frame for r in prow if FLOOR[0] <= r.x <= FLOOR[2]
+        # the synth generator before h-exit wrote one last row of a person who left at the
+        # floor edge about 2 s after they crossed the wall (a frame gap before it): not
+        # where the person left the floor
+        walked = prow[:-1] if len(prow) > 1 and prow[-1].frame - prow[-2].frame > 1 else prow
+        floor = [r.frame for r in walked if FLOOR[0] <= r.x <= FLOOR[2]
                  and FLOOR[1] <= r.y <= FLOOR[3]]
         if prow[-1].frame < last - 30 and floor:
             tail = tid[-30:]

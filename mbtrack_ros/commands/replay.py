@@ -211,7 +211,7 @@ def _match_calibration(calibration: RoomCalibration, reader: RecordingReader,
             cams[name] = cam.scaled(image.shape[1], image.shape[0])
     return RoomCalibration(cameras=cams, floor=calibration.floor,
                            frame_id=calibration.frame_id,
-                           entry_zones=calibration.entry_zones)
+                           entry_zones=calibration.entry_zones, exits=calibration.exits)
 
 
 def _collect_key_images(reader: RecordingReader, index: _FrameIndex,

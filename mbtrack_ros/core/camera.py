@@ -265,6 +265,28 @@ def look_at(eye: Iterable[float], target: Iterable[float],
     return R, -R @ eye
 
 
+def _check_exit(rect: Any, floor: tuple[float, float, float, float]
+                ) -> tuple[float, float, float, float]:
+    """An exit rectangle as 4 floats; it must be non-empty, outside the floor and share a
+    piece of the floor's border (else no track could walk into it)."""
+    try:
+        x0, y0, x1, y1 = (float(v) for v in rect)
+    except (TypeError, ValueError) as err:
+        raise CalibrationError(
+            f'exit must be [x_min, y_min, x_max, y_max], got {rect!r}') from err
+    if not (np.isfinite([x0, y0, x1, y1]).all() and x1 > x0 and y1 > y0):
+        raise CalibrationError(f'exit bounds are empty: {rect!r}')
+    fx0, fy0, fx1, fy1 = floor
+    overlap_x = min(x1, fx1) - max(x0, fx0)
+    overlap_y = min(y1, fy1) - max(y0, fy0)
+    if overlap_x > 0 and overlap_y > 0:
+        raise CalibrationError(f'exit {[x0, y0, x1, y1]} overlaps the floor {list(floor)}')
+    if not ((overlap_x > 0 and overlap_y == 0) or (overlap_y > 0 and overlap_x == 0)):
+        raise CalibrationError(f'exit {[x0, y0, x1, y1]} does not share a border with the '
+                               f'floor {list(floor)}')
+    return (x0, y0, x1, y1)
+
+
 @dataclass(frozen=True, eq=False)
 class RoomCalibration:
     """All cameras of a room plus the floor area people can walk on.
@@ -275,12 +297,18 @@ class RoomCalibration:
         frame_id: the world frame id (default ``room``).
         entry_zones: optional floor rectangles ``(x_min, y_min, x_max, y_max)`` where people
             enter (detection may be restricted to them).
+        exits: optional rectangles ``(x_min, y_min, x_max, y_max)`` outside the floor, each
+            sharing a piece of the floor's border (beyond a door), through which people
+            leave: the motion model lets tracks follow a person into them and a track whose
+            estimate is deep enough inside one is released at once (``ReleaseConfig
+            .exit_margin``). None: tracks stay on the floor.
     """
 
     cameras: dict[str, Camera]
     floor: tuple[float, float, float, float]
     frame_id: str = 'room'
     entry_zones: tuple[tuple[float, float, float, float], ...] = field(default_factory=tuple)
+    exits: tuple[tuple[float, float, float, float], ...] = field(default_factory=tuple)
 
     def __post_init__(self) -> None:
         if not self.cameras:
@@ -289,6 +317,40 @@ class RoomCalibration:
         if not (x1 > x0 and y1 > y0):
             raise CalibrationError(f'floor bounds are empty: {self.floor}')
         object.__setattr__(self, 'floor', (x0, y0, x1, y1))
+        object.__setattr__(self, 'exits', tuple(_check_exit(e, self.floor) for e in self.exits))
+
+    def exit_depth(self, xy: np.ndarray) -> np.ndarray:
+        """(K,) distance (metres) from the floor rectangle of floor points (K, 2) that lie
+        inside an exit; NaN for points in no exit."""
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        depth = np.full(len(xy), np.nan)
+        if not self.exits:
+            return depth
+        x0, y0, x1, y1 = self.floor
+        dx = np.maximum.reduce([x0 - xy[:, 0], xy[:, 0] - x1, np.zeros(len(xy))])
+        dy = np.maximum.reduce([y0 - xy[:, 1], xy[:, 1] - y1, np.zeros(len(xy))])
+        inside = np.zeros(len(xy), bool)
+        for ex0, ey0, ex1, ey1 in self.exits:
+            inside |= ((xy[:, 0] >= ex0) & (xy[:, 0] <= ex1)
+                       & (xy[:, 1] >= ey0) & (xy[:, 1] <= ey1))
+        depth[inside] = np.hypot(dx, dy)[inside]
+        return depth
+
+    def exit_hidden(self, camera: str, xy: np.ndarray) -> np.ndarray:
+        """(K,) True for floor points (K, 2) inside an exit that ``camera`` cannot see: its
+        centre is on the exit's side of the floor border they share, i.e. it hangs on the
+        wall with the door and looks at the exit from behind that wall."""
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        hidden = np.zeros(len(xy), bool)
+        cx, cy = self.cameras[camera].center[:2]
+        fx0, fy0, fx1, fy1 = self.floor
+        for ex0, ey0, ex1, ey1 in self.exits:
+            behind = ((ey0 >= fy1 and cy >= fy1) or (ey1 <= fy0 and cy <= fy0)
+                      or (ex0 >= fx1 and cx >= fx1) or (ex1 <= fx0 and cx <= fx0))
+            if behind:
+                hidden |= ((xy[:, 0] >= ex0) & (xy[:, 0] <= ex1)
+                           & (xy[:, 1] >= ey0) & (xy[:, 1] <= ey1))
+        return hidden
 
     @property
     def names(self) -> list[str]:
@@ -316,6 +378,7 @@ class RoomCalibration:
             'frame_id': self.frame_id,
             'floor': {'x_min': x0, 'y_min': y0, 'x_max': x1, 'y_max': y1},
             'entry_zones': [list(z) for z in self.entry_zones],
+            **({'exits': [list(e) for e in self.exits]} if self.exits else {}),
             'cameras': [c.to_dict() for c in self.cameras.values()],
         }
 
@@ -335,8 +398,13 @@ class RoomCalibration:
         if len(set(names)) != len(names):
             raise CalibrationError(f'duplicate camera names in {names}')
         zones = tuple(tuple(float(v) for v in z) for z in doc.get('entry_zones', []) or [])
+        exits = doc.get('exits', []) or []
+        if not isinstance(exits, list):
+            raise CalibrationError(f'exits must be a list of [x_min, y_min, x_max, y_max], '
+                                   f'got {exits!r}')
         return cls(cameras={c.name: c for c in cams}, floor=floor,
-                   frame_id=str(doc.get('frame_id', 'room')), entry_zones=zones)
+                   frame_id=str(doc.get('frame_id', 'room')), entry_zones=zones,
+                   exits=tuple(exits))
 
     def save(self, path: str | Path) -> None:
         """Write the calibration as YAML."""

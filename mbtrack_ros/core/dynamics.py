@@ -14,12 +14,17 @@ Over a time step ``dt`` (seconds, from image stamps) every particle row
   direction, ``theta = atan2(vy, vx) + N(0, orientation_noise^2 dt)``; slower people turn by
   a random walk with the same noise;
 * sitting label: flips with probability ``1 - exp(-sit_flip_rate * dt)``;
-* the floor bounds of the room reflect positions (and the velocity component) back inside.
+* the floor bounds of the room reflect positions (and the velocity component) back inside;
+  with exits (rectangles beyond a door that share a piece of the floor's border,
+  ``RoomCalibration.exits``) the walkable region is the floor and the exits: a particle that
+  lands in any of them stays, one that lands outside all of them is reflected in the
+  rectangle it started from (the floor when it started outside every rectangle).
 
 With all noises zero the model is exact constant-velocity motion.
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -69,6 +74,7 @@ class MotionConfig:
 
 _NO_DRAWS = np.zeros((0, 2))     # a noise that is off (contiguous: one compiled version)
 _NO_DRAWS_1D = np.zeros(0)
+_NO_REGIONS = np.zeros((0, 4))
 
 
 @njit(cache=True, nogil=True)
@@ -85,12 +91,25 @@ def _reflect(p, v, lo, hi):
 
 
 @njit(cache=True, nogil=True)
+def _region_of(x, y, regions):
+    """Index of the first rectangle of regions (R, 4) holding (x, y), or -1."""
+    for k in range(regions.shape[0]):
+        if regions[k, 0] <= x <= regions[k, 2] and regions[k, 1] <= y <= regions[k, 3]:
+            return k
+    return -1
+
+
+@njit(cache=True, nogil=True)
 def _move(out, dt, decay, dv, max_speed, dp, turn, orientation_speed, dtheta, flip_u,
-          flip_p, floor):
+          flip_p, regions):
     """The motion model on particles out (N, 6) in place, with the random draws made by
     :func:`predict` (empty arrays: that noise is off); one pass per particle, each
-    operation the one of the former numpy version (bit-identical results)."""
+    operation the one of the former numpy version (bit-identical results). regions
+    (R, 4): none (R = 0), the floor (R = 1) or the floor followed by the exits."""
     for i in range(out.shape[0]):
+        home = 0
+        if regions.shape[0] > 1:
+            home = max(_region_of(out[i, X], out[i, Y], regions), 0)
         vx = out[i, VX]
         vy = out[i, VY]
         if decay != 1.0:
@@ -117,9 +136,10 @@ def _move(out, dt, decay, dv, max_speed, dp, turn, orientation_speed, dtheta, fl
             out[i, THETA] = wrap_angle(base)
             if flip_u.shape[0] and flip_u[i] < flip_p:
                 out[i, SIT] = 1.0 - out[i, SIT]
-        if floor.shape[0]:
-            x, vx = _reflect(x, vx, floor[0], floor[2])
-            y, vy = _reflect(y, vy, floor[1], floor[3])
+        if regions.shape[0] == 1 or (regions.shape[0] > 1
+                                     and _region_of(x, y, regions) < 0):
+            x, vx = _reflect(x, vx, regions[home, 0], regions[home, 2])
+            y, vy = _reflect(y, vy, regions[home, 1], regions[home, 3])
         out[i, X] = x
         out[i, Y] = y
         out[i, VX] = vx
@@ -128,7 +148,8 @@ def _move(out, dt, decay, dv, max_speed, dp, turn, orientation_speed, dtheta, fl
 
 def predict(particles: np.ndarray, dt: float, config: MotionConfig,
             rng: np.random.Generator, *,
-            floor: tuple[float, float, float, float] | None = None) -> np.ndarray:
+            floor: tuple[float, float, float, float] | None = None,
+            exits: Sequence[tuple[float, float, float, float]] = ()) -> np.ndarray:
     """Propagate particles over ``dt`` seconds (000 Eq. 15: independent 1-body law q).
 
     Args:
@@ -137,6 +158,8 @@ def predict(particles: np.ndarray, dt: float, config: MotionConfig,
         config: noise levels.
         rng: random generator.
         floor: optional ``(x_min, y_min, x_max, y_max)`` metres; positions are reflected.
+        exits: rectangles beyond the floor's border that are walkable too (module
+            docstring; ``RoomCalibration.exits``, which checks them); need ``floor``.
 
     Returns:
         (N, 6) float64 new states (a new array).
@@ -169,9 +192,17 @@ def predict(particles: np.ndarray, dt: float, config: MotionConfig,
         if config.sit_flip_rate > 0:
             flip_u = rng.random(n)
             flip_p = float(-np.expm1(-config.sit_flip_rate * dt))
-    bounds = _NO_DRAWS_1D if floor is None else np.asarray(floor, dtype=np.float64)
-    if floor is not None and bounds.shape != (4,):
-        raise DynamicsError(f'floor must be (x_min, y_min, x_max, y_max), got {floor!r}')
+    regions = _NO_REGIONS
+    if floor is not None:
+        try:
+            regions = np.asarray([floor, *exits], dtype=np.float64)
+        except (TypeError, ValueError):
+            regions = _NO_DRAWS_1D
+        if regions.ndim != 2 or regions.shape[1] != 4:
+            raise DynamicsError('floor and exits must be (x_min, y_min, x_max, y_max), got '
+                                f'{floor!r}, {exits!r}')
+    elif len(exits):
+        raise DynamicsError('exits need a floor')
     _move(out, float(dt), decay, dv, float(config.max_speed), dp, bool(dt > 0),
-          float(config.orientation_speed), dtheta, flip_u, flip_p, bounds)
+          float(config.orientation_speed), dtheta, flip_u, flip_p, regions)
     return out

@@ -194,9 +194,11 @@ class _MarginalParticleFilter:
 
     def __init__(self, config: FilterConfig | None = None, *,
                  floor: tuple[float, float, float, float] | None = None,
+                 exits: tuple[tuple[float, float, float, float], ...] = (),
                  camera_names: list[str] | None = None) -> None:
         self.config = config or FilterConfig()
         self.floor = floor
+        self.exits = tuple(exits)
         self.camera_names = list(camera_names or [])
         self.timings: dict[str, float] = {}
         self.stats: dict[str, float] = {}
@@ -238,7 +240,7 @@ class _MarginalParticleFilter:
             w = np.exp(self._logw[tid])
             idx = systematic_resample(w, n, rng)
             out.append(predict(self._particles[tid][idx], dt, self.config.motion, rng,
-                               floor=self.floor))
+                               floor=self.floor, exits=self.exits))
         return out
 
     def _finish(self, ids: list[int], particles: list[np.ndarray],
@@ -347,9 +349,11 @@ class JointFilter:
 
     def __init__(self, config: FilterConfig | None = None, *,
                  floor: tuple[float, float, float, float] | None = None,
+                 exits: tuple[tuple[float, float, float, float], ...] = (),
                  camera_names: list[str] | None = None) -> None:
         self.config = config or FilterConfig()
         self.floor = floor
+        self.exits = tuple(exits)
         self.camera_names = list(camera_names or [])
         self.timings: dict[str, float] = {}
         self.stats: dict[str, float] = {}
@@ -399,7 +403,7 @@ class JointFilter:
         n, k_count = self._joint.shape[:2]
         idx = systematic_resample(np.exp(self._logw), n, rng)
         flat = predict(self._joint[idx].reshape(n * k_count, STATE_DIM), dt,
-                       self.config.motion, rng, floor=self.floor)
+                       self.config.motion, rng, floor=self.floor, exits=self.exits)
         joint = flat.reshape(n, k_count, STATE_DIM)
         log_prior = np.zeros(n)
         if self.config.use_mrf and k_count > 1:
@@ -469,7 +473,7 @@ def make_filter(name: str, calibration: RoomCalibration,
 
 def _particle_factory(cls: type) -> FilterFactory:
     def factory(calibration: RoomCalibration, config: TrackerConfig) -> TrackingFilter:
-        return cls(config.filter_config(), floor=calibration.floor,
+        return cls(config.filter_config(), floor=calibration.floor, exits=calibration.exits,
                    camera_names=list(calibration.names))
     return factory
 

@@ -14,7 +14,11 @@ work on row-span silhouettes (:mod:`mbtrack_ros.core.shape`) and part histograms
   (000 Eq. 20) and scored with Eq. 26 on binary visibility masks.
 
 Log-likelihoods are ``-D^2 / (2 sigma^2)`` (000 Eq. 19) summed over cameras; a camera that
-sees fewer than ``min_visible_pixels`` of a silhouette adds 0.
+sees fewer than ``min_visible_pixels`` of a silhouette adds 0. With exits in the calibration
+(rectangles beyond a door), a camera on the door's wall cannot see a particle in the exit:
+that particle gets the mean of its target's other particles in that camera
+(``MeasurementModel._without_hidden``), else the wall would pull every track back from
+the doorway (docs/detection.md, "Exits").
 
 How w* enters the foreground term (000 Eq. 33): the image histogram of a part is
 accumulated with per-pixel weight w*(u); the rendered (model) histogram of a part is
@@ -310,6 +314,27 @@ class MeasurementModel:
         out[sil.area <= 0] = 0.0
         return out
 
+    def _without_hidden(self, camera: str, loglik: np.ndarray, states: np.ndarray,
+                        target: np.ndarray, prior: np.ndarray, n_targets: int) -> np.ndarray:
+        """A camera's log-likelihoods (P,) with the particles it cannot see in an exit
+        (``RoomCalibration.exit_hidden``: behind the wall with the door) set to the
+        prior-weighted mean of their target's other particles: the camera then neither
+        pulls a track back from the doorway (a person beyond the wall looks absent to it)
+        nor favours the exit (an unseen silhouette would otherwise score 0, the best)."""
+        if not self.calibration.exits:
+            return loglik
+        hidden = self.calibration.exit_hidden(camera, states[:, :2])
+        if not hidden.any():
+            return loglik
+        seen = ~hidden
+        mass = np.bincount(target[seen], weights=prior[seen], minlength=n_targets)
+        total = np.bincount(target[seen], weights=prior[seen] * loglik[seen],
+                            minlength=n_targets)
+        mean = np.divide(total, mass, out=np.zeros(n_targets), where=mass > 0)
+        out = loglik.copy()
+        out[hidden] = mean[target[hidden]]
+        return out
+
     # -- HJS --------------------------------------------------------------------------------
     def _hjs_camera(self, camera: str, states: np.ndarray, target: np.ndarray,
                     prior: np.ndarray, key: np.ndarray, models: Sequence[PersonModel], *,
@@ -400,7 +425,8 @@ class MeasurementModel:
         for (c, name), ((sil, fc, bc, vis, _, _), own) in zip(cams, results):
             for key_, value in own.items():
                 timings[key_] = timings.get(key_, 0.0) + value
-            loglik += self._loglik(fc + bc, sil)
+            loglik += self._without_hidden(name, self._loglik(fc + bc, sil), states, target,
+                                           prior, len(parts))
             with np.errstate(invalid='ignore', divide='ignore'):
                 frac = np.where(sil.full_area > 0, vis / np.maximum(sil.full_area, 1), 0.0)
             frac = np.clip(frac, 0.0, 1.0)

@@ -102,7 +102,8 @@ def reexpress_world(calibration: RoomCalibration, *, up_axis: str = 'z',
     (``floor_offset``: the floor's coordinate along the up axis in the source frame, metres).
     Cameras keep their images: ``R' = R A^T``, ``t' = t + R' (0, 0, floor_offset)``.
     ``floor`` (new frame, metres) defaults to :func:`default_floor` of the moved cameras;
-    entry zones are kept only if the frame does not change.
+    entry zones are kept only if the frame does not change; exits (which must share the
+    floor's border) only if the floor does not change either.
     """
     A = world_rotation(up_axis)
     if not np.isfinite(floor_offset):
@@ -118,7 +119,8 @@ def reexpress_world(calibration: RoomCalibration, *, up_axis: str = 'z',
         return moved
     return replace(moved, floor=tuple(floor) if floor is not None
                    else default_floor(cameras.values()),
-                   entry_zones=calibration.entry_zones if identity else ())
+                   entry_zones=calibration.entry_zones if identity else (),
+                   exits=())
 
 
 def default_floor(cameras: Iterable[Camera], *, margin: float = 0.0

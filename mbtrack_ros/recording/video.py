@@ -406,7 +406,8 @@ def import_videos(outdir: str | Path, calibration: RoomCalibration,
         cameras[name] = cam
         sizes[name] = (cam.width, cam.height)
     room = RoomCalibration(cameras=cameras, floor=calibration.floor,
-                           frame_id=calibration.frame_id, entry_zones=calibration.entry_zones)
+                           frame_id=calibration.frame_id, entry_zones=calibration.entry_zones,
+                           exits=calibration.exits)
 
     trc = None
     if reference is not None:

@@ -365,7 +365,10 @@ class Crowd:
 
     def _keep_inside(self, w: Walker) -> None:
         room = self.room
-        if w.in_door or w.tasks and len(w.tasks[0]) > 3 and w.tasks[0][3] == 'door':
+        # in the doorway or corridor (entering, or leaving until gone: not pulled back to
+        # the floor for its last frame)
+        if w.in_door or w.tasks and (w.tasks[0][0] == 'gone' or len(w.tasks[0]) > 3
+                                     and w.tasks[0][3] == 'door'):
             x0, x1 = room.door[0] + 0.3, room.door[1] - 0.3
             if abs(w.pos[1] - room.depth) < 0.5:
                 w.pos[0] = np.clip(w.pos[0], x0, x1)

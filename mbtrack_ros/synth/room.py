@@ -72,6 +72,14 @@ class Room:
         """Floor rectangle just inside the door (for the calibration's entry_zones)."""
         return (self.door[0] - 0.2, self.depth - 0.9, self.door[1] + 0.2, self.depth)
 
+    @property
+    def exit_zone(self) -> tuple[float, float, float, float]:
+        """Rectangle beyond the door (for the calibration's exits): the door's x span, from
+        the walkable floor's edge through the door into the corridor, 1.2 m beyond the
+        wall (people who leave walk 1.3 m into the corridor before they disappear, see
+        :mod:`mbtrack_ros.synth.motion`; the release margin is well inside it)."""
+        return (self.door[0], self.walkable[3], self.door[1], self.depth + 1.2)
+
     def inside(self, xy: np.ndarray) -> np.ndarray:
         """Boolean (...,) of floor points (..., 2) strictly inside the room walls."""
         xy = np.asarray(xy, dtype=np.float64)
@@ -123,7 +131,8 @@ def make_calibration(room: Room, *, width: int = 320, height: int = 240,
                        (0.5 * room.width, 0.5 * room.depth, 0.0), up=(0.0, 1.0, 0.0))
         K = [[120.0, 0, 159.5], [0, 120.0, 119.5], [0, 0, 1]]
         cams['cam4'] = Camera('cam4', 320, 240, K, [-0.2, 0.04, 0.0, 0.0, 0.0], R, t)
-    calib = RoomCalibration(cameras=cams, floor=room.walkable, entry_zones=(room.entry_zone,))
+    calib = RoomCalibration(cameras=cams, floor=room.walkable, entry_zones=(room.entry_zone,),
+                            exits=(room.exit_zone,))
     if cameras is not None:
         calib = calib.subset(cameras)
     return calib.scaled(width, height) if (width, height) != (320, 240) else calib

@@ -345,7 +345,14 @@ class AutoDetection:
             existence = [self.aux[t.track_id].existence for t in tracks]
             if evidence:  # 4. release (only once the background exists)
                 ids = [t.track_id for t in tracks]
-                ended = self.releaser.update(stamp_ns, ids, supported, existence)
+                ended = self.releaser.exited(ids, means[:, [X, Y]])
+                if ended:            # the others go on; the releaser forgets the exited
+                    keep = [k for k, i in enumerate(ids) if i not in ended]
+                    ended += self.releaser.update(stamp_ns, [ids[k] for k in keep],
+                                                  supported[keep],
+                                                  [existence[k] for k in keep])
+                else:
+                    ended = self.releaser.update(stamp_ns, ids, supported, existence)
                 shown = [self._shown_since.get(i, 0) if cfg.duplicate_by_reporting else 0
                          for i in ids]
                 ended += [i for i in self.releaser.duplicates(stamp_ns, ids, means[:, [X, Y]],
@@ -443,7 +450,12 @@ class AutoDetection:
         if evidence:
             keep = [k for k, t in enumerate(tracks) if t.track_id not in ended]
             moved: set[int] = set()
+            # no birth or move deeper into an exit than half the release margin: the
+            # track would be released at once (a person still in the doorway or beyond)
+            limit = 0.5 * self.config.release.exit_margin
             for det, model in found.acquired:
+                if self.calibration.exit_depth(det.xy)[0] > limit:
+                    continue
                 birth = self._identify(det, model, tracks, keep, means, models, evidence,
                                        moved, stamp_ns)
                 if birth is not None:

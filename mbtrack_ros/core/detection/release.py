@@ -18,6 +18,13 @@ explains no foreground that the others do not) and counts as unsupported; of sev
 such tracks the one with the least exclusive support is taken first and the others are
 judged again without it, so that of two tracks on one person one survives (see
 :func:`spare_tracks`).
+
+**Exits.** When the calibration has exits (rectangles beyond a door, see
+``RoomCalibration.exits``) a track whose estimate is inside one and more than
+``exit_margin`` from the floor is released at once (:meth:`Releaser.exited`): its person
+walked out. Without exits a person who leaves holds the track at the floor edge while
+they stay visible through the open door, and the timeout only starts after that
+(docs/detection.md, "Exits").
 """
 from __future__ import annotations
 
@@ -178,6 +185,9 @@ class ReleaseConfig:
             to a person, 0.06 / 0.26 for unmatched (false positive) ones. 0.25 (not 0.18)
             had the better totals on six clear-room recordings x two tracker seeds
             (docs/detection.md, "Spare tracks and release").
+        exit_margin: metres from the floor rectangle beyond which a track inside one of the
+            calibration's exits is released at once (module docstring); people standing in
+            a doorway stay within it.
     """
 
     timeout: float = 1.0
@@ -190,6 +200,7 @@ class ReleaseConfig:
     merge_time: float = 0.5
     spare_support: float = 0.25
     spare_radius: float = 1.0
+    exit_margin: float = 0.3
 
     def __post_init__(self) -> None:
         if not self.timeout >= 0:
@@ -199,6 +210,9 @@ class ReleaseConfig:
         if not 0.0 <= self.spare_support <= 1.0 or not self.spare_radius >= 0:
             raise DetectionError('spare_support must be in [0, 1] and spare_radius >= 0, got '
                                  f'{self.spare_support}, {self.spare_radius}')
+        if not (np.isfinite(self.exit_margin) and self.exit_margin >= 0):
+            raise DetectionError(f'exit_margin must be a finite number >= 0, got '
+                                 f'{self.exit_margin}')
 
 
 class Releaser:
@@ -272,6 +286,15 @@ class Releaser:
                 cfg.spare_radius if states is not None else np.inf)
             supported = supported & ~self.spare
         return supported, coverage
+
+    def exited(self, ids: Sequence[int], xy: np.ndarray) -> list[int]:
+        """Ids of the tracks whose floor position (K, 2) lies inside an exit more than
+        ``exit_margin`` from the floor: their person left the room."""
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        if len(ids) != len(xy):
+            raise DetectionError('ids and positions must have the same length')
+        depth = self.calibration.exit_depth(xy)
+        return [int(ids[k]) for k in np.flatnonzero(depth > self.config.exit_margin)]
 
     def update(self, stamp_ns: int, ids: Sequence[int], supported: Sequence[bool],
                existence: Sequence[float] | None = None) -> list[int]:
