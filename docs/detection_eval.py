@@ -408,7 +408,8 @@ def switch_classes(out: Path, rec: Path) -> list[dict]:
     * ``d birth beside``: O reported at f and N born in the 2 s before f;
     * ``e absent``: p missing from the ground truth in between (a synth artefact).
 
-    With each: door (p in the door region), p sitting, nearest other person, and the corner
+    With each: how far the old track was from p at its last reported frame, how long p
+    went unmatched before the switch, p's walking speed, door (p in the door region), p sitting, nearest other person, and the corner
     cameras where less than half of p's silhouette is visible (nearer people in front)."""
     tracks, truth, events, _ = _load(out, rec)
     cal = RoomCalibration.load(rec / 'calibration.yaml')
@@ -419,6 +420,7 @@ def switch_classes(out: Path, rec: Path) -> list[dict]:
     for r in truth:
         gt.setdefault(r.frame, []).append(r)
     shown = {(t.frame, t.track_id): (t.x, t.y) for t in tracks}
+    where = {(r.frame, r.person_id): (r.x, r.y) for r in truth}
     born = {}
     for e in events:
         if e['kind'] == 'birth':
@@ -452,6 +454,12 @@ def switch_classes(out: Path, rec: Path) -> list[dict]:
             else:
                 kind = 'b swap'
             others = [np.hypot(r.x - me.x, r.y - me.y) for q, r in here.items() if q != p]
+            seen = [g for g in range(f0, f) if (g, old) in shown and (g, p) in where]
+            g = seen[-1] if seen else None       # the old track's last reported frame
+            last_off = np.hypot(shown[(g, old)][0] - where[(g, p)][0],
+                                shown[(g, old)][1] - where[(g, p)][1]) if g is not None else np.nan
+            a, b = where.get((f - 3, p)), where.get((f0, p))
+            speed = np.hypot(me.x - a[0], me.y - a[1]) * FPS / 3 if a else np.nan
             vis = _visible_fractions(cal, gt[f], int(p))
             o = shown.get((f, old))
             found.append({
@@ -460,7 +468,8 @@ def switch_classes(out: Path, rec: Path) -> list[dict]:
                 'nearest': float(min(others, default=np.inf)),
                 'occluded': sum(v < 0.5 for v in vis.values()), 'cameras': len(vis),
                 'old_off': float(np.hypot(o[0] - me.x, o[1] - me.y)) if o else np.nan,
-                'new_age': (f - b_new) / FPS})
+                'new_age': (f - b_new) / FPS, 'last_off': float(last_off),
+                'speed': float(speed), 'gap': (f - f0 - 1) / FPS})
     return found
 
 
@@ -473,7 +482,8 @@ def classes(pairs: list[tuple[Path, Path]]) -> None:
               f"{s['kind']}{' DOOR' if s['door'] else ''}{' sitting' if s['sitting'] else ''}"
               f", nearest person {s['nearest']:.2f} m, occluded in {s['occluded']}/"
               f"{s['cameras']} cameras, old track {s['old_off']:.2f} m off, new track "
-              f"{s['new_age']:.1f} s old")
+              f"{s['new_age']:.1f} s old; old track last reported {s['last_off']:.2f} m off, "
+              f"person unmatched {s['gap']:.2f} s before, walking {s['speed']:.2f} m/s")
     print('| class | switches | at the door | elsewhere: sitting | nearest person < 1 m | '
           'occluded (< 50 % visible) in >= 1 / >= 2 corner cameras |')
     print('| --- | --- | --- | --- | --- | --- |')
@@ -484,6 +494,13 @@ def classes(pairs: list[tuple[Path, Path]]) -> None:
               f"{sum(s['sitting'] for s in away)} | {sum(s['nearest'] < 1 for s in away)} | "
               f"{sum(s['occluded'] >= 1 for s in away)} / {sum(s['occluded'] >= 2 for s in away)} |")
     print(f'| all | {len(rows)} | {sum(s["door"] for s in rows)} | | | |')
+    lost = [s for s in rows if s['kind'].startswith('a') and not s['door']]
+    if lost:
+        q = lambda key: ' / '.join(f'{v:.2f}' for v in np.nanpercentile(   # noqa: E731
+            [s[key] for s in lost], [25, 50, 75]))
+        print(f'class a away from the door ({len(lost)}), quartiles: old track last reported '
+              f'{q("last_off")} m off the person, person unmatched {q("gap")} s before the '
+              f'switch, walking {q("speed")} m/s at the switch')
 
 
 def main(argv: list[str] | None = None) -> int:
