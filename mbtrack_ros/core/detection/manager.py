@@ -66,10 +66,9 @@ class AutoDetectionConfig:
         relocate_hidden: a confirmed detection that would start a new track within
             ``relocate_radius`` of a track that is not reported (existence below the
             report threshold: it lost its person) moves that track instead, whatever the
-            appearance gain (the nearest such track; when it was born or moved within
-            ``relocate_interval`` the detection is dropped instead, neither a move nor a
-            birth beside it; docs/detection.md: most identity switches on clear-room were a
-            birth beside a hidden track).
+            appearance gain (the nearest such track not born or moved within
+            ``relocate_interval``; docs/detection.md: most identity switches on clear-room
+            were a birth beside a hidden track).
         reuse_time, reuse_radius: a new track born within ``reuse_radius`` metres of where
             a track was released less than ``reuse_time`` seconds ago (outside the entry
             zones) takes that track's id (the released track's person re-found); 0
@@ -79,15 +78,6 @@ class AutoDetectionConfig:
         duplicate_by_reporting: of two tracks on one person (release ``merge_radius``,
             ``merge_time``) release the one reported without a break for the shorter time
             (born, moved or hidden later) instead of the younger one.
-        exclude_hidden: the detector's exclusion radius and unknown pixels also shield
-            tracks that are not reported (before h-ident). False (default): only reported
-            tracks and hidden ones in an entry zone do, so a person whose track lagged
-            0.2-0.4 m behind, lost its existence and was hidden is re-detected at once and
-            the hidden track moved back onto them (same id); shielded, the person stayed
-            undetected until the hidden track's release and was then born again under a new
-            id (docs/detection.md, h-ident). In the doorway a hidden track has mostly lost
-            a person who left: there it keeps shielding (without that, 11 more switches at
-            the door on ten clear-room runs).
     """
 
     background: BackgroundConfig = field(default_factory=BackgroundConfig)
@@ -107,7 +97,6 @@ class AutoDetectionConfig:
     reuse_time: float = 0.0
     reuse_radius: float = 1.0
     duplicate_by_reporting: bool = True
-    exclude_hidden: bool = False
 
     def __post_init__(self) -> None:
         if not self.relocate_radius >= 0 or not np.isfinite(self.relocate_margin):
@@ -142,7 +131,6 @@ class _Pending(NamedTuple):
     shapes: list
     evidence: dict
     ended: list
-    shields: list
 
 
 class _Found(NamedTuple):
@@ -303,12 +291,8 @@ class AutoDetection:
         # cameras together with the tracks (one rasterisation per camera)
         parts, owner, part_shapes = self._visibility_particles(tracks, models, shapes)
         part_sils = {}
-        # 1. rendered tracks per camera (all of them are kept out of the background update;
-        # a hidden track - existence below the report threshold, as of the last frame - does
-        # not hide its pixels from the detector unless exclude_hidden: see _find)
-        shields = [cfg.exclude_hidden or self.reported(t.track_id)
-                   or self._in_entry_zone(t.mean[X], t.mean[Y]) for t in tracks]
-        sils, masks, shown_masks = {}, {}, {}
+        # 1. rendered tracks per camera
+        sils, masks = {}, {}
         for n in names:
             cam = self.calibration.cameras[n]
             mask = np.zeros((cam.height, cam.width), bool)
@@ -324,13 +308,6 @@ class AutoDetection:
                 paint = mask.view(np.uint8)
                 _kernels.paint_spans(paint, sil.row, sil.x0, sil.x1, sil.part, 0,
                                      int(sil.offsets[-1]), 1, False)
-                if not all(shields):    # the detector's unknown pixels: shown tracks only
-                    seen = np.zeros_like(mask)
-                    for i in np.flatnonzero(shields):
-                        _kernels.paint_spans(seen.view(np.uint8), sil.row, sil.x0, sil.x1,
-                                             sil.part, int(sil.offsets[i]),
-                                             int(sil.offsets[i + 1]), 1, False)
-                    shown_masks[n] = seen
             masks[n] = mask
         t1 = time.perf_counter()
         # 2. background and foreground
@@ -338,8 +315,7 @@ class AutoDetection:
         fg = self._take_foreground(images, names)
         self.background.exclude_pending(masks)
         known_bins = dict(bins or {})
-        evidence = {n: FrameEvidence(images[n], fg[n], shown_masks.get(n, masks[n]),
-                                     _bins=known_bins.get(n))
+        evidence = {n: FrameEvidence(images[n], fg[n], masks[n], _bins=known_bins.get(n))
                     for n in fg}
         t2 = time.perf_counter()
         # 3. support, visibility and existence
@@ -383,7 +359,7 @@ class AutoDetection:
         self.timings = {'detect_render': t1 - t0, 'detect_background': t2 - t1,
                         'detect_existence': t3 - t2}
         self._pending = _Pending(int(stamp_ns), images, tracks, models, means, shapes,
-                                 evidence, ended, shields)
+                                 evidence, ended)
         return ended
 
     def search(self) -> list[Birth]:
@@ -441,18 +417,12 @@ class AutoDetection:
         acquired: list[tuple[Detection, PersonModel]] = []
         if pending.evidence:
             keep = [k for k, t in enumerate(pending.tracks) if t.track_id not in pending.ended]
-            # a hidden track does not shield its neighbourhood from the search (unless
-            # exclude_hidden): its person, re-detected there, moves it back (_identify)
-            # before its release instead of being born again after it
-            shield = np.array([pending.shields[k] for k in keep], dtype=bool)
             others = pending.means[keep]
             other_shapes = [pending.shapes[k] for k in keep]
             if born:
                 others = np.concatenate([others, np.array([b[0] for b in born])])
                 other_shapes = other_shapes + [b[1] for b in born]
-                shield = np.concatenate([shield, np.ones(len(born), bool)])
-            confirmed = self.detector.step(pending.evidence,
-                                           track_xy=others[shield][:, [X, Y]],
+            confirmed = self.detector.step(pending.evidence, track_xy=others[:, [X, Y]],
                                            stamp_ns=pending.stamp_ns)
             for det in confirmed:
                 model = acquire(det, pending.images, self.calibration, others=others,
@@ -466,7 +436,7 @@ class AutoDetection:
     def _settle(self, pending: _Pending, found: _Found) -> list[Birth]:
         """Births and moves from the detections of :meth:`_find` (:meth:`_identify`), in
         the order found; the tracks' bookkeeping is changed here only (main thread)."""
-        stamp_ns, _, tracks, models, means, _, evidence, ended, _ = pending
+        stamp_ns, _, tracks, models, means, _, evidence, ended = pending
         t0 = time.perf_counter()
         births: list[Birth] = []
         self.decisions = []
@@ -569,7 +539,7 @@ class AutoDetection:
             self.decisions.append(info)
             return Birth(model=model, state=state, detection=det, track_id=reused)
         tid = tracks[best[0]].track_id
-        if self._placed_recently(tid, stamp_ns):
+        if not hidden and self._placed_recently(tid, stamp_ns):
             info['action'] = f'drop (track {tid} placed recently)'
             self.decisions.append(info)
             return None
@@ -594,13 +564,14 @@ class AutoDetection:
                         ) -> tuple[int, float] | None:
         """(index, distance) of the nearest unreported track within ``relocate_radius`` of
         the detection (a track whose existence fell below the report threshold), or None.
-        A track born or moved within ``relocate_interval`` is found too and the caller
-        drops the detection: hidden again so soon, its model may not explain the person
-        there, and a birth beside it was the first half of a switch (h-ident)."""
+        Not a track born or moved within ``relocate_interval``: hidden again so soon, its
+        model does not explain the person there."""
         best = None
         for k in keep:
             tid = tracks[k].track_id
             if tid in moved or tid not in models or self.reported(tid):
+                continue
+            if self._placed_recently(tid, stamp_ns):
                 continue
             d = float(np.hypot(*(means[k, [X, Y]] - det.xy)))
             if d <= self.config.relocate_radius and (best is None or d < best[1]):
@@ -617,10 +588,6 @@ class AutoDetection:
             if t.track_id not in ended and not self.reported(t.track_id):
                 self._shown_since[t.track_id] = int(stamp_ns)
 
-    def _in_entry_zone(self, x: float, y: float) -> bool:
-        return any(z[0] <= x <= z[2] and z[1] <= y <= z[3]
-                   for z in self.calibration.entry_zones)
-
     def _remember_released(self, stamp_ns: int, tracks: Sequence[TrackEstimate],
                            means: np.ndarray, ended: Sequence[int]) -> None:
         """Keep where and when the tracks released this frame were, for ``reuse_time``
@@ -632,7 +599,8 @@ class AutoDetection:
             return
         for k, t in enumerate(tracks):
             x, y = means[k, [X, Y]]
-            if t.track_id in ended and not self._in_entry_zone(x, y):
+            if t.track_id in ended and not any(z[0] <= x <= z[2] and z[1] <= y <= z[3]
+                                               for z in self.calibration.entry_zones):
                 self._released[int(t.track_id)] = (int(stamp_ns), np.array([x, y]))
 
     def _reusable(self, det: Detection, stamp_ns: int, models: Mapping[int, PersonModel]
