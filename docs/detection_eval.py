@@ -36,7 +36,9 @@ import numpy as np
 
 from mbtrack_ros.core.camera import RoomCalibration
 from mbtrack_ros.core.detection.background import BackgroundBank
+from mbtrack_ros.core.detection.detector import is_ceiling
 from mbtrack_ros.core.detection import release as release_module
+from mbtrack_ros.core.shape import BodyShape, rasterize
 from mbtrack_ros.core.tracker import Tracker, TrackerConfig
 from mbtrack_ros.evaluation.clear_mot import clear_mot
 from mbtrack_ros.recording.bag import RecordingReader
@@ -384,6 +386,135 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
     print('all', ', '.join(f'{k} {v}: {n}' for (k, v), n in sorted(total.items())))
 
 
+def _visible_fractions(cal: RoomCalibration, people: list, person: int) -> dict[str, float]:
+    """Per corner camera, the fraction of ``person``'s silhouette (ground-truth position,
+    head height, sitting) not covered by a nearer person's silhouette."""
+    states = np.array([[r.x, r.y, 0.0, 0.0, 0.0, float(r.sitting)] for r in people])
+    heights = np.array([r.z_head if np.isfinite(r.z_head) else 1.75 for r in people])
+    me = [r.person_id for r in people].index(person)
+    out = {}
+    for name, cam in cal.cameras.items():
+        if is_ceiling(cam):
+            continue
+        sil = rasterize(cam, states, BodyShape(), heights=heights)
+        mine = sil.mask(me) > 0
+        if not mine.any():
+            continue
+        nearer = np.zeros_like(mine)
+        for k in range(len(people)):
+            if k != me and sil.distance[k] < sil.distance[me]:
+                nearer |= sil.mask(k) > 0
+        out[name] = float(1.0 - (mine & nearer).sum() / mine.sum())
+    return out
+
+
+def switch_classes(out: Path, rec: Path) -> list[dict]:
+    """Each identity switch of the CLEAR-MOT matching (person p at frame f: old track O ->
+    new track N), classified by what happened (h-ident):
+
+    * ``a released (REASON)`` / ``a hidden``: O was not reported at f, ended by the releaser
+      (support, existence, duplicate, spare) or hidden (existence below the report level);
+    * ``b swap``: O reported at f and N older than 2 s: two running tracks exchanged people;
+    * ``c relocate``: N was moved onto p, or O moved off p, by the identity check in the
+      second before f;
+    * ``d birth beside``: O reported at f and N born in the 2 s before f;
+    * ``e absent``: p missing from the ground truth in between (a synth artefact).
+
+    With each: how far the old track was from p at its last reported frame, how long p
+    went unmatched before the switch, p's walking speed, door (p in the door region), p sitting, nearest other person, and the corner
+    cameras where less than half of p's silhouette is visible (nearer people in front)."""
+    tracks, truth, events, _ = _load(out, rec)
+    cal = RoomCalibration.load(rec / 'calibration.yaml')
+    d = clear_mot(tracks, truth).matches_detail
+    s0 = min(r.stamp_ns for r in truth)
+    frames = np.round((d.stamp_ns.astype(np.int64) - s0) / (1e9 / FPS)).astype(int)
+    gt: dict[int, list] = {}
+    for r in truth:
+        gt.setdefault(r.frame, []).append(r)
+    shown = {(t.frame, t.track_id): (t.x, t.y) for t in tracks}
+    where = {(r.frame, r.person_id): (r.x, r.y) for r in truth}
+    born = {}
+    for e in events:
+        if e['kind'] == 'birth':
+            born.setdefault(e['id'], []).append(e['frame'])
+    moves = [(e['frame'], int(e['action'].split()[1]), e['xy']) for e in events
+             if e['kind'] == 'decision' and e['action'].startswith('move')]
+    ends = [(e['frame'], e['id'], e['reason']) for e in events if e['kind'] == 'end']
+    found = []
+    for p in np.unique(d.person_id):
+        sel = (d.person_id == p) & (d.track_id >= 0)
+        tid, fr = d.track_id[sel], frames[sel]
+        for k in range(1, len(tid)):
+            if tid[k] == tid[k - 1]:
+                continue
+            old, new, f, f0 = int(tid[k - 1]), int(tid[k]), int(fr[k]), int(fr[k - 1])
+            here = {r.person_id: r for r in gt[f]}
+            me = here[p]
+            b_new = max([g for g in born.get(new, []) if g <= f], default=-10**6)
+            end = next((e for e in ends if e[1] == old and f0 <= e[0] <= f), None)
+            moved = [m for m in moves if f - 15 <= m[0] <= f and (
+                m[1] == new and np.hypot(m[2][0] - me.x, m[2][1] - me.y) < 0.5
+                or m[1] == old and np.hypot(m[2][0] - me.x, m[2][1] - me.y) >= 0.5)]
+            if f - f0 > 20 and not any(r.person_id == p for r in gt.get(f0 + 1, [])):
+                kind = 'e absent'
+            elif moved:
+                kind = 'c relocate'
+            elif (f, old) not in shown:
+                kind = f'a released ({end[2]})' if end else 'a hidden'
+            elif b_new >= f - 30:
+                kind = 'd birth beside'
+            else:
+                kind = 'b swap'
+            others = [np.hypot(r.x - me.x, r.y - me.y) for q, r in here.items() if q != p]
+            seen = [g for g in range(f0, f) if (g, old) in shown and (g, p) in where]
+            g = seen[-1] if seen else None       # the old track's last reported frame
+            last_off = np.hypot(shown[(g, old)][0] - where[(g, p)][0],
+                                shown[(g, old)][1] - where[(g, p)][1]) if g is not None else np.nan
+            a, b = where.get((f - 3, p)), where.get((f0, p))
+            speed = np.hypot(me.x - a[0], me.y - a[1]) * FPS / 3 if a else np.nan
+            vis = _visible_fractions(cal, gt[f], int(p))
+            o = shown.get((f, old))
+            found.append({
+                'run': out.name, 'person': int(p), 'frame': f, 'old': old, 'new': new,
+                'kind': kind, 'door': _door(me.x, me.y), 'sitting': bool(me.sitting),
+                'nearest': float(min(others, default=np.inf)),
+                'occluded': sum(v < 0.5 for v in vis.values()), 'cameras': len(vis),
+                'old_off': float(np.hypot(o[0] - me.x, o[1] - me.y)) if o else np.nan,
+                'new_age': (f - b_new) / FPS, 'last_off': float(last_off),
+                'speed': float(speed), 'gap': (f - f0 - 1) / FPS})
+    return found
+
+
+def classes(pairs: list[tuple[Path, Path]]) -> None:
+    """Every switch with its class (``switch_classes``), then counts per class outside and
+    at the door, with the people's situation."""
+    rows = [s for out, rec in pairs for s in switch_classes(out, rec)]
+    for s in rows:
+        print(f"{s['run']} person {s['person']} f{s['frame']}: {s['old']} -> {s['new']} "
+              f"{s['kind']}{' DOOR' if s['door'] else ''}{' sitting' if s['sitting'] else ''}"
+              f", nearest person {s['nearest']:.2f} m, occluded in {s['occluded']}/"
+              f"{s['cameras']} cameras, old track {s['old_off']:.2f} m off, new track "
+              f"{s['new_age']:.1f} s old; old track last reported {s['last_off']:.2f} m off, "
+              f"person unmatched {s['gap']:.2f} s before, walking {s['speed']:.2f} m/s")
+    print('| class | switches | at the door | elsewhere: sitting | nearest person < 1 m | '
+          'occluded (< 50 % visible) in >= 1 / >= 2 corner cameras |')
+    print('| --- | --- | --- | --- | --- | --- |')
+    for kind in sorted({s['kind'] for s in rows}):
+        k = [s for s in rows if s['kind'] == kind]
+        away = [s for s in k if not s['door']]
+        print(f"| {kind} | {len(k)} | {sum(s['door'] for s in k)} | "
+              f"{sum(s['sitting'] for s in away)} | {sum(s['nearest'] < 1 for s in away)} | "
+              f"{sum(s['occluded'] >= 1 for s in away)} / {sum(s['occluded'] >= 2 for s in away)} |")
+    print(f'| all | {len(rows)} | {sum(s["door"] for s in rows)} | | | |')
+    lost = [s for s in rows if s['kind'].startswith('a') and not s['door']]
+    if lost:
+        q = lambda key: ' / '.join(f'{v:.2f}' for v in np.nanpercentile(   # noqa: E731
+            [s[key] for s in lost], [25, 50, 75]))
+        print(f'class a away from the door ({len(lost)}), quartiles: old track last reported '
+              f'{q("last_off")} m off the person, person unmatched {q("gap")} s before the '
+              f'switch, walking {q("speed")} m/s at the switch')
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest='cmd', required=True)
@@ -398,7 +529,7 @@ def main(argv: list[str] | None = None) -> int:
     s.add_argument('rec', type=Path)
     t = sub.add_parser('table')
     t.add_argument('pairs', type=Path, nargs='+')
-    for name in ('lag', 'decisions', 'totals', 'spares'):
+    for name in ('lag', 'decisions', 'totals', 'spares', 'classes'):
         sub.add_parser(name).add_argument('pairs', type=Path, nargs='+')
     r.add_argument('--release', action='append', default=[], metavar='FIELD=VALUE',
                    help='override a ReleaseConfig field (repeatable), e.g. spare_support=0')
@@ -415,7 +546,7 @@ def main(argv: list[str] | None = None) -> int:
         if len(args.pairs) % 2:
             p.error(f'{args.cmd} needs OUT REC pairs')
         {'table': table, 'lag': lag, 'decisions': decisions, 'totals': totals,
-         'spares': spares}[args.cmd](
+         'spares': spares, 'classes': classes}[args.cmd](
             list(zip(args.pairs[::2], args.pairs[1::2])))
     return 0
 
