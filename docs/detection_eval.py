@@ -122,6 +122,13 @@ def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False,
           f'{res.mismatches} people {res.persons} tracks {res.tracks}')
 
 
+def _matching(tracks, truth):
+    """The CLEAR-MOT matching detail and the frame index of each of its rows."""
+    d = clear_mot(tracks, truth).matches_detail
+    s0 = min(r.stamp_ns for r in truth)
+    return d, np.round((d.stamp_ns.astype(np.int64) - s0) / (1e9 / FPS)).astype(int)
+
+
 def _load(out: Path, rec: Path):
     tracks = read_tracks(out / 'tracks.csv')
     truth = read_ground_truth(rec / 'ground_truth.csv')
@@ -287,9 +294,7 @@ def spares(pairs: list[tuple[Path, Path]]) -> None:
     total: dict[str, int] = {}
     for out, rec in pairs:
         tracks, truth, events, _ = _load(out, rec)
-        d = clear_mot(tracks, truth).matches_detail
-        s0 = min(r.stamp_ns for r in truth)
-        frames = np.round((d.stamp_ns.astype(np.int64) - s0) / (1e9 / FPS)).astype(int)
+        d, frames = _matching(tracks, truth)
         matched = {(int(f), int(t)) for f, t, p in zip(frames, d.track_id, d.person_id)
                    if t >= 0 and p >= 0}
         found = []
@@ -361,9 +366,7 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
     total: dict[tuple[str, str], int] = {}
     for out, rec in pairs:
         tracks, truth, events, _ = _load(out, rec)
-        d = clear_mot(tracks, truth).matches_detail
-        s0 = min(r.stamp_ns for r in truth)
-        frames = np.round((d.stamp_ns.astype(np.int64) - s0) / (1e9 / FPS)).astype(int)
+        d, frames = _matching(tracks, truth)
         gt: dict[int, list] = {}
         for r in truth:
             gt.setdefault(r.frame, []).append(r)
@@ -425,9 +428,7 @@ def switch_classes(out: Path, rec: Path) -> list[dict]:
     cameras where less than half of p's silhouette is visible (nearer people in front)."""
     tracks, truth, events, _ = _load(out, rec)
     cal = RoomCalibration.load(rec / 'calibration.yaml')
-    d = clear_mot(tracks, truth).matches_detail
-    s0 = min(r.stamp_ns for r in truth)
-    frames = np.round((d.stamp_ns.astype(np.int64) - s0) / (1e9 / FPS)).astype(int)
+    d, frames = _matching(tracks, truth)
     gt: dict[int, list] = {}
     for r in truth:
         gt.setdefault(r.frame, []).append(r)
