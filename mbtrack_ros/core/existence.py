@@ -48,7 +48,7 @@ import numpy as np
 from mbtrack_ros.core.resampling import logsumexp
 
 __all__ = ['AuxiliaryConfig', 'ExistenceError', 'TrackAuxiliary', 'binary_step',
-           'coverage_log_ratio', 'mixture_loglik', 'predictive_loglik', 'transition']
+           'mixture_loglik', 'predictive_loglik', 'transition']
 
 
 class ExistenceError(ValueError):
@@ -177,13 +177,7 @@ class AuxiliaryConfig:
             (001 §3.1 alpha_10, alpha_01).
         death, birth: per-second probabilities of the existence chain (001 §3.2).
         initial_visibility, initial_existence: values at track creation.
-        support_gain: rate ``k`` of the coverage density of an existing person,
-            ``p(f | e=1) ∝ exp(k f)`` on [0, 1].
-        empty_support_gain: rate ``k0`` of the coverage density without a person,
-            ``p(f | e=0) ∝ exp(-k0 f)``; the evidence per camera is the log ratio
-            :func:`coverage_log_ratio`, ``k (2 f - 1)`` when ``k0 = k``. An empty place gives
-            coverages near 0, a person tracked a little off his place still 0.3-0.5: a
-            larger ``k0`` moves the neutral coverage down (about 0.3 for 13 with k = 4).
+        support_gain: ``k`` of the coverage evidence ``k (2 f - 1)`` per camera.
         appearance_weight: tempering of the visibility evidence in the existence update.
         visibility_cap: largest visibility prior used in that evidence: a wrong appearance
             model in every camera at once then costs at most ``log(1 - cap)`` per camera
@@ -198,7 +192,6 @@ class AuxiliaryConfig:
     initial_visibility: float = 0.8
     initial_existence: float = 0.9
     support_gain: float = 4.0
-    empty_support_gain: float = 13.0
     appearance_weight: float = 0.3
     visibility_cap: float = 0.7
     report_threshold: float = 0.5
@@ -208,10 +201,6 @@ class AuxiliaryConfig:
             v = getattr(self, name)
             if not 0.0 <= v < 1.0:
                 raise ExistenceError(f'{name} probability must be in [0, 1), got {v}')
-        for name in ('support_gain', 'empty_support_gain'):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v >= 0.0):
-                raise ExistenceError(f'{name} must be finite and >= 0, got {v}')
         for name in ('initial_visibility', 'initial_existence', 'report_threshold',
                      'visibility_cap'):
             v = getattr(self, name)
@@ -288,24 +277,13 @@ class TrackAuxiliary:
                 pv = min(prior, cfg.visibility_cap)
                 mix = _logaddexp(_log(pv) + l1 - l0, _log1p_neg(pv))
                 log_ratio_e += cfg.appearance_weight * w * mix
-        if coverage:
-            slope, offset = coverage_log_ratio(cfg.support_gain, cfg.empty_support_gain)
         for cam, f in coverage.items():
             w = _unit(visible_fraction.get(cam, 1.0))
             f = _unit(f) if math.isfinite(f) else 0.0
-            log_ratio_e += w * (slope * f + offset)
+            # truncated exponentials on [0, 1]: log p(f | e=1) - log p(f | e=0) = k (2f - 1)
+            log_ratio_e += w * cfg.support_gain * (2.0 * f - 1.0)
         A_e = transition(cfg.birth, cfg.death, dt)
         self.existence, _ = binary_step(self.existence, A_e, 0.0, log_ratio_e)
-
-
-def coverage_log_ratio(gain: float, empty_gain: float) -> tuple[float, float]:
-    """(slope, offset) of ``log p(f | e=1) - log p(f | e=0) = slope f + offset`` for the
-    truncated exponentials ``p(f | e=1) = exp(k f) / Z(k)`` and
-    ``p(f | e=0) = exp(-k0 f) / Z(-k0)`` on [0, 1], ``Z(a) = (exp(a) - 1) / a`` (1 at 0),
-    with ``k = gain`` and ``k0 = empty_gain`` (001 §3.2: the existence data likelihood)."""
-    def log_norm(a: float) -> float:
-        return 0.0 if a == 0.0 else math.log(math.expm1(a) / a)
-    return gain + empty_gain, log_norm(-empty_gain) - log_norm(gain)
 
 
 def _unit(x: float) -> float:
