@@ -218,43 +218,6 @@ def test_unknown_pixels_are_foreground_until_the_tracked_person_leaves():
     assert fg[region].mean() < 0.01 and not marked.unknown.any()
 
 
-def test_person_walking_off_his_bootstrap_place_is_seen_and_his_place_is_not():
-    """A person burnt into the bootstrap median walks off while his track lags on his old
-    place (the case of issue 4 where the track was hidden and its person reborn): the place
-    he left stops being foreground once it steadily shows the room, and he is foreground
-    in the margin of the not-yet-known region, where the model is the empty room. With
-    ``left_frames=0`` (the blob kept until learnt, the margin void) the track would see a
-    ghost where it stands and nothing where he is."""
-    rng = np.random.default_rng(11)
-    bg, person, body = _person_scene(rng)
-    region = np.zeros((H, W), bool)
-    region[20:110, 40:140] = True
-
-    def walked(k: int) -> tuple[np.ndarray, np.ndarray]:
-        """Frame and mask of the person moved 2 k pixels to the right."""
-        mask = np.roll(body, 2 * k, axis=1)
-        frame = bg.copy()
-        frame[mask] = (200, 30, 40)
-        return noisy(frame, rng), mask
-
-    results = {}
-    for left in (3, 0):
-        cfg = BackgroundConfig(bootstrap_frames=3, bootstrap_stride=1, unknown_frames=30,
-                               people=None, left_frames=left)
-        model = BackgroundModel(cfg)
-        for _ in range(3):
-            model.apply(noisy(person, rng))
-        model.set_unknown(region, foreground=body)
-        for k in range(1, 19):                 # 36 pixels: off his 25-pixel-wide place
-            frame, now = walked(k)
-            fg = model.apply(frame, exclude=body)          # the track stays behind
-        results[left] = (fg[body & ~now].mean(), fg[now].mean())
-    assert results[3][0] < 0.05 and results[3][1] > 0.9     # place left empty, person seen
-    assert results[0][0] > 0.95 and results[0][1] < 0.3     # before: ghost, person void
-    with pytest.raises(DetectionError, match='left_frames'):
-        BackgroundConfig(left_frames=-1)
-
-
 def test_unknown_pixels_nobody_covered_are_learnt_after_the_wait():
     rng = np.random.default_rng(9)
     bg, person, body = _person_scene(rng)

@@ -74,11 +74,6 @@ class BackgroundConfig:
         settle_frames: frames a not-yet-known pixel must keep a steady value other than its
             bootstrap one (no motion) to be learnt even under a track (the person who
             stood there has left, whatever a track does).
-        left_frames: frames after which a possible-person pixel of the bootstrap (the cue's
-            blob) that keeps a steady value other than its bootstrap one stops counting as
-            foreground; with it, not-yet-known pixels that differ from the model and move
-            count as foreground (a person walking off his bootstrap place is seen, his
-            place is not: 0 keeps the blob until it is learnt and the rest void).
         people: the person cue that marks not-yet-known pixels at the online bootstrap
             (:class:`~.people.PeopleCue`, used by :class:`BackgroundBank` when it has the
             calibration); ``None`` learns every pixel of the bootstrap frames.
@@ -101,7 +96,6 @@ class BackgroundConfig:
     static_alpha: float = 0.9
     unknown_frames: int = 15
     settle_frames: int = 20
-    left_frames: int = 3
     people: PeopleCueConfig | None = field(default_factory=PeopleCueConfig)
 
     def __post_init__(self) -> None:
@@ -117,8 +111,6 @@ class BackgroundConfig:
             raise DetectionError('motion_decay must be in [0, 1)')
         if self.unknown_frames < 1 or self.settle_frames < 1:
             raise DetectionError('unknown_frames and settle_frames must be >= 1')
-        if self.left_frames < 0:
-            raise DetectionError(f'left_frames must be >= 0, got {self.left_frames}')
 
 
 # not-yet-known pixel flags: not learnt; counts as foreground; has been covered by a track
@@ -335,7 +327,6 @@ class BackgroundModel:
         self._unknown: np.ndarray | None = None      # (H, W) uint8, 1 = not yet known
         self._unknown_age = 0                        # frames since pixels were marked
         self._changed: np.ndarray | None = None      # frames an unknown pixel kept a new value
-        self._moving: np.ndarray | None = None       # dilated persistent motion, last update
         self._raw: np.ndarray | None = None          # the last foreground test before unknowns
         self._seen = 0                               # frames offered for bootstrapping
         self.gain: float = 1.0                       # luminance gain of the last frame
@@ -477,20 +468,8 @@ class BackgroundModel:
             # not yet known: the model may show a person there, so the test is void; the
             # possible-person pixels are foreground, the others are not
             self._raw = fg.copy()
-            unknown = (self._unknown & _UNKNOWN) > 0
-            possible = (self._unknown & _POSSIBLE) > 0
-            fg[unknown] = 0
-            fg[possible] = 1
-            if cfg.left_frames > 0 and self._changed is not None:
-                # a possible-person pixel that has steadily shown something other than its
-                # bootstrap value: the person who stood there has left it (no ghost that
-                # holds the track of a person who walked off)
-                fg[possible & (self._changed >= cfg.left_frames)] = 0
-            if cfg.left_frames > 0:
-                # around the blob the model is the bootstrap median, mostly the empty room:
-                # its own test there (a person walking off his bootstrap place is seen)
-                margin = unknown & ~possible
-                fg[margin] = self._raw[margin]
+            fg[(self._unknown & _UNKNOWN) > 0] = 0
+            fg[(self._unknown & _POSSIBLE) > 0] = 1
         h, w = fg.shape
         min_area = int(round(cfg.min_blob_area * (h * w) / (320.0 * 240.0)))
         return clean_mask(fg, open_size=cfg.open_size, close_size=cfg.close_size,
@@ -529,11 +508,6 @@ class BackgroundModel:
         moving = _motion_kernel(y, self._prev_y, self._motion, float(cfg.motion_decay),
                                 float(cfg.motion_threshold), float(cfg.motion_persistent))
         self._prev_y = y
-        self._moving = None
-        if self._unknown is not None and self._unknown.any():
-            grow = _kernel(2 * cfg.mask_dilation + 1)
-            self._moving = (cv2.dilate(moving, grow) > 0 if grow is not None and moving.any()
-                            else moving > 0)
         if exclude is not None:
             exclude = np.asarray(exclude, dtype=bool)
             if exclude.shape != y.shape:
