@@ -5,6 +5,7 @@
     .venv/bin/python docs/detection_eval.py table OUT REC [OUT REC]   # one row per run
     .venv/bin/python docs/detection_eval.py lag OUT REC [OUT REC]     # track-person distance
     .venv/bin/python docs/detection_eval.py decisions OUT REC [OUT REC]  # moves right?
+    .venv/bin/python docs/detection_eval.py exits OUT REC [OUT REC]    # premature exits?
 
 ``run`` steps :class:`~mbtrack_ros.core.tracker.Tracker` with ``detection=True`` exactly as
 ``mbtrack replay REC --out OUT --eval REC/ground_truth.csv --seed S`` does (same
@@ -22,7 +23,8 @@ whether the old track was reported at the switch frame (not: hidden or ended).
 ``decisions`` checks each move, hidden move, id reuse and drop of the identity check
 against the ground truth: was the person at the detection the one the track (for a reuse:
 the released track) was matched to in the 15 matched frames before (same / other /
-unmatched: the track followed nobody)?
+unmatched: the track followed nobody)? ``exits`` tells, per release by the exit rule,
+whether the track's person was still in the room afterwards (premature).
 """
 from __future__ import annotations
 
@@ -308,6 +310,35 @@ def spares(pairs: list[tuple[Path, Path]]) -> None:
     print('total:', ', '.join(f'{k} {v}' for k, v in sorted(total.items())) or 'none')
 
 
+def exits(pairs: list[tuple[Path, Path]]) -> None:
+    """Each release by the exit rule against the person its track was matched to in the
+    second (15 frames) before: ``premature`` when that person is still in the ground truth
+    in at least 10 of the 15 frames after it (they stood at the door), ``left`` when not,
+    ``nobody`` when the track was matched to no one (its person had gone already)."""
+    total: dict[str, int] = {}
+    for out, rec in pairs:
+        tracks, truth, events, _ = _load(out, rec)
+        d, frames = _matching(tracks, truth)
+        present = {(r.frame, r.person_id) for r in truth}
+        found = []
+        for e in events:
+            if e['kind'] != 'end' or e['reason'] != 'exit':
+                continue
+            f = e['frame']
+            sel = (d.track_id == e['id']) & (frames >= f - 15) & (frames < f) & (d.person_id >= 0)
+            if not sel.any():
+                kind = 'nobody'
+            else:
+                p = int(np.bincount(d.person_id[sel]).argmax())
+                n = sum((g, p) in present for g in range(f + 1, f + 16))
+                kind = 'premature' if n >= 10 else 'left'
+            total[kind] = total.get(kind, 0) + 1
+            if kind == 'premature':
+                found.append(f"{e['id']}@{f} (person {p})")
+        print(f'{out.name}: premature ' + (', '.join(found) or 'none'))
+    print('total:', ', '.join(f'{k} {v}' for k, v in sorted(total.items())) or 'none')
+
+
 def lag(pairs: list[tuple[Path, Path]]) -> None:
     print('| run | person-frames | distance median | p90 | > 0.3 m | > 0.5 m | walking > 1 m/s: '
           'median | lag along | switches: old track not reported / reported > 0.5 m off |')
@@ -530,7 +561,7 @@ def main(argv: list[str] | None = None) -> int:
     s.add_argument('rec', type=Path)
     t = sub.add_parser('table')
     t.add_argument('pairs', type=Path, nargs='+')
-    for name in ('lag', 'decisions', 'totals', 'spares', 'classes'):
+    for name in ('lag', 'decisions', 'totals', 'spares', 'classes', 'exits'):
         sub.add_parser(name).add_argument('pairs', type=Path, nargs='+')
     r.add_argument('--release', action='append', default=[], metavar='FIELD=VALUE',
                    help='override a ReleaseConfig field (repeatable), e.g. spare_support=0')
@@ -547,7 +578,7 @@ def main(argv: list[str] | None = None) -> int:
         if len(args.pairs) % 2:
             p.error(f'{args.cmd} needs OUT REC pairs')
         {'table': table, 'lag': lag, 'decisions': decisions, 'totals': totals,
-         'spares': spares, 'classes': classes}[args.cmd](
+         'spares': spares, 'classes': classes, 'exits': exits}[args.cmd](
             list(zip(args.pairs[::2], args.pairs[1::2])))
     return 0
 
