@@ -170,6 +170,16 @@ def _coverage(fg_n: np.ndarray, kn_n: np.ndarray, area: np.ndarray
     return cov, known, area
 
 
+@njit(cache=True, nogil=True, inline='always')
+def _clipped_span(r: int, x0: int, x1: int, h: int, w: int
+                  ) -> tuple[int, int, int]:  # pragma: no cover - compiled
+    """A span (row r, columns [x0, x1)) clipped to an h x w image: (r, a, b), empty
+    (b <= a) when the row is outside the image."""
+    if r < 0 or r >= h:
+        return r, 0, 0
+    return r, min(max(x0, 0), w), min(max(x1, 0), w)
+
+
 @njit(cache=True, nogil=True)
 def _span_counts_kernel(fg: np.ndarray, unknown: np.ndarray, row: np.ndarray, x0: np.ndarray,
                         x1: np.ndarray, offsets: np.ndarray
@@ -188,11 +198,7 @@ def _span_counts_kernel(fg: np.ndarray, unknown: np.ndarray, row: np.ndarray, x0
         a_kn = 0
         a_area = 0
         for s in range(offsets[i], offsets[i + 1]):
-            r = row[s]
-            if r < 0 or r >= h:
-                continue
-            a = min(max(x0[s], 0), w)
-            b = min(max(x1[s], 0), w)
+            r, a, b = _clipped_span(row[s], x0[s], x1[s], h, w)
             if b <= a:
                 continue
             a_area += b - a
@@ -247,11 +253,7 @@ def _coverage_kernel(cs_fg: np.ndarray, cs_known: np.ndarray, row: np.ndarray, x
         a_kn = 0
         a_area = 0
         for s in range(offsets[i], offsets[i + 1]):
-            r = row[s]
-            if r < 0 or r >= h:
-                continue
-            a = min(max(x0[s], 0), w)
-            b = min(max(x1[s], 0), w)
+            r, a, b = _clipped_span(row[s], x0[s], x1[s], h, w)
             if b <= a:
                 continue
             a_fg += cs_fg[r, b] - cs_fg[r, a]
