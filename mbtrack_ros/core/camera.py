@@ -265,6 +265,13 @@ def look_at(eye: Iterable[float], target: Iterable[float],
     return R, -R @ eye
 
 
+def _in_rect(xy: np.ndarray, rect: tuple[float, float, float, float]) -> np.ndarray:
+    """(K,) True for floor points (K, 2) inside the closed rectangle
+    ``(x_min, y_min, x_max, y_max)``."""
+    x0, y0, x1, y1 = rect
+    return (xy[:, 0] >= x0) & (xy[:, 0] <= x1) & (xy[:, 1] >= y0) & (xy[:, 1] <= y1)
+
+
 def _check_exit(rect: Any, floor: tuple[float, float, float, float]
                 ) -> tuple[float, float, float, float]:
     """An exit rectangle as 4 floats; it must be non-empty, outside the floor and share a
@@ -330,9 +337,8 @@ class RoomCalibration:
         dx = np.maximum.reduce([x0 - xy[:, 0], xy[:, 0] - x1, np.zeros(len(xy))])
         dy = np.maximum.reduce([y0 - xy[:, 1], xy[:, 1] - y1, np.zeros(len(xy))])
         inside = np.zeros(len(xy), bool)
-        for ex0, ey0, ex1, ey1 in self.exits:
-            inside |= ((xy[:, 0] >= ex0) & (xy[:, 0] <= ex1)
-                       & (xy[:, 1] >= ey0) & (xy[:, 1] <= ey1))
+        for rect in self.exits:
+            inside |= _in_rect(xy, rect)
         depth[inside] = np.hypot(dx, dy)[inside]
         return depth
 
@@ -348,8 +354,7 @@ class RoomCalibration:
             behind = ((ey0 >= fy1 and cy >= fy1) or (ey1 <= fy0 and cy <= fy0)
                       or (ex0 >= fx1 and cx >= fx1) or (ex1 <= fx0 and cx <= fx0))
             if behind:
-                hidden |= ((xy[:, 0] >= ex0) & (xy[:, 0] <= ex1)
-                           & (xy[:, 1] >= ey0) & (xy[:, 1] <= ey1))
+                hidden |= _in_rect(xy, (ex0, ey0, ex1, ey1))
         return hidden
 
     @property
