@@ -1,0 +1,76 @@
+"""The "fully visible in two cameras" clock of docs/detection_eval.py (issue #4 entering)."""
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mbtrack_ros.recording.csvfiles import GroundTruthRow
+from mbtrack_ros.synth.room import default_room, make_calibration
+
+_SCRIPT = Path(__file__).resolve().parents[1] / 'docs' / 'detection_eval.py'
+
+
+@pytest.fixture(scope='module')
+def detection_eval():
+    spec = importlib.util.spec_from_file_location('detection_eval', _SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture(scope='module')
+def calibration():
+    return make_calibration(default_room())
+
+
+def _row(frame, pid, x, y):
+    return GroundTruthRow(stamp_ns=frame, frame=frame, person_id=pid, x=x, y=y, z_head=1.8,
+                          sitting=False, visible_cameras=())
+
+
+def _blockers(calibration, x, y, first_id):
+    """People 0.6 m from (x, y) towards each corner camera: each hides the lower body."""
+    out = []
+    for k, name in enumerate(['cam0', 'cam1', 'cam2', 'cam3']):
+        c = calibration.cameras[name].center[:2]
+        d = (c - (x, y)) / np.hypot(*(c - (x, y)))
+        out.append(_row(0, first_id + k, x + 0.6 * d[0], y + 0.6 * d[1]))
+    return out
+
+
+def test_a_person_alone_in_the_middle_is_fully_visible_in_every_camera(detection_eval,
+                                                                          calibration):
+    vis = detection_eval._visible_fractions(calibration, [_row(0, 1, 3.0, 2.5)], 1,
+                                            whole=True)
+    assert set(vis) == {'cam0', 'cam1', 'cam2', 'cam3'}   # no top view of the body model
+    assert all(v >= detection_eval.FULLY_VISIBLE for v in vis.values())
+
+
+def test_nearer_people_and_the_image_border_hide_part_of_the_silhouette(detection_eval,
+                                                                       calibration):
+    people = [_row(0, 1, 3.0, 2.5)] + _blockers(calibration, 3.0, 2.5, 2)
+    vis = detection_eval._visible_fractions(calibration, people, 1, whole=True)
+    assert all(vis[c] < 0.9 for c in ('cam0', 'cam1', 'cam2', 'cam3'))
+    # under a corner camera the feet leave its image: hidden for `whole`, not for the
+    # occlusion-only fraction (nobody in front)
+    corner = calibration.cameras['cam0'].center[:2]
+    near = [_row(0, 1, corner[0] + 0.5, corner[1] + 0.5)]
+    assert detection_eval._visible_fractions(calibration, near, 1)['cam0'] == 1.0
+    assert detection_eval._visible_fractions(calibration, near, 1, whole=True)['cam0'] < 0.9
+
+
+def test_the_entering_clock_starts_when_two_cameras_see_the_whole_person(detection_eval,
+                                                                         calibration):
+    # frames 0-2: four people stand between person 1 and the corner cameras; from frame 3
+    # on they are gone
+    rows = []
+    gt: dict[int, list] = {}
+    for f in range(6):
+        me = _row(f, 1, 3.0, 2.5)
+        rows.append(me)
+        others = [] if f >= 3 else [
+            _row(f, b.person_id, b.x, b.y) for b in _blockers(calibration, 3.0, 2.5, 2)]
+        gt[f] = [me] + others
+    assert detection_eval._fully_visible_from(calibration, gt, rows) == 3
+    assert detection_eval._fully_visible_from(calibration, gt, rows[:3]) is None
