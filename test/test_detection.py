@@ -509,6 +509,57 @@ def test_tracker_detects_tracks_and_releases_a_painted_person():
     assert tracker.track_ids == []
 
 
+def test_paint_blobs_marks_the_blob_only_where_the_outline_degenerates():
+    from mbtrack_ros.core.detection.release import paint_blobs
+
+    calib = make_room()
+    cam = calib.cameras['cam4']
+    xy = np.array([cam.center[:2], cam.center[:2] + [2.0, 1.0]])   # below / far off
+    heights = np.array([1.8, 1.8])
+    full = np.ones((H, W), bool)
+    _, area = blob_coverage(cam, full, xy, heights)
+    each = []
+    for k in range(2):
+        m = np.zeros((H, W), bool)
+        paint_blobs(m, cam, xy[k:k + 1], heights[:1])
+        assert m.sum() == area[k]                      # the same hull as blob_coverage
+        each.append(m)
+    outline = rasterize(cam, np.c_[xy, np.zeros((2, 4))], BodyShape(),
+                        heights=heights).area
+    assert outline[0] < 0.25 * area[0] and outline[1] >= 0.25 * area[1]
+    chosen = np.zeros((H, W), bool)
+    paint_blobs(chosen, cam, xy, heights, outline_area=outline)
+    assert np.array_equal(chosen, each[0])             # the far person keeps his outline
+
+
+def test_a_person_standing_below_the_ceiling_camera_is_not_learnt_into_its_background():
+    """The ceiling camera alone decides the release, and the body outline degenerates right
+    below it: the model update must still leave the tracked person out (cylinder blob in
+    the exclusion mask), else the person fades into the background and the track ends."""
+    from mbtrack_ros.core.detection.release import blob_coverage
+
+    rng = np.random.default_rng(3)
+    calib = make_room()
+    bgs = backgrounds(calib)
+    tracker = _detecting_tracker(calib, bgs, seed=2)
+    cam = calib.cameras['cam4']
+    below = cam.center[:2]
+    ids = set()
+    for k in range(150):                          # 10 s standing still
+        stamp = int(round(k * 1e9 / FPS))
+        images = paint(calib, bgs, [person(*below)], rng)
+        res = tracker.step(stamp, images)
+        ids |= {t.track_id for t in res.tracks}
+        assert not res.ended, f'track released at frame {k}'
+        if k >= 20:
+            assert len(res.tracks) == 1, f'frame {k}: {len(res.tracks)} tracks'
+    # the ceiling camera still sees the person as foreground after 10 s
+    fg = tracker.detection.background.models['cam4'].foreground(images['cam4'])
+    cov, _ = blob_coverage(cam, fg, below[None], np.array([1.8]))
+    assert cov[0] > 0.3
+    assert len(ids) == 1
+
+
 def test_detector_refines_a_fixed_budget_with_pending_candidates_first(monkeypatch):
     """Refinement cost is bounded per frame; candidates being confirmed are not starved."""
     rng = np.random.default_rng(5)
