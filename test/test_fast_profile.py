@@ -50,6 +50,11 @@ def test_replay_options_beat_the_params_file(tmp_path):
     mixed = config('--params', str(params), '--particles', '70', '--seed', '3')
     assert (mixed.particles, mixed.subsample, mixed.seed) == (70, 2, 3)
     assert config('--subsample', '3').subsample == 3
+    assert config().detection_every == 1
+    assert config('--detection-every', '3').detection_every == 3
+    params.write_text('tracker_node:\n  ros__parameters:\n    detection:\n      every: 2\n')
+    assert config('--params', str(params)).detection_every == 2
+    assert config('--params', str(params), '--detection-every', '4').detection_every == 4
 
 
 def test_replay_params_file_refuses_unknown_keys(tmp_path):

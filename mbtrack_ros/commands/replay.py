@@ -64,7 +64,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument('--out', type=Path, required=True, metavar='OUTDIR',
                         help='output directory (created)')
     parser.add_argument('--params', type=Path, default=None, metavar='NODE.yaml',
-                        help='take the tracker settings (tracker.*, detection.threshold) '
+                        help='take the tracker settings (tracker.*, detection.threshold, '
+                             'detection.every) '
                              'from a tracker_node parameter file (config/*.yaml); the '
                              'options below override it')
     parser.add_argument('--algorithm', default=None,
@@ -85,6 +86,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument('--pipeline-search', action='store_true',
                         help='search frame t for new people while frame t+1 is filtered '
                              '(people start one frame later; TrackerConfig.pipeline_search)')
+    parser.add_argument('--detection-every', type=int, default=None, metavar='K',
+                        help='run the detection pipeline on every K-th frame set only '
+                             '(default 1; a speed option that costs accuracy)')
     parser.add_argument('--init-from', type=Path, default=None, metavar='GROUND_TRUTH.csv',
                         help='start tracks from this ground truth (models from key views)')
     parser.add_argument('--eval', type=Path, default=None, metavar='GROUND_TRUTH.csv',
@@ -126,6 +130,7 @@ _NODE_TRACKER_KEYS = {f'tracker.{k}': k for k in (
     'algorithm', 'particles', 'joint_particles', 'sigma', 'd_occ', 'mrf_radius', 'use_mrf',
     'release_time', 'subsample', 'pipeline_search')}
 _NODE_TRACKER_KEYS['detection.threshold'] = 'detection_threshold'
+_NODE_TRACKER_KEYS['detection.every'] = 'detection_every'
 
 
 def tracker_values_from_params(path: Path) -> dict:
@@ -153,7 +158,7 @@ def _config(args: argparse.Namespace) -> TrackerConfig:
     try:
         values = tracker_values_from_params(args.params) if args.params is not None else {}
         for name in ('algorithm', 'particles', 'joint_particles', 'sigma', 'd_occ',
-                     'subsample'):
+                     'subsample', 'detection_every'):
             if getattr(args, name) is not None:  # an explicit option beats the file
                 values[name] = getattr(args, name)
         if args.no_mrf:
