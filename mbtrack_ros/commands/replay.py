@@ -21,6 +21,9 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
+import multiprocessing
+import pickle
 import queue
 import shutil
 import sys
@@ -305,19 +308,40 @@ def _track_rows(tracker: Tracker, reader: RecordingReader, index: _FrameIndex, s
 
 
 class _BackgroundWriter:
-    """Writes frame results to an ``OutputBagWriter`` in a thread (in order, bounded queue).
+    """Writes frame results to an ``OutputBagWriter`` beside the tracker (in order, bounded
+    queue): in a thread, or with ``process`` in a child process.
 
-    Building and serialising the rclpy messages of a frame (MarkerArray above all) took
-    ~13 % of the replay's wall time in the main thread; here it overlaps with the next
-    tracker step (its numba kernels release the GIL). Each result is snapshotted (track
-    means and covariances copied, particles left out) so the tracker may reuse its buffers.
-    A write error is raised by the next :meth:`write` or by :meth:`close`.
+    Building and serialising the rclpy messages of a frame (MarkerArray above all) costs
+    ~3 ms of CPU with 4 tracks, all of it holding the interpreter lock; in a thread it
+    still competes with the tracker's Python code for that lock, in a child process it
+    runs on the other core (the same writer code, the same bag). Each result is
+    snapshotted (track means and covariances copied, particles left out) so the tracker may
+    reuse its buffers. A write error is raised by the next :meth:`write` or by
+    :meth:`close`.
+
+    Args:
+        writer: the writer object (thread), or with ``process`` a picklable callable that
+            builds it in the child.
     """
 
-    def __init__(self, writer, depth: int = 8) -> None:
-        self._writer = writer
-        self._queue: queue.Queue = queue.Queue(maxsize=depth)
+    def __init__(self, writer, depth: int = 8, *, process: bool = False) -> None:
         self._error: BaseException | None = None
+        self._child = None
+        if process:
+            ctx = multiprocessing.get_context('spawn')
+            self._queue = ctx.Queue(maxsize=depth)
+            self._replies = ctx.Queue()
+            self._child = ctx.Process(target=_write_results, args=(writer, self._queue,
+                                                                   self._replies),
+                                      name='output_bag', daemon=True)
+            self._child.start()
+            failed = self._replies.get()  # None once the child's writer exists
+            if failed is not None:
+                self._child.join()
+                raise failed
+            return
+        self._writer = writer
+        self._queue = queue.Queue(maxsize=depth)
         self._thread = threading.Thread(target=self._run, name='output_bag', daemon=True)
         self._thread.start()
 
@@ -332,22 +356,81 @@ class _BackgroundWriter:
                 except BaseException as err:  # reported in the main thread
                     self._error = err
 
-    def write(self, result) -> None:
+    def _check(self) -> None:
+        if self._child is not None and self._error is None and not self._replies.empty():
+            self._error = self._replies.get()
         if self._error is not None:
             raise self._error
+
+    def write(self, result) -> None:
+        self._check()
         tracks = [dataclasses.replace(t, mean=np.array(t.mean), covariance=np.array(
             t.covariance), visible_fraction=dict(t.visible_fraction),
             visibility=dict(t.visibility), particles=None, weights=None)
             for t in result.tracks]
-        self._queue.put(dataclasses.replace(result, tracks=tracks, ended=list(result.ended)))
+        self._put(dataclasses.replace(result, tracks=tracks, ended=list(result.ended)))
+
+    def _put(self, item) -> None:
+        while True:
+            try:
+                self._queue.put(item, timeout=1.0)
+                return
+            except queue.Full:
+                if self._child is not None and not self._child.is_alive():
+                    raise RuntimeError('the output bag writer process died') from None
 
     def close(self) -> None:
         """Write what is queued, close the bag, raise a write error if one happened."""
-        self._queue.put(None)
-        self._thread.join()
-        self._writer.close()
-        if self._error is not None:
-            raise self._error
+        if self._child is None:
+            self._queue.put(None)
+            self._thread.join()
+            self._writer.close()
+            if self._error is not None:
+                raise self._error
+            return
+        if self._child.is_alive():
+            self._put(None)
+            if self._error is None:
+                self._error = self._replies.get()  # the first error, or None when closed
+        self._child.join()
+        self._check()
+
+
+def _write_results(make_writer, jobs, replies) -> None:
+    """The child process of ``_BackgroundWriter(..., process=True)``: build the writer, write
+    the results from ``jobs`` until None, close; report the first error (or None) on
+    ``replies`` (after start-up: None once the writer exists)."""
+    try:
+        writer = make_writer()
+    except BaseException as err:  # noqa: BLE001 - raised in the parent
+        replies.put(_picklable(err))
+        return
+    replies.put(None)
+    error = None
+    while (result := jobs.get()) is not None:
+        if error is None:
+            try:
+                writer.write(result)
+            except BaseException as err:  # noqa: BLE001 - raised in the parent
+                error = _picklable(err)
+                replies.put(error)
+    try:
+        writer.close()
+    except BaseException as err:  # noqa: BLE001 - raised in the parent
+        if error is None:
+            error = _picklable(err)
+            replies.put(error)
+    if error is None:
+        replies.put(None)
+
+
+def _picklable(err: BaseException) -> BaseException:
+    """``err`` as an exception the parent can unpickle with the same type and message
+    where possible."""
+    try:
+        return pickle.loads(pickle.dumps(err))
+    except Exception:  # noqa: BLE001
+        return RuntimeError(f'{type(err).__name__}: {err}')
 
 
 def _output_bag(out: Path, calibration: RoomCalibration):
@@ -361,7 +444,8 @@ def _output_bag(out: Path, calibration: RoomCalibration):
     if (path / 'metadata.yaml').exists():
         shutil.rmtree(path)  # replaced like tracks.csv
     try:
-        return _BackgroundWriter(OutputBagWriter(path, calibration))
+        return _BackgroundWriter(functools.partial(OutputBagWriter, path, calibration),
+                                 process=True)
     except OutputBagError as err:
         raise _UserError(str(err)) from err
 
