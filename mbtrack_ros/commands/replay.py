@@ -22,10 +22,11 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import functools
-import multiprocessing
+import os
 import pickle
 import queue
 import shutil
+import subprocess
 import sys
 import threading
 import time
@@ -308,16 +309,17 @@ def _track_rows(tracker: Tracker, reader: RecordingReader, index: _FrameIndex, s
 
 
 class _BackgroundWriter:
-    """Writes frame results to an ``OutputBagWriter`` beside the tracker (in order, bounded
-    queue): in a thread, or with ``process`` in a child process.
+    """Writes frame results to an ``OutputBagWriter`` beside the tracker (in order): in a
+    thread (bounded queue), or with ``process`` in a child Python process fed through a pipe.
 
     Building and serialising the rclpy messages of a frame (MarkerArray above all) costs
     ~3 ms of CPU with 4 tracks, all of it holding the interpreter lock; in a thread it
     still competes with the tracker's Python code for that lock, in a child process it
-    runs on the other core (the same writer code, the same bag). Each result is
-    snapshotted (track means and covariances copied, particles left out) so the tracker may
-    reuse its buffers. A write error is raised by the next :meth:`write` or by
-    :meth:`close`.
+    runs on the other core (the same writer code, the same bag). The child is a fresh
+    interpreter (``python -c``), not a ``multiprocessing`` child, so it never re-imports
+    the caller's main script. Each result is snapshotted (track means and covariances
+    copied, particles left out) so the tracker may reuse its buffers. A write error is
+    raised by a later :meth:`write` or by :meth:`close`.
 
     Args:
         writer: the writer object (thread), or with ``process`` a picklable callable that
@@ -326,22 +328,21 @@ class _BackgroundWriter:
 
     def __init__(self, writer, depth: int = 8, *, process: bool = False) -> None:
         self._error: BaseException | None = None
-        self._child = None
+        self._child: subprocess.Popen | None = None
         if process:
-            ctx = multiprocessing.get_context('spawn')
-            self._queue = ctx.Queue(maxsize=depth)
-            self._replies = ctx.Queue()
-            self._child = ctx.Process(target=_write_results, args=(writer, self._queue,
-                                                                   self._replies),
-                                      name='output_bag', daemon=True)
-            self._child.start()
-            failed = self._replies.get()  # None once the child's writer exists
+            env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
+            self._child = subprocess.Popen(
+                [sys.executable, '-c', 'from mbtrack_ros.commands.replay import '
+                 '_write_results; _write_results()'],
+                stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env)
+            self._send(writer)
+            failed = self._reply()  # None once the child's writer exists
             if failed is not None:
-                self._child.join()
+                self._child.wait()
                 raise failed
             return
         self._writer = writer
-        self._queue = queue.Queue(maxsize=depth)
+        self._queue: queue.Queue = queue.Queue(maxsize=depth)
         self._thread = threading.Thread(target=self._run, name='output_bag', daemon=True)
         self._thread.start()
 
@@ -356,28 +357,36 @@ class _BackgroundWriter:
                 except BaseException as err:  # reported in the main thread
                     self._error = err
 
-    def _check(self) -> None:
-        if self._child is not None and self._error is None and not self._replies.empty():
-            self._error = self._replies.get()
-        if self._error is not None:
-            raise self._error
+    def _send(self, item) -> None:
+        """Pickle ``item`` to the child; when the child has stopped, raise its error."""
+        try:
+            pickle.dump(item, self._child.stdin)
+            self._child.stdin.flush()
+        except (BrokenPipeError, OSError):
+            self._error = self._error or self._reply() or RuntimeError(
+                'the output bag writer process stopped')
+            raise self._error from None
+
+    def _reply(self) -> BaseException | None:
+        """The child's next reply: None (ready / closed) or its error."""
+        try:
+            return pickle.load(self._child.stdout)
+        except (EOFError, pickle.UnpicklingError, OSError):
+            return RuntimeError(f'the output bag writer process ended without a reply '
+                                f'(exit code {self._child.wait()})')
 
     def write(self, result) -> None:
-        self._check()
+        if self._error is not None:
+            raise self._error
         tracks = [dataclasses.replace(t, mean=np.array(t.mean), covariance=np.array(
             t.covariance), visible_fraction=dict(t.visible_fraction),
             visibility=dict(t.visibility), particles=None, weights=None)
             for t in result.tracks]
-        self._put(dataclasses.replace(result, tracks=tracks, ended=list(result.ended)))
-
-    def _put(self, item) -> None:
-        while True:
-            try:
-                self._queue.put(item, timeout=1.0)
-                return
-            except queue.Full:
-                if self._child is not None and not self._child.is_alive():
-                    raise RuntimeError('the output bag writer process died') from None
+        item = dataclasses.replace(result, tracks=tracks, ended=list(result.ended))
+        if self._child is not None:
+            self._send(item)
+        else:
+            self._queue.put(item)
 
     def close(self) -> None:
         """Write what is queued, close the bag, raise a write error if one happened."""
@@ -385,52 +394,41 @@ class _BackgroundWriter:
             self._queue.put(None)
             self._thread.join()
             self._writer.close()
-            if self._error is not None:
-                raise self._error
-            return
-        if self._child.is_alive():
-            self._put(None)
-            if self._error is None:
-                self._error = self._replies.get()  # the first error, or None when closed
-        self._child.join()
-        self._check()
+        elif self._error is None:
+            self._send(None)
+            self._child.stdin.close()
+            self._error = self._reply()  # None when the bag was closed without error
+            self._child.wait()
+        if self._error is not None:
+            raise self._error
 
 
-def _write_results(make_writer, jobs, replies) -> None:
-    """The child process of ``_BackgroundWriter(..., process=True)``: build the writer, write
-    the results from ``jobs`` until None, close; report the first error (or None) on
-    ``replies`` (after start-up: None once the writer exists)."""
+def _write_results() -> None:
+    """The child process of ``_BackgroundWriter(..., process=True)``: from stdin, a callable
+    that builds the writer, then results until None; to stdout, None once the writer exists
+    and None when the bag is closed, or the first error (then the child stops)."""
+    source = sys.stdin.buffer
+    replies = os.fdopen(os.dup(1), 'wb')  # the pipe; anything printed goes to stderr
+    os.dup2(2, 1)
+    sys.stdout = sys.stderr
+
+    def reply(value) -> None:
+        try:
+            pickle.dump(value, replies)
+        except Exception:  # noqa: BLE001 - an error that does not pickle
+            pickle.dump(RuntimeError(f'{type(value).__name__}: {value}'), replies)
+        replies.flush()
+
     try:
-        writer = make_writer()
-    except BaseException as err:  # noqa: BLE001 - raised in the parent
-        replies.put(_picklable(err))
-        return
-    replies.put(None)
-    error = None
-    while (result := jobs.get()) is not None:
-        if error is None:
-            try:
-                writer.write(result)
-            except BaseException as err:  # noqa: BLE001 - raised in the parent
-                error = _picklable(err)
-                replies.put(error)
-    try:
+        writer = pickle.load(source)()
+        reply(None)
+        while (result := pickle.load(source)) is not None:
+            writer.write(result)
         writer.close()
     except BaseException as err:  # noqa: BLE001 - raised in the parent
-        if error is None:
-            error = _picklable(err)
-            replies.put(error)
-    if error is None:
-        replies.put(None)
-
-
-def _picklable(err: BaseException) -> BaseException:
-    """``err`` as an exception the parent can unpickle with the same type and message
-    where possible."""
-    try:
-        return pickle.loads(pickle.dumps(err))
-    except Exception:  # noqa: BLE001
-        return RuntimeError(f'{type(err).__name__}: {err}')
+        reply(err)
+        raise SystemExit(1) from None
+    reply(None)
 
 
 def _output_bag(out: Path, calibration: RoomCalibration):
