@@ -16,6 +16,7 @@ from conftest import REPO, make_room  # noqa: E402
 from mbtrack_ros.core.tracker import Tracker, TrackerConfig, TrackerError  # noqa: E402
 
 FAST = REPO / 'config' / 'clear_room_fast.yaml'
+OFFLINE = REPO / 'config' / 'clear_room_offline.yaml'
 
 
 def test_subsample_is_validated_and_reaches_the_likelihood():
@@ -78,7 +79,19 @@ def test_fast_profile_is_the_default_with_half_the_particles():
     assert fast['particles'] == default['particles'] // 2
 
 
-def test_fast_profile_loads_in_the_node_and_the_replay(tmp_path):
+def test_offline_profile_is_the_default_with_fewer_particles_and_sparse_detection():
+    from mbtrack_ros.commands.replay import tracker_values_from_params
+
+    offline = tracker_values_from_params(OFFLINE)
+    default = tracker_values_from_params(REPO / 'config' / 'clear_room.yaml')
+    assert {k for k in offline.keys() | default.keys()
+            if offline.get(k) != default.get(k)} == {'particles', 'detection_every'}
+    assert offline['particles'] < default['particles']
+    assert offline['detection_every'] > default.get('detection_every', 1)
+
+
+@pytest.mark.parametrize('profile', [FAST, OFFLINE], ids=['fast', 'offline'])
+def test_fast_profile_loads_in_the_node_and_the_replay(tmp_path, profile):
     import argparse
 
     from mbtrack_ros.commands import replay
@@ -90,7 +103,7 @@ def test_fast_profile_loads_in_the_node_and_the_replay(tmp_path):
     context = Context()
     rclpy.init(context=context)
     try:
-        node = TrackerNode(cli_args=['--ros-args', '--params-file', str(FAST),
+        node = TrackerNode(cli_args=['--ros-args', '--params-file', str(profile),
                                      '-p', f'calibration_file:={calib}', '-p', 'warm_up:=false'],
                            context=context, step_thread=False)
         try:
@@ -102,6 +115,8 @@ def test_fast_profile_loads_in_the_node_and_the_replay(tmp_path):
     parser = argparse.ArgumentParser()
     replay.add_parser(parser.add_subparsers())
     replay_config = replay._config(parser.parse_args(
-        ['replay', 'REC', '--out', str(tmp_path), '--params', str(FAST)]))
+        ['replay', 'REC', '--out', str(tmp_path), '--params', str(profile)]))
     assert node_config.particles == replay_config.particles == 50
     assert node_config.subsample == replay_config.subsample == 1
+    assert node_config.detection_every == replay_config.detection_every == \
+        (1 if profile == FAST else 3)
