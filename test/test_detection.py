@@ -991,3 +991,58 @@ def test_a_person_re_found_soon_after_the_release_gets_the_released_id(
         ids.append(sorted(tracker.track_ids))
     assert ended_at is not None and ids[ended_at] == []
     assert ids[-1] == ([1] if reused else [2])
+
+
+def test_detection_every_kth_frame_set_holds_existence_in_between(monkeypatch):
+    """``detection_every=3``: the detection pipeline runs on frame sets 0, 3, 6, ... only;
+    the frame sets between report the tracks with the last existence and visibility, and
+    the painted person is still found and released."""
+    from mbtrack_ros.core.detection.manager import AutoDetection
+    from mbtrack_ros.core.existence import AuxiliaryConfig
+    from mbtrack_ros.core.tracker import TrackerConfig, TrackerError
+
+    for bad in (0, -2, 1.5, True):
+        with pytest.raises(TrackerError, match='detection_every'):
+            TrackerConfig(detection_every=bad)
+    calls: list[int] = []
+    plain = AutoDetection.update
+
+    def counted(self, stamp_ns, *a, **k):
+        calls.append(int(stamp_ns))
+        return plain(self, stamp_ns, *a, **k)
+
+    monkeypatch.setattr(AutoDetection, 'update', counted)
+    rng = np.random.default_rng(8)
+    calib = make_room()
+    bgs = backgrounds(calib)
+    every = 3
+    tracker = _detecting_tracker(calib, bgs, seed=1, detection_every=every)
+    enter, leave, total = 3, 30, 66
+    stamps, born, ended, held = [], None, None, 0
+    last: dict[int, tuple[float, dict]] = {}
+    for k in range(total):
+        x = 2.0 + 0.05 * k
+        people = [person(x, 2.8, theta=0.0)] if enter <= k < leave else []
+        stamp = int(round(k * 1e9 / FPS))
+        stamps.append(stamp)
+        res = tracker.step(stamp, paint(calib, bgs, people, rng))
+        if born is None and res.tracks:
+            born = k
+        for t in res.tracks:
+            if k % every:  # skipped: the values of the last detection frame set
+                before = last.get(t.track_id, (AuxiliaryConfig().initial_existence, {}))
+                assert (t.existence, t.visibility) == before  # (or those of a new track)
+                held += 1
+            last[t.track_id] = (t.existence, dict(t.visibility))
+        if res.ended:
+            assert k % every == 0  # releases happen on detection frame sets only
+            ended = k if ended is None else ended
+    assert calls == stamps[::every]
+    assert held > 10
+    assert born is not None and (born - enter) / FPS <= 0.5 + (every - 1) * 2 / FPS
+    assert ended is not None and 0 < (ended - leave) / FPS <= 1.5 + (every - 1) / FPS
+    assert tracker.track_ids == []
+    tracker.reset()  # the count restarts: the next frame set runs the detection
+    calls.clear()
+    tracker.step(stamps[-1] + 10 ** 9, bgs)
+    assert len(calls) == 1

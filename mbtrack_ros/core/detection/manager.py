@@ -505,6 +505,17 @@ class AutoDetection:
             self._placed[int(track_id)] = int(stamp_ns)
             self._shown_since[int(track_id)] = int(stamp_ns)
 
+    def carry(self, tracks: Sequence[TrackEstimate]) -> None:
+        """Fill ``visibility`` and ``existence`` of ``tracks`` in place with the values of
+        the last :meth:`update` (a frame set the detection skips, ``detection_every``); no
+        decision is made on such a frame set."""
+        self.decisions = []
+        for t in tracks:
+            aux = self.aux.get(t.track_id)
+            if aux is not None:
+                t.visibility = dict(aux.visibility)
+                t.existence = float(aux.existence)
+
     def reported(self, track_id: int) -> bool:
         aux = self.aux.get(int(track_id))
         return aux is None or aux.reported or self.config.report_hidden
