@@ -56,6 +56,11 @@ def test_replay_options_beat_the_params_file(tmp_path):
     params.write_text('tracker_node:\n  ros__parameters:\n    detection:\n      every: 2\n')
     assert config('--params', str(params)).detection_every == 2
     assert config('--params', str(params), '--detection-every', '4').detection_every == 4
+    # every tracker setting the node reads, the replay reads too (one map, TRACKER_PARAMETERS)
+    params.write_text('tracker_node:\n  ros__parameters:\n    tracker:\n      release_time: 2.0\n'
+                      '    detection:\n      spare_support: 0.4\n')
+    both = config('--params', str(params))
+    assert (both.release_time, both.spare_support) == (2.0, 0.4)
 
 
 def test_replay_params_file_refuses_unknown_keys(tmp_path):

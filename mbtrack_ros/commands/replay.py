@@ -130,16 +130,11 @@ def _resolve_inputs(args: argparse.Namespace) -> tuple[Path, RoomCalibration]:
 
 # tracker_node parameter (under ``tracker_node: ros__parameters:``) -> TrackerConfig field;
 # ``tracker.seed`` is left to ``--seed`` (a replay is always seeded)
-_NODE_TRACKER_KEYS = {f'tracker.{k}': k for k in (
-    'algorithm', 'particles', 'joint_particles', 'sigma', 'd_occ', 'mrf_radius', 'use_mrf',
-    'release_time', 'subsample', 'pipeline_search')}
-_NODE_TRACKER_KEYS['detection.threshold'] = 'detection_threshold'
-_NODE_TRACKER_KEYS['detection.every'] = 'detection_every'
-
-
 def tracker_values_from_params(path: Path) -> dict:
-    """TrackerConfig values of a tracker_node parameter file (its ``tracker.*`` and
-    ``detection.threshold``); raises TrackerError on an unreadable file or unknown key."""
+    """TrackerConfig values of a tracker_node parameter file (the ``tracker.*`` and
+    ``detection.*`` entries of ``TRACKER_PARAMETERS``, the node's own map); raises
+    TrackerError on an unreadable file or unknown key."""
+    from mbtrack_ros.nodes.params import TRACKER_PARAMETERS  # rclpy only when asked for
     try:
         doc = yaml.safe_load(Path(path).read_text())
         params = doc['tracker_node']['ros__parameters']
@@ -150,10 +145,10 @@ def tracker_values_from_params(path: Path) -> dict:
         for key, value in (params.get(section) or {}).items():
             flat[f'{section}.{key}'] = value
     unknown = sorted(k for k in flat if k.startswith('tracker.') and k != 'tracker.seed'
-                     and k not in _NODE_TRACKER_KEYS)
+                     and k not in TRACKER_PARAMETERS)
     if unknown:
         raise TrackerError(f'{path}: unknown tracker parameter(s) {", ".join(unknown)}')
-    return {field: flat[key] for key, field in _NODE_TRACKER_KEYS.items() if key in flat}
+    return {field: flat[key] for key, (field, _) in TRACKER_PARAMETERS.items() if key in flat}
 
 
 def _config(args: argparse.Namespace) -> TrackerConfig:

@@ -77,12 +77,26 @@ from mbtrack_ros.core.camera import CalibrationError, RoomCalibration
 from mbtrack_ros.core.detection.release import ReleaseConfig
 from mbtrack_ros.core.tracker import TrackerConfig, TrackerError
 
-__all__ = ['EXECUTORS', 'RELIABILITIES', 'TRANSPORTS', 'CameraInput', 'NodeParams', 'ParamsError',
-           'declare_and_read']
+__all__ = ['EXECUTORS', 'RELIABILITIES', 'TRACKER_PARAMETERS', 'TRANSPORTS', 'CameraInput',
+           'NodeParams', 'ParamsError', 'declare_and_read']
 
 TRANSPORTS = ('raw', 'compressed')
 RELIABILITIES = ('best_effort', 'reliable')
 EXECUTORS = ('events', 'single', 'multi')
+
+
+#: tracker_node parameter -> (TrackerConfig field, type the node reads it as); the one map
+#: from the node's names to the tracker's, also used by ``mbtrack replay --params``.
+TRACKER_PARAMETERS: dict[str, tuple[str, type]] = {
+    'tracker.algorithm': ('algorithm', str), 'tracker.particles': ('particles', int),
+    'tracker.joint_particles': ('joint_particles', int), 'tracker.subsample': ('subsample', int),
+    'tracker.pipeline_search': ('pipeline_search', bool), 'tracker.sigma': ('sigma', float),
+    'tracker.d_occ': ('d_occ', float), 'tracker.mrf_radius': ('mrf_radius', float),
+    'tracker.use_mrf': ('use_mrf', bool), 'tracker.release_time': ('release_time', float),
+    'detection.threshold': ('detection_threshold', float),
+    'detection.spare_support': ('spare_support', float),
+    'detection.every': ('detection_every', int),
+}
 
 
 class ParamsError(ValueError):
@@ -255,20 +269,11 @@ def declare_and_read(node: Node) -> tuple[NodeParams, RoomCalibration]:
     if gt and not Path(gt).is_file():
         raise ParamsError(f'init_ground_truth {gt!r} does not exist')
     tracker_values: dict[str, Any] = {
-        'algorithm': str(v['tracker.algorithm']), 'particles': int(v['tracker.particles']),
-        'joint_particles': int(v['tracker.joint_particles']),
-        'subsample': int(v['tracker.subsample']),
-        'pipeline_search': bool(v['tracker.pipeline_search']),
-        'sigma': float(v['tracker.sigma']), 'd_occ': float(v['tracker.d_occ']),
-        'mrf_radius': float(v['tracker.mrf_radius']), 'use_mrf': bool(v['tracker.use_mrf']),
-        'seed': None if v['tracker.seed'] < 0 else int(v['tracker.seed']),
+        field: kind(v[name]) for name, (field, kind) in TRACKER_PARAMETERS.items()}
+    tracker_values.update(
+        seed=None if v['tracker.seed'] < 0 else int(v['tracker.seed']),
         # automatic detection (003 §4, 001) inside Tracker.step
-        'detection': bool(v['detection.enabled']) and not gt,  # ground truth starts tracks
-        'release_time': float(v['tracker.release_time']),
-        'detection_threshold': float(v['detection.threshold']),
-        'spare_support': float(v['detection.spare_support']),
-        'detection_every': int(v['detection.every']),
-    }
+        detection=bool(v['detection.enabled']) and not gt)  # ground truth starts tracks
     known = {f.name for f in fields(TrackerConfig)}
     try:
         tracker = TrackerConfig.from_dict({k: x for k, x in tracker_values.items()
