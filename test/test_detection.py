@@ -1046,3 +1046,81 @@ def test_detection_every_kth_frame_set_holds_existence_in_between(monkeypatch):
     calls.clear()
     tracker.step(stamps[-1] + 10 ** 9, bgs)
     assert len(calls) == 1
+
+
+def test_filter_every_kth_frame_set_moves_the_last_tracks_in_between(monkeypatch):
+    """``filter_every=3``: the filter and the detection run on frame sets 0, 3, 6, ...
+    only; a frame set between reports the last filtered tracks moved to its stamp with
+    their own velocities (same ids, existence, visibility, covariance) and makes no
+    decision; the painted walking person is still found, followed and released."""
+    from mbtrack_ros.core.detection.manager import AutoDetection
+    from mbtrack_ros.core.filters import HJSFilter
+    from mbtrack_ros.core.state import VX, VY, X, Y
+    from mbtrack_ros.core.tracker import TrackerConfig, TrackerError
+
+    for bad in (0, -1, 2.5, False):
+        with pytest.raises(TrackerError, match='filter_every'):
+            TrackerConfig(filter_every=bad)
+    filtered: list[float] = []
+    detected: list[int] = []
+    plain_step, plain_update = HJSFilter.step, AutoDetection.update
+
+    def counted_step(self, dt, *a, **k):
+        filtered.append(dt)
+        return plain_step(self, dt, *a, **k)
+
+    def counted_update(self, stamp_ns, *a, **k):
+        detected.append(int(stamp_ns))
+        return plain_update(self, stamp_ns, *a, **k)
+
+    monkeypatch.setattr(HJSFilter, 'step', counted_step)
+    monkeypatch.setattr(AutoDetection, 'update', counted_update)
+    rng = np.random.default_rng(8)
+    calib = make_room()
+    bgs = backgrounds(calib)
+    every = 3
+    tracker = _detecting_tracker(calib, bgs, seed=1, filter_every=every)
+    enter, leave, total = 3, 36, 75
+    stamps, born, ended, moved, last, errors = [], None, None, 0, None, []
+    for k in range(total):
+        x = 2.0 + 0.05 * k                       # walking at 0.75 m/s
+        people = [person(x, 2.8, theta=0.0)] if enter <= k < leave else []
+        stamp = int(round(k * 1e9 / FPS))
+        stamps.append(stamp)
+        res = tracker.step(stamp, paint(calib, bgs, people, rng))
+        assert tracker.last_stamp_ns == stamp
+        if k % every:
+            assert res.ended == [] and tracker.detection.decisions == []
+            assert [t.track_id for t in res.tracks] == [t.track_id for t in last.tracks]
+            dt = (stamp - last.stamp_ns) / 1e9
+            for t, before in zip(res.tracks, last.tracks):
+                expect = before.mean.copy()
+                expect[[X, Y]] += before.mean[[VX, VY]] * dt
+                assert np.array_equal(t.mean, expect)
+                assert np.allclose(t.particles[:, [X, Y]], before.particles[:, [X, Y]]
+                                   + before.particles[:, [VX, VY]] * dt)
+                assert np.array_equal(t.covariance, before.covariance)
+                assert (t.existence, t.visibility) == (before.existence, before.visibility)
+                moved += 1
+        else:
+            last = res
+        if born is None and res.tracks:
+            born = k
+        if res.ended:
+            assert k % every == 0
+            ended = k if ended is None else ended
+        if enter + 6 <= k < leave and res.tracks:
+            errors.append(abs(res.tracks[0].mean[0] - x))
+    assert detected == stamps[::every]
+    # one filter step per filtered frame set, predicting over the frame sets between
+    assert filtered == [0.0] + [pytest.approx(every / FPS)] * (len(stamps[::every]) - 1)
+    assert moved > 10
+    assert born is not None and (born - enter) / FPS <= 0.5 + (every - 1) * 2 / FPS
+    assert np.median(errors) < 0.15
+    assert ended is not None and 0 < (ended - leave) / FPS <= 1.5 + (every - 1) / FPS
+    with pytest.raises(TrackerError, match='before the previous frame'):
+        tracker.step(stamps[-1] - 1, bgs)  # a skipped frame set's stamp counts too
+    tracker.reset()  # the count restarts: the next frame set is filtered and detected
+    detected.clear()
+    tracker.step(stamps[-1] + 10 ** 9, bgs)
+    assert len(detected) == 1
