@@ -56,11 +56,6 @@ def test_replay_options_beat_the_params_file(tmp_path):
     params.write_text('tracker_node:\n  ros__parameters:\n    detection:\n      every: 2\n')
     assert config('--params', str(params)).detection_every == 2
     assert config('--params', str(params), '--detection-every', '4').detection_every == 4
-    assert config().filter_every == 1
-    assert config('--filter-every', '2').filter_every == 2
-    params.write_text('tracker_node:\n  ros__parameters:\n    tracker:\n      filter_every: 3\n')
-    assert config('--params', str(params)).filter_every == 3
-    assert config('--params', str(params), '--filter-every', '1').filter_every == 1
 
 
 def test_replay_params_file_refuses_unknown_keys(tmp_path):

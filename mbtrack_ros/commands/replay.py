@@ -69,7 +69,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                         help='output directory (created)')
     parser.add_argument('--params', type=Path, default=None, metavar='NODE.yaml',
                         help='take the tracker settings (tracker.*, detection.threshold, '
-                             'detection.every, tracker.filter_every) '
+                             'detection.every) '
                              'from a tracker_node parameter file (config/*.yaml); the '
                              'options below override it')
     parser.add_argument('--algorithm', default=None,
@@ -93,10 +93,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument('--detection-every', type=int, default=None, metavar='K',
                         help='run the detection pipeline on every K-th frame set only '
                              '(default 1; a speed option that costs accuracy)')
-    parser.add_argument('--filter-every', type=int, default=None, metavar='K',
-                        help='filter every K-th frame set only, the ones between report '
-                             'the tracks moved with their velocities (default 1; a speed '
-                             'option that costs accuracy)')
     parser.add_argument('--init-from', type=Path, default=None, metavar='GROUND_TRUTH.csv',
                         help='start tracks from this ground truth (models from key views)')
     parser.add_argument('--eval', type=Path, default=None, metavar='GROUND_TRUTH.csv',
@@ -136,7 +132,7 @@ def _resolve_inputs(args: argparse.Namespace) -> tuple[Path, RoomCalibration]:
 # ``tracker.seed`` is left to ``--seed`` (a replay is always seeded)
 _NODE_TRACKER_KEYS = {f'tracker.{k}': k for k in (
     'algorithm', 'particles', 'joint_particles', 'sigma', 'd_occ', 'mrf_radius', 'use_mrf',
-    'release_time', 'subsample', 'pipeline_search', 'filter_every')}
+    'release_time', 'subsample', 'pipeline_search')}
 _NODE_TRACKER_KEYS['detection.threshold'] = 'detection_threshold'
 _NODE_TRACKER_KEYS['detection.every'] = 'detection_every'
 
@@ -166,7 +162,7 @@ def _config(args: argparse.Namespace) -> TrackerConfig:
     try:
         values = tracker_values_from_params(args.params) if args.params is not None else {}
         for name in ('algorithm', 'particles', 'joint_particles', 'sigma', 'd_occ',
-                     'subsample', 'detection_every', 'filter_every'):
+                     'subsample', 'detection_every'):
             if getattr(args, name) is not None:  # an explicit option beats the file
                 values[name] = getattr(args, name)
         if args.no_mrf:

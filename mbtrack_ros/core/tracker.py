@@ -73,12 +73,6 @@ class TrackerConfig:
             sets between are only filtered and report the tracks with the visibility and
             existence of the last detection frame set (1: every frame set; a speed option,
             its cost in docs/live_measurements.md).
-        filter_every: filter (and detect on) every k-th frame set only (the 1st, (k+1)-th,
-            ... since the start or a reset); a frame set between reports the tracks of the
-            last filtered one moved to its stamp with their own velocities (means and
-            particles; covariance, visibility and existence kept) and reads no image.
-            ``detection_every`` counts filtered frame sets (1: every frame set; a speed
-            option for offline replays, its cost in docs/live_measurements.md).
     """
 
     algorithm: str = 'hjs'
@@ -102,7 +96,6 @@ class TrackerConfig:
     subsample: int = 1
     pipeline_search: bool = False
     detection_every: int = 1
-    filter_every: int = 1
 
     def __post_init__(self) -> None:
         def bad(msg: str) -> None:
@@ -111,7 +104,7 @@ class TrackerConfig:
         if not isinstance(self.algorithm, str) or not self.algorithm:
             bad(f'algorithm must be a name, got {self.algorithm!r}')
         for name in ('particles', 'joint_particles', 'max_bp_iterations', 'subsample',
-                     'detection_every', 'filter_every'):
+                     'detection_every'):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
                 bad(f'{name} must be an integer >= 1, got {value!r}')
@@ -214,10 +207,7 @@ class Tracker:
         self._next_id = 1
         self._last_stamp: int | None = None
         self._search_pending = False  # step(search=False) left the detection search
-        self._steps = 0  # frame sets filtered since the start or reset (detection_every)
-        self._frames = 0  # frame sets seen since the start or reset (filter_every)
-        self._seen_stamp: int | None = None  # stamp of the last frame set seen
-        self._reported: list[TrackEstimate] = []  # tracks of the last filtered frame set
+        self._steps = 0  # frame sets stepped since the start or reset (detection_every)
         self._heights: dict[int, float] = {}
         self._models: dict[int, object] = {}
         self.detection = None
@@ -238,8 +228,7 @@ class Tracker:
 
     @property
     def last_stamp_ns(self) -> int | None:
-        """Stamp of the last frame set stepped (filtered or, ``filter_every``, moved)."""
-        return self._seen_stamp if self._seen_stamp is not None else self._last_stamp
+        return self._last_stamp
 
     def add_track(self, model, state: np.ndarray, stamp_ns: int,
                   track_id: int | None = None) -> int:
@@ -313,9 +302,6 @@ class Tracker:
         self._last_stamp = None
         self._search_pending = False
         self._steps = 0
-        self._frames = 0
-        self._seen_stamp = None
-        self._reported = []
 
     def step(self, stamp_ns: int, images: dict[str, np.ndarray], *,
              search: bool = True) -> FrameResult:
@@ -346,18 +332,11 @@ class Tracker:
         """
         self.search()  # a search left pending by the previous step
         stamp_ns = int(stamp_ns)
-        previous = self.last_stamp_ns
-        if previous is not None and stamp_ns < previous:
+        if self._last_stamp is not None and stamp_ns < self._last_stamp:
             raise TrackerError(f'stamp {stamp_ns} ns is before the previous frame '
-                               f'{previous} ns; reset the tracker')
-        t0 = time.perf_counter()
-        self._seen_stamp = stamp_ns
-        skip = self._last_stamp is not None \
-            and self._frames % int(self.config.filter_every) != 0
-        self._frames += 1
-        if skip:  # filter_every: the last filtered tracks, moved to this stamp
-            return self._moved(stamp_ns, t0)
+                               f'{self._last_stamp} ns; reset the tracker')
         dt = 0.0 if self._last_stamp is None else (stamp_ns - self._last_stamp) / 1e9
+        t0 = time.perf_counter()
         detect = self.detection is not None \
             and self._steps % int(self.config.detection_every) == 0
         if detect:  # the foreground runs on a worker during the filter
@@ -402,31 +381,7 @@ class Tracker:
                 self.search()
             timings.update(self.detection.timings)
         timings['total'] = time.perf_counter() - t0
-        self._reported = tracks
         return FrameResult(stamp_ns=stamp_ns, tracks=tracks, ended=ended, timings=timings)
-
-    def _moved(self, stamp_ns: int, t0: float) -> FrameResult:
-        """The tracks of the last filtered frame set at ``stamp_ns``: means and particles
-        moved with their own velocities (constant velocity, as :meth:`add_track`); the
-        covariance, visibility and existence are those of the filtered frame set."""
-        dt = (stamp_ns - self._last_stamp) / 1e9
-        tracks = []
-        for t in self._reported:
-            if t.track_id not in self._models:  # removed since (remove_track)
-                continue
-            mean = np.array(t.mean, dtype=np.float64)
-            mean[[X, Y]] += mean[[VX, VY]] * dt
-            particles = t.particles
-            if particles is not None:
-                particles = np.array(particles, dtype=np.float64)
-                particles[:, [X, Y]] += particles[:, [VX, VY]] * dt
-            tracks.append(replace(t, mean=mean, particles=particles,
-                                  visible_fraction=dict(t.visible_fraction),
-                                  visibility=dict(t.visibility)))
-        if self.detection is not None:  # no decision on this frame set
-            self.detection.carry(tracks)
-        return FrameResult(stamp_ns=stamp_ns, tracks=tracks, ended=[],
-                           timings={'total': time.perf_counter() - t0})
 
     def search(self) -> list[int]:
         """The detection search and acquisition of the last step (003 §4.1-4.2), if pending:

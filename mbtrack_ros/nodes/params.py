@@ -40,10 +40,6 @@ tracker.subsample               int        likelihood on every k-th image row (1
 tracker.pipeline_search         bool       search frame t for new people on a worker
                                            thread while frame t+1 is filtered (false;
                                            people start one frame later)
-tracker.filter_every            int        filter every k-th frame set only; the ones
-                                           between report the tracks moved with their
-                                           velocities (1; a speed option for offline
-                                           replays that costs accuracy)
 tracker.joint_particles         int        joint-filter particles (10000)
 tracker.sigma                   double     likelihood width, 000 Eq. 19 (0.12)
 tracker.d_occ                   double     occlusion penalty, 000 Eq. 26 (0.15)
@@ -164,9 +160,6 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
     'tracker.pipeline_search': (False, 'search frame t for new people on a worker thread '
                                 'while frame t+1 is filtered (TrackerConfig.pipeline_search)',
                                 {}),
-    'tracker.filter_every': (1, 'filter every k-th frame set only, the ones between report '
-                             'the tracks moved with their velocities (speed option, '
-                             'TrackerConfig.filter_every)', _ir(1, 30)),
     'tracker.joint_particles': (10_000, 'joint-filter particles', _ir(1, 1_000_000)),
     'tracker.sigma': (0.12, 'likelihood width sigma (000 Eq. 19)', _fr(1e-4, 10.0)),
     'tracker.d_occ': (0.15, 'occlusion penalty d_occ (000 Eq. 26)', _fr(0.0, 10.0)),
@@ -275,7 +268,6 @@ def declare_and_read(node: Node) -> tuple[NodeParams, RoomCalibration]:
         'detection_threshold': float(v['detection.threshold']),
         'spare_support': float(v['detection.spare_support']),
         'detection_every': int(v['detection.every']),
-        'filter_every': int(v['tracker.filter_every']),
     }
     known = {f.name for f in fields(TrackerConfig)}
     try:
