@@ -172,3 +172,38 @@ def test_incomplete_sets_name_the_missing_camera(tmp_path, room, rng):
         sets = list(reader.frames())
     assert [s.missing for s in sets] == [[], ['cam1'], []]
     assert np.array_equal(sets[2].images['cam1'], ims[2]['cam1'])
+
+
+def test_frames_in_process_gives_the_same_frames_then_the_same_error(tmp_path, room, rng):
+    """The reader process of ``mbtrack replay``: every frame set before the damage, in order,
+    with the same pixels, missing cameras and stamps, then the same BagError as reading
+    directly; on an intact bag the same frame sets, and closing early stops the child."""
+    from mbtrack_ros.recording.bag import frames_in_process
+
+    write(tmp_path / 'bag', room, frames(room, 24, rng))
+    with RecordingReader(tmp_path / 'bag') as reader:
+        direct = list(reader.frames())
+        child = list(prefetched(frames_in_process(reader), depth=2))
+        early = frames_in_process(reader)
+        assert next(early).index == 0
+        early.close()
+    assert [(fs.index, fs.stamp_ns, fs.missing) for fs in child] == \
+        [(fs.index, fs.stamp_ns, fs.missing) for fs in direct]
+    for a, d in zip(child, direct):
+        assert a.images.keys() == d.images.keys()
+        assert all(np.array_equal(a.images[c], d.images[c]) for c in d.images)
+    mcap_file = next(Path(tmp_path / 'bag').glob('*.mcap'))
+    data = mcap_file.read_bytes()
+    mcap_file.write_bytes(data[: len(data) * 2 // 3])
+
+    def read(wrap):
+        got = []
+        with pytest.raises(BagError) as info:
+            with RecordingReader(tmp_path / 'bag') as reader:
+                for fs in wrap(reader):
+                    got.append(fs.index)
+        return got, str(info.value)
+
+    direct_idx, direct_error = read(lambda r: r.frames())
+    child_idx, child_error = read(frames_in_process)
+    assert len(direct_idx) >= 3 and child_idx == direct_idx and child_error == direct_error

@@ -130,6 +130,7 @@ def test_corrupt_bag_keeps_tracks_so_far(recording, tmp_path, capsys):
 def test_wrong_image_size_mid_bag_is_one_line_error(recording, tmp_path, capsys, monkeypatch):
     import cv2
 
+    from mbtrack_ros.commands import replay as replay_command
     from mbtrack_ros.recording import bag
 
     original = bag.RecordingReader.frames
@@ -142,6 +143,8 @@ def test_wrong_image_size_mid_bag_is_one_line_error(recording, tmp_path, capsys,
             yield fs
 
     monkeypatch.setattr(bag.RecordingReader, 'frames', frames)
+    # the patched reader in this process (replay reads in a child process otherwise)
+    monkeypatch.setattr(replay_command, 'frames_in_process', lambda reader: reader.frames())
     out = tmp_path / 'out'
     code = main(['replay', str(recording), '--out', str(out), '--init-from',
                  str(recording / 'ground_truth.csv'), '--particles', '30'])

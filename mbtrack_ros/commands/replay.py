@@ -3,8 +3,9 @@
 BAG is a rosbag2 directory (MCAP or sqlite3) or a recording directory made by
 ``mbtrack synth`` (then ``--config`` defaults to its ``calibration.yaml``). Frames are read
 with :class:`~mbtrack_ros.recording.bag.RecordingReader` and fed to the
-:class:`~mbtrack_ros.core.tracker.Tracker` as fast as possible (a reader thread decodes the
-next frame sets while the tracker works: :func:`~mbtrack_ros.recording.bag.prefetched`).
+:class:`~mbtrack_ros.core.tracker.Tracker` as fast as possible (a child process decodes the
+next frame sets while the tracker works: :func:`~mbtrack_ros.recording.bag.frames_in_process`
+received ahead by :func:`~mbtrack_ros.recording.bag.prefetched`).
 Outputs in ``--out``:
 
 * ``tracks.csv`` (``recording.csvfiles`` format), written row by row while tracking;
@@ -41,7 +42,7 @@ from mbtrack_ros.core.filters import FilterError
 from mbtrack_ros.core.initiation import InitiationError, initial_tracks, plan_key_views
 from mbtrack_ros.core.likelihood import LikelihoodError
 from mbtrack_ros.core.tracker import Tracker, TrackerConfig, TrackerError
-from mbtrack_ros.recording.bag import BagError, RecordingReader, prefetched
+from mbtrack_ros.recording.bag import BagError, RecordingReader, frames_in_process, prefetched
 from mbtrack_ros.recording.csvfiles import (
     CsvFormatError, GroundTruthRow, TrackRow, read_ground_truth, write_tracks)
 
@@ -256,7 +257,8 @@ def _track_rows(tracker: Tracker, reader: RecordingReader, index: _FrameIndex, s
                disable=not sys.stderr.isatty())
     known = set(tracker.calibration.cameras)
     t_start = time.perf_counter()
-    frames = prefetched(reader.frames(), depth=4)  # read and decode while tracking
+    # read and decode in a child process while tracking (the GIL stays with the tracker)
+    frames = prefetched(frames_in_process(reader), depth=4)
     try:
         for fs in frames:
             if args.max_frames is not None and status['frames'] >= args.max_frames:
