@@ -187,6 +187,11 @@ def test_frames_in_process_gives_the_same_frames_then_the_same_error(tmp_path, r
         early = frames_in_process(reader)
         assert next(early).index == 0
         early.close()
+        never = frames_in_process(reader)  # the child starts at the call
+        never.close()
+        assert never._child.returncode is not None
+        with pytest.raises(StopIteration):
+            next(never)
     assert [(fs.index, fs.stamp_ns, fs.missing) for fs in child] == \
         [(fs.index, fs.stamp_ns, fs.missing) for fs in direct]
     for a, d in zip(child, direct):

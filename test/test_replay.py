@@ -143,8 +143,11 @@ def test_wrong_image_size_mid_bag_is_one_line_error(recording, tmp_path, capsys,
             yield fs
 
     monkeypatch.setattr(bag.RecordingReader, 'frames', frames)
-    # the patched reader in this process (replay reads in a child process otherwise)
-    monkeypatch.setattr(replay_command, 'frames_in_process', lambda reader: reader.frames())
+    def in_this_process(reader):  # the patched reader (replay reads in a child otherwise)
+        with bag.RecordingReader(reader.path, cameras=reader.cameras) as again:
+            yield from again.frames()
+
+    monkeypatch.setattr(replay_command, 'frames_in_process', in_this_process)
     out = tmp_path / 'out'
     code = main(['replay', str(recording), '--out', str(out), '--init-from',
                  str(recording / 'ground_truth.csv'), '--particles', '30'])

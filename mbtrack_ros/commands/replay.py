@@ -244,8 +244,9 @@ def _collect_key_images(reader: RecordingReader, index: _FrameIndex,
 
 def _track_rows(tracker: Tracker, reader: RecordingReader, index: _FrameIndex, starts: list,
                 args: argparse.Namespace, recorder, status: dict,
-                outputs=None) -> Iterator[TrackRow]:
-    """Tracking pass: yields the rows of tracks.csv frame by frame."""
+                outputs=None, source=None) -> Iterator[TrackRow]:
+    """Tracking pass: yields the rows of tracks.csv frame by frame (frame sets from
+    ``source``, default a new :func:`frames_in_process` of ``reader``)."""
     from tqdm import tqdm
 
     total = reader.frame_count
@@ -258,7 +259,8 @@ def _track_rows(tracker: Tracker, reader: RecordingReader, index: _FrameIndex, s
     known = set(tracker.calibration.cameras)
     t_start = time.perf_counter()
     # read and decode in a child process while tracking (the GIL stays with the tracker)
-    frames = prefetched(frames_in_process(reader), depth=4)
+    source = frames_in_process(reader) if source is None else source
+    frames = prefetched(source, depth=4)
     try:
         for fs in frames:
             if args.max_frames is not None and status['frames'] >= args.max_frames:
@@ -306,6 +308,8 @@ def _track_rows(tracker: Tracker, reader: RecordingReader, index: _FrameIndex, s
         status['bag_error'] = str(err)
     finally:
         frames.close()  # stop the reader thread before the reader closes
+        if hasattr(source, 'close'):
+            source.close()
         bar.close()
         status['wall_s'] = time.perf_counter() - t_start
 
@@ -515,6 +519,7 @@ def run(args: argparse.Namespace) -> int:
         if not ((bag / 'metadata.yaml').exists() or (bag / 'bag' / 'metadata.yaml').exists()):
             raise _UserError(f'{bag} is not a rosbag2 directory nor a recording directory '
                              '(no metadata.yaml)')
+        source = None
         try:
             with RecordingReader(bag) as reader:
                 first: dict[str, np.ndarray] = {}
@@ -525,6 +530,8 @@ def run(args: argparse.Namespace) -> int:
                 except BagError:
                     pass
                 calibration = _match_calibration(calibration, reader, first)
+                # the reader process starts (imports, opens the bag) while the tracker is built
+                source = frames_in_process(reader)
             starts = []
             if not auto:
                 plan = plan_key_views(calibration, truth)
@@ -564,7 +571,7 @@ def run(args: argparse.Namespace) -> int:
 
                     def collect() -> Iterator[TrackRow]:
                         for row in _track_rows(tracker, reader, index, starts, args, recorder,
-                                               status, outputs):
+                                               status, outputs, source):
                             rows.append(row)
                             yield row
 
@@ -581,6 +588,9 @@ def run(args: argparse.Namespace) -> int:
             return _error(str(err), 1)
         except (InitiationError, FilterError, CalibrationError) as err:
             raise _UserError(str(err)) from err
+        finally:
+            if source is not None:
+                source.close()
         if recorder is not None:
             recorder.save(out / 'particles.npz')
         shown_n = config.joint_particles if config.algorithm == 'joint' else config.particles

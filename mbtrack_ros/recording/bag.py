@@ -485,7 +485,7 @@ def prefetched(items: Iterable[_T_item], depth: int = 4) -> Iterator[_T_item]:
 
 
 def frames_in_process(reader: RecordingReader) -> Iterator[FrameSet]:
-    """``reader.frames()`` read and decoded by a child Python process.
+    """``reader.frames()`` read and decoded by a child Python process, started now.
 
     The same frame sets, in order, then the same :class:`BagError` at a damaged part, as
     :meth:`RecordingReader.frames` of the same bag, cameras and slop. Reading a bag is
@@ -493,32 +493,57 @@ def frames_in_process(reader: RecordingReader) -> Iterator[FrameSet]:
     four 320x240 images) and in a thread of the tracker's process it competes with the
     tracker for the interpreter lock; the child only hands over the pickled frame sets
     through a pipe (wrap the iterator in :func:`prefetched` to receive them ahead). The
-    child is a fresh interpreter (``python -c``). Closing the iterator stops the child.
+    child is a fresh interpreter (``python -c``) that starts (imports, opens the bag) while
+    the caller goes on; ``close()`` (or the end of the frames) stops it.
     """
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
-    child = subprocess.Popen(
-        [sys.executable, '-c', 'from mbtrack_ros.recording.bag import _serve_frames; '
-         '_serve_frames()'], stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env)
-    try:
-        pickle.dump((str(reader.path), reader.cameras, reader.slop_ns), child.stdin)
-        child.stdin.close()
-        while True:
-            try:
-                kind, value = pickle.load(child.stdout)
-            except (EOFError, pickle.UnpicklingError, OSError) as err:
-                raise BagError(f'{reader.path}: the reader process ended without a reply '
-                               f'(exit code {child.wait()}, {err or "end of pipe"})') from None
-            if kind == 'item':
-                yield value
-            elif kind == 'end':
-                return
-            else:
-                raise value
-    finally:
-        if child.poll() is None:
-            child.kill()
-        child.stdout.close()
-        child.wait()
+    return _FrameProcess(reader)
+
+
+class _FrameProcess:
+    """The iterator of :func:`frames_in_process`."""
+
+    def __init__(self, reader: RecordingReader) -> None:
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
+        self._path = reader.path
+        self._child = subprocess.Popen(
+            [sys.executable, '-c', 'from mbtrack_ros.recording.bag import _serve_frames; '
+             '_serve_frames()'], stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env)
+        pickle.dump((str(reader.path), reader.cameras, reader.slop_ns), self._child.stdin)
+        self._child.stdin.close()
+        self._done = False
+
+    def __iter__(self) -> _FrameProcess:
+        return self
+
+    def __next__(self) -> FrameSet:
+        if self._done:
+            raise StopIteration
+        try:
+            kind, value = pickle.load(self._child.stdout)
+        except (EOFError, pickle.UnpicklingError, OSError) as err:
+            self.close()
+            raise BagError(f'{self._path}: the reader process ended without a reply '
+                           f'({err or "end of pipe"})') from None
+        if kind == 'item':
+            return value
+        self.close()
+        if kind == 'end':
+            raise StopIteration
+        raise value
+
+    def close(self) -> None:
+        """Stop the child (if it still runs) and release the pipe."""
+        if self._done:
+            return
+        self._done = True
+        if self._child.poll() is None:
+            self._child.kill()
+        self._child.stdout.close()
+        self._child.wait()
+
+    def __del__(self) -> None:
+        if not getattr(self, '_done', True):
+            self.close()
 
 
 def _serve_frames() -> None:
