@@ -130,7 +130,6 @@ def test_corrupt_bag_keeps_tracks_so_far(recording, tmp_path, capsys):
 def test_wrong_image_size_mid_bag_is_one_line_error(recording, tmp_path, capsys, monkeypatch):
     import cv2
 
-    from mbtrack_ros.commands import replay as replay_command
     from mbtrack_ros.recording import bag
 
     original = bag.RecordingReader.frames
@@ -143,11 +142,6 @@ def test_wrong_image_size_mid_bag_is_one_line_error(recording, tmp_path, capsys,
             yield fs
 
     monkeypatch.setattr(bag.RecordingReader, 'frames', frames)
-    def in_this_process(reader):  # the patched reader (replay reads in a child otherwise)
-        with bag.RecordingReader(reader.path, cameras=reader.cameras) as again:
-            yield from again.frames()
-
-    monkeypatch.setattr(replay_command, 'frames_in_process', in_this_process)
     out = tmp_path / 'out'
     code = main(['replay', str(recording), '--out', str(out), '--init-from',
                  str(recording / 'ground_truth.csv'), '--particles', '30'])

@@ -3,9 +3,8 @@
 BAG is a rosbag2 directory (MCAP or sqlite3) or a recording directory made by
 ``mbtrack synth`` (then ``--config`` defaults to its ``calibration.yaml``). Frames are read
 with :class:`~mbtrack_ros.recording.bag.RecordingReader` and fed to the
-:class:`~mbtrack_ros.core.tracker.Tracker` as fast as possible (a child process decodes the
-next frame sets while the tracker works: :func:`~mbtrack_ros.recording.bag.frames_in_process`
-received ahead by :func:`~mbtrack_ros.recording.bag.prefetched`).
+:class:`~mbtrack_ros.core.tracker.Tracker` as fast as possible (a reader thread decodes the
+next frame sets while the tracker works: :func:`~mbtrack_ros.recording.bag.prefetched`).
 Outputs in ``--out``:
 
 * ``tracks.csv`` (``recording.csvfiles`` format), written row by row while tracking;
@@ -42,7 +41,7 @@ from mbtrack_ros.core.filters import FilterError
 from mbtrack_ros.core.initiation import InitiationError, initial_tracks, plan_key_views
 from mbtrack_ros.core.likelihood import LikelihoodError
 from mbtrack_ros.core.tracker import Tracker, TrackerConfig, TrackerError
-from mbtrack_ros.recording.bag import BagError, RecordingReader, frames_in_process, prefetched
+from mbtrack_ros.recording.bag import BagError, RecordingReader, prefetched
 from mbtrack_ros.recording.csvfiles import (
     CsvFormatError, GroundTruthRow, TrackRow, read_ground_truth, write_tracks)
 
@@ -244,9 +243,8 @@ def _collect_key_images(reader: RecordingReader, index: _FrameIndex,
 
 def _track_rows(tracker: Tracker, reader: RecordingReader, index: _FrameIndex, starts: list,
                 args: argparse.Namespace, recorder, status: dict,
-                outputs=None, source=None) -> Iterator[TrackRow]:
-    """Tracking pass: yields the rows of tracks.csv frame by frame (frame sets from
-    ``source``, default a new :func:`frames_in_process` of ``reader``)."""
+                outputs=None) -> Iterator[TrackRow]:
+    """Tracking pass: yields the rows of tracks.csv frame by frame."""
     from tqdm import tqdm
 
     total = reader.frame_count
@@ -258,9 +256,7 @@ def _track_rows(tracker: Tracker, reader: RecordingReader, index: _FrameIndex, s
                disable=not sys.stderr.isatty())
     known = set(tracker.calibration.cameras)
     t_start = time.perf_counter()
-    # read and decode in a child process while tracking (the GIL stays with the tracker)
-    source = frames_in_process(reader) if source is None else source
-    frames = prefetched(source, depth=4)
+    frames = prefetched(reader.frames(), depth=4)  # read and decode while tracking
     try:
         for fs in frames:
             if args.max_frames is not None and status['frames'] >= args.max_frames:
@@ -308,8 +304,6 @@ def _track_rows(tracker: Tracker, reader: RecordingReader, index: _FrameIndex, s
         status['bag_error'] = str(err)
     finally:
         frames.close()  # stop the reader thread before the reader closes
-        if hasattr(source, 'close'):
-            source.close()
         bar.close()
         status['wall_s'] = time.perf_counter() - t_start
 
@@ -519,7 +513,6 @@ def run(args: argparse.Namespace) -> int:
         if not ((bag / 'metadata.yaml').exists() or (bag / 'bag' / 'metadata.yaml').exists()):
             raise _UserError(f'{bag} is not a rosbag2 directory nor a recording directory '
                              '(no metadata.yaml)')
-        source = None
         try:
             with RecordingReader(bag) as reader:
                 first: dict[str, np.ndarray] = {}
@@ -530,8 +523,6 @@ def run(args: argparse.Namespace) -> int:
                 except BagError:
                     pass
                 calibration = _match_calibration(calibration, reader, first)
-                # the reader process starts (imports, opens the bag) while the tracker is built
-                source = frames_in_process(reader)
             starts = []
             if not auto:
                 plan = plan_key_views(calibration, truth)
@@ -571,7 +562,7 @@ def run(args: argparse.Namespace) -> int:
 
                     def collect() -> Iterator[TrackRow]:
                         for row in _track_rows(tracker, reader, index, starts, args, recorder,
-                                               status, outputs, source):
+                                               status, outputs):
                             rows.append(row)
                             yield row
 
@@ -588,9 +579,6 @@ def run(args: argparse.Namespace) -> int:
             return _error(str(err), 1)
         except (InitiationError, FilterError, CalibrationError) as err:
             raise _UserError(str(err)) from err
-        finally:
-            if source is not None:
-                source.close()
         if recorder is not None:
             recorder.save(out / 'particles.npz')
         shown_n = config.joint_particles if config.algorithm == 'joint' else config.particles

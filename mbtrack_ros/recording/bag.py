@@ -17,12 +17,8 @@ driver and a motion-capture bridge would write them. No rclpy is imported here.
 """
 from __future__ import annotations
 
-import os
-import pickle
 import queue
 import re
-import subprocess
-import sys
 import threading
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
@@ -44,7 +40,7 @@ from mbtrack_ros.recording.images import (
 
 __all__ = [
     'GROUND_TRUTH_TOPIC', 'BagError', 'FrameSet', 'RecordingReader', 'RecordingWriter',
-    'camera_info_topic', 'frames_in_process', 'image_topic', 'prefetched', 'typestore',
+    'camera_info_topic', 'image_topic', 'prefetched', 'typestore',
 ]
 
 GROUND_TRUTH_TOPIC = '/ground_truth/people'
@@ -482,91 +478,3 @@ def prefetched(items: Iterable[_T_item], depth: int = 4) -> Iterator[_T_item]:
     finally:
         stop.set()
         thread.join(timeout=5.0)
-
-
-def frames_in_process(reader: RecordingReader) -> Iterator[FrameSet]:
-    """``reader.frames()`` read and decoded by a child Python process, started now.
-
-    The same frame sets, in order, then the same :class:`BagError` at a damaged part, as
-    :meth:`RecordingReader.frames` of the same bag, cameras and slop. Reading a bag is
-    Python-heavy (rosbags' record parsing and CDR deserialisation, ~0.7 ms of CPU per set of
-    four 320x240 images) and in a thread of the tracker's process it competes with the
-    tracker for the interpreter lock; the child only hands over the pickled frame sets
-    through a pipe (wrap the iterator in :func:`prefetched` to receive them ahead). The
-    child is a fresh interpreter (``python -c``) that starts (imports, opens the bag) while
-    the caller goes on; ``close()`` (or the end of the frames) stops it.
-    """
-    return _FrameProcess(reader)
-
-
-class _FrameProcess:
-    """The iterator of :func:`frames_in_process`."""
-
-    def __init__(self, reader: RecordingReader) -> None:
-        env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
-        self._path = reader.path
-        self._child = subprocess.Popen(
-            [sys.executable, '-c', 'from mbtrack_ros.recording.bag import _serve_frames; '
-             '_serve_frames()'], stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env)
-        pickle.dump((str(reader.path), reader.cameras, reader.slop_ns), self._child.stdin)
-        self._child.stdin.close()
-        self._done = False
-
-    def __iter__(self) -> _FrameProcess:
-        return self
-
-    def __next__(self) -> FrameSet:
-        if self._done:
-            raise StopIteration
-        try:
-            kind, value = pickle.load(self._child.stdout)
-        except (EOFError, pickle.UnpicklingError, OSError) as err:
-            self.close()
-            raise BagError(f'{self._path}: the reader process ended without a reply '
-                           f'({err or "end of pipe"})') from None
-        if kind == 'item':
-            return value
-        self.close()
-        if kind == 'end':
-            raise StopIteration
-        raise value
-
-    def close(self) -> None:
-        """Stop the child (if it still runs) and release the pipe."""
-        if self._done:
-            return
-        self._done = True
-        if self._child.poll() is None:
-            self._child.kill()
-        self._child.stdout.close()
-        self._child.wait()
-
-    def __del__(self) -> None:
-        if not getattr(self, '_done', True):
-            self.close()
-
-
-def _serve_frames() -> None:
-    """The child of :func:`frames_in_process`: reads (bag path, cameras, slop) from stdin,
-    writes ('item', FrameSet) ... then ('end', None) or ('error', BagError) to stdout."""
-    out = os.fdopen(os.dup(1), 'wb')  # the pipe; anything printed goes to stderr
-    os.dup2(2, 1)
-    sys.stdout = sys.stderr
-    path, cameras, slop_ns = pickle.load(sys.stdin.buffer)
-    try:
-        with RecordingReader(path, cameras=cameras, slop_ns=slop_ns) as reader:
-            for fs in reader.frames():
-                pickle.dump(('item', fs), out, protocol=pickle.HIGHEST_PROTOCOL)
-                out.flush()
-        pickle.dump(('end', None), out)
-    except BrokenPipeError:
-        return  # the parent stopped reading
-    except BagError as err:
-        pickle.dump(('error', err), out)
-    except Exception as err:  # noqa: BLE001 - reported to the parent as a bag error
-        pickle.dump(('error', BagError(f'{path}: {type(err).__name__}: {err}')), out)
-    try:
-        out.flush()
-    except BrokenPipeError:
-        pass
-
