@@ -200,6 +200,19 @@ def test_background_writer_in_a_process_writes_the_bag_in_order_and_reports_erro
         failing.close()
     with pytest.raises(OutputBagError, match='already exists'):
         _BackgroundWriter(functools.partial(OutputBagWriter, out, room), process=True)
+    # started without waiting (replay builds the tracker meanwhile): the error comes with
+    # ready(), and a writer discarded before use ends its child and leaves an empty bag
+    late = _BackgroundWriter(functools.partial(OutputBagWriter, out, room), process=True,
+                             wait=False)
+    with pytest.raises(OutputBagError, match='already exists'):
+        late.ready()
+    assert late._child.poll() is not None
+    unused = _BackgroundWriter(functools.partial(OutputBagWriter, tmp_path / 'unused', room),
+                               process=True, wait=False)
+    unused.discard()
+    assert unused._child.returncode == 0
+    with AnyReader([tmp_path / 'unused']) as reader:
+        assert not list(reader.messages())
 
 
 def test_background_writer_keeps_order_snapshots_results_and_reports_errors():

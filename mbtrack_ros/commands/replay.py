@@ -319,11 +319,16 @@ class _BackgroundWriter:
     Args:
         writer: the writer object (thread), or with ``process`` a picklable callable that
             builds it in the child.
+        wait: with ``process``, wait until the child has built the writer (its error, e.g.
+            an existing bag, raised here); with False the child starts (~1.5 s of imports)
+            while the caller goes on, and :meth:`ready` (or the first :meth:`write`) waits.
     """
 
-    def __init__(self, writer, depth: int = 8, *, process: bool = False) -> None:
+    def __init__(self, writer, depth: int = 8, *, process: bool = False,
+                 wait: bool = True) -> None:
         self._error: BaseException | None = None
         self._child: subprocess.Popen | None = None
+        self._starting = False
         if process:
             env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
             self._child = subprocess.Popen(
@@ -331,10 +336,9 @@ class _BackgroundWriter:
                  '_write_results; _write_results()'],
                 stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env)
             self._send(writer)
-            failed = self._reply()  # None once the child's writer exists
-            if failed is not None:
-                self._child.wait()
-                raise failed
+            self._starting = True
+            if wait:
+                self.ready()
             return
         self._writer = writer
         self._queue: queue.Queue = queue.Queue(maxsize=depth)
@@ -351,6 +355,30 @@ class _BackgroundWriter:
                     self._writer.write(result)
                 except BaseException as err:  # reported in the main thread
                     self._error = err
+
+    def ready(self) -> None:
+        """Wait until the child process has built the writer; raise its error if it could
+        not (then the child has stopped)."""
+        if not self._starting:
+            return
+        self._starting = False
+        failed = self._reply()  # None once the child's writer exists
+        if failed is not None:
+            self._child.wait()
+            self._error = failed
+            raise failed
+
+    def discard(self) -> None:
+        """Stop a writer that will not be used (the caller failed before tracking): the
+        child closes its bag without writing a frame."""
+        if self._child is None:
+            self.close()
+            return
+        try:
+            self.ready()
+            self.close()
+        except BaseException:  # noqa: BLE001 - the caller's own error matters here
+            pass
 
     def _send(self, item) -> None:
         """Pickle ``item`` to the child; when the child has stopped, raise its error."""
@@ -371,6 +399,7 @@ class _BackgroundWriter:
                                 f'(exit code {self._child.wait()})')
 
     def write(self, result) -> None:
+        self.ready()
         if self._error is not None:
             raise self._error
         tracks = [dataclasses.replace(t, mean=np.array(t.mean), covariance=np.array(
@@ -385,6 +414,7 @@ class _BackgroundWriter:
 
     def close(self) -> None:
         """Write what is queued, close the bag, raise a write error if one happened."""
+        self.ready()
         if self._child is None:
             self._queue.put(None)
             self._thread.join()
@@ -427,7 +457,8 @@ def _write_results() -> None:
 
 
 def _output_bag(out: Path, calibration: RoomCalibration):
-    """Writer of OUTDIR/tracks.mcap: every tracker_node output topic (None without rclpy)."""
+    """Writer of OUTDIR/tracks.mcap: every tracker_node output topic (None without rclpy).
+    Its child process starts here; :func:`_writer_ready` waits for it."""
     try:
         from mbtrack_ros.nodes.output_bag import OutputBagError, OutputBagWriter
     except ImportError:
@@ -438,7 +469,19 @@ def _output_bag(out: Path, calibration: RoomCalibration):
         shutil.rmtree(path)  # replaced like tracks.csv
     try:
         return _BackgroundWriter(functools.partial(OutputBagWriter, path, calibration),
-                                 process=True)
+                                 process=True, wait=False)
+    except OutputBagError as err:
+        raise _UserError(str(err)) from err
+
+
+def _writer_ready(outputs: _BackgroundWriter | None) -> None:
+    """Wait for the writer of :func:`_output_bag`; its error (e.g. an unwritable bag) is a
+    user error."""
+    if outputs is None:
+        return
+    from mbtrack_ros.nodes.output_bag import OutputBagError
+    try:
+        outputs.ready()
     except OutputBagError as err:
         raise _UserError(str(err)) from err
 
@@ -489,33 +532,44 @@ def run(args: argparse.Namespace) -> int:
                           f'{", ".join(map(str, skipped))}; not tracked', file=sys.stderr)
                 if not starts:
                     raise _UserError('no person could be initialised from the ground truth')
+            # the writer's child process starts (imports ~1.5 s) while the tracker is built
+            # and the bag opened
+            outputs = _output_bag(out, calibration)
             try:
                 tracker = Tracker(calibration, config, rng=np.random.default_rng(args.seed))
             except TrackerError as err:
+                if outputs is not None:
+                    outputs.discard()
                 raise _UserError(str(err)) from err
-            with RecordingReader(bag) as reader:
-                recorder = None
-                if args.save_particles:
-                    from mbtrack_ros.evaluation.posterior import ParticleRecorder
-                    recorder = ParticleRecorder()
-                status = {'frames': 0, 'tracks': 0, 'skipped': 0, 'tracker_s': 0.0,
-                          'wall_s': 0.0, 'last_frame': -1, 'bag_error': None}
-                tracks_path = out / 'tracks.csv'
-                rows: list[TrackRow] = []
+            handed = False  # the tracking pass below closes the writer
+            try:
+                with RecordingReader(bag) as reader:
+                    _writer_ready(outputs)
+                    handed = True
+                    recorder = None
+                    if args.save_particles:
+                        from mbtrack_ros.evaluation.posterior import ParticleRecorder
+                        recorder = ParticleRecorder()
+                    status = {'frames': 0, 'tracks': 0, 'skipped': 0, 'tracker_s': 0.0,
+                              'wall_s': 0.0, 'last_frame': -1, 'bag_error': None}
+                    tracks_path = out / 'tracks.csv'
+                    rows: list[TrackRow] = []
 
-                outputs = _output_bag(out, calibration)
+                    def collect() -> Iterator[TrackRow]:
+                        for row in _track_rows(tracker, reader, index, starts, args, recorder,
+                                               status, outputs):
+                            rows.append(row)
+                            yield row
 
-                def collect() -> Iterator[TrackRow]:
-                    for row in _track_rows(tracker, reader, index, starts, args, recorder,
-                                           status, outputs):
-                        rows.append(row)
-                        yield row
-
-                try:
-                    write_tracks(tracks_path, collect())
-                finally:
-                    if outputs is not None:
-                        outputs.close()
+                    try:
+                        write_tracks(tracks_path, collect())
+                    finally:
+                        if outputs is not None:
+                            outputs.close()
+            except BaseException:
+                if not handed and outputs is not None:
+                    outputs.discard()
+                raise
         except BagError as err:
             return _error(str(err), 1)
         except (InitiationError, FilterError, CalibrationError) as err:
