@@ -385,7 +385,8 @@ def _camouflaged_walker(calib, bgs, rng, start, weak):
 def test_a_person_in_the_doorway_hidden_in_one_camera_is_detected_by_the_others():
     """h-enter: in the doorway one camera may see little of a person (dark clothes against
     the corridor, a background model that learnt them beyond the open door); its veto
-    must not hide them from the other three. Off the entry zones the veto stays."""
+    must not hide them from the other three. Off the entry zones, and within
+    ``excuse_radius`` of a track, the veto stays."""
     rng = np.random.default_rng(12)
     calib = make_room(ceiling=False)
     bgs = backgrounds(calib)
@@ -396,6 +397,10 @@ def test_a_person_in_the_doorway_hidden_in_one_camera_is_detected_by_the_others(
     assert found[0][1].coverage['cam0'] < 0.15                # the weak view, excused
     assert (found[0][0] - 5) / FPS <= 0.5 - 1e-9
     assert run_detector(calib, frames, config=DetectorConfig(excuse_weakest=False)) == []
+    # beside a tracked person (0.8 m) the weak camera still vetoes: not alone in the doorway
+    assert run_detector(calib, frames, track_xy=np.array([[3.8, 4.6]])) == []
+    assert run_detector(calib, frames, track_xy=np.array([[3.8, 4.6]]),
+                        config=DetectorConfig(excuse_radius=0.7))
     # the same person in the middle of the room: the weak camera still vetoes
     middle = _camouflaged_walker(calib, bgs, rng, (2.6, 2.8), 'cam0')
     assert run_detector(calib, middle) == []

@@ -67,14 +67,16 @@ class DetectorConfig:
         coarse_height, coarse_width: the single size of the coarse level.
         coarse_coverage: mean coverage over the seeing cameras of a promising coarse point.
         veto_coverage: a seeing camera with coverage below this rejects the hypothesis.
-        excuse_weakest: for a hypothesis inside an entry zone seen by at least
-            ``min_views + 1`` cameras, the side camera with the lowest coverage neither
-            vetoes it nor counts in the coarse mean coverage (its log response still
-            counts): in the doorway one view may show a person much like what its
-            background model holds behind them (dark clothes against the corridor, a
-            model that learnt the person while they stood beyond the open door), and it
-            must not hide them from the others. Only there: elsewhere the excuse let
-            hypotheses between two people through (docs/detection.md, h-enter).
+        excuse_weakest: for a hypothesis inside an entry zone, farther than
+            ``excuse_radius`` from every track and seen by at least ``min_views + 1``
+            cameras, the side camera with the lowest coverage neither vetoes it nor counts
+            in the coarse mean coverage (its log response still counts): in the doorway
+            one view may show a person much like what its background model holds behind
+            them (dark clothes against the corridor, a model that learnt the person while
+            they stood beyond the open door), and it must not hide them from the others.
+            Only there and only alone: elsewhere, and beside tracked people, the excuse
+            let hypotheses between people through (docs/detection.md, h-enter).
+        excuse_radius: metres; see ``excuse_weakest``.
         min_views: cameras that must see a hypothesis (in image, mostly not hidden by
             tracks, at least ``min_area`` pixels).
         min_known: fraction of the silhouette not covered by tracks for a camera to count.
@@ -111,6 +113,7 @@ class DetectorConfig:
     coarse_coverage: float = 0.45
     veto_coverage: float = 0.15
     excuse_weakest: bool = True
+    excuse_radius: float = 1.0
     min_views: int = 2
     min_known: float = 0.5
     min_area: int = 60
@@ -135,6 +138,8 @@ class DetectorConfig:
     max_speed: float = 2.0
 
     def __post_init__(self) -> None:
+        if not self.excuse_radius >= 0:
+            raise DetectionError('detector excuse_radius must be >= 0')
         for name in ('coarse_spacing', 'fine_spacing', 'nms_radius', 'confirm_radius'):
             if not getattr(self, name) > 0:
                 raise DetectionError(f'detector {name} must be > 0')
@@ -338,7 +343,7 @@ class Detector:
         # hypotheses whose weakest side camera may be excused from the veto (entry zones)
         self._entry = np.asarray(calibration.entry_zones if cfg.excuse_weakest else (),
                                  dtype=np.float64).reshape(-1, 4)
-        self._coarse_excusable = _in_zones(self.coarse_xy, self._entry)
+        self._coarse_in_entry = _in_zones(self.coarse_xy, self._entry)
         self._candidates: list[Detection] = []
         self.last_timing: dict[str, float] = {}
 
@@ -375,8 +380,18 @@ class Detector:
                                                     cfg.symmetry_ref - sym, 0.0)
         return np.where(sees, resp, 0.0), sees, np.where(sees, cov, np.nan)
 
+    def _excusable(self, xy: np.ndarray, in_entry: np.ndarray,
+                   track_xy: np.ndarray | None) -> np.ndarray:
+        """(N,) hypotheses whose weakest side camera may be excused from the veto: inside
+        an entry zone (``in_entry``) and farther than ``excuse_radius`` from every track."""
+        if track_xy is None or not len(track_xy) or not in_entry.any():
+            return in_entry
+        d = np.linalg.norm(xy[:, None, :] - np.asarray(track_xy)[None], axis=2)
+        return in_entry & (d.min(axis=1) > self.config.excuse_radius)
+
     def _score(self, evidence: Mapping[str, FrameEvidence], states: np.ndarray,
-               heights: np.ndarray, widths: np.ndarray, *, full: bool
+               heights: np.ndarray, widths: np.ndarray, *, full: bool,
+               track_xy: np.ndarray | None = None
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Combined log response (N,), seeing cameras (N,), coverage (C, N) of hypotheses."""
         cfg = self.config
@@ -409,8 +424,10 @@ class Detector:
             covs.append(cov)
             side.append(not self.ceiling[name])
         covs = np.asarray(covs).reshape(len(covs), n)
+        xy = states[:, [X, Y]]
         vetoed, _ = _vetoes(covs, np.asarray(side, bool), cfg.veto_coverage,
-                            _in_zones(states[:, [X, Y]], self._entry), cfg.min_views + 1)
+                            self._excusable(xy, _in_zones(xy, self._entry), track_xy),
+                            cfg.min_views + 1)
         total = np.where((views >= cfg.min_views) & ~vetoed, total, -np.inf)
         return total, views, covs
 
@@ -431,8 +448,9 @@ class Detector:
             covs.append(cov)
             side.append(not self.ceiling[name])
         covs = np.asarray(covs).reshape(len(covs), m)
+        excusable = self._excusable(self.coarse_xy, self._coarse_in_entry, track_xy)
         vetoed, counted = _vetoes(covs, np.asarray(side, bool), cfg.veto_coverage,
-                                  self._coarse_excusable, cfg.min_views + 1)
+                                  excusable, cfg.min_views + 1)
         mean_cov = np.where(counted, covs, 0.0).sum(axis=0) / np.maximum(counted.sum(axis=0), 1)
         ok = (views >= cfg.min_views) & ~vetoed & (mean_cov >= cfg.coarse_coverage)
         if track_xy is not None and len(track_xy):
@@ -489,7 +507,8 @@ class Detector:
         w0 = float(np.median(cfg.widths))
         states = np.concatenate([_states(xy, 0.0, p) for p in poses])
         n = len(states)
-        score, _, _ = self._score(evidence, states, np.full(n, h0), np.full(n, w0), full=True)
+        score, _, _ = self._score(evidence, states, np.full(n, h0), np.full(n, w0), full=True,
+                                  track_xy=track_xy)
         best = int(np.argmax(score))
         if not np.isfinite(score[best]):
             return None
@@ -501,7 +520,7 @@ class Detector:
                                                    np.asarray(cfg.orientations),
                                                    indexing='ij'))
         states2 = _states(np.repeat(bx[None], len(H), axis=0), O, states[best, SIT])
-        score2, _, _ = self._score(evidence, states2, H, W, full=True)
+        score2, _, _ = self._score(evidence, states2, H, W, full=True, track_xy=track_xy)
         b = int(np.argmax(score2))
         if not np.isfinite(score2[b]):
             return None
@@ -510,7 +529,7 @@ class Detector:
         pos = bx + np.stack([sx.ravel(), sy.ravel()], axis=1)
         H, W = np.full(len(pos), H[b]), np.full(len(pos), W[b])
         states2 = _states(pos, O[b], states[best, SIT])
-        score2, _, covs = self._score(evidence, states2, H, W, full=True)
+        score2, _, covs = self._score(evidence, states2, H, W, full=True, track_xy=track_xy)
         b = int(np.argmax(score2))
         if not np.isfinite(score2[b]):
             return None
