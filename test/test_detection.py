@@ -386,24 +386,26 @@ def test_a_person_in_the_doorway_hidden_in_one_camera_is_detected_by_the_others(
     """h-enter: in the doorway one camera may see little of a person (dark clothes against
     the corridor, a background model that learnt them beyond the open door); its veto
     must not hide them from the other three. Off the entry zones, and within
-    ``excuse_radius`` of a track, the veto stays."""
+    ``excuse_radius`` of a track, the veto stays. Opt-in (``excuse_weakest``): on the 18
+    clear-room runs it cost mean MOTA (docs/detection.md)."""
     rng = np.random.default_rng(12)
     calib = make_room(ceiling=False)
     bgs = backgrounds(calib)
     frames = _camouflaged_walker(calib, bgs, rng, (4.6, 4.8), 'cam0')
-    found = run_detector(calib, frames)
+    excuse = DetectorConfig(excuse_weakest=True)
+    found = run_detector(calib, frames, config=excuse)
     assert found and np.linalg.norm(found[0][1].xy - np.array([4.6, 4.8 - 0.04 * (
         found[0][0] - 5)])) <= 0.2
     assert found[0][1].coverage['cam0'] < 0.15                # the weak view, excused
     assert (found[0][0] - 5) / FPS <= 0.5 - 1e-9
-    assert run_detector(calib, frames, config=DetectorConfig(excuse_weakest=False)) == []
+    assert run_detector(calib, frames) == []                   # the default: vetoed
     # beside a tracked person (0.8 m) the weak camera still vetoes: not alone in the doorway
-    assert run_detector(calib, frames, track_xy=np.array([[3.8, 4.6]])) == []
+    assert run_detector(calib, frames, track_xy=np.array([[3.8, 4.6]]), config=excuse) == []
     assert run_detector(calib, frames, track_xy=np.array([[3.8, 4.6]]),
-                        config=DetectorConfig(excuse_radius=0.7))
+                        config=DetectorConfig(excuse_weakest=True, excuse_radius=0.7))
     # the same person in the middle of the room: the weak camera still vetoes
     middle = _camouflaged_walker(calib, bgs, rng, (2.6, 2.8), 'cam0')
-    assert run_detector(calib, middle) == []
+    assert run_detector(calib, middle, config=excuse) == []
     shown = [paint(calib, bgs, [], rng) for _ in range(5)] + [
         paint(calib, bgs, [person(2.6, 2.8 - 0.04 * k, theta=-np.pi / 2)], rng)
         for k in range(12)]
