@@ -75,14 +75,15 @@ def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False,
                        'reason': 'exit'} for t in ended)
         return ended
 
-    def logged_update(self, stamp, ids, supported, existence=None):
-        ended = update(self, stamp, ids, supported, existence)
+    def logged_update(self, stamp, ids, supported, existence=None, doorway=None):
+        ended = update(self, stamp, ids, supported, existence, doorway)
         for tid in ended:
             k = list(ids).index(tid)
             spare = k < len(self.spare) and self.spare[k]
             events.append({'kind': 'end', 'frame': frame['index'], 'id': int(tid),
                            'reason': 'spare' if spare else 'support' if not supported[k]
-                           else 'existence'})
+                           else 'existence',
+                           'doorway': bool(doorway is not None and doorway[k])})
         return ended
 
     def logged_duplicates(self, stamp, ids, xy, shown_since=None):
