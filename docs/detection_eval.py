@@ -1,6 +1,7 @@
 """Identity-switch analysis of automatic detection on a recording (docs/detection.md).
 
     .venv/bin/python docs/detection_eval.py run REC OUT [--seed S] [--no-people-cue]
+                                                 [--params NODE.yaml]
     .venv/bin/python docs/detection_eval.py report OUT REC            # causes of switches
     .venv/bin/python docs/detection_eval.py table OUT REC [OUT REC]   # one row per run
     .venv/bin/python docs/detection_eval.py lag OUT REC [OUT REC]     # track-person distance
@@ -42,6 +43,7 @@ from mbtrack_ros.core.detection.background import BackgroundBank
 from mbtrack_ros.core.detection.detector import is_ceiling
 from mbtrack_ros.core.detection import release as release_module
 from mbtrack_ros.core.shape import BodyShape, rasterize
+from mbtrack_ros.commands.replay import tracker_values_from_params
 from mbtrack_ros.core.tracker import Tracker, TrackerConfig
 from mbtrack_ros.evaluation.clear_mot import clear_mot
 from mbtrack_ros.recording.bag import RecordingReader
@@ -61,7 +63,9 @@ def _screen(x: float, y: float) -> bool:
 
 
 def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False,
-        release: dict[str, float] | None = None) -> None:
+        release: dict[str, float] | None = None, params: Path | None = None) -> None:
+    """Track ``rec`` with automatic detection (the tracker settings of a tracker_node
+    parameter file ``params`` if given, as ``mbtrack replay --params``) into ``out``."""
     out.mkdir(parents=True, exist_ok=True)
     cal = RoomCalibration.load(rec / 'calibration.yaml')
     events: list[dict] = []
@@ -98,7 +102,9 @@ def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False,
     rows: list[TrackRow] = []
     with RecordingReader(rec / 'bag') as reader:
         cal = cal.subset([n for n in cal.names if n in reader.cameras])
-        tracker = Tracker(cal, TrackerConfig(seed=seed, detection=True))
+        values = tracker_values_from_params(params) if params is not None else {}
+        tracker = Tracker(cal, TrackerConfig.from_dict({**values, 'seed': seed,
+                                                        'detection': True}))
         if release:  # ReleaseConfig fields overridden, e.g. spare_support=0 (no spare rule)
             det = tracker.detection
             det.releaser = release_module.Releaser(cal, replace(det.releaser.config, **release))
@@ -712,6 +718,8 @@ def main(argv: list[str] | None = None) -> int:
     t.add_argument('pairs', type=Path, nargs='+')
     for name in ('lag', 'decisions', 'totals', 'spares', 'classes', 'exits', 'releases'):
         sub.add_parser(name).add_argument('pairs', type=Path, nargs='+')
+    r.add_argument('--params', type=Path, default=None, metavar='NODE.yaml',
+                   help='tracker settings of a tracker_node parameter file (config/*.yaml)')
     r.add_argument('--release', action='append', default=[], metavar='FIELD=VALUE',
                    help='override a ReleaseConfig field (repeatable), e.g. spare_support=0')
     args = p.parse_args(argv)
@@ -720,7 +728,7 @@ def main(argv: list[str] | None = None) -> int:
             release = {k: float(v) for k, v in (a.split('=', 1) for a in args.release)}
         except ValueError:
             p.error(f'--release needs FIELD=NUMBER, got {args.release}')
-        run(args.rec, args.out, args.seed, args.no_people_cue, release)
+        run(args.rec, args.out, args.seed, args.no_people_cue, release, args.params)
     elif args.cmd == 'report':
         report(args.out, args.rec)
     else:

@@ -509,6 +509,57 @@ def test_tracker_detects_tracks_and_releases_a_painted_person():
     assert tracker.track_ids == []
 
 
+def test_paint_blobs_marks_the_blob_only_where_the_outline_degenerates():
+    from mbtrack_ros.core.detection.release import paint_blobs
+
+    calib = make_room()
+    cam = calib.cameras['cam4']
+    xy = np.array([cam.center[:2], cam.center[:2] + [2.0, 1.0]])   # below / far off
+    heights = np.array([1.8, 1.8])
+    full = np.ones((H, W), bool)
+    _, area = blob_coverage(cam, full, xy, heights)
+    each = []
+    for k in range(2):
+        m = np.zeros((H, W), bool)
+        paint_blobs(m, cam, xy[k:k + 1], heights[:1])
+        assert m.sum() == area[k]                      # the same hull as blob_coverage
+        each.append(m)
+    outline = rasterize(cam, np.c_[xy, np.zeros((2, 4))], BodyShape(),
+                        heights=heights).area
+    assert outline[0] < 0.25 * area[0] and outline[1] >= 0.25 * area[1]
+    chosen = np.zeros((H, W), bool)
+    paint_blobs(chosen, cam, xy, heights, outline_area=outline)
+    assert np.array_equal(chosen, each[0])             # the far person keeps his outline
+
+
+def test_a_person_standing_below_the_ceiling_camera_is_not_learnt_into_its_background():
+    """The ceiling camera alone decides the release, and the body outline degenerates right
+    below it: the model update must still leave the tracked person out (cylinder blob in
+    the exclusion mask), else the person fades into the background and the track ends."""
+    from mbtrack_ros.core.detection.release import blob_coverage
+
+    rng = np.random.default_rng(3)
+    calib = make_room()
+    bgs = backgrounds(calib)
+    tracker = _detecting_tracker(calib, bgs, seed=2)
+    cam = calib.cameras['cam4']
+    below = cam.center[:2]
+    ids = set()
+    for k in range(150):                          # 10 s standing still
+        stamp = int(round(k * 1e9 / FPS))
+        images = paint(calib, bgs, [person(*below)], rng)
+        res = tracker.step(stamp, images)
+        ids |= {t.track_id for t in res.tracks}
+        assert not res.ended, f'track released at frame {k}'
+        if k >= 20:
+            assert len(res.tracks) == 1, f'frame {k}: {len(res.tracks)} tracks'
+    # the ceiling camera still sees the person as foreground after 10 s
+    fg = tracker.detection.background.models['cam4'].foreground(images['cam4'])
+    cov, _ = blob_coverage(cam, fg, below[None], np.array([1.8]))
+    assert cov[0] > 0.3
+    assert len(ids) == 1
+
+
 def test_detector_refines_a_fixed_budget_with_pending_candidates_first(monkeypatch):
     """Refinement cost is bounded per frame; candidates being confirmed are not starved."""
     rng = np.random.default_rng(5)
@@ -940,3 +991,58 @@ def test_a_person_re_found_soon_after_the_release_gets_the_released_id(
         ids.append(sorted(tracker.track_ids))
     assert ended_at is not None and ids[ended_at] == []
     assert ids[-1] == ([1] if reused else [2])
+
+
+def test_detection_every_kth_frame_set_holds_existence_in_between(monkeypatch):
+    """``detection_every=3``: the detection pipeline runs on frame sets 0, 3, 6, ... only;
+    the frame sets between report the tracks with the last existence and visibility, and
+    the painted person is still found and released."""
+    from mbtrack_ros.core.detection.manager import AutoDetection
+    from mbtrack_ros.core.existence import AuxiliaryConfig
+    from mbtrack_ros.core.tracker import TrackerConfig, TrackerError
+
+    for bad in (0, -2, 1.5, True):
+        with pytest.raises(TrackerError, match='detection_every'):
+            TrackerConfig(detection_every=bad)
+    calls: list[int] = []
+    plain = AutoDetection.update
+
+    def counted(self, stamp_ns, *a, **k):
+        calls.append(int(stamp_ns))
+        return plain(self, stamp_ns, *a, **k)
+
+    monkeypatch.setattr(AutoDetection, 'update', counted)
+    rng = np.random.default_rng(8)
+    calib = make_room()
+    bgs = backgrounds(calib)
+    every = 3
+    tracker = _detecting_tracker(calib, bgs, seed=1, detection_every=every)
+    enter, leave, total = 3, 30, 66
+    stamps, born, ended, held = [], None, None, 0
+    last: dict[int, tuple[float, dict]] = {}
+    for k in range(total):
+        x = 2.0 + 0.05 * k
+        people = [person(x, 2.8, theta=0.0)] if enter <= k < leave else []
+        stamp = int(round(k * 1e9 / FPS))
+        stamps.append(stamp)
+        res = tracker.step(stamp, paint(calib, bgs, people, rng))
+        if born is None and res.tracks:
+            born = k
+        for t in res.tracks:
+            if k % every:  # skipped: the values of the last detection frame set
+                before = last.get(t.track_id, (AuxiliaryConfig().initial_existence, {}))
+                assert (t.existence, t.visibility) == before  # (or those of a new track)
+                held += 1
+            last[t.track_id] = (t.existence, dict(t.visibility))
+        if res.ended:
+            assert k % every == 0  # releases happen on detection frame sets only
+            ended = k if ended is None else ended
+    assert calls == stamps[::every]
+    assert held > 10
+    assert born is not None and (born - enter) / FPS <= 0.5 + (every - 1) * 2 / FPS
+    assert ended is not None and 0 < (ended - leave) / FPS <= 1.5 + (every - 1) / FPS
+    assert tracker.track_ids == []
+    tracker.reset()  # the count restarts: the next frame set runs the detection
+    calls.clear()
+    tracker.step(stamps[-1] + 10 ** 9, bgs)
+    assert len(calls) == 1

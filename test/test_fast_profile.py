@@ -16,6 +16,7 @@ from conftest import REPO, make_room  # noqa: E402
 from mbtrack_ros.core.tracker import Tracker, TrackerConfig, TrackerError  # noqa: E402
 
 FAST = REPO / 'config' / 'clear_room_fast.yaml'
+OFFLINE = REPO / 'config' / 'clear_room_offline.yaml'
 
 
 def test_subsample_is_validated_and_reaches_the_likelihood():
@@ -50,6 +51,11 @@ def test_replay_options_beat_the_params_file(tmp_path):
     mixed = config('--params', str(params), '--particles', '70', '--seed', '3')
     assert (mixed.particles, mixed.subsample, mixed.seed) == (70, 2, 3)
     assert config('--subsample', '3').subsample == 3
+    assert config().detection_every == 1
+    assert config('--detection-every', '3').detection_every == 3
+    params.write_text('tracker_node:\n  ros__parameters:\n    detection:\n      every: 2\n')
+    assert config('--params', str(params)).detection_every == 2
+    assert config('--params', str(params), '--detection-every', '4').detection_every == 4
 
 
 def test_replay_params_file_refuses_unknown_keys(tmp_path):
@@ -73,7 +79,19 @@ def test_fast_profile_is_the_default_with_half_the_particles():
     assert fast['particles'] == default['particles'] // 2
 
 
-def test_fast_profile_loads_in_the_node_and_the_replay(tmp_path):
+def test_offline_profile_is_the_default_with_fewer_particles_and_sparse_detection():
+    from mbtrack_ros.commands.replay import tracker_values_from_params
+
+    offline = tracker_values_from_params(OFFLINE)
+    default = tracker_values_from_params(REPO / 'config' / 'clear_room.yaml')
+    assert {k for k in offline.keys() | default.keys()
+            if offline.get(k) != default.get(k)} == {'particles', 'detection_every'}
+    assert offline['particles'] < default['particles']
+    assert offline['detection_every'] > default.get('detection_every', 1)
+
+
+@pytest.mark.parametrize('profile', [FAST, OFFLINE], ids=['fast', 'offline'])
+def test_fast_profile_loads_in_the_node_and_the_replay(tmp_path, profile):
     import argparse
 
     from mbtrack_ros.commands import replay
@@ -85,7 +103,7 @@ def test_fast_profile_loads_in_the_node_and_the_replay(tmp_path):
     context = Context()
     rclpy.init(context=context)
     try:
-        node = TrackerNode(cli_args=['--ros-args', '--params-file', str(FAST),
+        node = TrackerNode(cli_args=['--ros-args', '--params-file', str(profile),
                                      '-p', f'calibration_file:={calib}', '-p', 'warm_up:=false'],
                            context=context, step_thread=False)
         try:
@@ -97,6 +115,8 @@ def test_fast_profile_loads_in_the_node_and_the_replay(tmp_path):
     parser = argparse.ArgumentParser()
     replay.add_parser(parser.add_subparsers())
     replay_config = replay._config(parser.parse_args(
-        ['replay', 'REC', '--out', str(tmp_path), '--params', str(FAST)]))
+        ['replay', 'REC', '--out', str(tmp_path), '--params', str(profile)]))
     assert node_config.particles == replay_config.particles == 50
     assert node_config.subsample == replay_config.subsample == 1
+    assert node_config.detection_every == replay_config.detection_every == \
+        (1 if profile == FAST else 3)

@@ -151,6 +151,57 @@ def test_wrong_image_size_mid_bag_is_one_line_error(recording, tmp_path, capsys,
     assert {r.frame for r in read_tracks(out / 'tracks.csv')} == set(range(6))
 
 
+class _FailingWriter:
+    """A picklable stand-in for OutputBagWriter (built in the writer process)."""
+
+    def __init__(self, fail_at: int) -> None:
+        self.fail_at = fail_at
+
+    def write(self, result) -> None:
+        if result.stamp_ns == self.fail_at:
+            raise OSError('disk full')
+
+    def close(self) -> None:
+        pass
+
+
+def test_background_writer_in_a_process_writes_the_bag_in_order_and_reports_errors(tmp_path):
+    """``mbtrack replay`` writes tracks.mcap in a child process: the results arrive in order
+    and as they were when handed over; errors of the child are raised in the parent."""
+    import functools
+
+    from rosbags.highlevel import AnyReader
+
+    from conftest import make_room
+    from mbtrack_ros.commands.replay import _BackgroundWriter
+    from mbtrack_ros.core.state import FrameResult, TrackEstimate
+    from mbtrack_ros.nodes.output_bag import OutputBagError, OutputBagWriter
+
+    room = make_room()
+    out = tmp_path / 'tracks.mcap'
+    writer = _BackgroundWriter(functools.partial(OutputBagWriter, out, room), depth=2,
+                               process=True)
+    mean = np.zeros(6)
+    for k in range(20):
+        mean[0] = 0.1 * k  # one buffer, overwritten like a tracker reusing its arrays
+        writer.write(FrameResult(stamp_ns=k + 1, tracks=[TrackEstimate(
+            track_id=1, mean=mean, covariance=np.eye(6), height=1.7)]))
+    writer.close()
+    with AnyReader([out]) as reader:
+        people = [(stamp, reader.deserialize(raw, conn.msgtype).poses[0].position.x)
+                  for conn, stamp, raw in reader.messages()
+                  if conn.topic == '/tracker_node/people']
+    assert people == [(k + 1, pytest.approx(0.1 * k)) for k in range(20)]
+
+    failing = _BackgroundWriter(functools.partial(_FailingWriter, 3), depth=2, process=True)
+    with pytest.raises(OSError, match='disk full'):
+        for k in range(50):
+            failing.write(FrameResult(stamp_ns=k))
+        failing.close()
+    with pytest.raises(OutputBagError, match='already exists'):
+        _BackgroundWriter(functools.partial(OutputBagWriter, out, room), process=True)
+
+
 def test_background_writer_keeps_order_snapshots_results_and_reports_errors():
     """tracks.mcap is written in a thread: results in order, as they were when handed over
     (the tracker may reuse its arrays), and a write error is raised in the main thread."""

@@ -21,8 +21,12 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
+import os
+import pickle
 import queue
 import shutil
+import subprocess
 import sys
 import threading
 import time
@@ -64,7 +68,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument('--out', type=Path, required=True, metavar='OUTDIR',
                         help='output directory (created)')
     parser.add_argument('--params', type=Path, default=None, metavar='NODE.yaml',
-                        help='take the tracker settings (tracker.*, detection.threshold) '
+                        help='take the tracker settings (tracker.*, detection.threshold, '
+                             'detection.every) '
                              'from a tracker_node parameter file (config/*.yaml); the '
                              'options below override it')
     parser.add_argument('--algorithm', default=None,
@@ -85,6 +90,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument('--pipeline-search', action='store_true',
                         help='search frame t for new people while frame t+1 is filtered '
                              '(people start one frame later; TrackerConfig.pipeline_search)')
+    parser.add_argument('--detection-every', type=int, default=None, metavar='K',
+                        help='run the detection pipeline on every K-th frame set only '
+                             '(default 1; a speed option that costs accuracy)')
     parser.add_argument('--init-from', type=Path, default=None, metavar='GROUND_TRUTH.csv',
                         help='start tracks from this ground truth (models from key views)')
     parser.add_argument('--eval', type=Path, default=None, metavar='GROUND_TRUTH.csv',
@@ -126,6 +134,7 @@ _NODE_TRACKER_KEYS = {f'tracker.{k}': k for k in (
     'algorithm', 'particles', 'joint_particles', 'sigma', 'd_occ', 'mrf_radius', 'use_mrf',
     'release_time', 'subsample', 'pipeline_search')}
 _NODE_TRACKER_KEYS['detection.threshold'] = 'detection_threshold'
+_NODE_TRACKER_KEYS['detection.every'] = 'detection_every'
 
 
 def tracker_values_from_params(path: Path) -> dict:
@@ -153,7 +162,7 @@ def _config(args: argparse.Namespace) -> TrackerConfig:
     try:
         values = tracker_values_from_params(args.params) if args.params is not None else {}
         for name in ('algorithm', 'particles', 'joint_particles', 'sigma', 'd_occ',
-                     'subsample'):
+                     'subsample', 'detection_every'):
             if getattr(args, name) is not None:  # an explicit option beats the file
                 values[name] = getattr(args, name)
         if args.no_mrf:
@@ -300,19 +309,40 @@ def _track_rows(tracker: Tracker, reader: RecordingReader, index: _FrameIndex, s
 
 
 class _BackgroundWriter:
-    """Writes frame results to an ``OutputBagWriter`` in a thread (in order, bounded queue).
+    """Writes frame results to an ``OutputBagWriter`` beside the tracker (in order): in a
+    thread (bounded queue), or with ``process`` in a child Python process fed through a pipe.
 
-    Building and serialising the rclpy messages of a frame (MarkerArray above all) took
-    ~13 % of the replay's wall time in the main thread; here it overlaps with the next
-    tracker step (its numba kernels release the GIL). Each result is snapshotted (track
-    means and covariances copied, particles left out) so the tracker may reuse its buffers.
-    A write error is raised by the next :meth:`write` or by :meth:`close`.
+    Building and serialising the rclpy messages of a frame (MarkerArray above all) costs
+    ~3 ms of CPU with 4 tracks, all of it holding the interpreter lock; in a thread it
+    still competes with the tracker's Python code for that lock, in a child process it
+    runs on the other core (the same writer code, the same bag). The child is a fresh
+    interpreter (``python -c``), not a ``multiprocessing`` child, so it never re-imports
+    the caller's main script. Each result is snapshotted (track means and covariances
+    copied, particles left out) so the tracker may reuse its buffers. A write error is
+    raised by a later :meth:`write` or by :meth:`close`.
+
+    Args:
+        writer: the writer object (thread), or with ``process`` a picklable callable that
+            builds it in the child.
     """
 
-    def __init__(self, writer, depth: int = 8) -> None:
+    def __init__(self, writer, depth: int = 8, *, process: bool = False) -> None:
+        self._error: BaseException | None = None
+        self._child: subprocess.Popen | None = None
+        if process:
+            env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
+            self._child = subprocess.Popen(
+                [sys.executable, '-c', 'from mbtrack_ros.commands.replay import '
+                 '_write_results; _write_results()'],
+                stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env)
+            self._send(writer)
+            failed = self._reply()  # None once the child's writer exists
+            if failed is not None:
+                self._child.wait()
+                raise failed
+            return
         self._writer = writer
         self._queue: queue.Queue = queue.Queue(maxsize=depth)
-        self._error: BaseException | None = None
         self._thread = threading.Thread(target=self._run, name='output_bag', daemon=True)
         self._thread.start()
 
@@ -327,6 +357,24 @@ class _BackgroundWriter:
                 except BaseException as err:  # reported in the main thread
                     self._error = err
 
+    def _send(self, item) -> None:
+        """Pickle ``item`` to the child; when the child has stopped, raise its error."""
+        try:
+            pickle.dump(item, self._child.stdin)
+            self._child.stdin.flush()
+        except (BrokenPipeError, OSError):
+            self._error = self._error or self._reply() or RuntimeError(
+                'the output bag writer process stopped')
+            raise self._error from None
+
+    def _reply(self) -> BaseException | None:
+        """The child's next reply: None (ready / closed) or its error."""
+        try:
+            return pickle.load(self._child.stdout)
+        except (EOFError, pickle.UnpicklingError, OSError):
+            return RuntimeError(f'the output bag writer process ended without a reply '
+                                f'(exit code {self._child.wait()})')
+
     def write(self, result) -> None:
         if self._error is not None:
             raise self._error
@@ -334,15 +382,53 @@ class _BackgroundWriter:
             t.covariance), visible_fraction=dict(t.visible_fraction),
             visibility=dict(t.visibility), particles=None, weights=None)
             for t in result.tracks]
-        self._queue.put(dataclasses.replace(result, tracks=tracks, ended=list(result.ended)))
+        item = dataclasses.replace(result, tracks=tracks, ended=list(result.ended))
+        if self._child is not None:
+            self._send(item)
+        else:
+            self._queue.put(item)
 
     def close(self) -> None:
         """Write what is queued, close the bag, raise a write error if one happened."""
-        self._queue.put(None)
-        self._thread.join()
-        self._writer.close()
+        if self._child is None:
+            self._queue.put(None)
+            self._thread.join()
+            self._writer.close()
+        elif self._error is None:
+            self._send(None)
+            self._child.stdin.close()
+            self._error = self._reply()  # None when the bag was closed without error
+            self._child.wait()
         if self._error is not None:
             raise self._error
+
+
+def _write_results() -> None:
+    """The child process of ``_BackgroundWriter(..., process=True)``: from stdin, a callable
+    that builds the writer, then results until None; to stdout, None once the writer exists
+    and None when the bag is closed, or the first error (then the child stops)."""
+    source = sys.stdin.buffer
+    replies = os.fdopen(os.dup(1), 'wb')  # the pipe; anything printed goes to stderr
+    os.dup2(2, 1)
+    sys.stdout = sys.stderr
+
+    def reply(value) -> None:
+        try:
+            pickle.dump(value, replies)
+        except Exception:  # noqa: BLE001 - an error that does not pickle
+            pickle.dump(RuntimeError(f'{type(value).__name__}: {value}'), replies)
+        replies.flush()
+
+    try:
+        writer = pickle.load(source)()
+        reply(None)
+        while (result := pickle.load(source)) is not None:
+            writer.write(result)
+        writer.close()
+    except BaseException as err:  # noqa: BLE001 - raised in the parent
+        reply(err)
+        raise SystemExit(1) from None
+    reply(None)
 
 
 def _output_bag(out: Path, calibration: RoomCalibration):
@@ -356,7 +442,8 @@ def _output_bag(out: Path, calibration: RoomCalibration):
     if (path / 'metadata.yaml').exists():
         shutil.rmtree(path)  # replaced like tracks.csv
     try:
-        return _BackgroundWriter(OutputBagWriter(path, calibration))
+        return _BackgroundWriter(functools.partial(OutputBagWriter, path, calibration),
+                                 process=True)
     except OutputBagError as err:
         raise _UserError(str(err)) from err
 

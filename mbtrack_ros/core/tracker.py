@@ -67,6 +67,12 @@ class TrackerConfig:
             detection's worker thread while frame t+1 is filtered, and add its people after
             frame t+1's result (one frame later than without; deterministic, the same live
             and offline). See :meth:`Tracker.step`.
+        detection_every: with detection, run the whole detection pipeline (foreground,
+            release, visibility and existence, background update, search) on every k-th
+            frame set only (the 1st, (k+1)-th, ... since the start or a reset); the frame
+            sets between are only filtered and report the tracks with the visibility and
+            existence of the last detection frame set (1: every frame set; a speed option,
+            its cost in docs/live_measurements.md).
     """
 
     algorithm: str = 'hjs'
@@ -89,6 +95,7 @@ class TrackerConfig:
     spare_support: float | None = None
     subsample: int = 1
     pipeline_search: bool = False
+    detection_every: int = 1
 
     def __post_init__(self) -> None:
         def bad(msg: str) -> None:
@@ -96,7 +103,8 @@ class TrackerConfig:
 
         if not isinstance(self.algorithm, str) or not self.algorithm:
             bad(f'algorithm must be a name, got {self.algorithm!r}')
-        for name in ('particles', 'joint_particles', 'max_bp_iterations', 'subsample'):
+        for name in ('particles', 'joint_particles', 'max_bp_iterations', 'subsample',
+                     'detection_every'):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
                 bad(f'{name} must be an integer >= 1, got {value!r}')
@@ -199,6 +207,7 @@ class Tracker:
         self._next_id = 1
         self._last_stamp: int | None = None
         self._search_pending = False  # step(search=False) left the detection search
+        self._steps = 0  # frame sets stepped since the start or reset (detection_every)
         self._heights: dict[int, float] = {}
         self._models: dict[int, object] = {}
         self.detection = None
@@ -292,6 +301,7 @@ class Tracker:
             self.detection.reset()
         self._last_stamp = None
         self._search_pending = False
+        self._steps = 0
 
     def step(self, stamp_ns: int, images: dict[str, np.ndarray], *,
              search: bool = True) -> FrameResult:
@@ -327,7 +337,9 @@ class Tracker:
                                f'{self._last_stamp} ns; reset the tracker')
         dt = 0.0 if self._last_stamp is None else (stamp_ns - self._last_stamp) / 1e9
         t0 = time.perf_counter()
-        if self.detection is not None:  # the foreground runs on a worker during the filter
+        detect = self.detection is not None \
+            and self._steps % int(self.config.detection_every) == 0
+        if detect:  # the foreground runs on a worker during the filter
             self.detection.start_foreground(images)
         try:
             seen = images if self.detection is None else self.detection.tracking_images(images)
@@ -336,10 +348,11 @@ class Tracker:
             updates = self.filter.step(dt, self.measurement, seen, self.rng)
             t2 = time.perf_counter()
         except BaseException:
-            if self.detection is not None:
+            if detect:
                 self.detection.abandon()
             raise
         self._last_stamp = stamp_ns
+        self._steps += 1
         tracks = []
         for tid in sorted(updates):
             u = updates[tid]
@@ -352,7 +365,10 @@ class Tracker:
         timings.update(self.filter.timings)
         timings['filter'] = t2 - t1
         ended: list[int] = []
-        if self.detection is not None:  # 003 §4: release; 001: existence and visibility
+        if self.detection is not None and not detect:  # detection_every: the last decisions
+            self.detection.carry(tracks)
+            tracks = [t for t in tracks if self.detection.reported(t.track_id)]
+        elif self.detection is not None:  # 003 §4: release; 001: existence and visibility
             frame_bins = getattr(self.measurement, 'frame_bins', None)
             ended = self.detection.update(stamp_ns, images, tracks, self._models,
                                           bins=frame_bins() if frame_bins else None)

@@ -56,6 +56,10 @@ detection.threshold             double     smallest combined log response of a n
 detection.spare_support         double     exclusive support below which a track that
                                            overlaps another one is released as spare;
                                            0 = off (0.25)
+detection.every                 int        run the detection pipeline (release, existence,
+                                           background, search) on every k-th frame set
+                                           only (1; a speed option that costs accuracy,
+                                           see docs/live_measurements.md)
 ==============================  =========  =================================================
 """
 from __future__ import annotations
@@ -172,6 +176,8 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
                                 'below which a track that overlaps another one is released as '
                                 'spare (ReleaseConfig.spare_support); 0 = off',
                                 _fr(0.0, 1.0)),
+    'detection.every': (1, 'run the detection pipeline on every k-th frame set only (speed '
+                        'option, TrackerConfig.detection_every)', _ir(1, 30)),
 }
 
 
@@ -261,6 +267,7 @@ def declare_and_read(node: Node) -> tuple[NodeParams, RoomCalibration]:
         'release_time': float(v['tracker.release_time']),
         'detection_threshold': float(v['detection.threshold']),
         'spare_support': float(v['detection.spare_support']),
+        'detection_every': int(v['detection.every']),
     }
     known = {f.name for f in fields(TrackerConfig)}
     try:

@@ -33,7 +33,7 @@ from mbtrack_ros.core.detection.acquisition import AcquisitionConfig, acquire
 from mbtrack_ros.core.detection.background import BackgroundBank, BackgroundConfig
 from mbtrack_ros.core.detection.detector import (
     Detection, Detector, DetectorConfig, FrameEvidence, is_ceiling)
-from mbtrack_ros.core.detection.release import ReleaseConfig, Releaser
+from mbtrack_ros.core.detection.release import ReleaseConfig, Releaser, paint_blobs
 from mbtrack_ros.core.existence import AuxiliaryConfig, TrackAuxiliary, predictive_loglik
 from mbtrack_ros.core.shape import BodyShape, rasterize
 from mbtrack_ros.core.state import SIT, THETA, X, Y, TrackEstimate
@@ -291,6 +291,9 @@ class AutoDetection:
         # cameras together with the tracks (one rasterisation per camera)
         parts, owner, part_shapes = self._visibility_particles(tracks, models, shapes)
         part_sils = {}
+        # head height: sitting keeps the upper body above the chair (003 §2.1)
+        tops = np.array([sh.chair_height + (1.0 - sh.hip_fraction) * sh.height
+                         if m[SIT] >= 0.5 else sh.height for sh, m in zip(shapes, means)])
         # 1. rendered tracks per camera
         sils, masks = {}, {}
         for n in names:
@@ -308,6 +311,13 @@ class AutoDetection:
                 paint = mask.view(np.uint8)
                 _kernels.paint_spans(paint, sil.row, sil.x0, sil.x1, sil.part, 0,
                                      int(sil.offsets[-1]), 1, False)
+                if is_ceiling(cam):
+                    # the outline degenerates to a line right below a top-down camera: the
+                    # model update must not learn a person standing there (the release
+                    # reads this camera's blob, 003 §4.3). Only there: the wider blob
+                    # everywhere also shields bootstrap ghosts under false tracks (cr2:
+                    # a screen track lived 450 instead of 100 frames; docs/detection.md)
+                    paint_blobs(mask, cam, means[:, :2], tops, outline_area=sil.area)
             masks[n] = mask
         t1 = time.perf_counter()
         # 2. background and foreground
@@ -322,10 +332,6 @@ class AutoDetection:
         ended: list[int] = []
         if tracks:
             if evidence:
-                # head height: sitting keeps the upper body above the chair (003 §2.1)
-                tops = np.array([sh.chair_height + (1.0 - sh.hip_fraction) * sh.height
-                                 if m[SIT] >= 0.5 else sh.height
-                                 for sh, m in zip(shapes, means)])
                 supported, coverage = self.releaser.support(evidence, sils, means, tops)
             else:
                 supported = np.ones(len(tracks), bool)
@@ -500,6 +506,17 @@ class AutoDetection:
         if stamp_ns is not None:
             self._placed[int(track_id)] = int(stamp_ns)
             self._shown_since[int(track_id)] = int(stamp_ns)
+
+    def carry(self, tracks: Sequence[TrackEstimate]) -> None:
+        """Fill ``visibility`` and ``existence`` of ``tracks`` in place with the values of
+        the last :meth:`update` (a frame set the detection skips, ``detection_every``); no
+        decision is made on such a frame set."""
+        self.decisions = []
+        for t in tracks:
+            aux = self.aux.get(t.track_id)
+            if aux is not None:
+                t.visibility = dict(aux.visibility)
+                t.existence = float(aux.existence)
 
     def reported(self, track_id: int) -> bool:
         aux = self.aux.get(int(track_id))

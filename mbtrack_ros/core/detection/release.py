@@ -50,7 +50,40 @@ from mbtrack_ros.core.detection import DetectionError
 from mbtrack_ros.core.detection.detector import FrameEvidence, is_ceiling
 from mbtrack_ros.core.detection.features import span_counts, span_coverage
 
-__all__ = ['ReleaseConfig', 'Releaser', 'blob_coverage', 'spare_tracks']
+__all__ = ['ReleaseConfig', 'Releaser', 'blob_coverage', 'paint_blobs', 'spare_tracks']
+
+
+def _blob_windows(camera: Camera, xy: np.ndarray, heights: np.ndarray, radius: float,
+                  sides: int) -> list[tuple[int, int, np.ndarray] | None]:
+    """Per upright cylinder (floor point ``xy``, height, ``radius``) the image window it
+    covers: ``(x0, y0, inside)`` with ``inside`` the bool hull of the projected floor and head
+    circles, clipped to the image; None where it is behind the camera or off the image."""
+    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    k = xy.shape[0]
+    a = np.linspace(0.0, 2.0 * np.pi, sides, endpoint=False)
+    ring = np.stack([np.cos(a), np.sin(a)], axis=1) * radius            # (S, 2)
+    pts = np.zeros((k, 2, sides, 3))
+    pts[:, :, :, :2] = xy[:, None, None, :] + ring[None, None]
+    pts[:, 1, :, 2] = np.asarray(heights, dtype=np.float64).reshape(-1)[:, None]
+    pix = camera.project(pts.reshape(k, 2 * sides, 3))                    # (K, 2S, 2)
+    h, w = camera.height, camera.width
+    out: list[tuple[int, int, np.ndarray] | None] = []
+    for i in range(k):
+        p = pix[i][np.all(np.isfinite(pix[i]), axis=1)]
+        if len(p) < 3:
+            out.append(None)
+            continue
+        x0, y0 = np.floor(p.min(axis=0)).astype(int)
+        x1, y1 = np.ceil(p.max(axis=0)).astype(int) + 1
+        cx0, cy0, cx1, cy1 = max(x0, 0), max(y0, 0), min(x1, w), min(y1, h)
+        if cx1 <= cx0 or cy1 <= cy0:
+            out.append(None)
+            continue
+        hull = cv2.convexHull(np.round(p - [cx0, cy0]).astype(np.int32))
+        roi = np.zeros((cy1 - cy0, cx1 - cx0), np.uint8)
+        cv2.fillConvexPoly(roi, hull, 1)
+        out.append((int(cx0), int(cy0), roi.astype(bool)))
+    return out
 
 
 def blob_coverage(camera: Camera, foreground: np.ndarray, xy: np.ndarray,
@@ -71,34 +104,32 @@ def blob_coverage(camera: Camera, foreground: np.ndarray, xy: np.ndarray,
         area: (K,) blob pixels inside the image.
     """
     fg = np.asarray(foreground, dtype=bool)
-    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-    k = xy.shape[0]
-    a = np.linspace(0.0, 2.0 * np.pi, sides, endpoint=False)
-    ring = np.stack([np.cos(a), np.sin(a)], axis=1) * radius            # (S, 2)
-    pts = np.zeros((k, 2, sides, 3))
-    pts[:, :, :, :2] = xy[:, None, None, :] + ring[None, None]
-    pts[:, 1, :, 2] = np.asarray(heights, dtype=np.float64).reshape(-1)[:, None]
-    pix = camera.project(pts.reshape(k, 2 * sides, 3))                    # (K, 2S, 2)
-    cov = np.zeros(k)
-    area = np.zeros(k)
-    h, w = fg.shape
-    for i in range(k):
-        p = pix[i][np.all(np.isfinite(pix[i]), axis=1)]
-        if len(p) < 3:
+    windows = _blob_windows(camera, xy, heights, radius, sides)
+    cov = np.zeros(len(windows))
+    area = np.zeros(len(windows))
+    for i, win in enumerate(windows):
+        if win is None:
             continue
-        x0, y0 = np.floor(p.min(axis=0)).astype(int)
-        x1, y1 = np.ceil(p.max(axis=0)).astype(int) + 1
-        cx0, cy0, cx1, cy1 = max(x0, 0), max(y0, 0), min(x1, w), min(y1, h)
-        if cx1 <= cx0 or cy1 <= cy0:
-            continue
-        hull = cv2.convexHull(np.round(p - [cx0, cy0]).astype(np.int32))
-        roi = np.zeros((cy1 - cy0, cx1 - cx0), np.uint8)
-        cv2.fillConvexPoly(roi, hull, 1)
-        inside = roi.astype(bool)
+        x0, y0, inside = win
         area[i] = inside.sum()
         if area[i] > 0:
-            cov[i] = fg[cy0:cy1, cx0:cx1][inside].mean()
+            cov[i] = fg[y0:y0 + inside.shape[0], x0:x0 + inside.shape[1]][inside].mean()
     return cov, area
+
+
+def paint_blobs(mask: np.ndarray, camera: Camera, xy: np.ndarray, heights: np.ndarray, *,
+                outline_area: np.ndarray | None = None, max_fill: float = 0.25,
+                radius: float = 0.25, sides: int = 12) -> None:
+    """Set in ``mask`` (H, W) bool the pixels of the cylinder blobs of :func:`blob_coverage`
+    (what a top-down camera sees of people standing at ``xy``); with ``outline_area`` (K,)
+    only of the people whose body outline covers less than ``max_fill`` of their blob (the
+    outline degenerates near the point right below the camera)."""
+    for k, win in enumerate(_blob_windows(camera, xy, heights, radius, sides)):
+        if win is not None:
+            x0, y0, inside = win
+            if outline_area is not None and outline_area[k] >= max_fill * inside.sum():
+                continue
+            mask[y0:y0 + inside.shape[0], x0:x0 + inside.shape[1]] |= inside
 
 
 def spare_tracks(foregrounds: Sequence[np.ndarray], silhouettes: Sequence[object],
