@@ -34,7 +34,10 @@ corridor too). The cameras on the door's wall (``RoomCalibration.doorway_witness
 the doorway from the side and cannot see beyond the wall, so for a track within
 ``doorway_band`` of an exit's border, or inside the exit, only their foreground counts as
 support (003 §4.3: the release follows the foreground that the person explains); when none
-of them sees the track the ordinary rule applies.
+of them sees the track the ordinary rule applies. A track they see and do not cover ends
+after ``doorway_timeout``; one they cover keeps the ordinary ``timeout`` even when it
+counts as unsupported for another reason (spare, low existence): in a crowd at the door
+such a track usually still stands on its person (h-rel2, docs/detection.md).
 """
 from __future__ import annotations
 
@@ -231,9 +234,9 @@ class ReleaseConfig:
             a doorway stay within it.
         doorway_band: metres in front of an exit's border (and inside the exit) within
             which a track is supported only by the cameras on the door's wall (module
-            docstring, "Doorways"); 0 disables. ``doorway_timeout``: seconds without
-            support (or with existence below ``existence_threshold``) after which such a
-            track ends.
+            docstring, "Doorways"); 0 disables. ``doorway_timeout``: seconds after which
+            such a track ends when the door-wall cameras see it and find no foreground on
+            it (instead of ``timeout``).
     """
 
     timeout: float = 1.0
@@ -281,7 +284,8 @@ class Releaser:
         self._since: dict[int, int] = {}
         self._close: dict[tuple[int, int], int] = {}
         self.spare = np.zeros(0, bool)    # tracks of the last support() that were spare
-        self.doorway = np.zeros(0, bool)  # ... that stood in a doorway (wall cameras decided)
+        self.doorway = np.zeros(0, bool)  # ... in a doorway, seen but not covered by the
+        #                                     door-wall cameras (doorway_timeout applies)
 
     def support(self, evidence: Mapping[str, FrameEvidence], silhouettes: Mapping[str, object],
                 states: np.ndarray | None = None, heights: np.ndarray | None = None
@@ -341,7 +345,9 @@ class Releaser:
                     watched |= front & seen[name]
                     held |= front & covered[name]
             supported = np.where(watched, held, supported)
-            self.doorway = watched
+            # the short timeout is for this evidence only: a track the wall cameras cover
+            # that is spare (a crowd at the door) or fading keeps the ordinary one
+            self.doorway = watched & ~held
         self.spare = np.zeros(len(supported), bool)
         side = [n for n in silhouettes if n in evidence
                 and not is_ceiling(self.calibration.cameras[n])]
