@@ -9,6 +9,8 @@ where a subcommand reads it). Run from the repository root:
         door-wall cameras covered the track (>= 0.3) at the release frame
     doorway_ends.py first OUT_A OUT_B               first frame where two runs of one recording
         differ (tracks.csv rows or births / ends), with the ends of both there
+    doorway_ends.py creep OUT REC [OUT REC ...]     each premature exit release: frames since
+        the track was born or moved, its y and its person's y over the 6 frames before
 """
 from __future__ import annotations
 
@@ -84,6 +86,32 @@ def exits(pairs) -> None:
         print(k, total[k])
 
 
+def creep(pairs) -> None:
+    for out, rec in pairs:
+        tracks, truth, events, _ = de._load(out, rec)
+        d, frames = de._matching(tracks, truth)
+        person = {(r.frame, r.person_id): r.y for r in truth}
+        placed = collections.defaultdict(list)
+        for e in events:
+            if e['kind'] == 'birth':
+                placed[e['id']].append(e['frame'])
+            elif e['kind'] == 'decision' and e['action'].startswith('move'):
+                placed[int(e['action'].split()[1])].append(e['frame'])
+        ys = {(t.track_id, t.frame): t.y for t in tracks}
+        for e, kind, _ in _judged(out, rec):
+            if e['reason'] != 'exit' or kind != 'premature':
+                continue
+            f = e['frame']
+            sel = (d.track_id == e['id']) & (frames >= f - 15) & (frames < f) & \
+                (d.person_id >= 0)
+            p = int(np.bincount(d.person_id[sel]).argmax())
+            since = f - max([g for g in placed[e['id']] if g < f], default=0)
+            print(f"{out.name} t{e['id']}@{f}: placed {since} frames before; track y "
+                  + ' '.join(f"{ys.get((e['id'], g), np.nan):.2f}" for g in range(f - 6, f))
+                  + '; person y '
+                  + ' '.join(f"{person.get((g, p), np.nan):.2f}" for g in range(f - 6, f)))
+
+
 def first(a: Path, b: Path) -> None:
     def load(out):
         tr, ev = collections.defaultdict(list), collections.defaultdict(list)
@@ -108,4 +136,4 @@ if __name__ == '__main__':
     if cmd == 'first':
         first(*args)
     else:
-        {'doorway': doorway, 'exits': exits}[cmd](list(zip(args[::2], args[1::2])))
+        {'doorway': doorway, 'exits': exits, 'creep': creep}[cmd](list(zip(args[::2], args[1::2])))
