@@ -7,6 +7,7 @@
     .venv/bin/python docs/detection_eval.py lag OUT REC [OUT REC]     # track-person distance
     .venv/bin/python docs/detection_eval.py decisions OUT REC [OUT REC]  # moves right?
     .venv/bin/python docs/detection_eval.py exits OUT REC [OUT REC]    # premature exits?
+    .venv/bin/python docs/detection_eval.py releases OUT REC [OUT REC]  # late releases: why?
 
 ``run`` steps :class:`~mbtrack_ros.core.tracker.Tracker` with ``detection=True`` exactly as
 ``mbtrack replay REC --out OUT --eval REC/ground_truth.csv --seed S`` does (same
@@ -78,14 +79,15 @@ def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False,
                        'reason': 'exit'} for t in ended)
         return ended
 
-    def logged_update(self, stamp, ids, supported, existence=None):
-        ended = update(self, stamp, ids, supported, existence)
+    def logged_update(self, stamp, ids, supported, existence=None, doorway=None):
+        ended = update(self, stamp, ids, supported, existence, doorway)
         for tid in ended:
             k = list(ids).index(tid)
             spare = k < len(self.spare) and self.spare[k]
             events.append({'kind': 'end', 'frame': frame['index'], 'id': int(tid),
                            'reason': 'spare' if spare else 'support' if not supported[k]
-                           else 'existence'})
+                           else 'existence',
+                           'doorway': bool(doorway is not None and doorway[k])})
         return ended
 
     def logged_duplicates(self, stamp, ids, xy, shown_since=None):
@@ -177,6 +179,7 @@ def _analyse(out: Path, rec: Path) -> dict:
 
     cal = RoomCalibration.load(rec / 'calibration.yaml')
     switches, births, enter, enter_seen, leave, causes = [], [], [], [], [], {}
+    leave_detail: list[dict] = []      # per release: person, track, frames, end event
     per_person: dict[int, list] = {}
     for r in truth:
         per_person.setdefault(r.person_id, []).append(r)
@@ -228,10 +231,12 @@ def _analyse(out: Path, rec: Path) -> dict:
         if prow[-1].frame < last - 30 and floor:
             tail = tid[-30:]
             tail = tail[tail >= 0]
-            e = end_after(int(np.bincount(tail).argmax()), frame_of(st[-30:][0])) \
-                if tail.size else None
+            follower = int(np.bincount(tail).argmax()) if tail.size else -1
+            e = end_after(follower, frame_of(st[-30:][0])) if tail.size else None
             if e:
                 leave.append((e['frame'] - floor[-1]) / FPS)
+                leave_detail.append({'person': int(p), 'track': follower, 'left': floor[-1],
+                                     'gone': walked[-1].frame + 1, 'end': e})
     for tid, rows in sorted(by_track.items()):
         r0 = rows[0]
         dist, pid = nearest(r0.frame, r0.x, r0.y)
@@ -244,7 +249,8 @@ def _analyse(out: Path, rec: Path) -> dict:
     moves = sum(1 for e in events if e['kind'] == 'decision'
                 and e['action'].startswith('move'))
     return {'result': res, 'switches': switches, 'false_births': births, 'enter': enter,
-            'enter_seen': enter_seen, 'leave': leave, 'moves': moves, 'causes': causes}
+            'enter_seen': enter_seen, 'leave': leave, 'leave_detail': leave_detail, 'moves': moves,
+            'causes': causes}
 
 
 def report(out: Path, rec: Path) -> None:
@@ -357,6 +363,112 @@ def exits(pairs: list[tuple[Path, Path]]) -> None:
                 found.append(f"{e['id']}@{f} (person {p})")
         print(f'{out.name}: premature ' + (', '.join(found) or 'none'))
     print('total:', ', '.join(f'{k} {v}' for k, v in sorted(total.items())) or 'none')
+
+
+RELEASE_CLASSES = ('hidden', 'on another person', 'beside a tracked person', 'alone')
+
+
+def late_releases(out: Path, rec: Path, late: float = 1.5) -> list[dict]:
+    """Each release of a person who left (``report``'s "release after leaving the floor")
+    later than ``late`` seconds, with what its track did from the frame the person was
+    gone (their last ground-truth row + 1) to its end, frame by frame (h-rel):
+
+    * ``hidden``: the track was not reported (existence below the report level);
+    * ``on another person``: the CLEAR-MOT matching gave it to another person;
+    * ``beside a tracked person``: reported within 0.6 m of another person who had a
+      track of their own;
+    * ``alone``: reported, nobody within 0.6 m.
+
+    The class is the most frequent of these. With OUT/probe.csv (docs/diag/release_probe.py)
+    also the releaser's view over those frames: median existence, the fraction of frames
+    with support and found spare, the median exclusive support and coverage per camera."""
+    a = _analyse(out, rec)
+    tracks, truth, _, _ = _load(out, rec)
+    d, frames = _matching(tracks, truth)
+    shown = {(t.frame, t.track_id): (t.x, t.y) for t in tracks}
+    matched = {(int(f), int(t)): int(p) for f, t, p in zip(frames, d.track_id, d.person_id)
+               if t >= 0 and p >= 0}
+    tracked = {(f, p) for (f, _), p in matched.items()}
+    gt: dict[int, list] = {}
+    for r in truth:
+        gt.setdefault(r.frame, []).append(r)
+    probe = None
+    if (out / 'probe.csv').exists():
+        probe = np.genfromtxt(out / 'probe.csv', delimiter=',', names=True)
+        s0 = min(r.stamp_ns for r in truth)
+        probe_frame = np.round((probe['stamp_ns'] - s0) / (1e9 / FPS)).astype(int)
+    found = []
+    for ld in a['leave_detail']:
+        e, tid, p = ld['end'], ld['track'], ld['person']
+        delay = (e['frame'] - ld['left']) / FPS
+        if delay <= late:
+            continue
+        count = dict.fromkeys(RELEASE_CLASSES, 0)
+        places = []
+        for f in range(ld['gone'], e['frame']):
+            xy = shown.get((f, tid))
+            if xy is None:
+                count['hidden'] += 1
+                continue
+            places.append(xy)
+            q = matched.get((f, tid))
+            if q is not None and q != p:
+                count['on another person'] += 1
+                continue
+            near = [r.person_id for r in gt.get(f, []) if r.person_id != p
+                    and np.hypot(r.x - xy[0], r.y - xy[1]) < 0.6]
+            count['beside a tracked person' if any((f, q) in tracked for q in near)
+                  else 'alone'] += 1
+        row = {'run': out.name, 'person': p, 'track': tid, 'delay': delay,
+               'reason': e['reason'], 'frames': e['frame'] - ld['gone'], 'count': count,
+               'kind': max(RELEASE_CLASSES, key=count.__getitem__),
+               'place': np.median(places, axis=0) if places else (np.nan, np.nan)}
+        if probe is not None:
+            sel = ((probe['track_id'] == tid) & (probe_frame >= ld['gone'])
+                   & (probe_frame < e['frame']))
+            cams = [n for n in probe.dtype.names if n.startswith('coverage_')]
+            row['probe'] = {
+                'existence': float(np.nanmedian(probe['existence'][sel])) if sel.any() else np.nan,
+                'supported': float(np.mean(probe['supported'][sel])) if sel.any() else np.nan,
+                'spare': float(np.mean(probe['spare'][sel])) if sel.any() else np.nan,
+                'exclusive': float(np.nanmedian(probe['exclusive'][sel]))
+                if sel.any() and np.isfinite(probe['exclusive'][sel]).any() else np.nan,
+                'coverage': {c[9:]: float(np.nanmedian(probe[c][sel])) if sel.any()
+                             and np.isfinite(probe[c][sel]).any() else np.nan for c in cams},
+                'y': float(np.median(probe['y'][sel])) if sel.any() else np.nan}
+        found.append(row)
+    return found
+
+
+def releases(pairs: list[tuple[Path, Path]]) -> None:
+    """Every release later than 1.5 s with its class (``late_releases``), then the counts."""
+    rows = [r for out, rec in pairs for r in late_releases(out, rec)]
+    for r in rows:
+        c = r['count']
+        text = (f"{r['run']} person {r['person']} track {r['track']}: {r['delay']:.2f} s "
+                f"({r['reason']}), {r['kind']}; over {r['frames']} frames hidden "
+                f"{c['hidden']}, on another person {c['on another person']}, beside a tracked "
+                f"person {c['beside a tracked person']}, alone {c['alone']}; reported at "
+                f"({r['place'][0]:.2f}, {r['place'][1]:.2f})")
+        pr = r.get('probe')
+        if pr:
+            text += (f"; existence {pr['existence']:.2f}, supported {pr['supported']:.2f}, "
+                     f"spare {pr['spare']:.2f}, exclusive {pr['exclusive']:.2f}, y "
+                     f"{pr['y']:.2f}, coverage " + ' '.join(
+                         f'{k} {v:.2f}' for k, v in pr['coverage'].items()))
+        print(text)
+    print('| class | late releases | delay median | longest | ended by (exit, spare, support, '
+          'existence, duplicate) |')
+    print('| --- | --- | --- | --- | --- |')
+    for kind in RELEASE_CLASSES:
+        k = [r for r in rows if r['kind'] == kind]
+        if not k:
+            continue
+        by = [sum(r['reason'] == why for r in k)
+              for why in ('exit', 'spare', 'support', 'existence', 'duplicate')]
+        print(f"| {kind} | {len(k)} | {np.median([r['delay'] for r in k]):.2f} s | "
+              f"{max(r['delay'] for r in k):.2f} s | {', '.join(map(str, by))} |")
+    print(f'| all | {len(rows)} | | | |')
 
 
 def lag(pairs: list[tuple[Path, Path]]) -> None:
@@ -604,7 +716,7 @@ def main(argv: list[str] | None = None) -> int:
     s.add_argument('rec', type=Path)
     t = sub.add_parser('table')
     t.add_argument('pairs', type=Path, nargs='+')
-    for name in ('lag', 'decisions', 'totals', 'spares', 'classes', 'exits'):
+    for name in ('lag', 'decisions', 'totals', 'spares', 'classes', 'exits', 'releases'):
         sub.add_parser(name).add_argument('pairs', type=Path, nargs='+')
     r.add_argument('--params', type=Path, default=None, metavar='NODE.yaml',
                    help='tracker settings of a tracker_node parameter file (config/*.yaml)')
@@ -623,7 +735,8 @@ def main(argv: list[str] | None = None) -> int:
         if len(args.pairs) % 2:
             p.error(f'{args.cmd} needs OUT REC pairs')
         {'table': table, 'lag': lag, 'decisions': decisions, 'totals': totals,
-         'spares': spares, 'classes': classes, 'exits': exits}[args.cmd](
+         'spares': spares, 'classes': classes, 'exits': exits,
+         'releases': releases}[args.cmd](
             list(zip(args.pairs[::2], args.pairs[1::2])))
     return 0
 

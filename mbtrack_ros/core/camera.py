@@ -342,20 +342,53 @@ class RoomCalibration:
         depth[inside] = np.hypot(dx, dy)[inside]
         return depth
 
-    def exit_hidden(self, camera: str, xy: np.ndarray) -> np.ndarray:
-        """(K,) True for floor points (K, 2) inside an exit that ``camera`` cannot see: its
-        centre is on the exit's side of the floor border they share, i.e. it hangs on the
-        wall with the door and looks at the exit from behind that wall."""
-        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-        hidden = np.zeros(len(xy), bool)
+    def _on_door_wall(self, camera: str, exit_rect: tuple[float, float, float, float]
+                      ) -> bool:
+        """True when ``camera``'s centre is on the exit's side of the floor border they
+        share: it hangs on the wall with the door and looks at the exit from behind it."""
         cx, cy = self.cameras[camera].center[:2]
         fx0, fy0, fx1, fy1 = self.floor
-        for ex0, ey0, ex1, ey1 in self.exits:
-            behind = ((ey0 >= fy1 and cy >= fy1) or (ey1 <= fy0 and cy <= fy0)
-                      or (ex0 >= fx1 and cx >= fx1) or (ex1 <= fx0 and cx <= fx0))
-            if behind:
-                hidden |= _in_rect(xy, (ex0, ey0, ex1, ey1))
+        ex0, ey0, ex1, ey1 = exit_rect
+        return bool((ey0 >= fy1 and cy >= fy1) or (ey1 <= fy0 and cy <= fy0)
+                    or (ex0 >= fx1 and cx >= fx1) or (ex1 <= fx0 and cx <= fx0))
+
+    def exit_hidden(self, camera: str, xy: np.ndarray) -> np.ndarray:
+        """(K,) True for floor points (K, 2) inside an exit that ``camera`` cannot see: the
+        camera hangs on the wall with the door (``_on_door_wall``)."""
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        hidden = np.zeros(len(xy), bool)
+        for rect in self.exits:
+            if self._on_door_wall(camera, rect):
+                hidden |= _in_rect(xy, rect)
         return hidden
+
+    def doorway_witnesses(self, xy: np.ndarray, band: float) -> dict[str, np.ndarray]:
+        """Per camera, (K,) True for the floor points (K, 2) in front of a door - inside an
+        exit, or on the floor less than ``band`` metres from the border piece the exit
+        shares with it - that the camera watches from the door's wall
+        (``_on_door_wall``). These cameras see the doorway but not the corridor behind
+        it; any other camera's view of the doorway also shows the exit, where a person
+        who just left may still walk. Cameras with no such point are left out."""
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        fx0, fy0, fx1, fy1 = self.floor
+        out: dict[str, np.ndarray] = {}
+        for ex0, ey0, ex1, ey1 in self.exits:
+            # the exit grown by the band across the border it shares with the floor
+            if ey0 >= fy1:                      # beyond the floor's y_max side
+                front = (ex0, fy1 - band, ex1, ey1)
+            elif ey1 <= fy0:                    # beyond y_min
+                front = (ex0, ey0, ex1, fy0 + band)
+            elif ex0 >= fx1:                    # beyond x_max
+                front = (fx1 - band, ey0, ex1, ey1)
+            else:                               # beyond x_min
+                front = (ex0, ey0, fx0 + band, ey1)
+            inside = _in_rect(xy, front)
+            if not inside.any():
+                continue
+            for name in self.cameras:
+                if self._on_door_wall(name, (ex0, ey0, ex1, ey1)):
+                    out[name] = out.get(name, np.zeros(len(xy), bool)) | inside
+        return out
 
     @property
     def names(self) -> list[str]:

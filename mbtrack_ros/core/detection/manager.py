@@ -356,9 +356,11 @@ class AutoDetection:
                     keep = [k for k, i in enumerate(ids) if i not in ended]
                     ended += self.releaser.update(stamp_ns, [ids[k] for k in keep],
                                                   supported[keep],
-                                                  [existence[k] for k in keep])
+                                                  [existence[k] for k in keep],
+                                                  self.releaser.doorway[keep])
                 else:
-                    ended = self.releaser.update(stamp_ns, ids, supported, existence)
+                    ended = self.releaser.update(stamp_ns, ids, supported, existence,
+                                                 self.releaser.doorway)
                 shown = [self._shown_since.get(i, 0) if cfg.duplicate_by_reporting else 0
                          for i in ids]
                 ended += [i for i in self.releaser.duplicates(stamp_ns, ids, means[:, [X, Y]],

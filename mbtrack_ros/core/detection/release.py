@@ -25,6 +25,19 @@ judged again without it, so that of two tracks on one person one survives (see
 walked out. Without exits a person who leaves holds the track at the floor edge while
 they stay visible through the open door, and the timeout only starts after that
 (docs/detection.md, "Exits").
+
+**Doorways** (h-rel). Seen from a camera facing the door, a track standing in the doorway
+lies in front of the corridor: the person who just walked out is still foreground behind
+it, and so is a track left on the floor edge, which keeps it "supported" for seconds
+after its person has gone (the ceiling camera's blob of such a track reaches into the
+corridor too). The cameras on the door's wall (``RoomCalibration.doorway_witnesses``) see
+the doorway from the side and cannot see beyond the wall, so for a track within
+``doorway_band`` of an exit's border, or inside the exit, only their foreground counts as
+support (003 §4.3: the release follows the foreground that the person explains); when none
+of them sees the track the ordinary rule applies. A track they see and do not cover ends
+after ``doorway_timeout``; one they cover keeps the ordinary ``timeout`` even when it
+counts as unsupported for another reason (spare, low existence): in a crowd at the door
+such a track usually still stands on its person (h-rel2, docs/detection.md).
 """
 from __future__ import annotations
 
@@ -219,6 +232,11 @@ class ReleaseConfig:
         exit_margin: metres from the floor rectangle beyond which a track inside one of the
             calibration's exits is released at once (module docstring); people standing in
             a doorway stay within it.
+        doorway_band: metres in front of an exit's border (and inside the exit) within
+            which a track is supported only by the cameras on the door's wall (module
+            docstring, "Doorways"); 0 disables. ``doorway_timeout``: seconds after which
+            such a track ends when the door-wall cameras see it and find no foreground on
+            it (instead of ``timeout``).
     """
 
     timeout: float = 1.0
@@ -232,6 +250,8 @@ class ReleaseConfig:
     spare_support: float = 0.25
     spare_radius: float = 1.0
     exit_margin: float = 0.3
+    doorway_band: float = 0.5
+    doorway_timeout: float = 0.5
 
     def __post_init__(self) -> None:
         if not self.timeout >= 0:
@@ -244,6 +264,11 @@ class ReleaseConfig:
         if not (np.isfinite(self.exit_margin) and self.exit_margin >= 0):
             raise DetectionError(f'exit_margin must be a finite number >= 0, got '
                                  f'{self.exit_margin}')
+        if not self.doorway_timeout >= 0:
+            raise DetectionError(f'doorway_timeout must be >= 0, got {self.doorway_timeout}')
+        if not (np.isfinite(self.doorway_band) and self.doorway_band >= 0):
+            raise DetectionError(f'doorway_band must be a finite number >= 0, got '
+                                 f'{self.doorway_band}')
 
 
 class Releaser:
@@ -259,6 +284,8 @@ class Releaser:
         self._since: dict[int, int] = {}
         self._close: dict[tuple[int, int], int] = {}
         self.spare = np.zeros(0, bool)    # tracks of the last support() that were spare
+        self.doorway = np.zeros(0, bool)  # ... in a doorway, seen but not covered by the
+        #                                     door-wall cameras (doorway_timeout applies)
 
     def support(self, evidence: Mapping[str, FrameEvidence], silhouettes: Mapping[str, object],
                 states: np.ndarray | None = None, heights: np.ndarray | None = None
@@ -281,6 +308,8 @@ class Releaser:
         """
         cfg = self.config
         coverage: dict[str, np.ndarray] = {}
+        seen: dict[str, np.ndarray] = {}         # camera -> (K,) sees the track
+        covered: dict[str, np.ndarray] = {}      # camera -> (K,) sees it on foreground
         supported = None
         for name, sil in silhouettes.items():
             if name not in evidence:
@@ -297,13 +326,28 @@ class Releaser:
             sees = area >= cfg.min_area * cam.width * cam.height / (320.0 * 240.0)
             scale = 2.0 if blob else 1.0
             coverage[name] = np.where(sees, np.minimum(scale * cov, 1.0), np.nan)
+            seen[name], covered[name] = sees, sees & (cov >= threshold)
             if supported is None:
                 supported = np.zeros(cov.shape, bool)
             if name in self.deciding:
-                supported |= sees & (cov >= threshold)
+                supported |= covered[name]
         if supported is None:
             k = len(next(iter(silhouettes.values())).offsets) - 1 if silhouettes else 0
             supported = np.zeros(k, bool)
+        self.doorway = np.zeros(len(supported), bool)
+        if cfg.doorway_band > 0 and states is not None and self.calibration.exits:
+            # in front of a door only the cameras on the door's wall count (module docstring)
+            watched = np.zeros(len(supported), bool)
+            held = np.zeros(len(supported), bool)
+            for name, front in self.calibration.doorway_witnesses(
+                    states[:, :2], cfg.doorway_band).items():
+                if name in seen:
+                    watched |= front & seen[name]
+                    held |= front & covered[name]
+            supported = np.where(watched, held, supported)
+            # the short timeout is for this evidence only: a track the wall cameras cover
+            # that is spare (a crowd at the door) or fading keeps the ordinary one
+            self.doorway = watched & ~held
         self.spare = np.zeros(len(supported), bool)
         side = [n for n in silhouettes if n in evidence
                 and not is_ceiling(self.calibration.cameras[n])]
@@ -328,11 +372,16 @@ class Releaser:
         return [int(ids[k]) for k in np.flatnonzero(depth > self.config.exit_margin)]
 
     def update(self, stamp_ns: int, ids: Sequence[int], supported: Sequence[bool],
-               existence: Sequence[float] | None = None) -> list[int]:
-        """Record one frame's support; returns the ids to release now."""
+               existence: Sequence[float] | None = None,
+               doorway: Sequence[bool] | None = None) -> list[int]:
+        """Record one frame's support; returns the ids to release now. A track flagged in
+        ``doorway`` (``self.doorway`` of :meth:`support`) is released after
+        ``doorway_timeout`` instead of ``timeout``."""
         cfg = self.config
-        if len(supported) != len(ids) or (existence is not None and len(existence) != len(ids)):
-            raise DetectionError('ids, supported and existence must have the same length')
+        if len(supported) != len(ids) or any(v is not None and len(v) != len(ids)
+                                             for v in (existence, doorway)):
+            raise DetectionError('ids, supported, existence and doorway must have the same '
+                                 'length')
         ended = []
         live = set(int(i) for i in ids)
         for tid in list(self._since):
@@ -347,7 +396,8 @@ class Releaser:
                 self._since.pop(tid, None)
                 continue
             since = self._since.setdefault(tid, int(stamp_ns))
-            if (int(stamp_ns) - since) / 1e9 >= cfg.timeout:
+            timeout = cfg.doorway_timeout if doorway is not None and doorway[k] else cfg.timeout
+            if (int(stamp_ns) - since) / 1e9 >= timeout:
                 ended.append(tid)
                 del self._since[tid]
         return ended
