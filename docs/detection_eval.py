@@ -351,18 +351,27 @@ def exits(pairs: list[tuple[Path, Path]]) -> None:
             if e['kind'] != 'end' or e['reason'] != 'exit':
                 continue
             f = e['frame']
-            sel = (d.track_id == e['id']) & (frames >= f - 15) & (frames < f) & (d.person_id >= 0)
-            if not sel.any():
-                kind = 'nobody'
-            else:
-                p = int(np.bincount(d.person_id[sel]).argmax())
-                n = sum((g, p) in present for g in range(f + 1, f + 16))
-                kind = 'premature' if n >= 10 else 'left'
+            kind, p = end_class(d, frames, present, e['id'], f)
             total[kind] = total.get(kind, 0) + 1
             if kind == 'premature':
                 found.append(f"{e['id']}@{f} (person {p})")
         print(f'{out.name}: premature ' + (', '.join(found) or 'none'))
     print('total:', ', '.join(f'{k} {v}' for k, v in sorted(total.items())) or 'none')
+
+
+def end_class(d, frames: np.ndarray, present: set, track_id: int, frame: int
+              ) -> tuple[str, int]:
+    """(class, person) of a track's end at ``frame``: the person it was matched to in the
+    15 frames before (-1 for none) and ``premature`` when they are in the ground truth
+    (``present``: (frame, person) pairs) in at least 10 of the 15 frames after, ``left``
+    when not, ``nobody`` when the track was matched to no one."""
+    sel = (d.track_id == track_id) & (frames >= frame - 15) & (frames < frame) \
+        & (d.person_id >= 0)
+    if not sel.any():
+        return 'nobody', -1
+    p = int(np.bincount(d.person_id[sel]).argmax())
+    n = sum((g, p) in present for g in range(frame + 1, frame + 16))
+    return ('premature' if n >= 10 else 'left'), p
 
 
 RELEASE_CLASSES = ('hidden', 'on another person', 'beside a tracked person', 'alone')
@@ -657,7 +666,7 @@ def switch_classes(out: Path, rec: Path) -> list[dict]:
             g = seen[-1] if seen else None       # the old track's last reported frame
             last_off = np.hypot(shown[(g, old)][0] - where[(g, p)][0],
                                 shown[(g, old)][1] - where[(g, p)][1]) if g is not None else np.nan
-            a, b = where.get((f - 3, p)), where.get((f0, p))
+            a = where.get((f - 3, p))
             speed = np.hypot(me.x - a[0], me.y - a[1]) * FPS / 3 if a else np.nan
             vis = _visible_fractions(cal, gt[f], int(p))
             o = shown.get((f, old))

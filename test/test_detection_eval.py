@@ -74,3 +74,20 @@ def test_the_entering_clock_starts_when_two_cameras_see_the_whole_person(detecti
         gt[f] = [me] + others
     assert detection_eval._fully_visible_from(calibration, gt, rows) == 3
     assert detection_eval._fully_visible_from(calibration, gt, rows[:3]) is None
+
+
+def test_end_class_tells_premature_from_left_and_nobody(detection_eval):
+    """A track matched to person 1 in the 15 frames before its end at frame 20: premature
+    when person 1 stays in the ground truth, left when they are gone; a track matched to
+    no one is 'nobody'."""
+    from types import SimpleNamespace
+
+    frames = np.arange(5, 20)
+    d = SimpleNamespace(track_id=np.full(15, 7), person_id=np.full(15, 1))
+    stays = {(g, 1) for g in range(0, 40)}
+    gone = {(g, 1) for g in range(0, 21)}
+    assert detection_eval.end_class(d, frames, stays, 7, 20) == ('premature', 1)
+    assert detection_eval.end_class(d, frames, gone, 7, 20) == ('left', 1)
+    assert detection_eval.end_class(d, frames, stays, 8, 20) == ('nobody', -1)
+    unmatched = SimpleNamespace(track_id=np.full(15, 7), person_id=np.full(15, -1))
+    assert detection_eval.end_class(unmatched, frames, stays, 7, 20) == ('nobody', -1)

@@ -17,7 +17,6 @@ def ldetect(self, evidence, track_xy=None):
     f = frame['i']
     if f_lo <= f <= f_hi and f in gt:
         p = np.array([gt[f].x, gt[f].y])
-        cfg = self.config
         k = int(np.argmin(np.linalg.norm(self.coarse_xy - p, axis=1)))
         score, mean_cov = self.coarse(evidence, track_xy=track_xy)
         per = {}

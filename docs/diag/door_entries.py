@@ -1,6 +1,6 @@
 """Timeline of each entering person: GT first row, crossings, camera visibility, the
 detection decisions near them, births and the first reported / matched frame."""
-import sys, json
+import sys
 from pathlib import Path
 import os
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # docs/ for detection_eval

@@ -29,7 +29,7 @@ WALL = ('coverage_cam2', 'coverage_cam3')      # the synth room's cameras on the
 
 
 def _judged(out: Path, rec: Path):
-    """Ends of OUT with their class (premature / left / nobody) and the probe rows per track."""
+    """Ends of OUT with their class (premature / left / nobody), person and probe rows."""
     tracks, truth, events, _ = de._load(out, rec)
     d, frames = de._matching(tracks, truth)
     present = {(r.frame, r.person_id) for r in truth}
@@ -41,15 +41,8 @@ def _judged(out: Path, rec: Path):
     for e in events:
         if e['kind'] != 'end':
             continue
-        f = e['frame']
-        sel = (d.track_id == e['id']) & (frames >= f - 15) & (frames < f) & (d.person_id >= 0)
-        if not sel.any():
-            kind = 'nobody'
-        else:
-            p = int(np.bincount(d.person_id[sel]).argmax())
-            kind = 'premature' if sum((g, p) in present for g in range(f + 1, f + 16)) >= 10 \
-                else 'left'
-        yield e, kind, rows[e['id']]
+        kind, person = de.end_class(d, frames, present, e['id'], e['frame'])
+        yield e, kind, person, rows[e['id']]
 
 
 def _wall(row) -> float:
@@ -60,7 +53,7 @@ def _wall(row) -> float:
 def doorway(pairs) -> None:
     total = collections.Counter()
     for out, rec in pairs:
-        for e, kind, rows in _judged(out, rec):
+        for e, kind, _, rows in _judged(out, rec):
             if not e.get('doorway'):
                 continue
             last = rows[-8:]
@@ -79,7 +72,7 @@ def doorway(pairs) -> None:
 def exits(pairs) -> None:
     total = collections.Counter()
     for out, rec in pairs:
-        for e, kind, rows in _judged(out, rec):
+        for e, kind, _, rows in _judged(out, rec):
             if e['reason'] == 'exit' and rows:
                 total[(kind, 'covered' if _wall(rows[-1]) >= 0.3 else 'not covered')] += 1
     for k in sorted(total):
@@ -89,7 +82,6 @@ def exits(pairs) -> None:
 def creep(pairs) -> None:
     for out, rec in pairs:
         tracks, truth, events, _ = de._load(out, rec)
-        d, frames = de._matching(tracks, truth)
         person = {(r.frame, r.person_id): r.y for r in truth}
         placed = collections.defaultdict(list)
         for e in events:
@@ -98,13 +90,10 @@ def creep(pairs) -> None:
             elif e['kind'] == 'decision' and e['action'].startswith('move'):
                 placed[int(e['action'].split()[1])].append(e['frame'])
         ys = {(t.track_id, t.frame): t.y for t in tracks}
-        for e, kind, _ in _judged(out, rec):
+        for e, kind, p, _ in _judged(out, rec):
             if e['reason'] != 'exit' or kind != 'premature':
                 continue
             f = e['frame']
-            sel = (d.track_id == e['id']) & (frames >= f - 15) & (frames < f) & \
-                (d.person_id >= 0)
-            p = int(np.bincount(d.person_id[sel]).argmax())
             since = f - max([g for g in placed[e['id']] if g < f], default=0)
             print(f"{out.name} t{e['id']}@{f}: placed {since} frames before; track y "
                   + ' '.join(f"{ys.get((e['id'], g), np.nan):.2f}" for g in range(f - 6, f))

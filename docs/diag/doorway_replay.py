@@ -1,50 +1,54 @@
-"""h-rel, offline: replay 'in the doorway band, support only from the exit-blind cameras' with timeout T on release_probe.py logs.
-    usage: doorway_replay.py BAND TIMEOUT MIN_COVERAGE RUN...  (RUN = rec_sS; PROBE, BASE dirs)"""
-import os
+"""h-rel, offline: replay the rule "in the doorway band only the door-wall cameras support a
+track, release after TIMEOUT without them" on docs/diag/release_probe.py logs: which tracks
+it would end, their class (premature / left / nobody, as ``detection_eval exits``) and how
+much sooner than the run did.
+
+    usage: PROBE=DIR BASE=DIR doorway_replay.py BAND TIMEOUT MIN_COVERAGE RUN...
+"""
+from __future__ import annotations
+
 import sys
 from pathlib import Path
+
 import numpy as np
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-import detection_eval as de
-FPS=15
-band=float(sys.argv[1]); T=int(round(float(sys.argv[2])*FPS)); thr=float(sys.argv[3]); runs=sys.argv[4:]
-tot={}
-for run in runs:
-    out=Path(os.environ.get('PROBE', '/tmp/h-rel/probe'))/run; rec=Path('/tmp/h4')/run.rsplit('_s',1)[0]
-    tracks,truth,events,last=de._load(Path(os.environ.get('BASE', '/tmp/h-exit/v3'))/run,rec)
-    d,frames=de._matching(tracks,truth)
-    pr=np.genfromtxt(out/'probe.csv',delimiter=',',names=True)
-    s0=min(r.stamp_ns for r in truth)
-    pf=np.round((pr['stamp_ns']-s0)/(1e9/FPS)).astype(int)
-    matched={(int(f),int(t)):int(p) for f,t,p in zip(frames,d.track_id,d.person_id) if t>=0 and p>=0}
-    present={(r.frame,r.person_id) for r in truth}
-    ends={}
-    for e in events:
-        if e['kind']=='end': ends.setdefault(e['id'],[]).append(e['frame'])
-    wall=np.nanmax(np.stack([pr['coverage_cam2'],pr['coverage_cam3']]),axis=0)
-    inb=(pr['x']>=4.2)&(pr['x']<=5.1)&(pr['y']>=4.7-band)&(pr['y']<=5.0)
-    bad=inb&~(wall>=thr)
-    res=[]
-    for tid in np.unique(pr['track_id']):
-        s=np.flatnonzero(pr['track_id']==tid)
-        run_len=0; prevf=None
-        for i in s:
-            f=pf[i]
-            if prevf is not None and f!=prevf+1: run_len=0   # id reused / gap
-            prevf=f
-            run_len = run_len+1 if bad[i] else 0
-            if run_len>=T:
-                endf=min([g for g in ends.get(int(tid),[]) if g>=f], default=None)
-                ps=[matched[(g,int(tid))] for g in range(f-15,f) if (g,int(tid)) in matched]
-                if not ps: kind='nobody'
-                else:
-                    p=int(np.bincount(ps).argmax())
-                    n=sum((g,p) in present for g in range(f+1,f+16))
-                    kind='premature' if n>=10 else 'left'
-                gain=(endf-f)/FPS if endf is not None else np.nan
-                res.append((int(tid),f,kind,gain))
-                tot[kind]=tot.get(kind,0)+1
-                tot[kind+'_gain']=tot.get(kind+'_gain',0)+gain
-                break
-    print(run, ' '.join(f'{t}@{f}:{k}:{g:+.1f}s' for t,f,k,g in res))
-print({k:(round(v,1) if 'gain' in k else v) for k,v in tot.items()})
+import detection_eval as de  # noqa: E402
+from doorway_coverage import probe_run  # noqa: E402
+
+
+def main(band: float, timeout: float, threshold: float, runs: list[str]) -> None:
+    frames_needed = int(round(timeout * de.FPS))
+    total: dict[str, float] = {}
+    for run in runs:
+        pr, pf, d, frames, truth, events, wall = probe_run(run)
+        present = {(r.frame, r.person_id) for r in truth}
+        ends: dict[int, list[int]] = {}
+        for e in events:
+            if e['kind'] == 'end':
+                ends.setdefault(e['id'], []).append(e['frame'])
+        in_band = (pr['x'] >= 4.2) & (pr['x'] <= 5.1) & (pr['y'] >= 4.7 - band) & (pr['y'] <= 5.0)
+        bad = in_band & ~(wall >= threshold)
+        found = []
+        for tid in np.unique(pr['track_id']).astype(int):
+            run_len, prev = 0, None
+            for i in np.flatnonzero(pr['track_id'] == tid):
+                f = pf[i]
+                if prev is not None and f != prev + 1:
+                    run_len = 0                               # id reused / gap
+                prev = f
+                run_len = run_len + 1 if bad[i] else 0
+                if run_len >= frames_needed:
+                    end = min([g for g in ends.get(tid, []) if g >= f], default=None)
+                    kind, _ = de.end_class(d, frames, present, tid, f)
+                    gain = (end - f) / de.FPS if end is not None else np.nan
+                    found.append((tid, f, kind, gain))
+                    total[kind] = total.get(kind, 0) + 1
+                    total[kind + '_gain'] = total.get(kind + '_gain', 0) + gain
+                    break
+        print(run, ' '.join(f'{t}@{f}:{k}:{g:+.1f}s' for t, f, k, g in found))
+    print({k: (round(v, 1) if 'gain' in k else v) for k, v in total.items()})
+
+
+if __name__ == '__main__':
+    main(float(sys.argv[1]), float(sys.argv[2]), float(sys.argv[3]), sys.argv[4:])

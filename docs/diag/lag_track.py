@@ -4,7 +4,6 @@ from mbtrack_ros.core.camera import RoomCalibration
 from mbtrack_ros.recording.bag import RecordingReader
 from mbtrack_ros.core.tracker import Tracker, TrackerConfig
 from mbtrack_ros.core.detection import manager as M
-from mbtrack_ros.core.detection.features import span_coverage
 rec = Path(sys.argv[1]); seed = int(sys.argv[2]); nmax = int(sys.argv[3]); tid = int(sys.argv[4])
 import csv
 gt = {}
@@ -17,9 +16,6 @@ def aux(self, dt, colour, tracks, models, parts, owner, part_sils, coverage):
     k = [i for i, t in enumerate(tracks) if t.track_id == tid]
     if k:
         k = k[0]; t = tracks[k]
-        pc = {}
-        for n, sil in part_sils.items():
-            fg = self._pending_fg[n] if hasattr(self, '_pending_fg') else None
         log['t'] = (t.mean[:4].copy(), None if t.particles is None else t.particles[:, :2].std(0),
                     {n: round(float(c[k]), 2) for n, c in coverage.items()})
         if FR['i'] in ():
