@@ -170,8 +170,12 @@ def _run_live(args: argparse.Namespace, rec: Path, info: dict
         tracker_params['init_ground_truth'] = rec / 'ground_truth.csv'
     else:
         tracker_params['detection.enabled'] = True
+    # the player waits until the tracker subscribes to every camera and to /clock: images
+    # published before that are lost, and the tracker then learnt its background from
+    # frames 13-21 with people standing in them (MOTA 62-76 % instead of 94 %)
     player_params = {'bag': rec, 'rate': args.rate, 'exit_when_done': True,
-                     'start_delay': 1.0}
+                     'start_delay': 1.0, 'wait_for_subscribers': True,
+                     'clock_subscribers': 1}
     out_bag = args.out / 'tracks.mcap'
     if out_bag.exists():
         import shutil
