@@ -349,7 +349,6 @@ def test_detector_without_ceiling_camera_and_config_errors():
         DetectorConfig(fine_spacing=0.0)
 
 
-
 def test_veto_with_the_weakest_view_excused_equals_a_loop_over_hypotheses():
     rng = np.random.default_rng(11)
     covs = rng.uniform(0.0, 0.6, (5, 400))

@@ -170,3 +170,16 @@ def test_the_track_of_a_person_who_walked_out_ends_sooner_with_the_doorway_rule(
         assert 0 <= delay <= config.doorway_timeout + 0.25
     else:
         assert delay > config.doorway_timeout + 0.25
+
+
+def test_in_entry_zone_matches_a_loop_over_the_zones():
+    from mbtrack_ros.core.camera import RoomCalibration
+
+    calib = make_calibration(default_room())
+    calib = RoomCalibration(cameras=calib.cameras, floor=calib.floor,
+                            entry_zones=((4.0, 4.2, 5.3, 4.85), (0.0, 0.0, 0.5, 1.0)))
+    xy = np.random.default_rng(3).uniform(-0.5, 5.5, (500, 2))
+    brute = [any(z[0] <= x <= z[2] and z[1] <= y <= z[3] for z in calib.entry_zones)
+             for x, y in xy]
+    assert list(calib.in_entry_zone(xy)) == brute and any(brute)
+    assert not RoomCalibration(cameras=calib.cameras, floor=calib.floor).in_entry_zone(xy).any()

@@ -390,6 +390,14 @@ class RoomCalibration:
                     out[name] = out.get(name, np.zeros(len(xy), bool)) | inside
         return out
 
+    def in_entry_zone(self, xy: np.ndarray) -> np.ndarray:
+        """(K,) True for floor points (K, 2) inside any of the ``entry_zones``."""
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        inside = np.zeros(len(xy), bool)
+        for rect in self.entry_zones:
+            inside |= _in_rect(xy, rect)
+        return inside
+
     @property
     def names(self) -> list[str]:
         return list(self.cameras)

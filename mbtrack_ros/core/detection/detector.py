@@ -272,16 +272,6 @@ def _max_span_width(sil) -> np.ndarray:
     return out
 
 
-def _in_zones(xy: np.ndarray, zones: np.ndarray) -> np.ndarray:
-    """(N,) bool: floor points inside any of the rectangles ``zones`` (Z, 4)."""
-    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-    if not len(zones):
-        return np.zeros(len(xy), bool)
-    x, y = xy[:, :1], xy[:, 1:]
-    return ((x >= zones[:, 0]) & (y >= zones[:, 1]) & (x <= zones[:, 2])
-            & (y <= zones[:, 3])).any(axis=1)
-
-
 def _vetoes(covs: np.ndarray, side: np.ndarray, veto: float, excusable: np.ndarray,
             excuse_from: int) -> tuple[np.ndarray, np.ndarray]:
     """(vetoed (N,), counted (C, N)) of hypotheses from their per-camera coverage.
@@ -343,9 +333,7 @@ class Detector:
                                      widths=np.full(len(self.coarse_states), cfg.coarse_width))
                         for n, c in calibration.cameras.items()}
         # hypotheses whose weakest side camera may be excused from the veto (entry zones)
-        self._entry = np.asarray(calibration.entry_zones if cfg.excuse_weakest else (),
-                                 dtype=np.float64).reshape(-1, 4)
-        self._coarse_in_entry = _in_zones(self.coarse_xy, self._entry)
+        self._coarse_in_entry = self._in_entry(self.coarse_xy)
         self._candidates: list[Detection] = []
         self.last_timing: dict[str, float] = {}
 
@@ -381,6 +369,12 @@ class Detector:
             resp = resp + cfg.w_symmetry * np.where(np.isfinite(sym),
                                                     cfg.symmetry_ref - sym, 0.0)
         return np.where(sees, resp, 0.0), sees, np.where(sees, cov, np.nan)
+
+    def _in_entry(self, xy: np.ndarray) -> np.ndarray:
+        """(N,) hypotheses in an entry zone, all False unless ``excuse_weakest``."""
+        if not self.config.excuse_weakest:
+            return np.zeros(len(xy), bool)
+        return self.calibration.in_entry_zone(xy)
 
     def _excusable(self, xy: np.ndarray, in_entry: np.ndarray,
                    track_xy: np.ndarray | None) -> np.ndarray:
@@ -428,7 +422,7 @@ class Detector:
         covs = np.asarray(covs).reshape(len(covs), n)
         xy = states[:, [X, Y]]
         vetoed, _ = _vetoes(covs, np.asarray(side, bool), cfg.veto_coverage,
-                            self._excusable(xy, _in_zones(xy, self._entry), track_xy),
+                            self._excusable(xy, self._in_entry(xy), track_xy),
                             cfg.min_views + 1)
         total = np.where((views >= cfg.min_views) & ~vetoed, total, -np.inf)
         return total, views, covs

@@ -628,11 +628,10 @@ class AutoDetection:
                           if int(stamp_ns) - v[0] < horizon}
         if horizon <= 0:
             return
+        in_entry = self.calibration.in_entry_zone(means[:, [X, Y]])
         for k, t in enumerate(tracks):
-            x, y = means[k, [X, Y]]
-            if t.track_id in ended and not any(z[0] <= x <= z[2] and z[1] <= y <= z[3]
-                                               for z in self.calibration.entry_zones):
-                self._released[int(t.track_id)] = (int(stamp_ns), np.array([x, y]))
+            if t.track_id in ended and not in_entry[k]:
+                self._released[int(t.track_id)] = (int(stamp_ns), means[k, [X, Y]])
 
     def _reusable(self, det: Detection, stamp_ns: int, models: Mapping[int, PersonModel]
                   ) -> int | None:
