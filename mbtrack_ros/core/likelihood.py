@@ -138,6 +138,7 @@ def _normalised_priors(weights: np.ndarray, n: int, k: int, log_weights: bool) -
 
 
 _NO_BUFFER = np.zeros((1, 1, 1))   # workspace argument of the separable evaluation (unused)
+_NO_BINS = np.zeros((0, 0), np.int16)   # bins argument of a camera not quantised yet
 
 
 class _Workspaces:
@@ -188,6 +189,10 @@ class MeasurementModel:
         self._pool_size = 0
         self._workspaces = _Workspaces()
         self._camera_cost: dict[str, float] = {}   # seconds of a camera's last HJS update
+        self._camera_args: dict[str, tuple] = {}
+        body = BodyShape()
+        self._profile = (body.fractions, body.half_widths, body.segment_parts,
+                         float(body.hip_fraction))
 
     # -- images ---------------------------------------------------------------------------
     def set_images(self, images: Mapping[str, np.ndarray]) -> None:
@@ -307,13 +312,6 @@ class MeasurementModel:
         va, vb, wa = view_weights([cam], states, target, models)
         return key_view_stack(models), va[0], vb[0], wa[0]
 
-    def _loglik(self, value: np.ndarray, sil: Silhouettes) -> np.ndarray:
-        # the exponent of 000 Eq. 19 is negative; Algorithm 1 as printed lost the minus sign
-        out = -value / (2.0 * self.config.sigma ** 2)
-        out[sil.area * sil.row_step < self.config.min_visible_pixels] = 0.0
-        out[sil.area <= 0] = 0.0
-        return out
-
     def _without_hidden(self, camera: str, loglik: np.ndarray, states: np.ndarray,
                         target: np.ndarray, prior: np.ndarray, n_targets: int) -> np.ndarray:
         """A camera's log-likelihoods (P,) with the particles it cannot see in an exit
@@ -385,6 +383,15 @@ class MeasurementModel:
         prior = np.concatenate(priors) if priors else np.zeros(0)
         return states, target, prior, key_view_stack(models)
 
+    def _camera_arguments(self, name: str) -> tuple:
+        """The camera's constants as :func:`_kernels.update_camera` takes them."""
+        cam = self._camera(name)
+        cached = self._camera_args.get(name)
+        if cached is None or cached[0] is not cam:
+            cached = (cam, (*cam.depth_row, *cam.projection_parameters, cam.focal))
+            self._camera_args[name] = cached
+        return cached[1]
+
     def _evaluate(self, particles: Sequence[np.ndarray], weights: Sequence[np.ndarray] | None,
                   models: Sequence[PersonModel], *, separable: bool,
                   log_weights: bool) -> LikelihoodResult:
@@ -398,43 +405,66 @@ class MeasurementModel:
                       for k, (w, p) in enumerate(zip(weights, parts))]
         n_k = [p.shape[0] for p in parts]
         starts = np.concatenate([[0], np.cumsum(n_k)]).astype(np.int64)
-        loglik = np.zeros(int(starts[-1]))
-        visible = np.zeros((len(parts), len(self.camera_names)))
-        timings: dict[str, float] = {}
+        n_targets = len(parts)
         cams = [(c, name) for c, name in enumerate(self.camera_names)
                 if name in self._images and parts]
         t0 = time.perf_counter()
         states, target, prior, key = self._stack(parts, priors, models)
-        timings['models'] = time.perf_counter() - t0
+        # everything a camera thread needs, prepared once: its work is then one numba call
+        # that runs without the GIL (the threads do not wait for each other's Python)
+        heights = np.array([m.height for m in models], dtype=np.float64)[target]
+        widths = np.array([m.width for m in models], dtype=np.float64)[target]
+        chair = float(models[0].chair_height) if len(models) else 0.45
+        n_views = np.array([m.view_angles.size for m in models], np.int64)
+        angles = np.zeros((n_targets, int(n_views.max()) if n_targets else 1))
+        for k, m in enumerate(models):
+            angles[k, :n_views[k]] = m.view_angles
+        cam_loglik = np.empty((len(cams), states.shape[0]))
+        cam_visible = np.empty((len(cams), n_targets))
+        shape_args = (chair, *self._profile)
+        rest = (int(self.config.subsample), float(self.config.d_occ), bool(separable),
+                2.0 * self.config.sigma ** 2, int(self.config.min_visible_pixels))
+        timings: dict[str, float] = {'models': time.perf_counter() - t0}
 
-        def one(name: str):
-            own: dict[str, float] = {}
-            out = self._hjs_camera(name, states, target, prior, key, models,
-                                   separable=separable, record=False, timings=own)
-            return out, own
+        def one(i: int) -> float:
+            name = cams[i][1]
+            t1 = time.perf_counter()
+            bins = self._bins.get(name, _NO_BINS)
+            cam_args = self._camera_arguments(name)
+            image = self._images[name]
+
+            def run(mfg: np.ndarray, bbg: np.ndarray, wmap: np.ndarray) -> np.ndarray:
+                return _kernels.update_camera(
+                    image, bins, states, target, prior, heights, widths, *shape_args,
+                    angles, n_views, key, *cam_args, *rest, mfg, bbg, wmap, cam_loglik[i],
+                    cam_visible[i])
+
+            if separable:                               # no image buffers
+                bins = run(_NO_BUFFER, _NO_BUFFER, _NO_BUFFER)
+            else:
+                with self._workspaces.get(image.shape[0], image.shape[1], n_targets) as ws:
+                    bins = run(*ws)
+            self._bins[name] = bins
+            return time.perf_counter() - t1
 
         # Longest camera first (by its time in the previous call): the threads take the
         # cameras in this order, which balances them better than calibration order when a
         # few cameras see most of the people (results are still combined in camera order).
         by_cost = sorted(range(len(cams)),
                          key=lambda i: -self._camera_cost.get(cams[i][1], 0.0))
-        results: list = [None] * len(cams)
-        for i, res in zip(by_cost, self._map(one, [cams[i][1] for i in by_cost])):
-            results[i] = res
-            self._camera_cost[cams[i][1]] = res[1]['rasterize'] + res[1]['kernel']
-        for (c, name), ((sil, fc, bc, vis, _, _), own) in zip(cams, results):
-            for key_, value in own.items():
-                timings[key_] = timings.get(key_, 0.0) + value
-            loglik += self._without_hidden(name, self._loglik(fc + bc, sil), states, target,
-                                           prior, len(parts))
-            with np.errstate(invalid='ignore', divide='ignore'):
-                frac = np.where(sil.full_area > 0, vis / np.maximum(sil.full_area, 1), 0.0)
-            frac = np.clip(frac, 0.0, 1.0)
-            visible[:, c] = np.bincount(target, weights=prior * frac,
-                                        minlength=len(parts))[:len(parts)]
+        timings['camera'] = 0.0
+        for i, seconds in zip(by_cost, self._map(one, by_cost)):
+            self._camera_cost[cams[i][1]] = seconds
+            timings['camera'] += seconds
+        loglik = np.zeros(int(starts[-1]))
+        visible = np.zeros((n_targets, len(self.camera_names)))
+        for i, (c, name) in enumerate(cams):
+            loglik += self._without_hidden(name, cam_loglik[i], states, target, prior,
+                                           n_targets)
+            visible[:, c] = cam_visible[i]
         timings['total'] = time.perf_counter() - t0
         return LikelihoodResult(
-            loglik=[loglik[starts[k]:starts[k + 1]].copy() for k in range(len(parts))],
+            loglik=[loglik[starts[k]:starts[k + 1]].copy() for k in range(n_targets)],
             visible_fraction=visible, timings=timings)
 
     def close(self) -> None:
