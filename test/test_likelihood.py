@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import itertools
+import threading
+import time
 
 import cv2
 import numpy as np
@@ -487,3 +489,30 @@ def test_one_call_camera_update_equals_stagewise_path(seed, subsample, threads):
             np.testing.assert_array_equal(np.concatenate(res.loglik), loglik)
             np.testing.assert_array_equal(res.visible_fraction, visible)
             assert np.count_nonzero(loglik) > len(loglik) // 2
+
+
+def test_camera_threads_keep_item_order_and_raise_errors():
+    """The calling thread works through the cameras with the pool's threads: results come
+    back in item order whichever thread ran them, and an error in any thread reaches the
+    caller."""
+    mm = MeasurementModel(_room(*_two_cameras()), LikelihoodConfig(threads=3))
+    seen = set()
+
+    def slow_square(i: int) -> int:
+        seen.add(threading.current_thread().name)
+        time.sleep(0.002 * (i % 3))
+        return i * i
+
+    for _ in range(3):
+        assert mm._map(slow_square, list(range(11))) == [i * i for i in range(11)]
+    assert len(seen) >= 2                                    # the pool took part
+
+    def fail_on_7(i: int) -> int:
+        if i == 7:
+            raise LikelihoodError('camera 7 failed')
+        return i
+
+    with pytest.raises(LikelihoodError, match='camera 7'):
+        mm._map(fail_on_7, list(range(11)))
+    assert mm._map(slow_square, [2, 3]) == [4, 9]            # still usable afterwards
+    mm.close()

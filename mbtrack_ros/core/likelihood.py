@@ -28,6 +28,7 @@ the part masses alpha_part = sum w* change.
 """
 from __future__ import annotations
 
+import itertools
 import os
 import threading
 import time
@@ -479,20 +480,35 @@ class MeasurementModel:
         if pool is not None:
             pool.shutdown(wait=False)
 
-    def _map(self, fn, items: list):
-        """fn over items, on a thread per camera when ``config.threads`` allows (the numba
-        kernels release the GIL); per-camera stage timings then overlap."""
+    def _map(self, fn, items: list) -> list:
+        """fn over items, on ``config.threads`` threads when it allows (the numba kernels
+        release the GIL); per-camera stage timings then overlap. The calling thread is one
+        of them: it takes items in turn with the pool's threads instead of sleeping until
+        they finish (one thread fewer to wake per call)."""
         workers = self.config.threads or (os.cpu_count() or 1)
         workers = min(workers, len(items))
         if workers <= 1:
             return [fn(item) for item in items]
-        if self._pool is None or self._pool_size != workers:
+        if self._pool is None or self._pool_size != workers - 1:
             if self._pool is not None:
                 self._pool.shutdown(wait=False)
-            self._pool = ThreadPoolExecutor(max_workers=workers,
+            self._pool = ThreadPoolExecutor(max_workers=workers - 1,
                                             thread_name_prefix='mbtrack-likelihood')
-            self._pool_size = workers
-        return list(self._pool.map(fn, items))
+            self._pool_size = workers - 1
+        results: list = [None] * len(items)
+        taken = itertools.count()                  # next() is atomic under the GIL
+
+        def drain() -> None:
+            while (i := next(taken)) < len(items):
+                results[i] = fn(items[i])
+
+        helpers = [self._pool.submit(drain) for _ in range(workers - 1)]
+        try:
+            drain()
+        finally:
+            for helper in helpers:                  # waits; re-raises a helper's error
+                helper.result()
+        return results
 
     def hjs(self, particles: Sequence[np.ndarray], weights: Sequence[np.ndarray],
             models: Sequence[PersonModel], *, log_weights: bool = False) -> LikelihoodResult:
