@@ -13,6 +13,11 @@ work on row-span silhouettes (:mod:`mbtrack_ros.core.shape`) and part histograms
 * :meth:`~MeasurementModel.joint`: joint samples rendered with a per-pixel depth order
   (000 Eq. 20) and scored with Eq. 26 on binary visibility masks.
 
+For ``hjs`` and ``separable`` the main thread stacks the targets once; each camera is then
+one call of :func:`_kernels.update_camera` (quantising, silhouettes, key views, the update
+and the camera's log-likelihoods), which holds no GIL, so the camera threads run in
+parallel without waiting for each other's Python.
+
 Log-likelihoods are ``-D^2 / (2 sigma^2)`` (000 Eq. 19) summed over cameras; a camera that
 sees fewer than ``min_visible_pixels`` of a silhouette adds 0. With exits in the calibration
 (rectangles beyond a door), a camera on the door's wall cannot see a particle in the exit:
@@ -92,8 +97,8 @@ class LikelihoodResult:
         visible_fraction: (K, n_cameras) prior-expected visible fraction of each target's
             silhouette (weighted mean over its particles of sum(w*) / unclipped area); 0 for
             cameras without an image this frame.
-        timings: seconds per stage summed over cameras (``rasterize``, ``models``,
-            ``kernel``; cameras may run in parallel) and wall-clock ``total``.
+        timings: seconds of the main thread's preparation (``models``), of the cameras
+            summed (``camera``; they may run in parallel) and wall-clock ``total``.
     """
 
     loglik: list[np.ndarray]
@@ -339,8 +344,9 @@ class MeasurementModel:
                     prior: np.ndarray, key: np.ndarray, models: Sequence[PersonModel], *,
                     separable: bool, record: bool, timings: dict[str, float]):
         """000 Algorithm 1 "update" in one camera for the stacked particles of all targets
-        (states (P, 6), target (P,), normalised priors (P,), key views (K, V, 1536)); the
-        camera's key-view interpolation is computed here, in the camera's thread."""
+        (states (P, 6), target (P,), normalised priors (P,), key views (K, V, 1536)), step
+        by step with the silhouettes and w* kept: :meth:`hjs_debug`'s path (``hjs`` and
+        ``separable`` run each camera as one :func:`_kernels.update_camera` call)."""
         t0 = time.perf_counter()
         va, vb, wa = (v[0] for v in view_weights([self._camera(camera)], states, target,
                                                  models))
