@@ -13,6 +13,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from mbtrack_ros.core.state import SIT, THETA, X, Y
+
 __all__: list[str] = []
 
 N_BINS = 512
@@ -241,15 +243,15 @@ def axis_ends(states, heights, chair, hip, r2, t2):
     end_depth = np.empty((n, 2))
     sitting = np.empty(n, np.bool_)
     for i in range(n):
-        sit = states[i, 5] >= 0.5                       # state.SIT
+        sit = states[i, SIT] >= 0.5
         sitting[i] = sit
         zb = chair if sit else 0.0
         zt = chair + (1.0 - hip) * heights[i] if sit else heights[i]
         for j in range(2):
-            ends[i, j, 0] = states[i, 0]                # state.X, state.Y
-            ends[i, j, 1] = states[i, 1]
+            ends[i, j, 0] = states[i, X]
+            ends[i, j, 1] = states[i, Y]
             ends[i, j, 2] = zb if j == 0 else zt
-            end_depth[i, j] = _optical_depth(states[i, 0], states[i, 1], ends[i, j, 2], r2,
+            end_depth[i, j] = _optical_depth(states[i, X], states[i, Y], ends[i, j, 2], r2,
                                              t2)
     return ends, end_depth, sitting
 
@@ -420,7 +422,7 @@ def silhouettes(states, heights, widths, chair, frac, half, parts, hip, r2, t2, 
     :func:`body_outline`. Returns :func:`rasterize_quads`' arrays and the distance (N,)."""
     ends, end_depth, sitting = axis_ends(states, heights, chair, hip, r2, t2)
     left, right, seg_part, valid, distance = body_outline(
-        ends, end_depth, np.ascontiguousarray(states[:, 4]), sitting, frac, half, parts, hip,
+        ends, end_depth, np.ascontiguousarray(states[:, THETA]), sitting, frac, half, parts, hip,
         widths, rot, t, kmat, dist, centre, focal)
     row, x0, x1, part, offsets, area, part_area, full_area, bbox = rasterize_quads(
         left, right, seg_part, valid, width, height, row_step, 10 * height)
@@ -951,8 +953,8 @@ def update_camera(image, bins, states, target, prior, heights, widths, chair, fr
     # 003 Eq. 1-2: orientation relative to the camera (Camera.viewing_angle), two key views
     rel = np.empty(n)
     for i in range(n):
-        rel[i] = wrap_angle(states[i, 4] - np.arctan2(centre[1] - states[i, 1],
-                                                      centre[0] - states[i, 0]))
+        rel[i] = wrap_angle(states[i, THETA] - np.arctan2(centre[1] - states[i, Y],
+                                                          centre[0] - states[i, X]))
     va = np.zeros(n, np.int64)
     vb = np.zeros(n, np.int64)
     wa = np.ones(n)

@@ -46,7 +46,7 @@ import numpy as np
 
 from mbtrack_ros.core import _kernels
 from mbtrack_ros.core.camera import Camera
-from mbtrack_ros.core.state import SIT, STATE_DIM, THETA, X, Y
+from mbtrack_ros.core.state import STATE_DIM, THETA
 
 __all__ = ['HEAD', 'LEGS', 'PART_NAMES', 'TORSO', 'BodyShape', 'ShapeError', 'Silhouettes',
            'rasterize', 'render_labels', 'silhouette_outline', 'width_scale']
