@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import itertools
+import threading
+import time
 
 import cv2
 import numpy as np
@@ -419,3 +421,98 @@ def test_reused_workspaces_equal_fresh_ones_and_are_left_zero():
     # the kept buffers are back at zero (m_fg and b_bg; w* is scratch)
     (mfg, bbg, _), = reused._workspaces._free
     assert mfg.shape[0] >= 6 and not np.any(mfg) and not np.any(bbg)
+
+
+def _stagewise(mm: MeasurementModel, particles, weights, models, separable: bool):
+    """The update as separate steps (the path before the one-call camera update):
+    Python rasterisation, key-view weights, a stable argsort, hjs_camera with fresh
+    buffers, then 000 Eq. 19, the neutral cameras and the visible fractions in numpy."""
+    from mbtrack_ros.core import _kernels
+    from mbtrack_ros.core.appearance import key_view_stack, view_weights
+    states = np.concatenate(particles)
+    target = np.repeat(np.arange(len(particles)), [len(p) for p in particles])
+    prior = np.concatenate([w / w.sum() for w in weights])
+    key = key_view_stack(models)
+    cfg = mm.config
+    loglik = np.zeros(len(states))
+    visible = np.zeros((len(models), len(mm.camera_names)))
+    for c, name in enumerate(mm.camera_names):
+        cam = mm.calibration.cameras[name]
+        sil = mm.silhouettes(name, states, [models[k] for k in target])
+        va, vb, wa = (v[0] for v in view_weights([cam], states, target, models))
+        fc, bc, vis = _kernels.hjs_camera(
+            mm.bins(name), sil.row, sil.x0, sil.x1, sil.part, sil.offsets, sil.area,
+            sil.bbox, np.argsort(sil.distance, kind='stable'), target, prior, key, va, vb,
+            wa, len(models), cfg.d_occ, separable, np.zeros(0),
+            np.zeros(len(states) + 1, np.int64))
+        one = -(fc + bc) / (2.0 * cfg.sigma ** 2)
+        one[(sil.area <= 0) | (sil.area * sil.row_step < cfg.min_visible_pixels)] = 0.0
+        loglik += one
+        frac = np.where(sil.full_area > 0, vis / np.maximum(sil.full_area, 1), 0.0)
+        visible[:, c] = np.bincount(target, weights=prior * np.clip(frac, 0, 1),
+                                    minlength=len(models))
+    return loglik, visible
+
+
+@pytest.mark.parametrize('seed,subsample,threads', [(20, 1, 1), (21, 2, 2), (22, 1, 2)])
+def test_one_call_camera_update_equals_stagewise_path(seed, subsample, threads):
+    """``hjs`` / ``separable`` run each camera as one numba call (update_camera): bit for
+    bit the results of the steps done one by one, with sitting particles, particles out of
+    view and behind a camera, a distorted camera and several key views."""
+    rng = np.random.default_rng(seed)
+    R, t = look_at((-3.5, 2.0, 2.2), (0.0, 0.0, 0.8))
+    bent = Camera('bent', 44, 34, [[50, 0, 21.7], [0, 48, 16.2], [0, 0, 1]],
+                  [-0.2, 0.05, 0.002, -0.001, 0.01], R, t)
+    cams = (*_two_cameras(), bent)
+    mm = MeasurementModel(_room(*cams), LikelihoodConfig(subsample=subsample, threads=threads,
+                                                         min_visible_pixels=15))
+    mm.set_images({c.name: _random_image(rng, c.height, c.width) for c in cams})
+    for trial in range(4):
+        n_targets = 1 + trial % 4
+        models = [PersonModel(1.55 + 0.1 * k, 0.45 + 0.05 * k,
+                              rng.uniform(-np.pi, np.pi, 1 + (k + trial) % 3),
+                              rng.random((1 + (k + trial) % 3, 3, 512)) ** 4)
+                  for k in range(n_targets)]
+        particles = [_random_particles(rng, rng.uniform(-0.6, 0.6, 2), 5 + k)
+                     for k in range(n_targets)]
+        for p in particles:
+            p[:, 5] = rng.random(len(p)) < 0.3                     # some sitting
+        particles[0][0, X] = 40.0                                   # out of every view
+        particles[-1][-1, :2] = (4.5, 0.5)                          # behind 'side'
+        weights = [rng.random(len(p)) + 0.05 for p in particles]
+        for separable in (False, True):
+            res = (mm.separable(particles, models) if separable
+                   else mm.hjs(particles, weights, models))
+            loglik, visible = _stagewise(mm, particles,
+                                         [np.ones(len(p)) for p in particles] if separable
+                                         else weights, models, separable)
+            np.testing.assert_array_equal(np.concatenate(res.loglik), loglik)
+            np.testing.assert_array_equal(res.visible_fraction, visible)
+            assert np.count_nonzero(loglik) > len(loglik) // 2
+
+
+def test_camera_threads_keep_item_order_and_raise_errors():
+    """The calling thread works through the cameras with the pool's threads: results come
+    back in item order whichever thread ran them, and an error in any thread reaches the
+    caller."""
+    mm = MeasurementModel(_room(*_two_cameras()), LikelihoodConfig(threads=3))
+    seen = set()
+
+    def slow_square(i: int) -> int:
+        seen.add(threading.current_thread().name)
+        time.sleep(0.002 * (i % 3))
+        return i * i
+
+    for _ in range(3):
+        assert mm._map(slow_square, list(range(11))) == [i * i for i in range(11)]
+    assert len(seen) >= 2                                    # the pool took part
+
+    def fail_on_7(i: int) -> int:
+        if i == 7:
+            raise LikelihoodError('camera 7 failed')
+        return i
+
+    with pytest.raises(LikelihoodError, match='camera 7'):
+        mm._map(fail_on_7, list(range(11)))
+    assert mm._map(slow_square, [2, 3]) == [4, 9]            # still usable afterwards
+    mm.close()

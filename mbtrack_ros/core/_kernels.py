@@ -13,6 +13,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from mbtrack_ros.core.state import SIT, THETA, X, Y
+
 __all__: list[str] = []
 
 N_BINS = 512
@@ -222,6 +224,38 @@ def body_outline(ends, end_depth, theta, sitting, frac, half, parts, hip, width,
     return left, right, seg_part, valid, distance
 
 
+@njit(cache=True, nogil=True, fastmath={'contract'})
+def _optical_depth(px, py, pz, r2, t2):
+    """``Camera.depth`` of one point: r2 . p + t2 (r2 the third row of R). Multiply-adds
+    may fuse: numpy's ``points @ R[2]`` goes to OpenBLAS, whose kernel fuses them, and
+    this order with fused multiply-adds gives its bits (test_shape checks it)."""
+    return px * r2[0] + py * r2[1] + pz * r2[2] + t2
+
+
+@njit(cache=True, nogil=True)
+def axis_ends(states, heights, chair, hip, r2, t2):
+    """003 §2.1: the bottom / top points of the body axes of states (N, 6) and their optical
+    depths: standing from the feet (z = 0) to the head top (z = h), sitting from the hip at
+    chair height to ``chair + (1 - hip) h``. Returns ends (N, 2, 3), end_depth (N, 2) and
+    sitting (N,) bool."""
+    n = states.shape[0]
+    ends = np.empty((n, 2, 3))
+    end_depth = np.empty((n, 2))
+    sitting = np.empty(n, np.bool_)
+    for i in range(n):
+        sit = states[i, SIT] >= 0.5
+        sitting[i] = sit
+        zb = chair if sit else 0.0
+        zt = chair + (1.0 - hip) * heights[i] if sit else heights[i]
+        for j in range(2):
+            ends[i, j, 0] = states[i, X]
+            ends[i, j, 1] = states[i, Y]
+            ends[i, j, 2] = zb if j == 0 else zt
+            end_depth[i, j] = _optical_depth(states[i, X], states[i, Y], ends[i, j, 2], r2,
+                                             t2)
+    return ends, end_depth, sitting
+
+
 @njit(cache=True, nogil=True, inline='always')
 def _edge(ax, ay, bx, by):
     """One edge of a convex quad -> ``(y_top, y_bottom, x_at_top, dx/dy)`` (horizontal edges
@@ -377,6 +411,22 @@ def rasterize_quads(left, right, seg_part, valid, width, height, row_step, row_l
             bbox[i, 3] = by1
     offsets[n] = m
     return row[:m], x0[:m], x1[:m], part[:m], offsets, area, part_area, full_area, bbox
+
+
+@njit(cache=True, nogil=True)
+def silhouettes(states, heights, widths, chair, frac, half, parts, hip, r2, t2, rot, t, kmat,
+                dist, centre, focal, width, height, row_step):
+    """Rasterised silhouettes of states (N, 6) in one camera (003 §2.1): :func:`axis_ends`,
+    :func:`body_outline` and :func:`rasterize_quads` in one call (see ``shape.rasterize``).
+    heights, widths (N,) metres; r2, t2 the camera's ``depth_row``; rot ... focal as
+    :func:`body_outline`. Returns :func:`rasterize_quads`' arrays and the distance (N,)."""
+    ends, end_depth, sitting = axis_ends(states, heights, chair, hip, r2, t2)
+    left, right, seg_part, valid, distance = body_outline(
+        ends, end_depth, np.ascontiguousarray(states[:, THETA]), sitting, frac, half, parts, hip,
+        widths, rot, t, kmat, dist, centre, focal)
+    row, x0, x1, part, offsets, area, part_area, full_area, bbox = rasterize_quads(
+        left, right, seg_part, valid, width, height, row_step, 10 * height)
+    return row, x0, x1, part, offsets, area, part_area, full_area, bbox, distance
 
 
 @njit(cache=True, nogil=True)
@@ -862,6 +912,69 @@ def hjs_camera(bins, row, x0, x1, part, offsets, area, bbox, order, target, prio
     return hjs_camera_ws(bins, row, x0, x1, part, offsets, area, bbox, order, target, prior,
                          key, va, vb, wa, n_targets, d_occ, separable, record, pix_offsets,
                          mfg, bbg, wmap)
+
+
+@njit(cache=True, nogil=True)
+def update_camera(image, bins, states, target, prior, heights, widths, chair, frac, half,
+                  parts, hip, view_angles, n_views, key, r2, t2, rot, t, kmat, dist, centre,
+                  focal, row_step, d_occ, separable, two_sigma_sq, min_visible, mfg, bbg,
+                  wmap, loglik, visible):
+    """One camera's whole share of ``MeasurementModel.hjs`` / ``separable`` in one call
+    without the GIL: the image's colour bins (:func:`quantize_rgb`, when ``bins`` is given
+    empty (0, 0)), the silhouettes (:func:`silhouettes`), the key views of each particle
+    (003 Eq. 1-2, :func:`nearest_two_views` of the orientation relative to the camera),
+    the near-to-far order and :func:`hjs_camera_ws`; then the camera's log-likelihoods and
+    visible fractions.
+
+    Args:
+        states (P, 6), target (P,), prior (P,): the K targets' particles stacked, their
+            target index and normalised prior weights; heights, widths (P,) body sizes.
+        chair, frac, half, parts, hip: the body shape (``BodyShape``).
+        view_angles (K, V), n_views (K,): the key-view angles of the targets; key
+            (K, V, 1536) their key-view histograms (``key_view_stack``).
+        r2 ... focal: the camera (``Camera.depth_row``, ``projection_parameters``,
+            ``focal``); row_step: row sampling.
+        d_occ, separable, mfg, bbg, wmap: as :func:`hjs_camera_ws`.
+        two_sigma_sq: 2 sigma^2 of 000 Eq. 19; min_visible: fewer silhouette pixels (rows
+            times row_step) leave a particle neutral (0) in this camera.
+        loglik (P,): receives -(fc + bc) / (2 sigma^2) (000 Eq. 19), 0 where neutral.
+        visible (K,): receives per target the prior-weighted mean over its particles of
+            the visible fraction sum(w*) / unclipped area, clipped to [0, 1].
+
+    Returns:
+        bins (H, W) int16, the image's colour bins.
+    """
+    if bins.shape[0] == 0:
+        bins = quantize_rgb(image)
+    n = states.shape[0]
+    row, x0, x1, part, offsets, area, _, full_area, bbox, distance = silhouettes(
+        states, heights, widths, chair, frac, half, parts, hip, r2, t2, rot, t, kmat, dist,
+        centre, focal, bins.shape[1], bins.shape[0], row_step)
+    # 003 Eq. 1-2: orientation relative to the camera (Camera.viewing_angle), two key views
+    rel = np.empty(n)
+    for i in range(n):
+        rel[i] = wrap_angle(states[i, THETA] - np.arctan2(centre[1] - states[i, Y],
+                                                          centre[0] - states[i, X]))
+    va = np.zeros(n, np.int64)
+    vb = np.zeros(n, np.int64)
+    wa = np.ones(n)
+    nearest_two_views(rel, target, view_angles, n_views, va, vb, wa)
+    order = np.argsort(distance, kind='mergesort')          # stable: ties keep index order
+    fc, bc, vis = hjs_camera_ws(
+        bins, row, x0, x1, part, offsets, area, bbox, order, target, prior, key, va, vb, wa,
+        key.shape[0], d_occ, separable, np.zeros(0), np.zeros(n + 1, np.int64), mfg, bbg,
+        wmap)
+    visible[:] = 0.0
+    for p in range(n):
+        # the exponent of 000 Eq. 19 is negative; Algorithm 1 as printed lost the minus sign
+        if area[p] <= 0 or area[p] * row_step < min_visible:
+            loglik[p] = 0.0
+        else:
+            loglik[p] = -(fc[p] + bc[p]) / two_sigma_sq
+        f = vis[p] / full_area[p] if full_area[p] > 0 else 0.0
+        f = min(max(f, 0.0), 1.0)
+        visible[target[p]] += prior[p] * f
+    return bins
 
 
 # -- joint rendering (000 Eq. 20-21, 26 with binary masks) ------------------------------------

@@ -106,6 +106,11 @@ class Camera:
         return self._projection_rotation, self.t, self.K, self.dist, self._center
 
     @property
+    def depth_row(self) -> tuple[np.ndarray, float]:
+        """``(R[2], t[2])``: :meth:`depth` is ``points @ R[2] + t[2]`` (for numba kernels)."""
+        return np.ascontiguousarray(self.R[2]), float(self.t[2])
+
+    @property
     def focal(self) -> float:
         """Mean focal length in pixels."""
         return float(0.5 * (self.K[0, 0] + self.K[1, 1]))

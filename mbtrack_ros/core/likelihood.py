@@ -13,6 +13,11 @@ work on row-span silhouettes (:mod:`mbtrack_ros.core.shape`) and part histograms
 * :meth:`~MeasurementModel.joint`: joint samples rendered with a per-pixel depth order
   (000 Eq. 20) and scored with Eq. 26 on binary visibility masks.
 
+For ``hjs`` and ``separable`` the main thread stacks the targets once; each camera is then
+one call of :func:`_kernels.update_camera` (quantising, silhouettes, key views, the update
+and the camera's log-likelihoods), which holds no GIL, so the camera threads run in
+parallel without waiting for each other's Python.
+
 Log-likelihoods are ``-D^2 / (2 sigma^2)`` (000 Eq. 19) summed over cameras; a camera that
 sees fewer than ``min_visible_pixels`` of a silhouette adds 0. With exits in the calibration
 (rectangles beyond a door), a camera on the door's wall cannot see a particle in the exit:
@@ -28,6 +33,7 @@ the part masses alpha_part = sum w* change.
 """
 from __future__ import annotations
 
+import itertools
 import os
 import threading
 import time
@@ -91,8 +97,8 @@ class LikelihoodResult:
         visible_fraction: (K, n_cameras) prior-expected visible fraction of each target's
             silhouette (weighted mean over its particles of sum(w*) / unclipped area); 0 for
             cameras without an image this frame.
-        timings: seconds per stage summed over cameras (``rasterize``, ``models``,
-            ``kernel``; cameras may run in parallel) and wall-clock ``total``.
+        timings: seconds of the main thread's preparation (``models``), of the cameras
+            summed (``camera``; they may run in parallel) and wall-clock ``total``.
     """
 
     loglik: list[np.ndarray]
@@ -138,6 +144,7 @@ def _normalised_priors(weights: np.ndarray, n: int, k: int, log_weights: bool) -
 
 
 _NO_BUFFER = np.zeros((1, 1, 1))   # workspace argument of the separable evaluation (unused)
+_NO_BINS = np.zeros((0, 0), np.int16)   # bins argument of a camera not quantised yet
 
 
 class _Workspaces:
@@ -188,6 +195,10 @@ class MeasurementModel:
         self._pool_size = 0
         self._workspaces = _Workspaces()
         self._camera_cost: dict[str, float] = {}   # seconds of a camera's last HJS update
+        self._camera_args: dict[str, tuple] = {}
+        body = BodyShape()
+        self._profile = (body.fractions, body.half_widths, body.segment_parts,
+                         float(body.hip_fraction))
 
     # -- images ---------------------------------------------------------------------------
     def set_images(self, images: Mapping[str, np.ndarray]) -> None:
@@ -307,13 +318,6 @@ class MeasurementModel:
         va, vb, wa = view_weights([cam], states, target, models)
         return key_view_stack(models), va[0], vb[0], wa[0]
 
-    def _loglik(self, value: np.ndarray, sil: Silhouettes) -> np.ndarray:
-        # the exponent of 000 Eq. 19 is negative; Algorithm 1 as printed lost the minus sign
-        out = -value / (2.0 * self.config.sigma ** 2)
-        out[sil.area * sil.row_step < self.config.min_visible_pixels] = 0.0
-        out[sil.area <= 0] = 0.0
-        return out
-
     def _without_hidden(self, camera: str, loglik: np.ndarray, states: np.ndarray,
                         target: np.ndarray, prior: np.ndarray, n_targets: int) -> np.ndarray:
         """A camera's log-likelihoods (P,) with the particles it cannot see in an exit
@@ -340,8 +344,9 @@ class MeasurementModel:
                     prior: np.ndarray, key: np.ndarray, models: Sequence[PersonModel], *,
                     separable: bool, record: bool, timings: dict[str, float]):
         """000 Algorithm 1 "update" in one camera for the stacked particles of all targets
-        (states (P, 6), target (P,), normalised priors (P,), key views (K, V, 1536)); the
-        camera's key-view interpolation is computed here, in the camera's thread."""
+        (states (P, 6), target (P,), normalised priors (P,), key views (K, V, 1536)), step
+        by step with the silhouettes and w* kept: :meth:`hjs_debug`'s path (``hjs`` and
+        ``separable`` run each camera as one :func:`_kernels.update_camera` call)."""
         t0 = time.perf_counter()
         va, vb, wa = (v[0] for v in view_weights([self._camera(camera)], states, target,
                                                  models))
@@ -385,6 +390,15 @@ class MeasurementModel:
         prior = np.concatenate(priors) if priors else np.zeros(0)
         return states, target, prior, key_view_stack(models)
 
+    def _camera_arguments(self, name: str) -> tuple:
+        """The camera's constants as :func:`_kernels.update_camera` takes them."""
+        cam = self._camera(name)
+        cached = self._camera_args.get(name)
+        if cached is None or cached[0] is not cam:
+            cached = (cam, (*cam.depth_row, *cam.projection_parameters, cam.focal))
+            self._camera_args[name] = cached
+        return cached[1]
+
     def _evaluate(self, particles: Sequence[np.ndarray], weights: Sequence[np.ndarray] | None,
                   models: Sequence[PersonModel], *, separable: bool,
                   log_weights: bool) -> LikelihoodResult:
@@ -398,43 +412,66 @@ class MeasurementModel:
                       for k, (w, p) in enumerate(zip(weights, parts))]
         n_k = [p.shape[0] for p in parts]
         starts = np.concatenate([[0], np.cumsum(n_k)]).astype(np.int64)
-        loglik = np.zeros(int(starts[-1]))
-        visible = np.zeros((len(parts), len(self.camera_names)))
-        timings: dict[str, float] = {}
+        n_targets = len(parts)
         cams = [(c, name) for c, name in enumerate(self.camera_names)
                 if name in self._images and parts]
         t0 = time.perf_counter()
         states, target, prior, key = self._stack(parts, priors, models)
-        timings['models'] = time.perf_counter() - t0
+        # everything a camera thread needs, prepared once: its work is then one numba call
+        # that runs without the GIL (the threads do not wait for each other's Python)
+        heights = np.array([m.height for m in models], dtype=np.float64)[target]
+        widths = np.array([m.width for m in models], dtype=np.float64)[target]
+        chair = float(models[0].chair_height) if len(models) else 0.45
+        n_views = np.array([m.view_angles.size for m in models], np.int64)
+        angles = np.zeros((n_targets, int(n_views.max()) if n_targets else 1))
+        for k, m in enumerate(models):
+            angles[k, :n_views[k]] = m.view_angles
+        cam_loglik = np.empty((len(cams), states.shape[0]))
+        cam_visible = np.empty((len(cams), n_targets))
+        shape_args = (chair, *self._profile)
+        rest = (int(self.config.subsample), float(self.config.d_occ), bool(separable),
+                2.0 * self.config.sigma ** 2, int(self.config.min_visible_pixels))
+        timings: dict[str, float] = {'models': time.perf_counter() - t0}
 
-        def one(name: str):
-            own: dict[str, float] = {}
-            out = self._hjs_camera(name, states, target, prior, key, models,
-                                   separable=separable, record=False, timings=own)
-            return out, own
+        def one(i: int) -> float:
+            name = cams[i][1]
+            t1 = time.perf_counter()
+            bins = self._bins.get(name, _NO_BINS)
+            cam_args = self._camera_arguments(name)
+            image = self._images[name]
+
+            def run(mfg: np.ndarray, bbg: np.ndarray, wmap: np.ndarray) -> np.ndarray:
+                return _kernels.update_camera(
+                    image, bins, states, target, prior, heights, widths, *shape_args,
+                    angles, n_views, key, *cam_args, *rest, mfg, bbg, wmap, cam_loglik[i],
+                    cam_visible[i])
+
+            if separable:                               # no image buffers
+                bins = run(_NO_BUFFER, _NO_BUFFER, _NO_BUFFER)
+            else:
+                with self._workspaces.get(image.shape[0], image.shape[1], n_targets) as ws:
+                    bins = run(*ws)
+            self._bins[name] = bins
+            return time.perf_counter() - t1
 
         # Longest camera first (by its time in the previous call): the threads take the
         # cameras in this order, which balances them better than calibration order when a
         # few cameras see most of the people (results are still combined in camera order).
         by_cost = sorted(range(len(cams)),
                          key=lambda i: -self._camera_cost.get(cams[i][1], 0.0))
-        results: list = [None] * len(cams)
-        for i, res in zip(by_cost, self._map(one, [cams[i][1] for i in by_cost])):
-            results[i] = res
-            self._camera_cost[cams[i][1]] = res[1]['rasterize'] + res[1]['kernel']
-        for (c, name), ((sil, fc, bc, vis, _, _), own) in zip(cams, results):
-            for key_, value in own.items():
-                timings[key_] = timings.get(key_, 0.0) + value
-            loglik += self._without_hidden(name, self._loglik(fc + bc, sil), states, target,
-                                           prior, len(parts))
-            with np.errstate(invalid='ignore', divide='ignore'):
-                frac = np.where(sil.full_area > 0, vis / np.maximum(sil.full_area, 1), 0.0)
-            frac = np.clip(frac, 0.0, 1.0)
-            visible[:, c] = np.bincount(target, weights=prior * frac,
-                                        minlength=len(parts))[:len(parts)]
+        timings['camera'] = 0.0
+        for i, seconds in zip(by_cost, self._map(one, by_cost)):
+            self._camera_cost[cams[i][1]] = seconds
+            timings['camera'] += seconds
+        loglik = np.zeros(int(starts[-1]))
+        visible = np.zeros((n_targets, len(self.camera_names)))
+        for i, (c, name) in enumerate(cams):
+            loglik += self._without_hidden(name, cam_loglik[i], states, target, prior,
+                                           n_targets)
+            visible[:, c] = cam_visible[i]
         timings['total'] = time.perf_counter() - t0
         return LikelihoodResult(
-            loglik=[loglik[starts[k]:starts[k + 1]].copy() for k in range(len(parts))],
+            loglik=[loglik[starts[k]:starts[k + 1]].copy() for k in range(n_targets)],
             visible_fraction=visible, timings=timings)
 
     def close(self) -> None:
@@ -449,20 +486,35 @@ class MeasurementModel:
         if pool is not None:
             pool.shutdown(wait=False)
 
-    def _map(self, fn, items: list):
-        """fn over items, on a thread per camera when ``config.threads`` allows (the numba
-        kernels release the GIL); per-camera stage timings then overlap."""
+    def _map(self, fn, items: list) -> list:
+        """fn over items, on ``config.threads`` threads when it allows (the numba kernels
+        release the GIL); per-camera stage timings then overlap. The calling thread is one
+        of them: it takes items in turn with the pool's threads instead of sleeping until
+        they finish (one thread fewer to wake per call)."""
         workers = self.config.threads or (os.cpu_count() or 1)
         workers = min(workers, len(items))
         if workers <= 1:
             return [fn(item) for item in items]
-        if self._pool is None or self._pool_size != workers:
+        if self._pool is None or self._pool_size != workers - 1:
             if self._pool is not None:
                 self._pool.shutdown(wait=False)
-            self._pool = ThreadPoolExecutor(max_workers=workers,
+            self._pool = ThreadPoolExecutor(max_workers=workers - 1,
                                             thread_name_prefix='mbtrack-likelihood')
-            self._pool_size = workers
-        return list(self._pool.map(fn, items))
+            self._pool_size = workers - 1
+        results: list = [None] * len(items)
+        taken = itertools.count()                  # next() is atomic under the GIL
+
+        def drain() -> None:
+            while (i := next(taken)) < len(items):
+                results[i] = fn(items[i])
+
+        helpers = [self._pool.submit(drain) for _ in range(workers - 1)]
+        try:
+            drain()
+        finally:
+            for helper in helpers:                  # waits; re-raises a helper's error
+                helper.result()
+        return results
 
     def hjs(self, particles: Sequence[np.ndarray], weights: Sequence[np.ndarray],
             models: Sequence[PersonModel], *, log_weights: bool = False) -> LikelihoodResult:

@@ -46,7 +46,7 @@ import numpy as np
 
 from mbtrack_ros.core import _kernels
 from mbtrack_ros.core.camera import Camera
-from mbtrack_ros.core.state import SIT, STATE_DIM, THETA, X, Y
+from mbtrack_ros.core.state import STATE_DIM, THETA
 
 __all__ = ['HEAD', 'LEGS', 'PART_NAMES', 'TORSO', 'BodyShape', 'ShapeError', 'Silhouettes',
            'rasterize', 'render_labels', 'silhouette_outline', 'width_scale']
@@ -230,27 +230,19 @@ def silhouette_outline(camera: Camera, states: np.ndarray, shape: BodyShape, *,
     n = states.shape[0]
     h = _per_particle(heights, shape.height, n, 'heights')
     w = _per_particle(widths, shape.width, n, 'widths')
-    hip = shape.hip_fraction
-    sitting = states[:, SIT] >= 0.5
     # axis end points: feet (z = 0) and head top (z = h) standing; sitting, the hip at chair
     # height and the head top at chair height + upper body height; legs dropped
-    zb = np.where(sitting, shape.chair_height, 0.0)
-    zt = np.where(sitting, shape.chair_height + (1.0 - hip) * h, h)
-    ends = np.empty((n, 2, 3))
-    ends[:, :, 0] = states[:, None, X]
-    ends[:, :, 1] = states[:, None, Y]
-    ends[:, 0, 2] = zb
-    ends[:, 1, 2] = zt
+    ends, end_depth, sitting = _kernels.axis_ends(
+        states, h, float(shape.chair_height), float(shape.hip_fraction), *camera.depth_row)
     # 003 §2.1: project the bottom and top points; the axis points in between lie on the
     # image segment joining them (perspective-correct placement in the kernel, which also
     # drops the leg segments and rescales the profile heights of sitting particles); one
     # numba pass projects the ends (Camera.project), takes s(o) of the orientation relative
     # to the camera (width_scale) and the camera distance of the body centre
-    end_depth = camera.depth(ends)                             # (N, 2), linear in z
     return _kernels.body_outline(
         ends, end_depth, np.ascontiguousarray(states[:, THETA]), sitting, shape.fractions,
-        shape.half_widths, shape.segment_parts, float(hip), w, *camera.projection_parameters,
-        camera.focal)
+        shape.half_widths, shape.segment_parts, float(shape.hip_fraction), w,
+        *camera.projection_parameters, camera.focal)
 
 
 def rasterize(camera: Camera, states: np.ndarray, shape: BodyShape | Sequence[BodyShape], *,
@@ -284,11 +276,15 @@ def rasterize(camera: Camera, states: np.ndarray, shape: BodyShape | Sequence[Bo
             shape = shapes[0]
     if int(row_step) < 1:
         raise ShapeError(f'row_step must be >= 1, got {row_step}')
-    left, right, seg_part, valid, distance = silhouette_outline(
-        camera, states, shape, heights=heights, widths=widths)
-    (row, x0, x1, part, offsets, area, part_area, full_area,
-     bbox) = _kernels.rasterize_quads(left, right, seg_part, valid, camera.width,
-                                      camera.height, int(row_step), 10 * camera.height)
+    n = states.shape[0]
+    h = _per_particle(heights, shape.height, n, 'heights')
+    w = _per_particle(widths, shape.width, n, 'widths')
+    (row, x0, x1, part, offsets, area, part_area, full_area, bbox,
+     distance) = _kernels.silhouettes(
+        states, h, w, float(shape.chair_height), shape.fractions, shape.half_widths,
+        shape.segment_parts, float(shape.hip_fraction), *camera.depth_row,
+        *camera.projection_parameters, camera.focal, camera.width, camera.height,
+        int(row_step))
     return Silhouettes(row=row, x0=x0, x1=x1, part=part, offsets=offsets, area=area,
                        part_area=part_area, full_area=full_area, bbox=bbox,
                        distance=distance, width=camera.width, height=camera.height,
