@@ -107,11 +107,12 @@ def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False,
                                                         'detection': True}))
         if release:  # ReleaseConfig fields overridden, e.g. spare_support=0 (no spare rule)
             det = tracker.detection
-            det.releaser = release_module.Releaser(cal, replace(det.releaser.config, **release))
+            det.releaser = release_module.Releaser(tracker.calibration,  # image_scale's size
+                                                   replace(det.releaser.config, **release))
         if no_people_cue:  # the bootstrap before issue 6: every pixel learnt, 10 x 4 frames
             bg = replace(tracker.detection.config.background, people=None,
                          bootstrap_frames=10, bootstrap_stride=4)
-            tracker.detection.background = BackgroundBank(bg, calibration=cal)
+            tracker.detection.background = BackgroundBank(bg, calibration=tracker.calibration)
         live: set[int] = set()
         for fs in reader.frames():
             frame['index'] = fs.index

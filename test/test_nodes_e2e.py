@@ -114,6 +114,8 @@ def test_detection_parameter_reaches_the_tracker(room_calibration, context, tmp_
 BAD = [
     (['-p', 'tracker.particles:=0'], "'tracker.particles': value out of range"),
     (['-p', 'tracker.subsample:=0'], "'tracker.subsample': value out of range"),
+    (['-p', 'tracker.image_scale:=1.5'], "'tracker.image_scale': value out of range"),
+    (['-p', 'tracker.image_scale:=0.0'], 'image_scale must be a number in (0, 1], got 0.0'),
     (['-p', 'image_transport:=udp'], "image_transport: 'udp' is not one of raw, compressed"),
     (['-p', 'camera.cam0.transport:=theora'], 'camera.cam0.transport'),
     (['-p', 'sync.slop:=1'], "'sync.slop': wrong type"),

@@ -93,6 +93,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument('--detection-every', type=int, default=None, metavar='K',
                         help='run the detection pipeline on every K-th frame set only '
                              '(default 1; a speed option that costs accuracy)')
+    parser.add_argument('--image-scale', type=float, default=None, metavar='S',
+                        help='track on the images resized by S in (0, 1] (default 1; a '
+                             'speed option that costs accuracy)')
     parser.add_argument('--init-from', type=Path, default=None, metavar='GROUND_TRUTH.csv',
                         help='start tracks from this ground truth (models from key views)')
     parser.add_argument('--eval', type=Path, default=None, metavar='GROUND_TRUTH.csv',
@@ -157,7 +160,7 @@ def _config(args: argparse.Namespace) -> TrackerConfig:
     try:
         values = tracker_values_from_params(args.params) if args.params is not None else {}
         for name in ('algorithm', 'particles', 'joint_particles', 'sigma', 'd_occ',
-                     'subsample', 'detection_every'):
+                     'subsample', 'detection_every', 'image_scale'):
             if getattr(args, name) is not None:  # an explicit option beats the file
                 values[name] = getattr(args, name)
         if args.no_mrf:

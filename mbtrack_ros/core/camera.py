@@ -206,6 +206,13 @@ class Camera:
         K[1, 2] = (K[1, 2] + 0.5) * sy - 0.5
         return replace(self, width=int(width), height=int(height), K=K)
 
+    def fit(self, image: np.ndarray) -> np.ndarray:
+        """``image`` (H, W[, C]) resized to this camera's size (area averaging, the right
+        filter for shrinking), or the same array when it already has that size."""
+        if image.shape[:2] == (self.height, self.width):
+            return image
+        return cv2.resize(image, (self.width, self.height), interpolation=cv2.INTER_AREA)
+
     @property
     def projection_matrix(self) -> np.ndarray:
         """CameraInfo ``P`` (3, 4) of the (unrectified) camera: ``[K | 0]``."""
@@ -420,6 +427,13 @@ class RoomCalibration:
         """All cameras resized to the same image size."""
         return replace(self, cameras={n: c.scaled(width, height)
                                       for n, c in self.cameras.items()})
+
+    def scaled_by(self, factor: float) -> RoomCalibration:
+        """Every camera with its image resized by ``factor`` (each size rounded to whole
+        pixels); the room itself is unchanged."""
+        return replace(self, cameras={
+            n: c.scaled(max(1, round(c.width * factor)), max(1, round(c.height * factor)))
+            for n, c in self.cameras.items()})
 
     def to_dict(self) -> dict[str, Any]:
         x0, y0, x1, y1 = self.floor

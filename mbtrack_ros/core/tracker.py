@@ -73,6 +73,12 @@ class TrackerConfig:
             sets between are only filtered and report the tracks with the visibility and
             existence of the last detection frame set (1: every frame set; a speed option,
             its cost in docs/live_measurements.md).
+        image_scale: the tracker works on the images resized by this factor in (0, 1]
+            (:meth:`Tracker.step` resizes them once, the cameras' intrinsics are scaled to
+            match); pixel lengths of the detection (morphology, edge validation, masks)
+            and the likelihood's smallest visible area are scaled with it. 1: the images
+            as they come; a speed option (docs/live_measurements.md, part 3). Tracks are in
+            room coordinates whatever the scale.
     """
 
     algorithm: str = 'hjs'
@@ -96,6 +102,7 @@ class TrackerConfig:
     subsample: int = 1
     pipeline_search: bool = False
     detection_every: int = 1
+    image_scale: float = 1.0
 
     def __post_init__(self) -> None:
         def bad(msg: str) -> None:
@@ -134,6 +141,9 @@ class TrackerConfig:
         if self.spare_support is not None and not (
                 isinstance(self.spare_support, (int, float)) and 0 <= self.spare_support <= 1):
             bad(f'spare_support must be a number in [0, 1], got {self.spare_support!r}')
+        if isinstance(self.image_scale, bool) or not (
+                isinstance(self.image_scale, (int, float)) and 0 < self.image_scale <= 1):
+            bad(f'image_scale must be a number in (0, 1], got {self.image_scale!r}')
         if self.seed is not None and (isinstance(self.seed, bool)
                                       or not isinstance(self.seed, (int, np.integer))):
             bad(f'seed must be an integer or None, got {self.seed!r}')
@@ -149,7 +159,8 @@ class TrackerConfig:
         release = replace(ReleaseConfig(), timeout=float(self.release_time))
         if self.spare_support is not None:
             release = replace(release, spare_support=float(self.spare_support))
-        return AutoDetectionConfig(detector=detector, release=release, sigma=float(self.sigma))
+        config = AutoDetectionConfig(detector=detector, release=release, sigma=float(self.sigma))
+        return _pixels_scaled(config, float(self.image_scale))
 
     def filter_config(self) -> FilterConfig:
         """The particle-filter parameters of this configuration."""
@@ -177,11 +188,42 @@ class TrackerConfig:
         return cls(**values)
 
 
+def _length(pixels: int, scale: float) -> int:
+    """A length in pixels of the full-size image, in the image resized by ``scale``
+    (rounded half up)."""
+    return int(np.floor(pixels * scale + 0.5))
+
+
+def _pixels_scaled(config, scale: float):
+    """``AutoDetectionConfig`` with its pixel lengths scaled for images resized by
+    ``scale``: background morphology and mask growth, the person cue's dilations, the
+    edge validation. Its areas (``min_area``, ``min_blob_area``) are given at 320x240 and
+    scaled with the image area where they are used, and metres need nothing."""
+    if scale == 1.0:
+        return config
+    bg = config.background
+    # kernel diameters 2r + 1: the radius r is what scales
+    diameter = (lambda d: 2 * _length((d - 1) // 2, scale) + 1 if d > 1 else d)
+    people = bg.people if bg.people is None else replace(
+        bg.people, motion_dilation=_length(bg.people.motion_dilation, scale),
+        dilation=_length(bg.people.dilation, scale),
+        edge_min_pixels=_length(bg.people.edge_min_pixels, scale))
+    background = replace(bg, mask_dilation=_length(bg.mask_dilation, scale),
+                         open_size=diameter(bg.open_size), close_size=diameter(bg.close_size),
+                         people=people)
+    det = config.detector
+    detector = replace(det, edge_min_pixels=_length(det.edge_min_pixels, scale),
+                       edge_neighbourhood=_length(det.edge_neighbourhood, scale))
+    return replace(config, background=background, detector=detector)
+
+
 class Tracker:
     """Tracks people across frames with the configured algorithm.
 
     Args:
-        calibration: the room (cameras and floor bounds).
+        calibration: the room (cameras and floor bounds) at the size of the images given
+            to :meth:`step`; with ``config.image_scale`` below 1 the tracker keeps its
+            cameras resized in :attr:`calibration` and resizes the images.
         config: tracker parameters.
         rng: random generator; default ``np.random.default_rng(config.seed)``.
         measurement: optional measurement model (default: the real
@@ -190,8 +232,11 @@ class Tracker:
 
     def __init__(self, calibration: RoomCalibration, config: TrackerConfig | None = None, *,
                  rng: np.random.Generator | None = None, measurement=None) -> None:
-        self.calibration = calibration
         self.config = config or TrackerConfig()
+        scale = float(self.config.image_scale)
+        if scale != 1.0:
+            calibration = calibration.scaled_by(scale)
+        self.calibration = calibration  # the cameras at the size the tracker works at
         self.rng = rng if rng is not None else np.random.default_rng(self.config.seed)
         try:
             self.filter: TrackingFilter = make_filter(self.config.algorithm, calibration,
@@ -200,9 +245,12 @@ class Tracker:
             raise TrackerError(str(err)) from err
         if measurement is None:
             from mbtrack_ros.core.likelihood import LikelihoodConfig, MeasurementModel
-            measurement = MeasurementModel(
-                calibration, LikelihoodConfig(sigma=self.config.sigma, d_occ=self.config.d_occ,
-                                              subsample=int(self.config.subsample)))
+            likelihood = LikelihoodConfig(sigma=self.config.sigma, d_occ=self.config.d_occ,
+                                          subsample=int(self.config.subsample))
+            if scale != 1.0:  # an area: scales with the square
+                likelihood = replace(likelihood, min_visible_pixels=max(1, _length(
+                    likelihood.min_visible_pixels, scale * scale)))
+            measurement = MeasurementModel(calibration, likelihood)
         self.measurement = measurement
         self._next_id = 1
         self._last_stamp: int | None = None
@@ -324,7 +372,8 @@ class Tracker:
 
         Args:
             stamp_ns: frame stamp, integer nanoseconds; must not go backwards.
-            images: ``(H, W, 3) uint8`` RGB images by camera name.
+            images: ``(H, W, 3) uint8`` RGB images by camera name, at the size of the
+                calibration given to the tracker (resized here once by ``image_scale``).
             search: run the detection search now (default) or leave it for :meth:`search`.
 
         Returns:
@@ -337,6 +386,9 @@ class Tracker:
                                f'{self._last_stamp} ns; reset the tracker')
         dt = 0.0 if self._last_stamp is None else (stamp_ns - self._last_stamp) / 1e9
         t0 = time.perf_counter()
+        if self.config.image_scale != 1.0:  # the one resize of every frame
+            cams = self.calibration.cameras
+            images = {n: cams[n].fit(im) if n in cams else im for n, im in images.items()}
         detect = self.detection is not None \
             and self._steps % int(self.config.detection_every) == 0
         if detect:  # the foreground runs on a worker during the filter

@@ -40,6 +40,10 @@ tracker.subsample               int        likelihood on every k-th image row (1
 tracker.pipeline_search         bool       search frame t for new people on a worker
                                            thread while frame t+1 is filtered (false;
                                            people start one frame later)
+tracker.image_scale             double     the tracker works on the images resized by
+                                           this factor in (0, 1] (1.0; a speed option
+                                           that costs accuracy, see
+                                           docs/live_measurements.md)
 tracker.joint_particles         int        joint-filter particles (10000)
 tracker.sigma                   double     likelihood width, 000 Eq. 19 (0.12)
 tracker.d_occ                   double     occlusion penalty, 000 Eq. 26 (0.15)
@@ -96,6 +100,7 @@ TRACKER_PARAMETERS: dict[str, tuple[str, type]] = {
     'detection.threshold': ('detection_threshold', float),
     'detection.spare_support': ('spare_support', float),
     'detection.every': ('detection_every', int),
+    'tracker.image_scale': ('image_scale', float),
 }
 
 
@@ -174,6 +179,9 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
     'tracker.pipeline_search': (False, 'search frame t for new people on a worker thread '
                                 'while frame t+1 is filtered (TrackerConfig.pipeline_search)',
                                 {}),
+    'tracker.image_scale': (1.0, 'the tracker works on the images resized by this factor '
+                            'in (0, 1] (speed option, TrackerConfig.image_scale)',
+                            _fr(0.0, 1.0)),
     'tracker.joint_particles': (10_000, 'joint-filter particles', _ir(1, 1_000_000)),
     'tracker.sigma': (0.12, 'likelihood width sigma (000 Eq. 19)', _fr(1e-4, 10.0)),
     'tracker.d_occ': (0.15, 'occlusion penalty d_occ (000 Eq. 26)', _fr(0.0, 10.0)),

@@ -30,7 +30,6 @@ import time
 from collections import deque
 from collections.abc import Sequence
 
-import cv2
 import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
@@ -324,7 +323,7 @@ class TrackerNode(Node):
                                f'{rgb.shape[0]}, calibration {cam.width}x{cam.height}: '
                                'dropped (set rescale_images to resize)')
                 return
-            rgb = cv2.resize(rgb, (cam.width, cam.height), interpolation=cv2.INTER_AREA)
+            rgb = cam.fit(rgb)  # the tracker resizes it again with tracker.image_scale < 1
         if msg.header.frame_id and msg.header.frame_id != cam.frame_id:
             self.warn_once(f'{camera}:frame', f'{camera}: unexpected frame id '
                            f'{msg.header.frame_id!r} (calibration: {cam.frame_id!r})')
@@ -464,7 +463,9 @@ class TrackerNode(Node):
 
     def debug_image(self, camera: str, rgb: np.ndarray, result: FrameResult) -> Image:
         """``~/debug/<camera>/occlusion``: occlusion maps and silhouettes (000 Fig. 4)."""
-        occ, sil = occlusion_layers(self.tracker.measurement, self.calibration.cameras[camera],
+        # the layers at the tracker's image size (tracker.image_scale), drawn at the camera's
+        occ, sil = occlusion_layers(self.tracker.measurement,
+                                    self.tracker.calibration.cameras[camera],
                                     result, self.tracker.models)
         out = messages.debug_overlay(rgb, occlusion=occ, silhouettes=sil)
         return rgb_to_image(out, messages.make_header(

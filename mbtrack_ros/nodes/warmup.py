@@ -69,7 +69,7 @@ def warm_up(config: TrackerConfig, *, ceiling: bool = False,
         models = {track.track_id: tracker.models[track.track_id],
                   -1: tracker.models[track.track_id]}
         both = replace(result, tracks=[track, twin])
-        camera = synth.calibration.cameras[cameras[0]]
+        camera = tracker.calibration.cameras[cameras[0]]  # at the tracker's image size
         occ, sil = occlusion_layers(tracker.measurement, camera, both, models)
         messages.debug_overlay(frame.images[camera.name], occlusion=occ, silhouettes=sil)
     return WarmUpReport(frames=frames, births=births, max_tracks=max_tracks,

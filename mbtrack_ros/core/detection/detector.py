@@ -100,6 +100,9 @@ class DetectorConfig:
         min_speed, max_speed: m/s; a confirmed detection faster than ``min_speed`` over
             its confirming frames gets its walking direction as body orientation; its
             velocity is clipped to ``max_speed``.
+        edge_min_pixels, edge_neighbourhood: edge validation of the contour feature,
+            pixels (:meth:`EdgeMap.from_image`: smallest edge component, foreground
+            neighbourhood searched).
     """
 
     coarse_spacing: float = 0.3
@@ -138,6 +141,8 @@ class DetectorConfig:
     min_motion: float = 0.05
     min_speed: float = 0.3
     max_speed: float = 2.0
+    edge_min_pixels: int = 12
+    edge_neighbourhood: int = 7
 
     def __post_init__(self) -> None:
         if not self.excuse_radius >= 0:
@@ -193,12 +198,15 @@ class FrameEvidence:
         foreground: (H, W) bool foreground mask.
         tracks: (H, W) bool pixels covered by the rendered silhouettes of current tracks.
         motion: (H, W) bool pixels that moved recently (None: not checked).
+        edge_min_pixels, edge_neighbourhood: edge validation (``DetectorConfig``).
     """
 
     image: np.ndarray
     foreground: np.ndarray
     tracks: np.ndarray | None = None
     motion: np.ndarray | None = None
+    edge_min_pixels: int = 12
+    edge_neighbourhood: int = 7
     _motion_integral: ForegroundIntegral | None = field(default=None, repr=False)
     _integral: ForegroundIntegral | None = field(default=None, repr=False)
     _edges: EdgeMap | None = field(default=None, repr=False)
@@ -232,7 +240,9 @@ class FrameEvidence:
             fg = self.foreground
             if self.tracks is not None:
                 fg = fg & ~self.tracks
-            self._edges = EdgeMap.from_image(self.image, fg)
+            self._edges = EdgeMap.from_image(self.image, fg,
+                                             min_edge_pixels=self.edge_min_pixels,
+                                             neighbourhood=self.edge_neighbourhood)
         return self._edges
 
 

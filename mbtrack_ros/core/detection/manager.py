@@ -325,7 +325,10 @@ class AutoDetection:
         fg = self._take_foreground(images, names)
         self.background.exclude_pending(masks)
         known_bins = dict(bins or {})
-        evidence = {n: FrameEvidence(images[n], fg[n], masks[n], _bins=known_bins.get(n))
+        det = self.config.detector
+        evidence = {n: FrameEvidence(images[n], fg[n], masks[n], _bins=known_bins.get(n),
+                                     edge_min_pixels=det.edge_min_pixels,
+                                     edge_neighbourhood=det.edge_neighbourhood)
                     for n in fg}
         t2 = time.perf_counter()
         # 3. support, visibility and existence

@@ -75,8 +75,8 @@ class PeopleCueConfig:
         min_visible: fraction of a silhouette inside the image for a camera to see it.
         min_area: smallest silhouette area seen, pixels at 320x240 (scaled).
         motion_threshold: frame-difference luminance above which a pixel moved.
-        motion_dilation: pixels by which the moving pixels grow (not scaled: limbs that
-            moved by a few pixels fill the body between them).
+        motion_dilation: pixels by which the moving pixels grow (limbs that moved by a few
+            pixels fill the body between them).
         min_motion: smallest moving fraction of the silhouette in every seeing camera
             (ignored with a single bootstrap frame).
         w_symmetry: weight of the colour-symmetry term against the contour term.
@@ -88,6 +88,7 @@ class PeopleCueConfig:
             that no part of the person is learnt into the background.
         dilation: pixels by which those silhouettes grow.
         core_width: width of the body's core, metres (see :meth:`PeopleCue.regions`).
+        edge_min_pixels: smallest edge component of the contour feature, pixels.
         The possible foreground inside the region is the silhouette of the tested body
         (``height`` x ``width``): a person-sized blob the detector can localise.
     """
@@ -110,6 +111,7 @@ class PeopleCueConfig:
     region_width: float = 1.0
     core_width: float = 0.15
     dilation: int = 3
+    edge_min_pixels: int = 12
 
     def __post_init__(self) -> None:
         if not (self.spacing > 0 and self.height > 0 and self.width > 0
@@ -192,7 +194,8 @@ class PeopleCue:
                         f'camera {name!r}: image {f[name].shape[1]}x{f[name].shape[0]} '
                         f'differs from the calibration {cam.width}x{cam.height}')
             seen_hyp = self._seen[name]     # unseen hypotheses score -inf: not computed
-            edges = EdgeMap.from_image(image)          # whole image: no background needed
+            # whole image: no background needed
+            edges = EdgeMap.from_image(image, min_edge_pixels=cfg.edge_min_pixels)
             con, _ = contour_loglik_spans(edges, seen_hyp.spans, seen_hyp.width)  # 003 Eq. 5
             sym = colour_symmetry(image, seen_hyp.spans)
             resp = np.full(n_or * m, -np.inf)

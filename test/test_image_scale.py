@@ -1,0 +1,176 @@
+"""Issue 5: ``TrackerConfig.image_scale`` (the tracker works on resized images): validated,
+read by the node's parameter map and ``mbtrack replay``; the cameras are scaled to match,
+every image is resized once per step, the detection's pixel lengths scale, and tracking at
+half size stays within a few centimetres of full size."""
+from __future__ import annotations
+
+import argparse
+
+import cv2
+import numpy as np
+import pytest
+
+from mbtrack_ros.core import camera as camera_module
+from mbtrack_ros.core.detection.manager import AutoDetectionConfig
+from mbtrack_ros.core.initiation import initial_tracks, plan_key_views
+from mbtrack_ros.core.tracker import Tracker, TrackerConfig, TrackerError
+from mbtrack_ros.synth.generator import Synthesizer
+
+from conftest import make_room
+
+
+@pytest.mark.parametrize('bad', [0, 0.0, -0.5, 1.5, float('nan'), True, '0.5', None])
+def test_bad_scale_is_rejected_in_one_line(bad):
+    with pytest.raises(TrackerError, match='image_scale must be a number in') as err:
+        TrackerConfig(image_scale=bad)
+    assert '\n' not in str(err.value)
+
+
+def test_replay_reads_the_scale_from_params_and_option(tmp_path, capsys):
+    from mbtrack_ros.commands import replay
+
+    parser = argparse.ArgumentParser()
+    replay.add_parser(parser.add_subparsers())
+    params = tmp_path / 'node.yaml'
+    params.write_text('tracker_node:\n  ros__parameters:\n    tracker:\n'
+                      '      image_scale: 0.5\n')
+
+    def config(*extra: str) -> TrackerConfig:
+        return replay._config(parser.parse_args(['replay', 'REC', '--out', str(tmp_path),
+                                                 *extra]))
+
+    assert config().image_scale == 1.0
+    assert config('--params', str(params)).image_scale == 0.5
+    assert config('--params', str(params), '--image-scale', '0.75').image_scale == 0.75
+    rec = tmp_path / 'rec'
+    rec.mkdir()
+    room = tmp_path / 'room.yaml'
+    make_room().save(room)
+    args = parser.parse_args(['replay', str(rec), '--out', str(tmp_path / 'o'),
+                              '--config', str(room), '--image-scale', '2'])
+    assert replay.run(args) == 2
+    err = capsys.readouterr().err.strip()
+    assert 'image_scale must be a number in (0, 1], got 2.0' in err and '\n' not in err
+
+
+def test_node_parameter_map_has_the_scale():
+    pytest.importorskip('rclpy')
+    from mbtrack_ros.nodes.params import GLOBAL_PARAMETERS, TRACKER_PARAMETERS
+
+    assert TRACKER_PARAMETERS['tracker.image_scale'] == ('image_scale', float)
+    assert GLOBAL_PARAMETERS['tracker.image_scale'][0] == 1.0
+
+
+def test_calibration_scaled_by_projects_to_the_resized_pixels():
+    room = make_room(160, 120)
+    half = room.scaled_by(0.5)
+    points = np.array([[1.0, 1.5, 0.0], [2.5, 3.0, 1.7], [0.5, 3.5, 1.0]])
+    for name, cam in room.cameras.items():
+        small = half.cameras[name]
+        assert (small.width, small.height) == (80, 60)
+        # pixel centres at integer coordinates: u' = (u + 0.5) s - 0.5
+        np.testing.assert_allclose(small.project(points),
+                                   (cam.project(points) + 0.5) * 0.5 - 0.5, atol=1e-9)
+    assert room.scaled_by(1.0).cameras['cam0'].width == 160
+    odd = room.scaled_by(0.75)
+    assert (odd.cameras['cam0'].width, odd.cameras['cam0'].height) == (120, 90)
+
+
+def test_camera_fit_is_the_block_mean_at_half_size():
+    cam = make_room(8, 6).cameras['cam0']
+    rng = np.random.default_rng(3)
+    image = rng.integers(0, 256, (12, 16, 3), dtype=np.uint8)
+    fitted = cam.fit(image)
+    blocks = image.reshape(6, 2, 8, 2, 3).astype(np.float64).mean(axis=(1, 3))
+    assert fitted.shape == (6, 8, 3)
+    assert np.abs(fitted.astype(np.float64) - blocks).max() <= 0.5 + 1e-9
+    same = rng.integers(0, 256, (6, 8, 3), dtype=np.uint8)
+    assert cam.fit(same) is same  # already at the size: no copy, no resize
+
+
+def test_pixel_lengths_scale_and_scale_one_changes_nothing():
+    plain = TrackerConfig().detection_config()
+    assert plain == AutoDetectionConfig(detector=plain.detector, release=plain.release,
+                                        sigma=plain.sigma)
+    assert plain.background == AutoDetectionConfig().background
+    half = TrackerConfig(image_scale=0.5).detection_config()
+    bg, people, det = half.background, half.background.people, half.detector
+    assert bg.mask_dilation == 3 and bg.open_size == 3 and bg.close_size == 3
+    assert (people.motion_dilation, people.dilation, people.edge_min_pixels) == (1, 2, 6)
+    assert (det.edge_min_pixels, det.edge_neighbourhood) == (6, 4)
+    # areas are scaled where they are used (given at 320x240): unchanged in the config
+    assert det.min_area == plain.detector.min_area
+    assert half.release == plain.release
+    quarter = TrackerConfig(image_scale=0.25).detection_config().background
+    assert quarter.open_size == 1 and quarter.close_size == 3  # radius 1 -> 0, 2 -> 1
+    room = make_room(160, 120)
+    full = Tracker(room, TrackerConfig())
+    small = Tracker(room, TrackerConfig(image_scale=0.5))
+    assert full.measurement.config.min_visible_pixels == 20
+    assert small.measurement.config.min_visible_pixels == 5  # an area: s^2
+    assert small.calibration.cameras['cam0'].width == 80
+    assert full.calibration is room
+
+
+def test_every_image_is_resized_once_per_step(monkeypatch):
+    synth = Synthesizer('clear-room-short', seed=1, frames=4, width=160, height=120)
+    tracker = Tracker(synth.calibration, TrackerConfig(image_scale=0.5, detection=True,
+                                                       particles=20, seed=0))
+    calls = []
+    resize = cv2.resize
+
+    def counting(image, size, *args, **kwargs):
+        calls.append((image.shape[:2], tuple(size)))
+        return resize(image, size, *args, **kwargs)
+
+    monkeypatch.setattr(camera_module.cv2, 'resize', counting)
+    seen = []
+    set_images = tracker.measurement.set_images
+    monkeypatch.setattr(tracker.measurement, 'set_images',
+                        lambda images: (seen.append({n: im.shape for n, im in images.items()}),
+                                        set_images(images))[1])
+    frames = list(synth)
+    for frame in frames:
+        tracker.step(frame.stamp_ns, frame.images)
+    n_cams = len(synth.calibration.cameras)
+    frame_resizes = [c for c in calls if c[0] == (120, 160)]
+    assert len(frame_resizes) == n_cams * len(frames)
+    assert all(size == (80, 60) for _, size in frame_resizes)
+    assert seen and all(shape[:2] == (60, 80) for step in seen for shape in step.values())
+
+
+def _track(synth_frames, calibration, starts, scale: float) -> dict[tuple[int, int], np.ndarray]:
+    """(frame, person) -> tracked floor position, tracks started from ground truth."""
+    tracker = Tracker(calibration, TrackerConfig(image_scale=scale, particles=100, seed=0))
+    pending, person_of, out = list(starts), {}, {}
+    for frame in synth_frames:
+        while pending and pending[0].frame <= frame.index:
+            init = pending.pop(0)
+            person_of[tracker.add_track(init.model, init.state, init.stamp_ns)] = init.person_id
+        result = tracker.step(frame.stamp_ns, frame.images)
+        for t in result.tracks:
+            out[frame.index, person_of[t.track_id]] = np.asarray(t.mean[:2])
+    return out
+
+
+def test_half_size_tracks_within_a_few_centimetres_of_full_size():
+    synth = Synthesizer('clear-room-short', seed=1, frames=30)  # 320x240
+    frames = list(synth)
+    truth = [r for f in frames for r in f.ground_truth]
+    calibration = synth.calibration
+    plan = plan_key_views(calibration, truth)
+    needed = {v.frame for views in plan.values() for v in views}
+    key_images = {f.index: f.images for f in frames if f.index in needed}
+    starts = sorted(initial_tracks(calibration, truth, key_images, plan, skip_missing=True),
+                    key=lambda s: s.frame)
+    assert starts
+    full = _track(frames, calibration, starts, 1.0)
+    half = _track(frames, calibration, starts, 0.5)
+    gt = {(r.frame, r.person_id): np.array([r.x, r.y]) for r in truth}
+    keys = sorted(set(full) & set(half) & set(gt))
+    assert len(keys) > 20
+    apart = np.array([np.linalg.norm(full[k] - half[k]) for k in keys])
+    err_full = np.array([np.linalg.norm(full[k] - gt[k]) for k in keys])
+    err_half = np.array([np.linalg.norm(half[k] - gt[k]) for k in keys])
+    assert np.median(apart) < 0.06
+    assert err_half.mean() < err_full.mean() + 0.03
