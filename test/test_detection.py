@@ -1114,13 +1114,15 @@ def test_detection_every_kth_frame_set_holds_existence_in_between(monkeypatch):
     assert len(calls) == 1
 
 
-def _pinned_existence(reach_radius, frames=14, ghost=False, spare_rule=True):
+def _pinned_existence(reach_radius, frames=14, ghost=False, spare_rule=True,
+                      exclusion=True):
     """A person walking at 0.9 m/s along y = 2.6 m, tracked as track 1 for 16 frames;
     then, frame by frame, track 1 is put back 0.4 m behind them before the step (a track
     that fell behind a person who started walking) or, with ``ghost``, a second track
     with track 1's model is kept 0.4 m beside the person while track 1 follows them.
     Returns the existence per later frame of the pinned track (NaN: released).
-    ``spare_rule=False``: no spare tracks (release ``spare_support`` 0)."""
+    ``spare_rule=False``: no spare tracks (release ``spare_support`` 0);
+    ``exclusion=False``: the detector's (and the reach's) exclusion radius 0."""
     from dataclasses import replace
 
     rng = np.random.default_rng(5)
@@ -1129,6 +1131,9 @@ def _pinned_existence(reach_radius, frames=14, ghost=False, spare_rule=True):
     tracker = _detecting_tracker(calib, bgs, seed=4)
     det = tracker.detection
     det.config = replace(det.config, reach_radius=reach_radius)
+    if not exclusion:
+        det.config = replace(det.config, detector=replace(det.config.detector,
+                                                          exclusion_radius=0.0))
     if not spare_rule:
         det.releaser = Releaser(calib, replace(det.releaser.config, spare_support=0.0))
 
@@ -1166,22 +1171,24 @@ def test_a_track_lagging_its_walking_person_stays_reported_by_its_reach():
     assert np.nanmin(at_mean) < 0.5, at_mean
 
 
-@pytest.mark.parametrize('exclusive, spare_rule', [(True, True), (True, False),
-                                                   (False, True), (False, False)])
+@pytest.mark.parametrize('guard', ['all', 'pixels', 'spare', 'radius', 'none'])
 def test_the_reach_does_not_keep_a_track_alive_on_another_tracked_person(
-        monkeypatch, exclusive, spare_rule):
+        monkeypatch, guard):
     """A second track kept 0.4 m beside a tracked person: its reach counts only foreground
-    that the other track's silhouette does not cover, and a spare track (release rule) has
-    no reach; either keeps its existence from the person beside it, so that it falls below
-    the report threshold. Without both the person keeps it reported."""
+    that the other track's silhouette does not cover ('pixels'), a spare track (release
+    rule) has no reach ('spare'), and no place of the reach lies within the detector's
+    exclusion radius of another track ('radius'). Each alone keeps the ghost's existence
+    from the person beside it, so that it falls below the report threshold; with none of
+    them the person keeps it reported."""
     from mbtrack_ros.core.detection import manager
 
-    if not exclusive:   # the other track's pixels not set aside
+    if guard not in ('all', 'pixels'):   # the other track's pixels not set aside
         counts = manager.span_counts
         monkeypatch.setattr(manager, 'span_counts',
                             lambda fg, spans, unknown=None: counts(fg, spans))
-    ghost = _pinned_existence(0.5, ghost=True, spare_rule=spare_rule)
-    if exclusive or spare_rule:
+    ghost = _pinned_existence(0.5, ghost=True, spare_rule=guard in ('all', 'spare'),
+                              exclusion=guard in ('all', 'radius'))
+    if guard != 'none':
         assert np.nanmin(ghost) < 0.5, ghost
     else:
         assert np.all(ghost[:6] >= 0.5), ghost
@@ -1221,7 +1228,8 @@ def test_reach_counts_foreground_only_where_no_other_track_is():
     """The reach ring's coverage, side and top-down cameras: a place on an untracked
     person's foreground is covered; the same place is not when another track's silhouette
     (blob) at its mean covers that person, nor when the person's pixels are a possible
-    person of the bootstrap (a ghost: the background's not-yet-known foreground); bad
+    person of the bootstrap (a ghost: the background's not-yet-known foreground); with the
+    detector's exclusion radius there is no place near the other track at all; bad
     settings raise."""
     from mbtrack_ros.core.detection.manager import AutoDetection, AutoDetectionConfig
     from mbtrack_ros.core.detection.release import paint_blobs
@@ -1232,10 +1240,12 @@ def test_reach_counts_foreground_only_where_no_other_track_is():
     me = np.array([2.0, 2.5, 0.0, 0.0, 0.0, 0.0])      # the person is 0.5 m in +x of me
     other = np.r_[person_xy, 0.0, 0.0, 0.0, 0.0]       # a track on that person
     covered = {}
-    for case in ('free', 'tracked', 'ghost'):
-        det = AutoDetection(calib, AutoDetectionConfig(reach_radius=0.5, reach_directions=4))
+    for case in ('free', 'tracked', 'ghost', 'excluded'):
+        det = AutoDetection(calib, AutoDetectionConfig(
+            reach_radius=0.5, reach_directions=4,
+            detector=DetectorConfig(exclusion_radius=0.5 if case == 'excluded' else 0.0)))
         det.bootstrap({n: [np.zeros((H, W, 3), np.uint8)] for n in calib.cameras})
-        means = np.array([me, other]) if case == 'tracked' else me[None]
+        means = np.array([me, other]) if case in ('tracked', 'excluded') else me[None]
         evidence, sils = {}, {}
         for n, cam in calib.cameras.items():
             fg = np.zeros((H, W), bool)
@@ -1249,6 +1259,10 @@ def test_reach_counts_foreground_only_where_no_other_track_is():
             sils[n] = rasterize(cam, means, [shape] * len(means))
         places, rings = det._reach_coverage(0, evidence, sils, means, [shape] * len(means),
                                             np.full(len(means), 1.8))
+        if case == 'excluded':
+            assert len(places) == len(rings) == 6     # 8 places, the 2 nearest the track not
+            assert np.linalg.norm(places - person_xy, axis=1).min() > 0.5
+            continue
         at = int(np.argmin(np.linalg.norm(places - person_xy, axis=1)))
         assert np.allclose(places[at], person_xy)
         covered[case] = rings[at]

@@ -717,8 +717,9 @@ class AutoDetection:
                         shapes: Sequence[BodyShape], tops: np.ndarray
                         ) -> tuple[np.ndarray, list[dict[str, float]]]:
         """The places (M, 2) of track k's reach (``reach_directions`` places on each of
-        the rings of radius ``reach_radius`` / 2 and ``reach_radius`` around its mean) and
-        per place: camera -> coverage of its silhouette there (top-down cameras: the
+        the rings of radius ``reach_radius`` / 2 and ``reach_radius`` around its mean, but
+        none within the detector's ``exclusion_radius`` of another track) and per place:
+        camera -> coverage of its silhouette there (top-down cameras: the
         release's blob, doubled as in :meth:`Releaser.support`), counting only foreground
         that no other track's silhouette (blob) at its mean covers and that is not a
         possible person of the bootstrap (the background's not-yet-known foreground), over
@@ -730,11 +731,17 @@ class AutoDetection:
         angle = np.tile(2.0 * np.pi * np.arange(cfg.reach_directions) / cfg.reach_directions,
                         2)
         radius = np.repeat([0.5 * cfg.reach_radius, cfg.reach_radius], cfg.reach_directions)
-        m = len(angle)
-        ring = np.repeat(means[k][None], m, axis=0)
+        ring = np.repeat(means[k][None], len(angle), axis=0)
         ring[:, X] += radius * np.cos(angle)
         ring[:, Y] += radius * np.sin(angle)
         others = np.delete(np.arange(len(means)), k)
+        if len(others) and cfg.detector.exclusion_radius > 0:
+            # another track's neighbourhood is its own (as for the detector)
+            gap = np.linalg.norm(ring[:, None, :2] - means[None, others, :2], axis=2)
+            ring = ring[gap.min(axis=1) > cfg.detector.exclusion_radius]
+        m = len(ring)
+        if m == 0:
+            return np.zeros((0, 2)), []
         out: list[dict[str, float]] = [{} for _ in range(m)]
         for n, sil in sils.items():
             if n not in evidence:
