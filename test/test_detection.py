@@ -1115,14 +1115,15 @@ def test_detection_every_kth_frame_set_holds_existence_in_between(monkeypatch):
 
 
 def _pinned_existence(reach_radius, frames=14, ghost=False, spare_rule=True,
-                      exclusion=True):
+                      exclusion=True, reach_age=0.0):
     """A person walking at 0.9 m/s along y = 2.6 m, tracked as track 1 for 16 frames;
     then, frame by frame, track 1 is put back 0.4 m behind them before the step (a track
     that fell behind a person who started walking) or, with ``ghost``, a second track
     with track 1's model is kept 0.4 m beside the person while track 1 follows them.
     Returns the existence per later frame of the pinned track (NaN: released).
     ``spare_rule=False``: no spare tracks (release ``spare_support`` 0);
-    ``exclusion=False``: the detector's (and the reach's) exclusion radius 0."""
+    ``exclusion=False``: the detector's (and the reach's) exclusion radius 0; the track is
+    about 1 s old (``reach_age`` 0 by default)."""
     from dataclasses import replace
 
     rng = np.random.default_rng(5)
@@ -1130,7 +1131,7 @@ def _pinned_existence(reach_radius, frames=14, ghost=False, spare_rule=True,
     bgs = backgrounds(calib)
     tracker = _detecting_tracker(calib, bgs, seed=4)
     det = tracker.detection
-    det.config = replace(det.config, reach_radius=reach_radius)
+    det.config = replace(det.config, reach_radius=reach_radius, reach_age=reach_age)
     if not exclusion:
         det.config = replace(det.config, detector=replace(det.config.detector,
                                                           exclusion_radius=0.0))
@@ -1169,6 +1170,8 @@ def test_a_track_lagging_its_walking_person_stays_reported_by_its_reach():
     assert np.all(lagging >= 0.5), lagging
     at_mean = _pinned_existence(0.0)
     assert np.nanmin(at_mean) < 0.5, at_mean
+    young = _pinned_existence(0.5, reach_age=2.0)     # a track of 1 s has no reach yet
+    assert np.nanmin(young) < 0.5, young
 
 
 @pytest.mark.parametrize('guard', ['all', 'pixels', 'spare', 'radius', 'none'])
@@ -1205,7 +1208,8 @@ def test_a_lagging_track_is_moved_to_the_place_its_reach_found(move):
     calib = make_room(ceiling=False)
     bgs = backgrounds(calib)
     tracker = _detecting_tracker(calib, bgs, seed=4)
-    tracker.detection.config = replace(tracker.detection.config, reach_move=move)
+    tracker.detection.config = replace(tracker.detection.config, reach_move=move,
+                                       reach_age=0.0)
 
     def walker(k):
         return [person(1.5 + 0.06 * k, 2.6, theta=0.0)]
@@ -1270,6 +1274,6 @@ def test_reach_counts_foreground_only_where_no_other_track_is():
         assert covered['free'][n] > 0.8, (n, covered)
         assert covered['tracked'][n] < 0.1, (n, covered)
         assert covered['ghost'][n] < 0.1, (n, covered)
-    for bad in ({'reach_radius': -0.1}, {'reach_directions': 0}):
+    for bad in ({'reach_radius': -0.1}, {'reach_directions': 0}, {'reach_age': -1.0}):
         with pytest.raises(DetectionError):
             AutoDetectionConfig(**bad)
