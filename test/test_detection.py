@@ -671,11 +671,16 @@ def _walker(k):
 def _drifted_walker(frames, before_drift=None):
     """:func:`_walker` tracked as track 1 for ``frames`` frames, then track 1 put 0.8 m
     beside the person (``before_drift(tracker)`` runs just before). Returns the tracker and
-    ``step(k)``, which steps frame k and returns (result, the decisions' actions)."""
+    ``step(k)``, which steps frame k and returns (result, the decisions' actions). The
+    reach is off: these tests are about the detector's identity check, and 0.8 m is
+    within what the reach (0.5 m rings, a silhouette's width) would bring back by itself."""
+    from dataclasses import replace
+
     rng = np.random.default_rng(3)
     calib = make_room()
     bgs = backgrounds(calib)
     tracker = _detecting_tracker(calib, bgs, seed=2)
+    tracker.detection.config = replace(tracker.detection.config, reach_radius=0.0)
     res = _track_painted(tracker, calib, bgs, rng, frames, _walker)
     assert tracker.track_ids == [1]
     if before_drift is not None:
@@ -1107,3 +1112,168 @@ def test_detection_every_kth_frame_set_holds_existence_in_between(monkeypatch):
     calls.clear()
     tracker.step(stamps[-1] + 10 ** 9, bgs)
     assert len(calls) == 1
+
+
+def _pinned_existence(reach_radius, frames=14, ghost=False, spare_rule=True,
+                      exclusion=True, reach_age=0.0):
+    """A person walking at 0.9 m/s along y = 2.6 m, tracked as track 1 for 16 frames;
+    then, frame by frame, track 1 is put back 0.4 m behind them before the step (a track
+    that fell behind a person who started walking) or, with ``ghost``, a second track
+    with track 1's model is kept 0.4 m beside the person while track 1 follows them.
+    Returns the existence per later frame of the pinned track (NaN: released).
+    ``spare_rule=False``: no spare tracks (release ``spare_support`` 0);
+    ``exclusion=False``: the detector's (and the reach's) exclusion radius 0; the track is
+    about 1 s old (``reach_age`` 0 by default)."""
+    from dataclasses import replace
+
+    rng = np.random.default_rng(5)
+    calib = make_room(ceiling=False)       # the corner cameras alone decide existence
+    bgs = backgrounds(calib)
+    tracker = _detecting_tracker(calib, bgs, seed=4)
+    det = tracker.detection
+    det.config = replace(det.config, reach_radius=reach_radius, reach_age=reach_age)
+    if not exclusion:
+        det.config = replace(det.config, detector=replace(det.config.detector,
+                                                          exclusion_radius=0.0))
+    if not spare_rule:
+        det.releaser = Releaser(calib, replace(det.releaser.config, spare_support=0.0))
+
+    def walker(k):
+        return [person(1.5 + 0.06 * k, 2.6, theta=0.0)]
+    res = _track_painted(tracker, calib, bgs, rng, 16, walker)
+    assert tracker.track_ids == [1] and res[-1].tracks[0].existence > 0.9
+    pinned = 1
+    if ghost:
+        state = res[-1].tracks[0].mean.copy()
+        state[1] += 0.4
+        pinned = tracker.add_track(tracker._models[1], state, int(round(15 * 1e9 / FPS)))
+    out = []
+    for k in range(16, 16 + frames):
+        x = 1.5 + 0.06 * k
+        if pinned in tracker.track_ids:
+            state = np.array([x - 0.4, 2.6, 0.0, 0.0, 0.0, 0.0]) if not ghost else \
+                np.array([x - 0.06, 3.0, 0.9, 0.0, 0.0, 0.0])
+            tracker.relocate_track(pinned, state)
+        tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, walker(k), rng))
+        aux = det.aux.get(pinned)
+        out.append(aux.existence if aux is not None and pinned in tracker.track_ids
+                   else np.nan)
+    return np.array(out)
+
+
+def test_a_track_lagging_its_walking_person_stays_reported_by_its_reach():
+    """A track kept 0.4 m behind its walking person: the coverage of its silhouette falls
+    and, judged at its mean only, its existence drops below the report threshold (it would
+    be hidden, the person shielded from the detector, and re-born under a new id after
+    its release); with the reach (the best place within 0.5 m counts) it stays reported."""
+    lagging = _pinned_existence(0.5)
+    assert np.all(lagging >= 0.5), lagging
+    at_mean = _pinned_existence(0.0)
+    assert np.nanmin(at_mean) < 0.5, at_mean
+    young = _pinned_existence(0.5, reach_age=2.0)     # a track of 1 s has no reach yet
+    assert np.nanmin(young) < 0.5, young
+
+
+@pytest.mark.parametrize('guard', ['all', 'pixels', 'spare', 'radius', 'none'])
+def test_the_reach_does_not_keep_a_track_alive_on_another_tracked_person(
+        monkeypatch, guard):
+    """A second track kept 0.4 m beside a tracked person: its reach counts only foreground
+    that the other track's silhouette does not cover ('pixels'), a spare track (release
+    rule) has no reach ('spare'), and no place of the reach lies within the detector's
+    exclusion radius of another track ('radius'). Each alone keeps the ghost's existence
+    from the person beside it, so that it falls below the report threshold; with none of
+    them the person keeps it reported."""
+    from mbtrack_ros.core.detection import manager
+
+    if guard not in ('all', 'pixels'):   # the other track's pixels not set aside
+        counts = manager.span_counts
+        monkeypatch.setattr(manager, 'span_counts',
+                            lambda fg, spans, unknown=None: counts(fg, spans))
+    ghost = _pinned_existence(0.5, ghost=True, spare_rule=guard in ('all', 'spare'),
+                              exclusion=guard in ('all', 'radius'))
+    if guard != 'none':
+        assert np.nanmin(ghost) < 0.5, ghost
+    else:
+        assert np.all(ghost[:6] >= 0.5), ghost
+
+
+@pytest.mark.parametrize('move', [True, False])
+def test_a_lagging_track_is_moved_to_the_place_its_reach_found(move):
+    """A track put 0.45 m behind its walking person once: with ``reach_move`` it is
+    restarted where its reach found the person and is within 0.2 m of them two frames
+    later; without, the filter alone is still more than 0.25 m behind."""
+    from dataclasses import replace
+
+    rng = np.random.default_rng(5)
+    calib = make_room(ceiling=False)
+    bgs = backgrounds(calib)
+    tracker = _detecting_tracker(calib, bgs, seed=4)
+    tracker.detection.config = replace(tracker.detection.config, reach_move=move,
+                                       reach_age=0.0)
+
+    def walker(k):
+        return [person(1.5 + 0.06 * k, 2.6, theta=0.0)]
+    _track_painted(tracker, calib, bgs, rng, 16, walker)
+    assert tracker.track_ids == [1]
+    tracker.relocate_track(1, np.array([1.5 + 0.06 * 15 - 0.45, 2.6, 0.0, 0.0, 0.0, 0.0]))
+    moved = []
+    for k in (16, 17):
+        res = tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, walker(k), rng))
+        moved.append(1 in tracker.detection.reach_moves)
+    lag = 1.5 + 0.06 * 17 - res.tracks[0].mean[0]
+    assert tracker.track_ids == [1]
+    if move:
+        assert moved[0] and abs(lag) < 0.2, lag
+    else:
+        assert not any(moved) and lag > 0.25, lag
+
+
+def test_reach_counts_foreground_only_where_no_other_track_is():
+    """The reach ring's coverage, side and top-down cameras: a place on an untracked
+    person's foreground is covered; the same place is not when another track's silhouette
+    (blob) at its mean covers that person, nor when the person's pixels are a possible
+    person of the bootstrap (a ghost: the background's not-yet-known foreground); with the
+    detector's exclusion radius there is no place near the other track at all; bad
+    settings raise."""
+    from mbtrack_ros.core.detection.manager import AutoDetection, AutoDetectionConfig
+    from mbtrack_ros.core.detection.release import paint_blobs
+
+    calib = make_room()
+    shape = BodyShape(1.8, 0.5)
+    person_xy = np.array([2.5, 2.5])
+    me = np.array([2.0, 2.5, 0.0, 0.0, 0.0, 0.0])      # the person is 0.5 m in +x of me
+    other = np.r_[person_xy, 0.0, 0.0, 0.0, 0.0]       # a track on that person
+    covered = {}
+    for case in ('free', 'tracked', 'ghost', 'excluded'):
+        det = AutoDetection(calib, AutoDetectionConfig(
+            reach_radius=0.5, reach_directions=4,
+            detector=DetectorConfig(exclusion_radius=0.5 if case == 'excluded' else 0.0)))
+        det.bootstrap({n: [np.zeros((H, W, 3), np.uint8)] for n in calib.cameras})
+        means = np.array([me, other]) if case in ('tracked', 'excluded') else me[None]
+        evidence, sils = {}, {}
+        for n, cam in calib.cameras.items():
+            fg = np.zeros((H, W), bool)
+            if is_ceiling(cam):
+                paint_blobs(fg, cam, person_xy[None], np.array([1.8]))
+            else:
+                fg |= render_labels(cam, np.r_[person_xy, 0, 0, 0, 0], shape) > 0
+            if case == 'ghost':
+                det.background.model(n).set_unknown(fg)
+            evidence[n] = FrameEvidence(np.zeros((H, W, 3), np.uint8), fg)
+            sils[n] = rasterize(cam, means, [shape] * len(means))
+        places, rings = det._reach_coverage(0, evidence, sils, means, [shape] * len(means),
+                                            np.full(len(means), 1.8))
+        if case == 'excluded':
+            assert len(places) == len(rings) == 6     # 8 places, the 2 nearest the track not
+            assert np.linalg.norm(places - person_xy, axis=1).min() > 0.5
+            continue
+        at = int(np.argmin(np.linalg.norm(places - person_xy, axis=1)))
+        assert np.allclose(places[at], person_xy)
+        covered[case] = rings[at]
+    for n in calib.cameras:
+        assert covered['free'][n] > 0.8, (n, covered)
+        assert covered['tracked'][n] < 0.1, (n, covered)
+        assert covered['ghost'][n] < 0.1, (n, covered)
+    for bad in ({'reach_radius': -0.1}, {'reach_directions': 0}, {'reach_age': -1.0}):
+        with pytest.raises(DetectionError):
+            AutoDetectionConfig(**bad)

@@ -48,7 +48,7 @@ import numpy as np
 from mbtrack_ros.core.resampling import logsumexp
 
 __all__ = ['AuxiliaryConfig', 'ExistenceError', 'TrackAuxiliary', 'binary_step',
-           'mixture_loglik', 'predictive_loglik', 'transition']
+           'coverage_log_ratio', 'mixture_loglik', 'predictive_loglik', 'transition']
 
 
 class ExistenceError(ValueError):
@@ -168,6 +168,20 @@ def mixture_loglik(loglik_visible: np.ndarray, loglik_hidden: np.ndarray,
     return np.where(np.isnan(out), -np.inf, out)
 
 
+def coverage_log_ratio(coverage: Mapping[str, float], weights: Mapping[str, float],
+                       gain: float, total: float = 0.0) -> float:
+    """Existence evidence of the foreground coverage ``f_c`` of a track's silhouettes:
+    ``sum_c w_c k (2 f_c - 1)``, the log ratio of two truncated exponentials on [0, 1]
+    (``p(f | e=1) ∝ exp(k f)``, ``p(f | e=0) ∝ exp(-k f)``), each camera weighted by
+    ``weights`` (1 when omitted; NaN coverage counts as 0), added to ``total``."""
+    out = total
+    for cam, f in coverage.items():
+        w = _unit(weights.get(cam, 1.0))
+        f = _unit(f) if math.isfinite(f) else 0.0
+        out += w * gain * (2.0 * f - 1.0)
+    return out
+
+
 @dataclass(frozen=True)
 class AuxiliaryConfig:
     """Parameters of the visibility and existence processes.
@@ -277,11 +291,8 @@ class TrackAuxiliary:
                 pv = min(prior, cfg.visibility_cap)
                 mix = _logaddexp(_log(pv) + l1 - l0, _log1p_neg(pv))
                 log_ratio_e += cfg.appearance_weight * w * mix
-        for cam, f in coverage.items():
-            w = _unit(visible_fraction.get(cam, 1.0))
-            f = _unit(f) if math.isfinite(f) else 0.0
-            # truncated exponentials on [0, 1]: log p(f | e=1) - log p(f | e=0) = k (2f - 1)
-            log_ratio_e += w * cfg.support_gain * (2.0 * f - 1.0)
+        log_ratio_e = coverage_log_ratio(coverage, visible_fraction, cfg.support_gain,
+                                         log_ratio_e)
         A_e = transition(cfg.birth, cfg.death, dt)
         self.existence, _ = binary_step(self.existence, A_e, 0.0, log_ratio_e)
 

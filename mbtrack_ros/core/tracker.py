@@ -23,7 +23,7 @@ import numpy as np
 from mbtrack_ros.core.camera import RoomCalibration
 from mbtrack_ros.core.dynamics import DynamicsError, MotionConfig
 from mbtrack_ros.core.filters import FilterConfig, FilterError, TrackingFilter, make_filter
-from mbtrack_ros.core.state import STATE_DIM, FrameResult, TrackEstimate, VX, VY, X, Y
+from mbtrack_ros.core.state import SIT, STATE_DIM, FrameResult, TrackEstimate, VX, VY, X, Y
 
 __all__ = ['Tracker', 'TrackerConfig', 'TrackerError']
 
@@ -426,6 +426,12 @@ class Tracker:
                                           bins=frame_bins() if frame_bins else None)
             for tid in ended:
                 self.remove_track(tid)
+            for t in tracks:   # a lagging track catches up (AutoDetectionConfig.reach_move)
+                if t.track_id in self.detection.reach_moves and t.track_id not in ended:
+                    state = t.mean.copy()
+                    state[[X, Y]] = self.detection.reach_moves[t.track_id]
+                    state[SIT] = float(state[SIT] >= 0.5)      # the mean holds p(sitting)
+                    self.relocate_track(t.track_id, state)
             tracks = [t for t in tracks
                       if t.track_id not in ended and self.detection.reported(t.track_id)]
             self._search_pending = True

@@ -368,6 +368,14 @@ class BackgroundModel:
         """(H, W) bool not-yet-known pixels that count as foreground (a possible person)."""
         return self._flagged(_POSSIBLE)
 
+    @property
+    def possible_foreground_as_tested(self) -> np.ndarray:
+        """:attr:`possible_foreground` as the last foreground test used it (a deferred
+        model update not applied, unlike the property)."""
+        if self._unknown is None:
+            return np.zeros(self.shape or (0, 0), bool)
+        return (self._unknown & _POSSIBLE) > 0
+
     def _flagged(self, flag: int) -> np.ndarray:
         """(H, W) bool pixels carrying a not-yet-known ``flag`` (after a pending update)."""
         self.update_pending()

@@ -33,8 +33,13 @@ from mbtrack_ros.core.detection.acquisition import AcquisitionConfig, acquire
 from mbtrack_ros.core.detection.background import BackgroundBank, BackgroundConfig
 from mbtrack_ros.core.detection.detector import (
     Detection, Detector, DetectorConfig, FrameEvidence, is_ceiling)
-from mbtrack_ros.core.detection.release import ReleaseConfig, Releaser, paint_blobs
-from mbtrack_ros.core.existence import AuxiliaryConfig, TrackAuxiliary, predictive_loglik
+from mbtrack_ros.core.detection.features import span_counts
+from mbtrack_ros.core.detection.release import (
+    ReleaseConfig, Releaser, blob_coverage, paint_blobs,
+)
+from mbtrack_ros.core.existence import (
+    AuxiliaryConfig, TrackAuxiliary, coverage_log_ratio, predictive_loglik,
+)
 from mbtrack_ros.core.shape import BodyShape, rasterize
 from mbtrack_ros.core.state import SIT, THETA, X, Y, TrackEstimate
 
@@ -78,6 +83,22 @@ class AutoDetectionConfig:
         duplicate_by_reporting: of two tracks on one person (release ``merge_radius``,
             ``merge_time``) release the one reported without a break for the shorter time
             (born, moved or hidden later) instead of the younger one.
+        reach_radius, reach_directions: a track whose coverage evidence for existence is
+            negative at its mean is also judged at ``reach_directions`` places on each of
+            two rings around it (radius half and all of ``reach_radius``, metres), on the
+            foreground no other track's silhouette covers, and the best place counts: a
+            track that fell behind a person who started walking stays reported while the
+            person is within the detector's ``exclusion_radius`` (the same 0.5 m by
+            default), where the detector does not look for them (docs/detection.md,
+            "Lagging tracks and existence"); 0 disables.
+        reach_move: a track whose reach counted a place with positive coverage evidence
+            is also restarted there (same id and velocity, :attr:`AutoDetection.reach_moves`;
+            the tracker moves it after the frame's output), so that it catches up with its
+            person instead of staying behind.
+        reach_age: seconds a track must have existed before it has a reach: a false birth
+            (a shadow, a ghost, the fringe of a person) would keep itself alive on what is
+            near it (on main's twelve clear-room runs 26 of 28 false births lived less
+            than 4 s).
     """
 
     background: BackgroundConfig = field(default_factory=BackgroundConfig)
@@ -97,6 +118,10 @@ class AutoDetectionConfig:
     reuse_time: float = 0.0
     reuse_radius: float = 1.0
     duplicate_by_reporting: bool = True
+    reach_radius: float = 0.5
+    reach_directions: int = 8
+    reach_move: bool = True
+    reach_age: float = 4.0
 
     def __post_init__(self) -> None:
         if not self.relocate_radius >= 0 or not np.isfinite(self.relocate_margin):
@@ -107,6 +132,10 @@ class AutoDetectionConfig:
             raise DetectionError('sigma and clutter_distance must be > 0')
         if self.visibility_particles < 1:
             raise DetectionError('visibility_particles must be >= 1')
+        if not (self.reach_radius >= 0 and self.reach_directions >= 1
+                and self.reach_age >= 0):
+            raise DetectionError('reach_radius and reach_age must be >= 0 and '
+                                 'reach_directions >= 1')
 
 
 @dataclass
@@ -162,6 +191,9 @@ class AutoDetection:
         self._last_stamp: int | None = None
         self.timings: dict[str, float] = {}
         self.decisions: list[dict] = []    # per frame: what happened to confirmed detections
+        # per frame: track id -> floor place (x, y) its reach found it a person at
+        self.reach_moves: dict[int, np.ndarray] = {}
+        self._first_seen: dict[int, int] = {}  # track id -> stamp of its first update
         self._placed: dict[int, int] = {}  # track id -> stamp of its birth or last move
         self._released: dict[int, tuple[int, np.ndarray]] = {}  # id -> (stamp, floor xy)
         self._shown_since: dict[int, int] = {}  # id -> birth, move or last hidden stamp
@@ -192,6 +224,8 @@ class AutoDetection:
             except Exception:  # noqa: BLE001 - dropped with the rest of the search
                 pass
         self.aux.clear()
+        self.reach_moves = {}
+        self._first_seen.clear()
         self._placed.clear()
         self._released.clear()
         self._shown_since.clear()
@@ -282,6 +316,9 @@ class AutoDetection:
         """
         cfg = self.config
         t0 = time.perf_counter()
+        self.reach_moves = {}
+        self._first_seen = {t.track_id: self._first_seen.get(t.track_id, int(stamp_ns))
+                            for t in tracks}
         dt = 0.0 if self._last_stamp is None else max(stamp_ns - self._last_stamp, 0) / 1e9
         self._last_stamp = int(stamp_ns)
         names = [n for n in images if n in self.calibration.cameras]
@@ -350,7 +387,19 @@ class AutoDetection:
                     known_bins[name] = quantize(images[name])
                 return known_bins[name]
 
-            self._auxiliary(dt, colour, tracks, models, parts, owner, part_sils, coverage)
+            spare = self.releaser.spare if evidence else np.zeros(len(tracks), bool)
+
+            def reach(k: int) -> tuple[np.ndarray, list[dict[str, float]]]:
+                """Places (M, 2) of track k's reach and its silhouette's coverages there
+                (none for a spare track: the others explain its foreground; none for a
+                track younger than ``reach_age``)."""
+                age = (int(stamp_ns) - self._first_seen[tracks[k].track_id]) / 1e9
+                if (k < len(spare) and spare[k]) or age < cfg.reach_age:
+                    return np.zeros((0, 2)), []
+                return self._reach_coverage(k, evidence, sils, means, shapes, tops)
+
+            self._auxiliary(dt, colour, tracks, models, parts, owner, part_sils, coverage,
+                            reach)
             existence = [self.aux[t.track_id].existence for t in tracks]
             if evidence:  # 4. release (only once the background exists)
                 ids = [t.track_id for t in tracks]
@@ -679,6 +728,63 @@ class AutoDetection:
         h = track.height if np.isfinite(track.height) and track.height > 0 else 1.75
         return BodyShape(height=float(h))
 
+    def _reach_coverage(self, k: int, evidence: Mapping[str, FrameEvidence],
+                        sils: Mapping[str, object], means: np.ndarray,
+                        shapes: Sequence[BodyShape], tops: np.ndarray
+                        ) -> tuple[np.ndarray, list[dict[str, float]]]:
+        """The places (M, 2) of track k's reach (``reach_directions`` places on each of
+        the rings of radius ``reach_radius`` / 2 and ``reach_radius`` around its mean, but
+        none within the detector's ``exclusion_radius`` of another track) and per place:
+        camera -> coverage of its silhouette there (top-down cameras: the
+        release's blob, doubled as in :meth:`Releaser.support`), counting only foreground
+        that no other track's silhouette (blob) at its mean covers and that is not a
+        possible person of the bootstrap (the background's not-yet-known foreground), over
+        the whole area: a track beside a tracked person finds no support in that person,
+        a track that lost its person at the start no support in their old place."""
+        cfg = self.config
+        if cfg.reach_radius <= 0:
+            return np.zeros((0, 2)), []
+        angle = np.tile(2.0 * np.pi * np.arange(cfg.reach_directions) / cfg.reach_directions,
+                        2)
+        radius = np.repeat([0.5 * cfg.reach_radius, cfg.reach_radius], cfg.reach_directions)
+        ring = np.repeat(means[k][None], len(angle), axis=0)
+        ring[:, X] += radius * np.cos(angle)
+        ring[:, Y] += radius * np.sin(angle)
+        others = np.delete(np.arange(len(means)), k)
+        if len(others) and cfg.detector.exclusion_radius > 0:
+            # another track's neighbourhood is its own (as for the detector)
+            gap = np.linalg.norm(ring[:, None, :2] - means[None, others, :2], axis=2)
+            ring = ring[gap.min(axis=1) > cfg.detector.exclusion_radius]
+        m = len(ring)
+        if m == 0:
+            return np.zeros((0, 2)), []
+        out: list[dict[str, float]] = [{} for _ in range(m)]
+        for n, sil in sils.items():
+            if n not in evidence:
+                continue
+            cam = self.calibration.cameras[n]
+            # pixels that are not the track's support: other tracks', bootstrap ghosts
+            taken = self.background.model(n).possible_foreground_as_tested.copy()
+            if taken.shape != evidence[n].foreground.shape:
+                taken = np.zeros(evidence[n].foreground.shape, bool)
+            if is_ceiling(cam):
+                paint_blobs(taken, cam, means[others, :2], tops[others])
+                cov, _ = blob_coverage(cam, evidence[n].foreground & ~taken, ring[:, :2],
+                                       np.full(m, tops[k]))
+                cov = np.minimum(2.0 * cov, 1.0)
+            else:
+                paint = taken.view(np.uint8)
+                for j in others:
+                    _kernels.paint_spans(paint, sil.row, sil.x0, sil.x1, sil.part,
+                                         int(sil.offsets[j]), int(sil.offsets[j + 1]), 1,
+                                         False)
+                fg_free, _, area = span_counts(evidence[n].foreground,
+                                               rasterize(cam, ring, shapes[k]), unknown=taken)
+                cov = np.where(area > 0, fg_free / np.maximum(area, 1.0), 0.0)
+            for i in range(m):
+                out[i][n] = float(cov[i])
+        return ring[:, [X, Y]], out
+
     def _visibility_particles(self, tracks: Sequence[TrackEstimate],
                               models: Mapping[int, PersonModel], shapes: Sequence[BodyShape]
                               ) -> tuple[np.ndarray, np.ndarray, list[BodyShape]]:
@@ -706,10 +812,13 @@ class AutoDetection:
     def _auxiliary(self, dt: float, colour: Callable[[str], np.ndarray | None],
                    tracks: Sequence[TrackEstimate],
                    models: Mapping[int, PersonModel], parts: np.ndarray, owner_arr: np.ndarray,
-                   part_sils: Mapping[str, object], coverage: Mapping[str, np.ndarray]) -> None:
+                   part_sils: Mapping[str, object], coverage: Mapping[str, np.ndarray],
+                   reach: Callable[[int], tuple[np.ndarray, list[dict[str, float]]]] | None
+                   = None) -> None:
         """Visibility and existence of every track (001) from the appearance likelihood of
         its particles ``parts`` (``owner_arr``: their track) rasterised in ``part_sils``;
-        ``colour(camera)`` gives the frame's colour bins of a side camera."""
+        ``colour(camera)`` gives the frame's colour bins of a side camera; ``reach(k)`` the
+        coverages of track k's reach ring (:meth:`_reach_coverage`)."""
         cfg = self.config
         hidden = -cfg.clutter_distance ** 2 / (2.0 * cfg.sigma ** 2)    # 001 Eq. 23
         has_particles = len(parts) > 0
@@ -747,6 +856,18 @@ class AutoDetection:
             side_w = cfg.side_weight if self.ceiling else 1.0
             weights = {n: (float(t.visible_fraction.get(n, 1.0)) * side_w
                            if n in self.side else 1.0) for n in set(cov) | set(vis)}
+            gain = cfg.existence.support_gain
+            if reach is not None and cov and coverage_log_ratio(cov, weights, gain) < 0.0:
+                # the track's reach: its best place counts (AutoDetectionConfig.reach_radius)
+                best = coverage_log_ratio(cov, weights, gain)
+                places, rings = reach(k)
+                for place, ring in zip(places, rings):
+                    ring = {n: ring.get(n, 0.0) for n in cov}
+                    evidence = coverage_log_ratio(ring, weights, gain)
+                    if evidence > best:
+                        cov, best = ring, evidence
+                        if cfg.reach_move and evidence > 0.0:
+                            self.reach_moves[t.track_id] = place
             aux.update(dt, loglik_visible=vis, loglik_hidden=hid, coverage=cov,
                        visible_fraction=weights)
             t.visibility = dict(aux.visibility)
