@@ -84,15 +84,17 @@ def test_fast_profile_is_the_default_with_half_the_particles():
     assert fast['particles'] == default['particles'] // 2
 
 
-def test_offline_profile_is_the_default_with_fewer_particles_and_sparse_detection():
+def test_offline_profile_is_the_default_with_fewer_particles_sparse_detection_half_size():
     from mbtrack_ros.commands.replay import tracker_values_from_params
 
     offline = tracker_values_from_params(OFFLINE)
     default = tracker_values_from_params(REPO / 'config' / 'clear_room.yaml')
     assert {k for k in offline.keys() | default.keys()
-            if offline.get(k) != default.get(k)} == {'particles', 'detection_every'}
+            if offline.get(k) != default.get(k)} == {'particles', 'detection_every',
+                                                      'image_scale'}
     assert offline['particles'] < default['particles']
     assert offline['detection_every'] > default.get('detection_every', 1)
+    assert offline['image_scale'] < default.get('image_scale', 1.0)
 
 
 @pytest.mark.parametrize('profile', [FAST, OFFLINE], ids=['fast', 'offline'])
@@ -125,3 +127,5 @@ def test_fast_profile_loads_in_the_node_and_the_replay(tmp_path, profile):
     assert node_config.subsample == replay_config.subsample == 1
     assert node_config.detection_every == replay_config.detection_every == \
         (1 if profile == FAST else 3)
+    assert node_config.image_scale == replay_config.image_scale == \
+        (1.0 if profile == FAST else 0.5)
