@@ -857,9 +857,9 @@ class AutoDetection:
             weights = {n: (float(t.visible_fraction.get(n, 1.0)) * side_w
                            if n in self.side else 1.0) for n in set(cov) | set(vis)}
             gain = cfg.existence.support_gain
-            if reach is not None and cov and coverage_log_ratio(cov, weights, gain) < 0.0:
+            best = coverage_log_ratio(cov, weights, gain) if reach is not None and cov else 0.0
+            if best < 0.0:
                 # the track's reach: its best place counts (AutoDetectionConfig.reach_radius)
-                best = coverage_log_ratio(cov, weights, gain)
                 places, rings = reach(k)
                 for place, ring in zip(places, rings):
                     ring = {n: ring.get(n, 0.0) for n in cov}
