@@ -79,6 +79,14 @@ def wrap_angle(a):
     return np.mod(a + np.pi, 2.0 * np.pi) - np.pi
 
 
+@njit(cache=True, nogil=True, inline='always')
+def relative_orientation(theta, x, y, centre):
+    """Body orientation ``theta`` of a person at floor point (x, y) relative to the direction
+    towards the camera centre (0 = facing it; not wrapped): ``Camera.viewing_angle`` in a
+    kernel."""
+    return theta - np.arctan2(centre[1] - y, centre[0] - x)
+
+
 @njit(cache=True, nogil=True)
 def nearest_two_views(rel, target, view_angles, n_views, va, vb, wa):
     """003 Eq. 1-2 for relative angles rel (N,) of models target (N,): the two key views of
@@ -210,7 +218,7 @@ def body_outline(ends, end_depth, theta, sitting, frac, half, parts, hip, width,
         if d1 > 1e-6:
             tx, ty = _project_one(ends[i, 1, 0], ends[i, 1, 1], ends[i, 1, 2], rot, t, kmat,
                                   dist)
-        rel = theta[i] - np.arctan2(centre[1] - y, centre[0] - x)
+        rel = relative_orientation(theta[i], x, y, centre)
         scale = width_scale(rel)
         valid[i] = _outline_one(i, bx, by, tx, ty, d0, d1, sitting[i], frac, half, parts, hip,
                                 width[i], scale, focal, left, right, seg_part)
@@ -953,8 +961,8 @@ def update_camera(image, bins, states, target, prior, heights, widths, chair, fr
     # 003 Eq. 1-2: orientation relative to the camera (Camera.viewing_angle), two key views
     rel = np.empty(n)
     for i in range(n):
-        rel[i] = wrap_angle(states[i, THETA] - np.arctan2(centre[1] - states[i, Y],
-                                                          centre[0] - states[i, X]))
+        rel[i] = wrap_angle(relative_orientation(states[i, THETA], states[i, X],
+                                                 states[i, Y], centre))
     va = np.zeros(n, np.int64)
     vb = np.zeros(n, np.int64)
     wa = np.ones(n)
