@@ -173,13 +173,13 @@ def test_background_writer_in_a_process_writes_the_bag_in_order_and_reports_erro
     from rosbags.highlevel import AnyReader
 
     from conftest import make_room
-    from mbtrack_ros.commands.replay import _BackgroundWriter
+    from mbtrack_ros.commands.output_writer import BackgroundWriter
     from mbtrack_ros.core.state import FrameResult, TrackEstimate
     from mbtrack_ros.nodes.output_bag import OutputBagError, OutputBagWriter
 
     room = make_room()
     out = tmp_path / 'tracks.mcap'
-    writer = _BackgroundWriter(functools.partial(OutputBagWriter, out, room), depth=2,
+    writer = BackgroundWriter(functools.partial(OutputBagWriter, out, room), depth=2,
                                process=True)
     mean = np.zeros(6)
     for k in range(20):
@@ -193,21 +193,21 @@ def test_background_writer_in_a_process_writes_the_bag_in_order_and_reports_erro
                   if conn.topic == '/tracker_node/people']
     assert people == [(k + 1, pytest.approx(0.1 * k)) for k in range(20)]
 
-    failing = _BackgroundWriter(functools.partial(_FailingWriter, 3), depth=2, process=True)
+    failing = BackgroundWriter(functools.partial(_FailingWriter, 3), depth=2, process=True)
     with pytest.raises(OSError, match='disk full'):
         for k in range(50):
             failing.write(FrameResult(stamp_ns=k))
         failing.close()
     with pytest.raises(OutputBagError, match='already exists'):
-        _BackgroundWriter(functools.partial(OutputBagWriter, out, room), process=True)
+        BackgroundWriter(functools.partial(OutputBagWriter, out, room), process=True)
     # started without waiting (replay builds the tracker meanwhile): the error comes with
     # ready(), and a writer discarded before use ends its child and leaves an empty bag
-    late = _BackgroundWriter(functools.partial(OutputBagWriter, out, room), process=True,
+    late = BackgroundWriter(functools.partial(OutputBagWriter, out, room), process=True,
                              wait=False)
     with pytest.raises(OutputBagError, match='already exists'):
         late.ready()
     assert late._child.poll() is not None
-    unused = _BackgroundWriter(functools.partial(OutputBagWriter, tmp_path / 'unused', room),
+    unused = BackgroundWriter(functools.partial(OutputBagWriter, tmp_path / 'unused', room),
                                process=True, wait=False)
     unused.discard()
     assert unused._child.returncode == 0
@@ -218,7 +218,7 @@ def test_background_writer_in_a_process_writes_the_bag_in_order_and_reports_erro
 def test_background_writer_keeps_order_snapshots_results_and_reports_errors():
     """tracks.mcap is written in a thread: results in order, as they were when handed over
     (the tracker may reuse its arrays), and a write error is raised in the main thread."""
-    from mbtrack_ros.commands.replay import _BackgroundWriter
+    from mbtrack_ros.commands.output_writer import BackgroundWriter
     from mbtrack_ros.core.state import FrameResult, TrackEstimate
 
     class Fake:
@@ -235,7 +235,7 @@ def test_background_writer_keeps_order_snapshots_results_and_reports_errors():
 
     mean = np.zeros(6)
     fake = Fake()
-    writer = _BackgroundWriter(fake, depth=2)
+    writer = BackgroundWriter(fake, depth=2)
     for k in range(20):
         mean[0] = k  # one buffer, overwritten like a tracker reusing its arrays
         writer.write(FrameResult(stamp_ns=k, tracks=[TrackEstimate(
@@ -244,7 +244,7 @@ def test_background_writer_keeps_order_snapshots_results_and_reports_errors():
     assert fake.closed and fake.got == [(k, [float(k)]) for k in range(20)]
 
     failing = Fake(fail_at=3)
-    writer = _BackgroundWriter(failing, depth=2)
+    writer = BackgroundWriter(failing, depth=2)
     for k in range(6):
         try:
             writer.write(FrameResult(stamp_ns=k))
