@@ -3,8 +3,11 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import logging
+import os
 import sys
 from collections.abc import Sequence
+from typing import NoReturn
 
 from mbtrack_ros import __version__
 
@@ -49,7 +52,13 @@ def _one_line_error(prog: str):
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``mbtrack``; returns the exit code."""
+    """Entry point of ``mbtrack``; returns the exit code.
+
+    As the ``mbtrack`` command (``argv`` None), a subcommand that sets the parser default
+    ``_quick_exit`` (replay: every file it wrote is closed, its writer process has ended)
+    ends the process as soon as it returns, without the interpreter's tear-down of numba,
+    LLVM, OpenCV and the rest: 0.3-0.6 s of every replay (docs/live_measurements.md,
+    part 5)."""
     words = list(sys.argv[1:] if argv is None else argv)
     command = next((w for w in words if not w.startswith('-')), '').replace('-', '_')
     parser = build_parser(only=(command,) if command in SUBCOMMANDS else None)
@@ -60,10 +69,22 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
-        return int(args._run(args) or 0)
+        code = int(args._run(args) or 0)
     except KeyboardInterrupt:
         print('mbtrack: interrupted', file=sys.stderr)
         return 130
+    if argv is None and getattr(args, '_quick_exit', False):
+        _quick_exit(code)
+    return code
+
+
+def _quick_exit(code: int) -> NoReturn:
+    """End the process with ``code`` now: flush the standard streams and the logging
+    handlers, then ``os._exit`` (no tear-down of the imported modules)."""
+    logging.shutdown()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)
 
 
 if __name__ == '__main__':

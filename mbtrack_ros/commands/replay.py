@@ -101,6 +101,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                         help='write OUTDIR/particles.npz (posterior particle sets)')
     parser.add_argument('--max-frames', type=int, default=None, metavar='N',
                         help='stop after N frames')
+    # run as the mbtrack command, the process ends right after run() (mbtrack_ros.cli.main)
+    parser.set_defaults(_quick_exit=True)
     return parser
 
 
