@@ -291,3 +291,33 @@ def test_the_replay_command_ends_at_once_with_complete_outputs(recording, tmp_pa
             with AnyReader([out / 'tracks.mcap']) as reader:
                 counts.append(sum(1 for _ in reader.messages()))
         assert counts[0] == counts[1] > 0
+
+
+def test_replay_at_half_scale_resizes_ahead_with_the_same_tracks(recording, tmp_path, capsys,
+                                                                 monkeypatch):
+    """With ``--image-scale`` the replay resizes the images in its reader thread (the resize
+    of ``Tracker.step``, done ahead): the step gets them at its size, and the tracks are
+    those of a replay that leaves the resize to the step, bit for bit."""
+    from mbtrack_ros.commands import replay
+    from mbtrack_ros.core.tracker import Tracker
+
+    gt = recording / 'ground_truth.csv'
+    args = ['replay', str(recording), '--image-scale', '0.5', '--particles', '30',
+            '--seed', '4', '--init-from', str(gt)]
+    seen = []
+    step = Tracker.step
+
+    def recording_step(self, stamp_ns, images, **kwargs):
+        seen.append({c: im.shape[:2] for c, im in images.items()})
+        return step(self, stamp_ns, images, **kwargs)
+
+    monkeypatch.setattr(Tracker, 'step', recording_step)
+    assert main(args + ['--out', str(tmp_path / 'ahead')]) == 0
+    assert seen and all(shape == (60, 80) for frame in seen for shape in frame.values())
+    monkeypatch.setattr(Tracker, 'step', step)
+    monkeypatch.setattr(replay, '_at_working_size', lambda frames, tracker: frames)
+    assert main(args + ['--out', str(tmp_path / 'in_step')]) == 0
+    capsys.readouterr()
+    ahead = (tmp_path / 'ahead' / 'tracks.csv').read_bytes()
+    assert ahead.count(b'\n') > 24  # people tracked
+    assert ahead == (tmp_path / 'in_step' / 'tracks.csv').read_bytes()

@@ -37,7 +37,7 @@ from mbtrack_ros.core.filters import FilterError
 from mbtrack_ros.core.initiation import InitiationError, initial_tracks, plan_key_views
 from mbtrack_ros.core.likelihood import LikelihoodError
 from mbtrack_ros.core.tracker import Tracker, TrackerConfig, TrackerError
-from mbtrack_ros.recording.bag import BagError, RecordingReader, prefetched
+from mbtrack_ros.recording.bag import BagError, FrameSet, RecordingReader, prefetched
 from mbtrack_ros.recording.csvfiles import (
     CsvFormatError, GroundTruthRow, TrackRow, read_ground_truth, write_tracks)
 
@@ -237,6 +237,20 @@ def _collect_key_images(reader: RecordingReader, index: _FrameIndex,
     return images
 
 
+def _at_working_size(frames: Iterator[FrameSet], tracker: Tracker) -> Iterator[FrameSet]:
+    """The frame sets with their images resized to the tracker's processing size
+    (``TrackerConfig.image_scale``) by the resize ``Tracker.step`` would apply
+    (``Camera.fit``), so that it runs in the reader thread; ``Tracker.step`` then finds
+    them at its size. Unchanged at scale 1 (where the step checks the sizes)."""
+    if tracker.config.image_scale == 1.0:
+        yield from frames
+        return
+    cams = tracker.calibration.cameras
+    for fs in frames:
+        fs.images = {c: cams[c].fit(im) if c in cams else im for c, im in fs.images.items()}
+        yield fs
+
+
 def _track_rows(tracker: Tracker, reader: RecordingReader, index: _FrameIndex, starts: list,
                 args: argparse.Namespace, recorder, status: dict,
                 outputs=None) -> Iterator[TrackRow]:
@@ -252,7 +266,8 @@ def _track_rows(tracker: Tracker, reader: RecordingReader, index: _FrameIndex, s
                disable=not sys.stderr.isatty())
     known = set(tracker.calibration.cameras)
     t_start = time.perf_counter()
-    frames = prefetched(reader.frames(), depth=4)  # read and decode while tracking
+    # read, decode and resize while tracking
+    frames = prefetched(_at_working_size(reader.frames(), tracker), depth=4)
     try:
         for fs in frames:
             if args.max_frames is not None and status['frames'] >= args.max_frames:
