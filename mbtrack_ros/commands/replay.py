@@ -3,9 +3,10 @@
 BAG is a rosbag2 directory (MCAP or sqlite3) or a recording directory made by
 ``mbtrack synth`` (then ``--config`` defaults to its ``calibration.yaml``). Frames are read
 with :class:`~mbtrack_ros.recording.bag.RecordingReader` and fed to the
-:class:`~mbtrack_ros.core.tracker.Tracker` as fast as possible (a reader thread decodes the
-next frame sets while the tracker works: :func:`~mbtrack_ros.recording.bag.prefetched`).
-Outputs in ``--out``:
+:class:`~mbtrack_ros.core.tracker.Tracker` as fast as possible (a reader thread decodes, and
+at ``image_scale`` < 1 resizes, the next frame sets while the tracker works:
+:func:`~mbtrack_ros.recording.bag.prefetched`); ``tracks.mcap`` is written by a child
+process (:mod:`mbtrack_ros.commands.output_writer`). Outputs in ``--out``:
 
 * ``tracks.csv`` (``recording.csvfiles`` format), written row by row while tracking;
 * ``particles.npz`` with ``--save-particles`` (format of ``evaluation.posterior``).
