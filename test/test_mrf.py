@@ -105,3 +105,24 @@ def test_bad_input_raises():
         belief_propagation([np.zeros((3, 2))] * 2, [np.ones(3)] * 2, edges=[(0, 0)])
     with pytest.raises(MRFError):
         belief_propagation([np.zeros((3, 2))] * 2, [np.zeros(3)] * 2)
+
+
+def test_exclusion_potential_distances_equal_scipy_cdist_bit_for_bit():
+    """The pairwise squared distances are computed with numpy (scipy.spatial costs ~0.3 s
+    of import per replay); they must be scipy's cdist 'sqeuclidean', bit for bit, so the
+    potential's threshold decisions are the same."""
+    from scipy.spatial.distance import cdist
+
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        n, m = rng.integers(1, 80, size=2)
+        a = rng.normal(size=(n, 2)) * rng.uniform(0.01, 5.0)
+        b = rng.normal(size=(m, 2)) * rng.uniform(0.01, 5.0) + rng.normal(size=2)
+        d2 = cdist(a, b, 'sqeuclidean')
+        radius = float(np.sqrt(np.median(d2)))  # about half the pairs on each side
+        psi = exclusion_potential(a, b, radius=radius, epsilon=0.01)
+        np.testing.assert_array_equal(psi, np.where(d2 > radius * radius, 1.0, 0.01))
+        # a radius exactly at a pair's distance: only bit-equal distances agree there
+        edge = float(np.sqrt(d2[0, 0]))
+        np.testing.assert_array_equal(exclusion_potential(a, b, radius=edge),
+                                      np.where(d2 > edge * edge, 1.0, 1e-3))

@@ -173,13 +173,13 @@ def test_background_writer_in_a_process_writes_the_bag_in_order_and_reports_erro
     from rosbags.highlevel import AnyReader
 
     from conftest import make_room
-    from mbtrack_ros.commands.replay import _BackgroundWriter
+    from mbtrack_ros.commands.output_writer import BackgroundWriter
     from mbtrack_ros.core.state import FrameResult, TrackEstimate
     from mbtrack_ros.nodes.output_bag import OutputBagError, OutputBagWriter
 
     room = make_room()
     out = tmp_path / 'tracks.mcap'
-    writer = _BackgroundWriter(functools.partial(OutputBagWriter, out, room), depth=2,
+    writer = BackgroundWriter(functools.partial(OutputBagWriter, out, room), depth=2,
                                process=True)
     mean = np.zeros(6)
     for k in range(20):
@@ -193,21 +193,21 @@ def test_background_writer_in_a_process_writes_the_bag_in_order_and_reports_erro
                   if conn.topic == '/tracker_node/people']
     assert people == [(k + 1, pytest.approx(0.1 * k)) for k in range(20)]
 
-    failing = _BackgroundWriter(functools.partial(_FailingWriter, 3), depth=2, process=True)
+    failing = BackgroundWriter(functools.partial(_FailingWriter, 3), depth=2, process=True)
     with pytest.raises(OSError, match='disk full'):
         for k in range(50):
             failing.write(FrameResult(stamp_ns=k))
         failing.close()
     with pytest.raises(OutputBagError, match='already exists'):
-        _BackgroundWriter(functools.partial(OutputBagWriter, out, room), process=True)
+        BackgroundWriter(functools.partial(OutputBagWriter, out, room), process=True)
     # started without waiting (replay builds the tracker meanwhile): the error comes with
     # ready(), and a writer discarded before use ends its child and leaves an empty bag
-    late = _BackgroundWriter(functools.partial(OutputBagWriter, out, room), process=True,
+    late = BackgroundWriter(functools.partial(OutputBagWriter, out, room), process=True,
                              wait=False)
     with pytest.raises(OutputBagError, match='already exists'):
         late.ready()
     assert late._child.poll() is not None
-    unused = _BackgroundWriter(functools.partial(OutputBagWriter, tmp_path / 'unused', room),
+    unused = BackgroundWriter(functools.partial(OutputBagWriter, tmp_path / 'unused', room),
                                process=True, wait=False)
     unused.discard()
     assert unused._child.returncode == 0
@@ -218,7 +218,7 @@ def test_background_writer_in_a_process_writes_the_bag_in_order_and_reports_erro
 def test_background_writer_keeps_order_snapshots_results_and_reports_errors():
     """tracks.mcap is written in a thread: results in order, as they were when handed over
     (the tracker may reuse its arrays), and a write error is raised in the main thread."""
-    from mbtrack_ros.commands.replay import _BackgroundWriter
+    from mbtrack_ros.commands.output_writer import BackgroundWriter
     from mbtrack_ros.core.state import FrameResult, TrackEstimate
 
     class Fake:
@@ -235,7 +235,7 @@ def test_background_writer_keeps_order_snapshots_results_and_reports_errors():
 
     mean = np.zeros(6)
     fake = Fake()
-    writer = _BackgroundWriter(fake, depth=2)
+    writer = BackgroundWriter(fake, depth=2)
     for k in range(20):
         mean[0] = k  # one buffer, overwritten like a tracker reusing its arrays
         writer.write(FrameResult(stamp_ns=k, tracks=[TrackEstimate(
@@ -244,7 +244,7 @@ def test_background_writer_keeps_order_snapshots_results_and_reports_errors():
     assert fake.closed and fake.got == [(k, [float(k)]) for k in range(20)]
 
     failing = Fake(fail_at=3)
-    writer = _BackgroundWriter(failing, depth=2)
+    writer = BackgroundWriter(failing, depth=2)
     for k in range(6):
         try:
             writer.write(FrameResult(stamp_ns=k))
@@ -253,3 +253,71 @@ def test_background_writer_keeps_order_snapshots_results_and_reports_errors():
     with pytest.raises(OSError, match='disk full'):
         writer.close()
     assert failing.closed and [s for s, _ in failing.got] == [0, 1, 2]
+
+
+def test_the_replay_command_ends_at_once_with_complete_outputs(recording, tmp_path, capsys):
+    """Run as the ``mbtrack`` command, replay ends its process right after its last file is
+    closed (no interpreter tear-down, 0.3-0.6 s): the exit code, tracks.csv and
+    tracks.mcap are those of the same replay called in-process, also for a damaged bag."""
+    import shutil
+    import subprocess
+    import sys
+
+    from rosbags.highlevel import AnyReader
+
+    damaged = tmp_path / 'damaged'
+    shutil.copytree(recording, damaged)
+    mcap = next((damaged / 'bag').glob('*.mcap'))
+    mcap.write_bytes(mcap.read_bytes()[: int(mcap.stat().st_size * 0.75)])
+    # the console script's body, with an exit hook that a quick exit never runs
+    script = ('import atexit, sys\n'
+              'atexit.register(lambda: print("tear-down ran", file=sys.stderr))\n'
+              'from mbtrack_ros.cli import main\n'
+              'sys.exit(main())\n')
+    for rec, expected_code in ((recording, 0), (damaged, 1)):
+        args = ['replay', str(rec), '--init-from', str(rec / 'ground_truth.csv'),
+                '--particles', '30', '--seed', '2']
+        inside, outside = tmp_path / f'in_{rec.name}', tmp_path / f'out_{rec.name}'
+        assert main(args + ['--out', str(inside)]) == expected_code
+        capsys.readouterr()
+        done = subprocess.run([sys.executable, '-c', script] + args + ['--out', str(outside)],
+                              capture_output=True, text=True)
+        assert done.returncode == expected_code, done.stderr[-2000:]
+        assert 'tear-down ran' not in done.stderr
+        assert 'mbtrack replay: ' in done.stderr and 'Traceback' not in done.stderr
+        assert (outside / 'tracks.csv').read_bytes() == (inside / 'tracks.csv').read_bytes()
+        counts = []
+        for out in (inside, outside):
+            with AnyReader([out / 'tracks.mcap']) as reader:
+                counts.append(sum(1 for _ in reader.messages()))
+        assert counts[0] == counts[1] > 0
+
+
+def test_replay_at_half_scale_resizes_ahead_with_the_same_tracks(recording, tmp_path, capsys,
+                                                                 monkeypatch):
+    """With ``--image-scale`` the replay resizes the images in its reader thread (the resize
+    of ``Tracker.step``, done ahead): the step gets them at its size, and the tracks are
+    those of a replay that leaves the resize to the step, bit for bit."""
+    from mbtrack_ros.commands import replay
+    from mbtrack_ros.core.tracker import Tracker
+
+    gt = recording / 'ground_truth.csv'
+    args = ['replay', str(recording), '--image-scale', '0.5', '--particles', '30',
+            '--seed', '4', '--init-from', str(gt)]
+    seen = []
+    step = Tracker.step
+
+    def recording_step(self, stamp_ns, images, **kwargs):
+        seen.append({c: im.shape[:2] for c, im in images.items()})
+        return step(self, stamp_ns, images, **kwargs)
+
+    monkeypatch.setattr(Tracker, 'step', recording_step)
+    assert main(args + ['--out', str(tmp_path / 'ahead')]) == 0
+    assert seen and all(shape == (60, 80) for frame in seen for shape in frame.values())
+    monkeypatch.setattr(Tracker, 'step', step)
+    monkeypatch.setattr(replay, '_at_working_size', lambda frames, tracker: frames)
+    assert main(args + ['--out', str(tmp_path / 'in_step')]) == 0
+    capsys.readouterr()
+    ahead = (tmp_path / 'ahead' / 'tracks.csv').read_bytes()
+    assert ahead.count(b'\n') > 24  # people tracked
+    assert ahead == (tmp_path / 'in_step' / 'tracks.csv').read_bytes()

@@ -3,9 +3,10 @@
 BAG is a rosbag2 directory (MCAP or sqlite3) or a recording directory made by
 ``mbtrack synth`` (then ``--config`` defaults to its ``calibration.yaml``). Frames are read
 with :class:`~mbtrack_ros.recording.bag.RecordingReader` and fed to the
-:class:`~mbtrack_ros.core.tracker.Tracker` as fast as possible (a reader thread decodes the
-next frame sets while the tracker works: :func:`~mbtrack_ros.recording.bag.prefetched`).
-Outputs in ``--out``:
+:class:`~mbtrack_ros.core.tracker.Tracker` as fast as possible (a reader thread decodes, and
+at ``image_scale`` < 1 resizes, the next frame sets while the tracker works:
+:func:`~mbtrack_ros.recording.bag.prefetched`); ``tracks.mcap`` is written by a child
+process (:mod:`mbtrack_ros.commands.output_writer`). Outputs in ``--out``:
 
 * ``tracks.csv`` (``recording.csvfiles`` format), written row by row while tracking;
 * ``particles.npz`` with ``--save-particles`` (format of ``evaluation.posterior``).
@@ -20,15 +21,10 @@ to there is kept on disk and the exit code is 1.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import functools
-import os
-import pickle
-import queue
+import importlib.util
 import shutil
-import subprocess
 import sys
-import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -36,12 +32,13 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from mbtrack_ros.commands.output_writer import BackgroundWriter, output_bag_writer
 from mbtrack_ros.core.camera import CalibrationError, RoomCalibration
 from mbtrack_ros.core.filters import FilterError
 from mbtrack_ros.core.initiation import InitiationError, initial_tracks, plan_key_views
 from mbtrack_ros.core.likelihood import LikelihoodError
 from mbtrack_ros.core.tracker import Tracker, TrackerConfig, TrackerError
-from mbtrack_ros.recording.bag import BagError, RecordingReader, prefetched
+from mbtrack_ros.recording.bag import BagError, FrameSet, RecordingReader, prefetched
 from mbtrack_ros.recording.csvfiles import (
     CsvFormatError, GroundTruthRow, TrackRow, read_ground_truth, write_tracks)
 
@@ -105,6 +102,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                         help='write OUTDIR/particles.npz (posterior particle sets)')
     parser.add_argument('--max-frames', type=int, default=None, metavar='N',
                         help='stop after N frames')
+    # run as the mbtrack command, the process ends right after run() (mbtrack_ros.cli.main)
+    parser.set_defaults(_quick_exit=True)
     return parser
 
 
@@ -137,7 +136,7 @@ def tracker_values_from_params(path: Path) -> dict:
     """TrackerConfig values of a tracker_node parameter file (the ``tracker.*`` and
     ``detection.*`` entries of ``TRACKER_PARAMETERS``, the node's own map); raises
     TrackerError on an unreadable file or unknown key."""
-    from mbtrack_ros.nodes.params import TRACKER_PARAMETERS  # rclpy only when asked for
+    from mbtrack_ros.nodes.tracker_parameters import TRACKER_PARAMETERS  # no rclpy
     try:
         doc = yaml.safe_load(Path(path).read_text())
         params = doc['tracker_node']['ros__parameters']
@@ -239,6 +238,20 @@ def _collect_key_images(reader: RecordingReader, index: _FrameIndex,
     return images
 
 
+def _at_working_size(frames: Iterator[FrameSet], tracker: Tracker) -> Iterator[FrameSet]:
+    """The frame sets with their images resized to the tracker's processing size
+    (``TrackerConfig.image_scale``) by the resize ``Tracker.step`` would apply
+    (``Camera.fit``), so that it runs in the reader thread; ``Tracker.step`` then finds
+    them at its size. Unchanged at scale 1 (where the step checks the sizes)."""
+    if tracker.config.image_scale == 1.0:
+        yield from frames
+        return
+    cams = tracker.calibration.cameras
+    for fs in frames:
+        fs.images = {c: cams[c].fit(im) if c in cams else im for c, im in fs.images.items()}
+        yield fs
+
+
 def _track_rows(tracker: Tracker, reader: RecordingReader, index: _FrameIndex, starts: list,
                 args: argparse.Namespace, recorder, status: dict,
                 outputs=None) -> Iterator[TrackRow]:
@@ -254,7 +267,8 @@ def _track_rows(tracker: Tracker, reader: RecordingReader, index: _FrameIndex, s
                disable=not sys.stderr.isatty())
     known = set(tracker.calibration.cameras)
     t_start = time.perf_counter()
-    frames = prefetched(reader.frames(), depth=4)  # read and decode while tracking
+    # read, decode and resize while tracking
+    frames = prefetched(_at_working_size(reader.frames(), tracker), depth=4)
     try:
         for fs in frames:
             if args.max_frames is not None and status['frames'] >= args.max_frames:
@@ -306,187 +320,34 @@ def _track_rows(tracker: Tracker, reader: RecordingReader, index: _FrameIndex, s
         status['wall_s'] = time.perf_counter() - t_start
 
 
-class _BackgroundWriter:
-    """Writes frame results to an ``OutputBagWriter`` beside the tracker (in order): in a
-    thread (bounded queue), or with ``process`` in a child Python process fed through a pipe.
-
-    Building and serialising the rclpy messages of a frame (MarkerArray above all) costs
-    ~3 ms of CPU with 4 tracks, all of it holding the interpreter lock; in a thread it
-    still competes with the tracker's Python code for that lock, in a child process it
-    runs on the other core (the same writer code, the same bag). The child is a fresh
-    interpreter (``python -c``), not a ``multiprocessing`` child, so it never re-imports
-    the caller's main script. Each result is snapshotted (track means and covariances
-    copied, particles left out) so the tracker may reuse its buffers. A write error is
-    raised by a later :meth:`write` or by :meth:`close`.
-
-    Args:
-        writer: the writer object (thread), or with ``process`` a picklable callable that
-            builds it in the child.
-        wait: with ``process``, wait until the child has built the writer (its error, e.g.
-            an existing bag, raised here); with False the child starts (~1.5 s of imports)
-            while the caller goes on, and :meth:`ready` (or the first :meth:`write`) waits.
-    """
-
-    def __init__(self, writer, depth: int = 8, *, process: bool = False,
-                 wait: bool = True) -> None:
-        self._error: BaseException | None = None
-        self._child: subprocess.Popen | None = None
-        self._starting = False
-        if process:
-            env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
-            self._child = subprocess.Popen(
-                [sys.executable, '-c', 'from mbtrack_ros.commands.replay import '
-                 '_write_results; _write_results()'],
-                stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env)
-            self._send(writer)
-            self._starting = True
-            if wait:
-                self.ready()
-            return
-        self._writer = writer
-        self._queue: queue.Queue = queue.Queue(maxsize=depth)
-        self._thread = threading.Thread(target=self._run, name='output_bag', daemon=True)
-        self._thread.start()
-
-    def _run(self) -> None:
-        while True:
-            result = self._queue.get()
-            if result is None:
-                return
-            if self._error is None:
-                try:
-                    self._writer.write(result)
-                except BaseException as err:  # reported in the main thread
-                    self._error = err
-
-    def ready(self) -> None:
-        """Wait until the child process has built the writer; raise its error if it could
-        not (then the child has stopped)."""
-        if not self._starting:
-            return
-        self._starting = False
-        failed = self._reply()  # None once the child's writer exists
-        if failed is not None:
-            self._child.wait()
-            self._error = failed
-            raise failed
-
-    def discard(self) -> None:
-        """Stop a writer that will not be used (the caller failed before tracking): the
-        child closes its bag without writing a frame."""
-        if self._child is None:
-            self.close()
-            return
-        try:
-            self.ready()
-            self.close()
-        except BaseException:  # noqa: BLE001 - the caller's own error matters here
-            pass
-
-    def _send(self, item) -> None:
-        """Pickle ``item`` to the child; when the child has stopped, raise its error."""
-        try:
-            pickle.dump(item, self._child.stdin)
-            self._child.stdin.flush()
-        except (BrokenPipeError, OSError):
-            self._error = self._error or self._reply() or RuntimeError(
-                'the output bag writer process stopped')
-            raise self._error from None
-
-    def _reply(self) -> BaseException | None:
-        """The child's next reply: None (ready / closed) or its error."""
-        try:
-            return pickle.load(self._child.stdout)
-        except (EOFError, pickle.UnpicklingError, OSError):
-            return RuntimeError(f'the output bag writer process ended without a reply '
-                                f'(exit code {self._child.wait()})')
-
-    def write(self, result) -> None:
-        self.ready()
-        if self._error is not None:
-            raise self._error
-        tracks = [dataclasses.replace(t, mean=np.array(t.mean), covariance=np.array(
-            t.covariance), visible_fraction=dict(t.visible_fraction),
-            visibility=dict(t.visibility), particles=None, weights=None)
-            for t in result.tracks]
-        item = dataclasses.replace(result, tracks=tracks, ended=list(result.ended))
-        if self._child is not None:
-            self._send(item)
-        else:
-            self._queue.put(item)
-
-    def close(self) -> None:
-        """Write what is queued, close the bag, raise a write error if one happened."""
-        self.ready()
-        if self._child is None:
-            self._queue.put(None)
-            self._thread.join()
-            self._writer.close()
-        elif self._error is None:
-            self._send(None)
-            self._child.stdin.close()
-            self._error = self._reply()  # None when the bag was closed without error
-            self._child.wait()
-        if self._error is not None:
-            raise self._error
-
-
-def _write_results() -> None:
-    """The child process of ``_BackgroundWriter(..., process=True)``: from stdin, a callable
-    that builds the writer, then results until None; to stdout, None once the writer exists
-    and None when the bag is closed, or the first error (then the child stops)."""
-    source = sys.stdin.buffer
-    replies = os.fdopen(os.dup(1), 'wb')  # the pipe; anything printed goes to stderr
-    os.dup2(2, 1)
-    sys.stdout = sys.stderr
-
-    def reply(value) -> None:
-        try:
-            pickle.dump(value, replies)
-        except Exception:  # noqa: BLE001 - an error that does not pickle
-            pickle.dump(RuntimeError(f'{type(value).__name__}: {value}'), replies)
-        replies.flush()
-
-    try:
-        writer = pickle.load(source)()
-        reply(None)
-        while (result := pickle.load(source)) is not None:
-            writer.write(result)
-        writer.close()
-    except BaseException as err:  # noqa: BLE001 - raised in the parent
-        reply(err)
-        raise SystemExit(1) from None
-    reply(None)
-
-
 def _output_bag(out: Path, calibration: RoomCalibration):
     """Writer of OUTDIR/tracks.mcap: every tracker_node output topic (None without rclpy).
-    Its child process starts here; :func:`_writer_ready` waits for it."""
-    try:
-        from mbtrack_ros.nodes.output_bag import OutputBagError, OutputBagWriter
-    except ImportError:
+    Its child process starts here; :func:`_writer_ready` waits for it. rclpy is imported
+    in the child only."""
+    if importlib.util.find_spec('rclpy') is None:
         print(f'{_PROG}: note: no rclpy, so no {out / "tracks.mcap"}', file=sys.stderr)
         return None
     path = out / 'tracks.mcap'
     if (path / 'metadata.yaml').exists():
         shutil.rmtree(path)  # replaced like tracks.csv
-    try:
-        return _BackgroundWriter(functools.partial(OutputBagWriter, path, calibration),
-                                 process=True, wait=False)
-    except OutputBagError as err:
-        raise _UserError(str(err)) from err
+    return BackgroundWriter(functools.partial(output_bag_writer, path, list(calibration.names),
+                                              calibration.frame_id),
+                            process=True, wait=False)
 
 
-def _writer_ready(outputs: _BackgroundWriter | None) -> None:
+def _writer_ready(outputs: BackgroundWriter | None) -> None:
     """Wait for the writer of :func:`_output_bag`; its error (e.g. an unwritable bag) is a
     user error."""
     if outputs is None:
         return
-    from mbtrack_ros.nodes.output_bag import OutputBagError
     try:
         outputs.ready()
-    except OutputBagError as err:
-        raise _UserError(str(err)) from err
+    except Exception as err:
+        # the child's error arrived pickled, so its module is loaded already
+        from mbtrack_ros.nodes.output_bag import OutputBagError
+        if isinstance(err, OutputBagError):
+            raise _UserError(str(err)) from err
+        raise
 
 
 def run(args: argparse.Namespace) -> int:
@@ -512,7 +373,7 @@ def run(args: argparse.Namespace) -> int:
             raise _UserError(f'{bag} is not a rosbag2 directory nor a recording directory '
                              '(no metadata.yaml)')
         try:
-            with RecordingReader(bag) as reader:
+            with RecordingReader(bag) as reader:  # opened once (~0.15 s an opening)
                 first: dict[str, np.ndarray] = {}
                 try:
                     for fs in reader.frames():
@@ -521,32 +382,30 @@ def run(args: argparse.Namespace) -> int:
                 except BagError:
                     pass
                 calibration = _match_calibration(calibration, reader, first)
-            starts = []
-            if not auto:
-                plan = plan_key_views(calibration, truth)
-                needed = {v.frame for views in plan.values() for v in views}
-                with RecordingReader(bag) as reader:
+                starts = []
+                if not auto:
+                    plan = plan_key_views(calibration, truth)
+                    needed = {v.frame for views in plan.values() for v in views}
                     key_images = _collect_key_images(reader, index, needed)
-                starts = initial_tracks(calibration, truth, key_images, plan,
-                                        skip_missing=True)
-                skipped = sorted(set(plan) - {s.person_id for s in starts})
-                if skipped:
-                    print(f'{_PROG}: note: no unoccluded key view of person(s) '
-                          f'{", ".join(map(str, skipped))}; not tracked', file=sys.stderr)
-                if not starts:
-                    raise _UserError('no person could be initialised from the ground truth')
-            # the writer's child process starts (imports ~1.5 s) while the tracker is built
-            # and the bag opened
-            outputs = _output_bag(out, calibration)
-            try:
-                tracker = Tracker(calibration, config, rng=np.random.default_rng(args.seed))
-            except TrackerError as err:
-                if outputs is not None:
-                    outputs.discard()
-                raise _UserError(str(err)) from err
-            handed = False  # the tracking pass below closes the writer
-            try:
-                with RecordingReader(bag) as reader:
+                    starts = initial_tracks(calibration, truth, key_images, plan,
+                                            skip_missing=True)
+                    skipped = sorted(set(plan) - {s.person_id for s in starts})
+                    if skipped:
+                        print(f'{_PROG}: note: no unoccluded key view of person(s) '
+                              f'{", ".join(map(str, skipped))}; not tracked', file=sys.stderr)
+                    if not starts:
+                        raise _UserError('no person could be initialised from the ground '
+                                         'truth')
+                # the writer's child process starts (its imports) while the tracker is built
+                outputs = _output_bag(out, calibration)
+                try:
+                    tracker = Tracker(calibration, config, rng=np.random.default_rng(args.seed))
+                except TrackerError as err:
+                    if outputs is not None:
+                        outputs.discard()
+                    raise _UserError(str(err)) from err
+                handed = False  # the tracking pass below closes the writer
+                try:
                     _writer_ready(outputs)
                     handed = True
                     recorder = None
@@ -569,10 +428,10 @@ def run(args: argparse.Namespace) -> int:
                     finally:
                         if outputs is not None:
                             outputs.close()
-            except BaseException:
-                if not handed and outputs is not None:
-                    outputs.discard()
-                raise
+                except BaseException:
+                    if not handed and outputs is not None:
+                        outputs.discard()
+                    raise
         except BagError as err:
             return _error(str(err), 1)
         except (InitiationError, FilterError, CalibrationError) as err:

@@ -21,7 +21,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.distance import cdist
 
 __all__ = ['BeliefPropagationResult', 'MRFError', 'belief_propagation',
            'exclusion_potential']
@@ -45,8 +44,13 @@ def exclusion_potential(xy_a: np.ndarray, xy_b: np.ndarray, *, radius: float = 0
         (N, M) float64: 1 where the positions are farther apart than ``radius``, else
         ``epsilon``.
     """
-    d2 = cdist(np.asarray(xy_a, dtype=np.float64), np.asarray(xy_b, dtype=np.float64),
-               'sqeuclidean')
+    xy_a = np.asarray(xy_a, dtype=np.float64)
+    xy_b = np.asarray(xy_b, dtype=np.float64)
+    # squared distances of all pairs; the same floating-point operations as scipy's
+    # cdist(..., 'sqeuclidean') without importing scipy.spatial (~0.3 s per replay)
+    dx = xy_a[:, 0, None] - xy_b[None, :, 0]
+    dy = xy_a[:, 1, None] - xy_b[None, :, 1]
+    d2 = dx * dx + dy * dy
     # 000 §VI-A: p(x^h, x^k) = delta(|x^h - x^k| > r), soft-floored at epsilon
     return np.where(d2 > radius * radius, 1.0, epsilon)
 

@@ -19,15 +19,18 @@ from __future__ import annotations
 
 from pathlib import Path
 from types import TracebackType
+from typing import TYPE_CHECKING
 
 from rclpy.serialization import serialize_message
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.rosbag2.errors import WriterError
 from rosbags.typesys import Stores, get_typestore
 
-from mbtrack_ros.core.camera import RoomCalibration
 from mbtrack_ros.core.state import FrameResult
 from mbtrack_ros.nodes import messages
+
+if TYPE_CHECKING:  # not imported at run time: replay's writer process starts without numba
+    from mbtrack_ros.core.camera import RoomCalibration
 
 __all__ = ['OutputBagError', 'OutputBagWriter', 'output_topics']
 
@@ -58,15 +61,20 @@ class OutputBagWriter:
 
     Args:
         path: bag directory to create (must not exist).
-        calibration: the room (its frame id is the default output frame).
-        camera_names: cameras of the ``visibility_<camera>`` fields of ``~/tracks``.
+        calibration: the room (its frame id is the default output frame); may be None
+            when ``camera_names`` and ``frame_id`` are given.
+        camera_names: cameras of the ``visibility_<camera>`` fields of ``~/tracks``
+            (default: the calibration's).
         frame_id: output frame id (default: the calibration's).
         node_name: node name used in the topic names.
     """
 
-    def __init__(self, path: str | Path, calibration: RoomCalibration,
+    def __init__(self, path: str | Path, calibration: RoomCalibration | None,
                  camera_names: list[str] | tuple[str, ...] | None = None, *,
                  frame_id: str | None = None, node_name: str = 'tracker_node') -> None:
+        if calibration is None and (camera_names is None or not frame_id):
+            raise OutputBagError('output bag: give a calibration, or camera names and a '
+                                 'frame id')
         self.path = Path(path)
         self.camera_names = list(camera_names or calibration.names)
         self.frame_id = frame_id or calibration.frame_id

@@ -80,6 +80,7 @@ from rclpy.node import Node
 from mbtrack_ros.core.camera import CalibrationError, RoomCalibration
 from mbtrack_ros.core.detection.release import ReleaseConfig
 from mbtrack_ros.core.tracker import TrackerConfig, TrackerError
+from mbtrack_ros.nodes.tracker_parameters import TRACKER_PARAMETERS
 
 __all__ = ['EXECUTORS', 'RELIABILITIES', 'TRACKER_PARAMETERS', 'TRANSPORTS', 'CameraInput',
            'NodeParams', 'ParamsError', 'declare_and_read']
@@ -87,21 +88,6 @@ __all__ = ['EXECUTORS', 'RELIABILITIES', 'TRACKER_PARAMETERS', 'TRANSPORTS', 'Ca
 TRANSPORTS = ('raw', 'compressed')
 RELIABILITIES = ('best_effort', 'reliable')
 EXECUTORS = ('events', 'single', 'multi')
-
-
-#: tracker_node parameter -> (TrackerConfig field, type the node reads it as); the one map
-#: from the node's names to the tracker's, also used by ``mbtrack replay --params``.
-TRACKER_PARAMETERS: dict[str, tuple[str, type]] = {
-    'tracker.algorithm': ('algorithm', str), 'tracker.particles': ('particles', int),
-    'tracker.joint_particles': ('joint_particles', int), 'tracker.subsample': ('subsample', int),
-    'tracker.pipeline_search': ('pipeline_search', bool), 'tracker.sigma': ('sigma', float),
-    'tracker.d_occ': ('d_occ', float), 'tracker.mrf_radius': ('mrf_radius', float),
-    'tracker.use_mrf': ('use_mrf', bool), 'tracker.release_time': ('release_time', float),
-    'detection.threshold': ('detection_threshold', float),
-    'detection.spare_support': ('spare_support', float),
-    'detection.every': ('detection_every', int),
-    'tracker.image_scale': ('image_scale', float),
-}
 
 
 class ParamsError(ValueError):
