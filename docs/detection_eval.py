@@ -120,6 +120,12 @@ def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False,
                                                 if c in cal.cameras})
             for d in tracker.detection.decisions:
                 events.append({'kind': 'decision', 'frame': fs.index, **d})
+            for c in getattr(tracker.detection, 'exit_checks', []):  # h-reid's exit rescue
+                events.append({'kind': 'exit_check', 'frame': fs.index, **c})
+                if c['rescued']:      # the exit rule named it, the rescue kept it
+                    events[:] = [e for e in events if not (
+                        e['kind'] == 'end' and e['frame'] == fs.index and e['id'] == c['id']
+                        and e['reason'] == 'exit')]
             for tid in sorted(set(tracker.track_ids) - live):   # new, or a released id reused
                 events.append({'kind': 'birth', 'frame': fs.index, 'id': int(tid)})
             live = set(tracker.track_ids)
