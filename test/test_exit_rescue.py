@@ -11,6 +11,7 @@ import pytest
 from mbtrack_ros.core.detection import DetectionError
 from mbtrack_ros.core.detection.detector import FrameEvidence
 from mbtrack_ros.core.detection.manager import AutoDetection, AutoDetectionConfig
+from mbtrack_ros.core.detection.release import Releaser
 from mbtrack_ros.core.shape import BodyShape, rasterize
 from mbtrack_ros.core.state import TrackEstimate
 
@@ -134,3 +135,37 @@ def test_a_person_standing_at_the_door_keeps_the_id_of_a_track_pushed_into_the_e
         assert np.hypot(*(last.tracks[0].mean[:2] - AT_DOOR)) < 0.2
     else:
         assert ended == [1] and 1 not in tracker.track_ids
+
+
+@pytest.mark.parametrize('ceiling', [True, False])
+def test_a_person_who_walks_out_is_still_released_within_1_5_s_with_the_rescue(ceiling):
+    """test_exits' walk-out clip (one person comes in, stands, leaves through the door)
+    with the rescue on: the track ends within 1.5 s of the ground truth's last row and no
+    exit decision keeps it (with the ceiling camera the exit rule ends it, the doorway
+    rule off as in test_exits; without, the default rules)."""
+    from mbtrack_ros.core.tracker import Tracker, TrackerConfig
+    from mbtrack_ros.synth import Synthesizer
+    from mbtrack_ros.synth.presets import Preset
+
+    from test_exits import _leaver
+
+    synth = Synthesizer(Preset('leaver', 'one person leaves', 200, None, _leaver), seed=4,
+                        width=320, height=240, ceiling=ceiling)
+    tracker = Tracker(synth.calibration, TrackerConfig(detection=True, seed=0))
+    tracker.detection.config = replace(tracker.detection.config, exit_rescue=0.5)
+    if ceiling:   # the exit rule, not the doorway rule, ends it (as in test_exits)
+        tracker.detection.releaser = Releaser(
+            synth.calibration, replace(tracker.detection.releaser.config, doorway_band=0.0))
+    last_truth = ended = None
+    checks = []
+    for frame in synth:
+        if frame.ground_truth:
+            last_truth = frame.index
+        res = tracker.step(frame.stamp_ns, frame.images)
+        checks += tracker.detection.exit_checks
+        if res.ended and ended is None and last_truth is not None:
+            ended = frame.index
+    assert ended is not None and 0 <= (ended - last_truth) / synth.fps <= 1.5
+    assert not any(c['rescued'] for c in checks) and tracker.track_ids == []
+    if ceiling:
+        assert checks, 'the exit rule did not fire'

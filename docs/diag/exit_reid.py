@@ -71,9 +71,26 @@ def _exits(out: Path, rec: Path):
 
 
 def detail(pairs) -> None:
+    stats: dict[str, list] = {}
     for out, rec in pairs:
         for x in _exits(out, rec):
             f, p = x['frame'], x['person']
+            a, b = x['where'].get((f - 6, p)), x['where'].get((f, p))
+            last = x['track'][-1] if x['track'] else None
+            if a is not None and b is not None and last is not None:
+                # the nearest other reported track to the person in the frame before, and
+                # whether the released estimate lies beyond it as seen from it, outwards
+                # (the clear-room door is on the floor's y_max edge: outwards is +y)
+                near = [(np.hypot(t.x - b[0], t.y - b[1]), t) for t in x['at'].get(f - 1, [])
+                        if t.track_id != x['id']]
+                gap, other = min(near, key=lambda n: n[0]) if near else (np.inf, None)
+                push = np.nan
+                if other is not None and gap < 0.8:
+                    v = np.array([last.x - other.x, last.y - other.y])
+                    push = v[1] / max(np.linalg.norm(v), 1e-9)
+                stats.setdefault(x['kind'], []).append(
+                    (x['age'], (b[1] - a[1]) * FPS / 6, np.hypot(last.x - b[0], last.y - b[1]),
+                     last.x - b[0], b[1], gap, push))
             print(f"{out.name} track {x['id']} exit@{f} {x['kind']} person {p}, "
                   f"track age {x['age']:.1f} s")
             print('  track y: ' + ' '.join(f'{t.frame}:({t.x:.2f},{t.y:.2f})'
@@ -103,6 +120,18 @@ def detail(pairs) -> None:
                     print(f'  birth {tid}@{g}: person {q}, '
                           + (f'at ({r0.x:.2f},{r0.y:.2f}), {dist:.2f} m from the last '
                              f'place in the room' if r0 else 'never reported'))
+
+
+    for kind, v in sorted(stats.items()):
+        v = np.array(v)
+        q = lambda c: ' / '.join(f'{t:.2f}' for t in np.percentile(v[:, c], [25, 50, 75]))  # noqa: E731
+        print(f'{kind} ({len(v)}), quartiles: track age {q(0)} s; person moving {q(1)} m/s in y '
+              f'(< 0: into the room); last reported estimate {q(2)} m from the person, '
+              f'x offset {q(3)} m; person y {q(4)} m; moving out (> 0.1 m/s) '
+              f'{int(np.sum(v[:, 1] > 0.1))}, into the room (< -0.1 m/s) '
+              f'{int(np.sum(v[:, 1] < -0.1))}; another track within 0.8 m of the person '
+              f'{int(np.sum(v[:, 5] < 0.8))}, with the released estimate beyond it outwards '
+              f'(cosine with +y > 0.7) {int(np.sum(v[:, 6] > 0.7))}')
 
 
 def replay(grace: float, radius: float, pairs) -> None:
