@@ -1,7 +1,7 @@
 """Identity-switch analysis of automatic detection on a recording (docs/detection.md).
 
     .venv/bin/python docs/detection_eval.py run REC OUT [--seed S] [--no-people-cue]
-                                                 [--params NODE.yaml]
+                                                 [--params NODE.yaml] [--exit-rescue C]
     .venv/bin/python docs/detection_eval.py report OUT REC            # causes of switches
     .venv/bin/python docs/detection_eval.py table OUT REC [OUT REC]   # one row per run
     .venv/bin/python docs/detection_eval.py lag OUT REC [OUT REC]     # track-person distance
@@ -63,9 +63,11 @@ def _screen(x: float, y: float) -> bool:
 
 
 def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False,
-        release: dict[str, float] | None = None, params: Path | None = None) -> None:
+        release: dict[str, float] | None = None, params: Path | None = None,
+        exit_rescue: float | None = None) -> None:
     """Track ``rec`` with automatic detection (the tracker settings of a tracker_node
-    parameter file ``params`` if given, as ``mbtrack replay --params``) into ``out``."""
+    parameter file ``params`` if given, as ``mbtrack replay --params``) into ``out``
+    (``exit_rescue``: that ``AutoDetectionConfig`` field instead of its default)."""
     out.mkdir(parents=True, exist_ok=True)
     cal = RoomCalibration.load(rec / 'calibration.yaml')
     events: list[dict] = []
@@ -105,6 +107,9 @@ def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False,
         values = tracker_values_from_params(params) if params is not None else {}
         tracker = Tracker(cal, TrackerConfig.from_dict({**values, 'seed': seed,
                                                         'detection': True}))
+        if exit_rescue is not None:
+            det = tracker.detection
+            det.config = replace(det.config, exit_rescue=exit_rescue)
         if release:  # ReleaseConfig fields overridden, e.g. spare_support=0 (no spare rule)
             det = tracker.detection
             det.releaser = release_module.Releaser(tracker.calibration,  # image_scale's size
@@ -120,6 +125,12 @@ def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False,
                                                 if c in cal.cameras})
             for d in tracker.detection.decisions:
                 events.append({'kind': 'decision', 'frame': fs.index, **d})
+            for c in getattr(tracker.detection, 'exit_checks', []):  # h-reid's exit rescue
+                events.append({'kind': 'exit_check', 'frame': fs.index, **c})
+                if c['rescued']:      # the exit rule named it, the rescue kept it
+                    events[:] = [e for e in events if not (
+                        e['kind'] == 'end' and e['frame'] == fs.index and e['id'] == c['id']
+                        and e['reason'] == 'exit')]
             for tid in sorted(set(tracker.track_ids) - live):   # new, or a released id reused
                 events.append({'kind': 'birth', 'frame': fs.index, 'id': int(tid)})
             live = set(tracker.track_ids)
@@ -732,13 +743,16 @@ def main(argv: list[str] | None = None) -> int:
                    help='tracker settings of a tracker_node parameter file (config/*.yaml)')
     r.add_argument('--release', action='append', default=[], metavar='FIELD=VALUE',
                    help='override a ReleaseConfig field (repeatable), e.g. spare_support=0')
+    r.add_argument('--exit-rescue', type=float, default=None, metavar='COVERAGE',
+                   help='AutoDetectionConfig.exit_rescue (h-reid; 0 = off, the default)')
     args = p.parse_args(argv)
     if args.cmd == 'run':
         try:
             release = {k: float(v) for k, v in (a.split('=', 1) for a in args.release)}
         except ValueError:
             p.error(f'--release needs FIELD=NUMBER, got {args.release}')
-        run(args.rec, args.out, args.seed, args.no_people_cue, release, args.params)
+        run(args.rec, args.out, args.seed, args.no_people_cue, release, args.params,
+            args.exit_rescue)
     elif args.cmd == 'report':
         report(args.out, args.rec)
     else:

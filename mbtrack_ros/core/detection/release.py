@@ -24,7 +24,9 @@ judged again without it, so that of two tracks on one person one survives (see
 ``exit_margin`` from the floor is released at once (:meth:`Releaser.exited`): its person
 walked out. Without exits a person who leaves holds the track at the floor edge while
 they stay visible through the open door, and the timeout only starts after that
-(docs/detection.md, "Exits").
+(docs/detection.md, "Exits"). The estimate of a person who stands at the door can be
+pushed into the exit too; ``AutoDetection`` then looks for that person on the floor
+beside it before it lets the track go (``AutoDetectionConfig.exit_rescue``).
 
 **Doorways** (h-rel). Seen from a camera facing the door, a track standing in the doorway
 lies in front of the corridor: the person who just walked out is still foreground behind
