@@ -30,17 +30,21 @@ def _state(x, y):
     return np.array([x, y, 0.0, 0.0, 0.0, 0.0])
 
 
-def _supports(people_xy, track_xy, det_xy):
+def _supports(people_xy, track_xy, det_xy, ghosts=0):
     """Exclusive support of one track alone and with the detection as one more track, and
-    whether it is spare, on a foreground painted from ``people_xy`` (corner cameras)."""
+    whether it is spare, on a foreground painted from ``people_xy`` (corner cameras); the
+    first ``ghosts`` people are possible people of the bootstrap (``FrameEvidence.ghost``)."""
     calib = make_room(ceiling=False)
     auto = AutoDetection(calib, AutoDetectionConfig())
     evidence = {}
     for n, cam in calib.cameras.items():
         fg = np.zeros((H, W), bool)
-        for xy in people_xy:
+        ghost = np.zeros((H, W), bool)
+        for j, xy in enumerate(people_xy):
             fg |= render_labels(cam, _state(*xy), SHAPE) > 0
-        evidence[n] = FrameEvidence(np.zeros((H, W, 3), np.uint8), fg)
+            if j < ghosts:
+                ghost |= render_labels(cam, _state(*xy), SHAPE) > 0
+        evidence[n] = FrameEvidence(np.zeros((H, W, 3), np.uint8), fg, ghost=ghost)
     track = TrackEstimate(1, _state(*track_xy), np.eye(4), 1.8)
     det = Detection(_state(*det_xy), 1.8, 0.5, 5.0)
     alone, beside, spare = auto._exclusive_support(
@@ -60,9 +64,21 @@ def test_a_lagging_track_loses_its_exclusive_support_to_the_detection_of_its_per
     assert beside > 0.5 and alone > 0.8 and not spare, (alone, beside)
 
 
-def _lagging(monkeypatch, beside_support, lag=0.42, frames=14):
-    """A person walking at 0.3 m/s along y = 2.6 m, tracked as track 1 for 36 frames
-    (longer than ``relocate_interval``); then, before each step until a decision, track 1
+def test_a_bootstrap_ghost_is_no_support_of_a_track():
+    """A track on a person who stood there in the bootstrap frames (the background's
+    possible-person pixels): those pixels are nobody's support, so the track has none to
+    lose to a detection beside it (and the rule, which needs support before, keeps it);
+    the same person not a ghost supports it fully."""
+    alone, beside, _ = _supports([(2.0, 2.6), (2.0, 3.3)], (2.0, 2.6), (2.0, 3.3), ghosts=1)
+    assert alone < 0.05 and beside < 0.05, (alone, beside)
+    alone, _, _ = _supports([(2.0, 2.6), (2.0, 3.3)], (2.0, 2.6), (2.0, 3.3), ghosts=0)
+    assert alone > 0.8
+
+
+def _lagging(monkeypatch, beside_support, lag=0.42, frames=14, tracked=36, until='decision'):
+    """A person walking at 0.3 m/s along y = 2.6 m, tracked as track 1 for ``tracked``
+    frames (36: longer than ``relocate_interval``); then, before each step (until the first
+    decision, or always with ``until=None``), track 1
     is put ``lag`` metres behind them in x and in y (0.6 m off, on the diagonal the corner
     cameras cam0 and cam2 look along: a track that fell behind its person and keeps part
     of their foreground). The appearance gain cannot
@@ -81,11 +97,11 @@ def _lagging(monkeypatch, beside_support, lag=0.42, frames=14):
 
     def walker(k):
         return [person(2.0 + 0.02 * k, 2.6, theta=0.0)]
-    _track_painted(tracker, calib, bgs, rng, 36, walker)
+    _track_painted(tracker, calib, bgs, rng, tracked, walker)
     assert tracker.track_ids == [1]
     actions = []
-    for k in range(36, 36 + frames):
-        if 1 in tracker.track_ids and not actions:
+    for k in range(tracked, tracked + frames):
+        if 1 in tracker.track_ids and not (actions and until == 'decision'):
             tracker.relocate_track(1, _state(2.0 + 0.02 * (k - 1) - lag, 2.6 - lag))
         tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, walker(k), rng))
         actions += [d['action'] for d in det.decisions]
@@ -103,6 +119,17 @@ def test_a_detection_beside_a_lagging_reported_track_moves_it(monkeypatch, besid
         assert tracker.track_ids == [1]
     else:
         assert 'birth' in actions and not any(a.startswith('move') for a in actions)
+
+
+def test_a_young_track_lagging_since_its_birth_is_moved_once(monkeypatch):
+    """A track 0.5 s old (born, never moved) that lags its person is moved by their
+    detection (a track left on its person's bootstrap place); moved, it is not moved again
+    within ``relocate_interval`` (it would hop through a group): the next detection beside
+    it while it is kept lagging is born instead."""
+    tracker, actions = _lagging(monkeypatch, 0.25, tracked=8, frames=30, until=None)
+    beside = [a for a in actions if a.endswith('(beside)')]
+    assert beside == ['move 1 (beside)'], actions
+    assert actions.index('move 1 (beside)') < actions.index('birth'), actions
 
 
 def test_a_newcomer_beside_a_tracked_person_is_born():
@@ -136,3 +163,43 @@ def test_a_newcomer_beside_a_tracked_person_is_born():
 def test_beside_support_must_not_be_negative():
     with pytest.raises(DetectionError):
         AutoDetectionConfig(beside_support=-0.1)
+
+
+class _KeyedModel(_Model):
+    """A person model as far as the rule reads it: a shape and key views."""
+    view_angles = np.zeros(1)
+
+
+def _decide(tracks_xy, people_xy=((2.6, 2.6),), det_xy=(2.6, 2.6)):
+    """``AutoDetection._lagging_beside`` on a painted foreground: the index of the track
+    moved onto the detection (or None) and the decision's ``beside`` record."""
+    calib = make_room(ceiling=False)
+    auto = AutoDetection(calib, AutoDetectionConfig())
+    evidence = {}
+    for n, cam in calib.cameras.items():
+        fg = np.zeros((H, W), bool)
+        for xy in people_xy:
+            fg |= render_labels(cam, _state(*xy), SHAPE) > 0
+        evidence[n] = FrameEvidence(np.zeros((H, W, 3), np.uint8), fg)
+    tracks = [TrackEstimate(j + 1, _state(*xy), np.eye(4), 1.8)
+              for j, xy in enumerate(tracks_xy)]
+    means = np.array([t.mean for t in tracks])
+    det = Detection(_state(*det_xy), 1.8, 0.5, 5.0)
+    info: dict = {}
+    best = auto._lagging_beside(det, _KeyedModel(), tracks, list(range(len(tracks))), means,
+                                {t.track_id: _KeyedModel() for t in tracks}, evidence, set(),
+                                0, info)
+    return (None if best is None else best[0]), info['beside']
+
+
+def test_only_a_single_track_losing_its_support_is_moved():
+    """One lagging track beside the detection of its person is taken; two tracks that
+    would both be left spare by it (a group) make it unclear whose person it is: none is
+    taken. A track on a second person next to the lagging one does not stop the move."""
+    lagging = (2.18, 2.18)
+    assert _decide([lagging])[0] == 0
+    moved, record = _decide([lagging, (2.18, 2.6)])
+    assert record[0][1] >= 0.25 > record[1][1]                 # track 1 alone qualifies
+    assert moved is None and all(with_det < 0.25 for _, _, with_det in record), record
+    moved, record = _decide([(3.3, 2.6), lagging], people_xy=((2.6, 2.6), (3.3, 2.6)))
+    assert moved == 1 and record[0][2] > 0.25, record

@@ -100,12 +100,13 @@ class AutoDetectionConfig:
             near it (on main's twelve clear-room runs 26 of 28 false births lived less
             than 4 s).
         beside_support: a confirmed detection that would start a new track next to a
-            reported track (the nearest within ``relocate_radius``, not spare, not placed
-            within ``relocate_interval``) moves that track there instead (same id) when,
+            reported track (within ``relocate_radius``, not spare, not moved within
+            ``relocate_interval``) moves that track there instead (same id) when,
             with the detection as one more track, the track's exclusive support
-            (:func:`release.spare_tracks`) falls below this: the track had fallen behind
-            the detection's person and lived on their fringe (docs/detection.md, "Births
-            beside a live track"); 0 disables.
+            (:func:`release.spare_tracks`) falls below this from above: the track had
+            fallen behind the detection's person and lived on their fringe
+            (:meth:`AutoDetection._lagging_beside`; docs/detection.md, "Births beside a
+            live track"); 0 disables.
     """
 
     background: BackgroundConfig = field(default_factory=BackgroundConfig)
@@ -375,7 +376,8 @@ class AutoDetection:
         det = self.config.detector
         evidence = {n: FrameEvidence(images[n], fg[n], masks[n], _bins=known_bins.get(n),
                                      edge_min_pixels=det.edge_min_pixels,
-                                     edge_neighbourhood=det.edge_neighbourhood)
+                                     edge_neighbourhood=det.edge_neighbourhood,
+                                     ghost=self.background.model(n).possible_foreground_as_tested)
                     for n in fg}
         t2 = time.perf_counter()
         # 3. support, visibility and existence
@@ -637,7 +639,7 @@ class AutoDetection:
             self.decisions.append(info)
             return Birth(model=model, state=state, detection=det, track_id=reused)
         tid = tracks[best[0]].track_id
-        if not hidden and self._placed_recently(tid, stamp_ns):
+        if not (hidden or beside) and self._placed_recently(tid, stamp_ns):
             info['action'] = f'drop (track {tid} placed recently)'
             self.decisions.append(info)
             return None
@@ -687,14 +689,16 @@ class AutoDetection:
 
         A track that fell 0.5-1 m behind its person keeps some of their foreground (the
         corner cameras look along the gap), so it stays reported, while the detector finds
-        the person outside its 0.5 m exclusion radius. The candidate is the track nearest
-        the detection, within ``relocate_radius``, not spare, not born or moved within
-        ``relocate_interval``: when the detection, as one more track, leaves it less
-        exclusive support than ``beside_support`` (the release's measure of a spare
-        track), its foreground was the detection's person, and the track is moved there
-        instead of a birth beside it - unless a farther track loses more (in a crowd at
-        the door the nearest track is often not the person's). A track on a person of its
-        own keeps its exclusive support next to a newcomer."""
+        the person outside its 0.5 m exclusion radius. With the detection as one more
+        track, such a track's exclusive support falls below ``beside_support`` (the
+        release's measure of a spare track) while it was above before: its foreground was
+        the detection's person, and it is moved there instead of a birth beside it. Only
+        when exactly one track within ``relocate_radius`` would fall below (in a group
+        at the door several do, and the nearest is often not the person's), and not a
+        spare track, one not reported, or one moved within ``relocate_interval`` (it would
+        hop through a group; a young track never moved may be: a birth that lags its
+        person from the start). A track on a person of its own keeps its
+        exclusive support next to a newcomer."""
         cfg = self.config
         keep = list(keep)
         gap = np.array([np.hypot(*(means[k, [X, Y]] - det.xy)) for k in keep])
@@ -705,16 +709,23 @@ class AutoDetection:
                                                          models, evidence)
         info['beside'] = [(int(tracks[keep[j]].track_id), round(float(alone[j]), 3),
                            round(float(with_det[j]), 3)) for j in near]
-        i = int(near[np.argmin(gap[near])])
-        if np.nanmin(with_det[near], initial=np.inf) < with_det[i]:
-            return None      # a farther track loses more: whose person it is is unclear
+        # the one near track the detection would leave spare (NaN, seen nowhere: none);
+        # two or more (a group at the door): whose person it is is unclear
+        losing = near[with_det[near] < cfg.beside_support]
+        if len(losing) != 1:
+            return None
+        i = int(losing[0])
         k = keep[i]
         tid = tracks[k].track_id
         ref = models.get(tid)
+        # a track moved within relocate_interval stays (it would hop through a group); a
+        # young one never moved may be taken (a birth lagging its person from the start)
+        moved_lately = self._placed_recently(tid, stamp_ns) \
+            and self._placed.get(tid, 0) > self._first_seen.get(tid, stamp_ns)
         if spare[i] or tid in moved or ref is None or not ref.view_angles.size \
-                or not self.reported(tid) or self._placed_recently(tid, stamp_ns):
+                or not self.reported(tid) or moved_lately:
             return None
-        if not with_det[i] < cfg.beside_support:     # NaN (seen nowhere): not judged
+        if not alone[i] >= cfg.beside_support:    # not spare now, spare with it
             return None
         return k, float(with_det[i])
 
@@ -745,7 +756,9 @@ class AutoDetection:
         shapes = [self._shape(models.get(tracks[j].track_id), tracks[j]) for j in keep]
         cams = [self.calibration.cameras[n] for n in side]
         sils = [rasterize(c, states, shapes + [model.shape]) for c in cams]
-        fgs = [evidence[n].foreground for n in side]
+        # a bootstrap ghost is no one's support (the track lagging on its person's old place)
+        fgs = [evidence[n].foreground if evidence[n].ghost is None
+               else evidence[n].foreground & ~evidence[n].ghost for n in side]
         least = [rel.min_area * c.width * c.height / (320.0 * 240.0) for c in cams]
         xy = states[:, [X, Y]]
         spare, alone = spare_tracks(fgs, [s.select(0, k) for s in sils], rel.spare_support,
