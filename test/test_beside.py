@@ -142,7 +142,8 @@ def test_a_newcomer_beside_a_tracked_person_is_born():
     calib = make_room(ceiling=False)
     bgs = backgrounds(calib)
     tracker = _detecting_tracker(calib, bgs, seed=3)
-    tracker.detection.config = replace(tracker.detection.config, relocate_margin=1e9)
+    tracker.detection.config = replace(tracker.detection.config, relocate_margin=1e9,
+                                       beside_support=0.25)
     a = person(2.5, 2.5, theta=0.0)
 
     def b(k):
@@ -174,7 +175,7 @@ def _decide(tracks_xy, people_xy=((2.6, 2.6),), det_xy=(2.6, 2.6)):
     """``AutoDetection._lagging_beside`` on a painted foreground: the index of the track
     moved onto the detection (or None) and the decision's ``beside`` record."""
     calib = make_room(ceiling=False)
-    auto = AutoDetection(calib, AutoDetectionConfig())
+    auto = AutoDetection(calib, AutoDetectionConfig(beside_support=0.25))
     evidence = {}
     for n, cam in calib.cameras.items():
         fg = np.zeros((H, W), bool)
