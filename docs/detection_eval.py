@@ -565,7 +565,8 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
             sel = (d.track_id == tid) & (frames < f) & (frames >= f - 60)
             before = d.person_id[sel][-15:]
             who = None if not before.size else int(np.bincount(before).argmax())
-            kind = words[0] + (' hidden' if 'hidden' in e['action'] else '')
+            kind = words[0] + (' hidden' if 'hidden' in e['action'] else
+                               ' beside' if 'beside' in e['action'] else '')
             key = (kind, 'same' if who == at else 'unmatched' if who is None else 'other')
             counts[key] = counts.get(key, 0) + 1
             total[key] = total.get(key, 0) + 1
