@@ -725,7 +725,7 @@ class AutoDetection:
         exclusive support next to a newcomer."""
         cfg = self.config
         keep = list(keep)
-        gap = np.array([np.hypot(*(means[k, [X, Y]] - det.xy)) for k in keep])
+        gap = np.linalg.norm(means[keep][:, [X, Y]] - det.xy, axis=1)
         near = np.flatnonzero(gap <= cfg.relocate_radius)
         if not len(near):
             return None
