@@ -135,7 +135,7 @@ def _normalised_priors(weights: np.ndarray, n: int, k: int, log_weights: bool) -
             raise LikelihoodError(f'target {k}: all log-weights are -inf/NaN')
         w = np.exp(w - top)
     else:
-        if np.any(np.isnan(w)) or np.any(w < 0) or np.any(np.isinf(w)):
+        if not np.isfinite(w).all() or (w < 0).any():
             raise LikelihoodError(f'target {k}: weights must be finite and >= 0')
     total = w.sum()
     if not total > 0:
@@ -143,6 +143,7 @@ def _normalised_priors(weights: np.ndarray, n: int, k: int, log_weights: bool) -
     return w / total
 
 
+_CPUS = os.cpu_count() or 1   # threads of _map by default (os.cpu_count reads /sys: once)
 _NO_BUFFER = np.zeros((1, 1, 1))   # workspace argument of the separable evaluation (unused)
 _NO_BINS = np.zeros((0, 0), np.int16)   # bins argument of a camera not quantised yet
 
@@ -281,7 +282,7 @@ class MeasurementModel:
         arr = np.asarray(states, dtype=np.float64)
         if arr.ndim != 2 or arr.shape[1] != STATE_DIM:
             raise LikelihoodError(f'{what} must be (N, {STATE_DIM}), got {arr.shape}')
-        if not np.all(np.isfinite(arr)):
+        if not np.isfinite(arr).all():
             raise LikelihoodError(f'{what} contain non-finite values')
         return arr
 
@@ -491,7 +492,7 @@ class MeasurementModel:
         release the GIL); per-camera stage timings then overlap. The calling thread is one
         of them: it takes items in turn with the pool's threads instead of sleeping until
         they finish (one thread fewer to wake per call)."""
-        workers = self.config.threads or (os.cpu_count() or 1)
+        workers = self.config.threads or _CPUS
         workers = min(workers, len(items))
         if workers <= 1:
             return [fn(item) for item in items]
