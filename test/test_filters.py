@@ -37,6 +37,36 @@ def test_systematic_resampling_counts_match_weights():
     assert np.all(np.abs(counts - 1000 * w) < 1.0 + 1e-9)
 
 
+def test_systematic_resampling_as_cumsum_and_searchsorted():
+    """systematic_resample (through the row version) against the one-row cumsum +
+    searchsorted: same indices for weights with zeros, tiny sums and counts other than N;
+    rows of different weights at once give each row's indices."""
+    from mbtrack_ros.core.resampling import systematic_indices
+    rng = np.random.default_rng(7)
+    rows, offsets = [], []
+    for case in range(300):
+        n = 37
+        w = rng.random(n) ** int(rng.integers(1, 30)) * 10.0 ** rng.uniform(-200, 5)
+        w[rng.random(n) < 0.3] = 0.0
+        if not w.sum() > 0:
+            w[int(rng.integers(n))] = 1.0
+        count = 23 if case % 2 else 61
+        offset = np.random.default_rng(case).random()
+        cumulative = np.cumsum(w / w.sum())
+        cumulative[-1] = 1.0
+        expected = np.minimum(np.searchsorted(cumulative, (offset + np.arange(count)) / count,
+                                              side='right'), n - 1)
+        idx = systematic_resample(w, count, np.random.default_rng(case))
+        assert idx.dtype == np.int64
+        np.testing.assert_array_equal(idx, expected)
+        if count == 61:
+            rows.append((w, expected))
+            offsets.append(offset)
+    batch = systematic_indices(np.array([r[0] for r in rows]),
+                               np.array([r[0].sum() for r in rows]), np.array(offsets), 61)
+    np.testing.assert_array_equal(batch, np.array([r[1] for r in rows]))
+
+
 def test_effective_sample_size():
     assert effective_sample_size(np.ones(40)) == pytest.approx(40.0)
     assert effective_sample_size(np.array([0.0, 3.0, 0.0])) == pytest.approx(1.0)

@@ -50,7 +50,8 @@ from mbtrack_ros.core.dynamics import (
     MotionConfig, concatenate_noise, draw_motion_noise, move_particles, predict)
 from mbtrack_ros.core.mrf import belief_propagation
 from mbtrack_ros.core.resampling import (
-    normalize_log_weight_rows, normalize_log_weights, systematic_resample)
+    ResamplingError, normalize_log_weight_rows, normalize_log_weights, systematic_indices,
+    systematic_resample)
 from mbtrack_ros.core.state import STATE_DIM, THETA, VX, VY, X, Y
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
@@ -245,13 +246,27 @@ class _MarginalParticleFilter:
         :func:`predict`; the particles of all tracks then move in one pass (the same
         numbers as one ``predict`` per track). Returns views of one (K N, 6) array."""
         n = int(self.config.particles)
-        chosen, noise = [], []
-        for tid in ids:
-            idx = systematic_resample(np.exp(self._logw[tid]), n, rng)
-            chosen.append(self._particles[tid][idx])
-            noise.append(draw_motion_noise(n, dt, self.config.motion, rng))
-        if not chosen:
+        if not ids:
             return []
+        logw = [self._logw[tid] for tid in ids]
+        noise = []
+        if len({lw.shape[0] for lw in logw}) == 1:
+            # all tracks' weights at once (rows: the same numbers as one track at a time)
+            w = np.exp(np.stack(logw))
+            totals = w.sum(axis=1)
+            if not (np.isfinite(totals).all() and (totals > 0).all()):
+                raise ResamplingError('track weights must have a positive finite sum')
+            offsets = np.empty(len(ids))
+            for k in range(len(ids)):     # systematic_resample's draw, then predict's
+                offsets[k] = rng.random()
+                noise.append(draw_motion_noise(n, dt, self.config.motion, rng))
+            idx = systematic_indices(w, totals, offsets, n)
+            chosen = [self._particles[tid][idx[k]] for k, tid in enumerate(ids)]
+        else:
+            chosen = []
+            for tid, lw in zip(ids, logw):
+                chosen.append(self._particles[tid][systematic_resample(np.exp(lw), n, rng)])
+                noise.append(draw_motion_noise(n, dt, self.config.motion, rng))
         moved = np.concatenate(chosen) if len(chosen) > 1 else chosen[0]
         move_particles(moved, dt, self.config.motion, concatenate_noise(noise),
                        floor=self.floor, exits=self.exits)

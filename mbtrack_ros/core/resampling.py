@@ -13,7 +13,8 @@ import math
 import numpy as np
 
 __all__ = ['ResamplingError', 'effective_sample_size', 'logsumexp', 'normalize_log_weight_rows',
-           'normalize_log_weights', 'normalized_weights', 'systematic_resample']
+           'normalize_log_weights', 'normalized_weights', 'systematic_indices',
+           'systematic_resample']
 
 
 class ResamplingError(ValueError):
@@ -115,8 +116,20 @@ def systematic_resample(weights: np.ndarray, count: int,
     if w.ndim != 1 or w.size == 0 or not math.isfinite(total) or total <= 0 or (w < 0).any():
         raise ResamplingError('weights must be a non-empty 1-D array of non-negative numbers '
                               'with a positive finite sum')
-    cumulative = np.cumsum(w / total)
-    cumulative[-1] = 1.0  # guard against round-off leaving the last bin short
-    positions = (rng.random() + np.arange(count)) / count
-    idx = np.searchsorted(cumulative, positions, side='right')
-    return np.minimum(idx, w.size - 1).astype(np.int64)
+    return systematic_indices(w[None, :], np.array([total]), np.array([rng.random()]),
+                              count)[0]
+
+
+def systematic_indices(weights: np.ndarray, totals: np.ndarray, offsets: np.ndarray,
+                       count: int) -> np.ndarray:
+    """The indices of :func:`systematic_resample` for K weight rows at once (checked by the
+    caller): rows (K, N) of non-negative weights, their sums ``totals`` (K,) and the uniform
+    draws ``offsets`` (K,) in [0, 1). Returns (K, count) int64, each row sorted (the same
+    numbers as one call per row: cumulative sums run along each row)."""
+    cumulative = np.cumsum(weights / totals[:, None], axis=1)
+    cumulative[:, -1] = 1.0  # guard against round-off leaving the last bin short
+    positions = (offsets[:, None] + np.arange(count)) / count
+    idx = np.empty((weights.shape[0], count), np.int64)
+    for k in range(weights.shape[0]):
+        idx[k] = np.searchsorted(cumulative[k], positions[k], side='right')
+    return np.minimum(idx, weights.shape[1] - 1, out=idx)
