@@ -37,6 +37,36 @@ def test_systematic_resampling_counts_match_weights():
     assert np.all(np.abs(counts - 1000 * w) < 1.0 + 1e-9)
 
 
+def test_systematic_resampling_as_cumsum_and_searchsorted():
+    """systematic_resample (through the row version) against the one-row cumsum +
+    searchsorted: same indices for weights with zeros, tiny sums and counts other than N;
+    rows of different weights at once give each row's indices."""
+    from mbtrack_ros.core.resampling import systematic_indices
+    rng = np.random.default_rng(7)
+    rows, offsets = [], []
+    for case in range(300):
+        n = 37
+        w = rng.random(n) ** int(rng.integers(1, 30)) * 10.0 ** rng.uniform(-200, 5)
+        w[rng.random(n) < 0.3] = 0.0
+        if not w.sum() > 0:
+            w[int(rng.integers(n))] = 1.0
+        count = 23 if case % 2 else 61
+        offset = np.random.default_rng(case).random()
+        cumulative = np.cumsum(w / w.sum())
+        cumulative[-1] = 1.0
+        expected = np.minimum(np.searchsorted(cumulative, (offset + np.arange(count)) / count,
+                                              side='right'), n - 1)
+        idx = systematic_resample(w, count, np.random.default_rng(case))
+        assert idx.dtype == np.int64
+        np.testing.assert_array_equal(idx, expected)
+        if count == 61:
+            rows.append((w, expected))
+            offsets.append(offset)
+    batch = systematic_indices(np.array([r[0] for r in rows]),
+                               np.array([r[0].sum() for r in rows]), np.array(offsets), 61)
+    np.testing.assert_array_equal(batch, np.array([r[1] for r in rows]))
+
+
 def test_effective_sample_size():
     assert effective_sample_size(np.ones(40)) == pytest.approx(40.0)
     assert effective_sample_size(np.array([0.0, 3.0, 0.0])) == pytest.approx(1.0)
@@ -391,3 +421,77 @@ def test_logsumexp_matches_scipy_and_handles_minus_infinity(rng):
     assert logsumexp(np.array([1000.0, 1000.0])) == pytest.approx(1000.0 + np.log(2.0))
     assert logsumexp(np.full(3, -np.inf)) == -np.inf
     assert logsumexp(np.zeros(0)) == -np.inf
+
+
+# -- the batched filter stages against track-by-track reference versions -----------------------
+def _normalize_1d(log_weights):
+    """The former one-track normalisation (np.where for NaN, logsumexp, uniform fallback)."""
+    lw = np.where(np.isnan(log_weights), -np.inf, np.asarray(log_weights, np.float64))
+    top = float(np.max(lw))
+    if not np.isfinite(top):
+        return np.full(lw.size, -np.log(lw.size)), True
+    return lw - (top + float(np.log(np.sum(np.exp(lw - top))))), False
+
+
+def test_log_weight_rows_equal_the_one_track_normalisation():
+    from mbtrack_ros.core.resampling import normalize_log_weight_rows
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        k, n = int(rng.integers(1, 7)), int(rng.integers(1, 130))
+        lw = rng.normal(size=(k, n)) * 10.0 ** rng.uniform(-3, 3) + rng.uniform(-800, 800)
+        lw[rng.random((k, n)) < 0.1] = -np.inf
+        lw[rng.random((k, n)) < 0.05] = np.nan
+        if k > 1:
+            lw[int(rng.integers(k))] = rng.choice([-np.inf, np.nan], size=n)   # degenerate
+        rows, flat = normalize_log_weight_rows(lw)
+        for r in range(k):
+            ref, ref_flat = _normalize_1d(lw[r])
+            np.testing.assert_array_equal(rows[r], ref)
+            assert bool(flat[r]) == ref_flat
+            one, one_flat = normalize_log_weights(lw[r])
+            np.testing.assert_array_equal(one, ref)
+            assert one_flat == ref_flat
+    with pytest.raises(ResamplingError, match=r'\+inf'):
+        normalize_log_weight_rows(np.array([[0.0, np.inf]]))
+
+
+@pytest.mark.parametrize('tracks', [1, 4])
+def test_hjs_stages_equal_track_by_track_versions(tracks):
+    """_propagate (draws per track, one motion pass) and _finish (normalisation of all
+    tracks at once) give the numbers of one systematic_resample + predict and one
+    normalisation per track, and leave the generator in the same state."""
+    import copy
+    config = FilterConfig(particles=40)
+    filt = HJSFilter(config, floor=(0.0, 0.0, 4.0, 3.0), exits=((4.0, 1.0, 5.0, 2.0),),
+                     camera_names=['a', 'b'])
+    setup = np.random.default_rng(11)
+    for k in range(tracks):
+        filt.add(10 + k, object(), np.array([0.5 + k, 1.5, 0.3, -0.2, 0.1 * k, k % 2]), setup)
+        filt._logw[10 + k] = _normalize_1d(setup.normal(size=40) * 3)[0]
+    ids = filt.track_ids()
+    ref = copy.deepcopy(filt)
+    rng_a, rng_b = np.random.default_rng(5), np.random.default_rng(5)
+    moved = filt._propagate(ids, 0.07, rng_a)
+    expected = [predict(ref._particles[t][systematic_resample(np.exp(ref._logw[t]), 40, rng_b)],
+                        0.07, config.motion, rng_b, floor=ref.floor, exits=ref.exits)
+                for t in ids]
+    for got, want in zip(moved, expected):
+        np.testing.assert_array_equal(got, want)
+    assert rng_a.random() == rng_b.random()
+    loglik = [setup.normal(size=40) * 50 for _ in ids]
+    if tracks > 1:
+        loglik[1][:] = -np.inf                    # a degenerate track among the others
+    log_prior = [np.log(setup.random(40)) for _ in ids]
+    vf = setup.random((tracks, 2))
+    updates = filt._finish(ids, moved, log_prior, loglik, _Result(loglik, vf))
+    degenerate = 0
+    for k, t in enumerate(ids):
+        lw, flat = _normalize_1d(log_prior[k] + loglik[k])
+        degenerate += flat
+        np.testing.assert_array_equal(filt._logw[t], lw)
+        mean, cov = summarize_particles(moved[k], np.exp(lw))
+        np.testing.assert_array_equal(updates[t].mean, mean)
+        np.testing.assert_array_equal(updates[t].covariance, cov)
+        np.testing.assert_array_equal(updates[t].weights, np.exp(lw))
+        assert updates[t].visible_fraction == {'a': float(vf[k, 0]), 'b': float(vf[k, 1])}
+    assert filt.stats['degenerate_tracks'] == degenerate

@@ -516,3 +516,28 @@ def test_camera_threads_keep_item_order_and_raise_errors():
         mm._map(fail_on_7, list(range(11)))
     assert mm._map(slow_square, [2, 3]) == [4, 9]            # still usable afterwards
     mm.close()
+
+
+def test_prior_list_equals_target_by_target_normalisation():
+    """The one-pass normalisation of equal-sized linear weights gives the numbers of
+    _normalised_priors per target, and its errors (the fallback's)."""
+    from mbtrack_ros.core.likelihood import (
+        LikelihoodError, _normalised_prior_list, _normalised_priors)
+    rng = np.random.default_rng(4)
+    for _ in range(100):
+        k, n = int(rng.integers(1, 6)), int(rng.integers(1, 90))
+        parts = [np.zeros((n, 6)) for _ in range(k)]
+        weights = [rng.random(n) * 10.0 ** rng.uniform(-300, 300) for _ in range(k)]
+        for got, (j, w) in zip(_normalised_prior_list(weights, parts, False),
+                               enumerate(weights)):
+            np.testing.assert_array_equal(got, _normalised_priors(w, n, j, False))
+        logs = [np.log(w) for w in weights]
+        for got, (j, w) in zip(_normalised_prior_list(logs, parts, True), enumerate(logs)):
+            np.testing.assert_array_equal(got, _normalised_priors(w, n, j, True))
+    parts = [np.zeros((3, 6)), np.zeros((3, 6))]
+    with pytest.raises(LikelihoodError, match='target 1: weights must be finite'):
+        _normalised_prior_list([np.ones(3), np.array([1.0, np.nan, 1.0])], parts, False)
+    with pytest.raises(LikelihoodError, match='target 0: weights sum to zero'):
+        _normalised_prior_list([np.zeros(3), np.ones(3)], parts, False)
+    with pytest.raises(LikelihoodError, match='target 1: 2 weights for 3 particles'):
+        _normalised_prior_list([np.ones(3), np.ones(2)], parts, False)

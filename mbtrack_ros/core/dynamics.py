@@ -24,6 +24,7 @@ With all noises zero the model is exact constant-velocity motion.
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -33,7 +34,8 @@ from numba import njit
 from mbtrack_ros.core._kernels import wrap_angle
 from mbtrack_ros.core.state import SIT, STATE_DIM, THETA, VX, VY, X, Y
 
-__all__ = ['DynamicsError', 'MotionConfig', 'predict']
+__all__ = ['DynamicsError', 'MotionConfig', 'concatenate_noise', 'draw_motion_noise',
+           'move_particles', 'predict']
 
 
 class DynamicsError(ValueError):
@@ -146,6 +148,37 @@ def _move(out, dt, decay, dv, max_speed, dp, turn, orientation_speed, dtheta, fl
         out[i, VY] = vy
 
 
+_REGIONS: dict[tuple, np.ndarray] = {}    # the regions array of each (floor, exits) seen
+
+
+def _regions(floor: tuple[float, float, float, float] | None,
+             exits: Sequence[tuple[float, float, float, float]]) -> np.ndarray:
+    """The (R, 4) regions argument of :func:`_move`: none, the floor, or the floor followed by
+    the exits (kept per floor and exits: a filter passes the same ones every frame; the
+    cached arrays are never written)."""
+    try:
+        key = (floor, tuple(exits))
+        cached = _REGIONS.get(key)
+    except TypeError:                       # unhashable (lists): built every time
+        key, cached = None, None
+    if cached is not None:
+        return cached
+    regions = _NO_REGIONS
+    if floor is not None:
+        try:
+            regions = np.asarray([floor, *exits], dtype=np.float64)
+        except (TypeError, ValueError):
+            regions = _NO_DRAWS_1D
+        if regions.ndim != 2 or regions.shape[1] != 4:
+            raise DynamicsError('floor and exits must be (x_min, y_min, x_max, y_max), got '
+                                f'{floor!r}, {exits!r}')
+    elif len(exits):
+        raise DynamicsError('exits need a floor')
+    if key is not None and len(_REGIONS) < 64:
+        _REGIONS[key] = regions
+    return regions
+
+
 def predict(particles: np.ndarray, dt: float, config: MotionConfig,
             rng: np.random.Generator, *,
             floor: tuple[float, float, float, float] | None = None,
@@ -171,17 +204,26 @@ def predict(particles: np.ndarray, dt: float, config: MotionConfig,
     p = np.asarray(particles, dtype=np.float64)
     if p.ndim != 2 or p.shape[1] != STATE_DIM:
         raise DynamicsError(f'particles must have shape (N, {STATE_DIM}), got {p.shape}')
-    if not (np.isfinite(dt) and dt >= 0):
+    if not (math.isfinite(dt) and dt >= 0):
         raise DynamicsError(f'time step must be finite and >= 0, got {dt}')
     out = p.copy()
-    n = out.shape[0]
-    if n == 0:
+    if out.shape[0] == 0:
         return out
+    noise = draw_motion_noise(out.shape[0], dt, config, rng)
+    move_particles(out, dt, config, noise, floor=floor, exits=exits)
+    return out
+
+
+def draw_motion_noise(n: int, dt: float, config: MotionConfig,
+                      rng: np.random.Generator) -> tuple[np.ndarray, ...]:
+    """The random numbers of :func:`predict` for n particles, drawn in its fixed order:
+    velocity (n, 2), position (n, 2), orientation noise (n,) and sitting-flip uniforms (n,);
+    a noise that is off is an empty array and draws nothing."""
+    if not (math.isfinite(dt) and dt >= 0):
+        raise DynamicsError(f'time step must be finite and >= 0, got {dt}')
     sq = np.sqrt(dt)
-    decay = float(np.exp(-config.velocity_damping * dt)) if config.velocity_damping > 0 else 1.0
     dv = dp = _NO_DRAWS
     dtheta = flip_u = _NO_DRAWS_1D
-    flip_p = 0.0
     if config.velocity_noise > 0:
         dv = rng.normal(0.0, config.velocity_noise * sq, size=(n, 2))
     if config.position_noise > 0:
@@ -191,18 +233,28 @@ def predict(particles: np.ndarray, dt: float, config: MotionConfig,
             dtheta = rng.normal(0.0, config.orientation_noise * sq, size=n)
         if config.sit_flip_rate > 0:
             flip_u = rng.random(n)
-            flip_p = float(-np.expm1(-config.sit_flip_rate * dt))
-    regions = _NO_REGIONS
-    if floor is not None:
-        try:
-            regions = np.asarray([floor, *exits], dtype=np.float64)
-        except (TypeError, ValueError):
-            regions = _NO_DRAWS_1D
-        if regions.ndim != 2 or regions.shape[1] != 4:
-            raise DynamicsError('floor and exits must be (x_min, y_min, x_max, y_max), got '
-                                f'{floor!r}, {exits!r}')
-    elif len(exits):
-        raise DynamicsError('exits need a floor')
+    return dv, dp, dtheta, flip_u
+
+
+def concatenate_noise(noises: Sequence[tuple[np.ndarray, ...]]) -> tuple[np.ndarray, ...]:
+    """The draws of several :func:`draw_motion_noise` calls (same ``dt`` and config) as the
+    draws of their particle sets stacked in the same order."""
+    return tuple(np.concatenate(parts) if len(parts) > 1 else parts[0]
+                 for parts in zip(*noises))
+
+
+def move_particles(out: np.ndarray, dt: float, config: MotionConfig,
+                   noise: tuple[np.ndarray, ...], *,
+                   floor: tuple[float, float, float, float] | None = None,
+                   exits: Sequence[tuple[float, float, float, float]] = ()) -> None:
+    """Move particles ``out`` (N, 6, C-contiguous float64) in place over ``dt`` seconds with
+    the draws ``noise`` of :func:`draw_motion_noise` (N rows each, or empty): the
+    deterministic part of :func:`predict`, one numba pass for any number of particle sets
+    stacked (each particle moves on its own)."""
+    decay = float(np.exp(-config.velocity_damping * dt)) if config.velocity_damping > 0 else 1.0
+    flip_p = 0.0
+    if dt > 0 and config.sit_flip_rate > 0:
+        flip_p = float(-np.expm1(-config.sit_flip_rate * dt))
+    dv, dp, dtheta, flip_u = noise
     _move(out, float(dt), decay, dv, float(config.max_speed), dp, bool(dt > 0),
-          float(config.orientation_speed), dtheta, flip_u, flip_p, regions)
-    return out
+          float(config.orientation_speed), dtheta, flip_u, flip_p, _regions(floor, exits))

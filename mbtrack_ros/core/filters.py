@@ -46,9 +46,12 @@ from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from mbtrack_ros.core.dynamics import MotionConfig, predict
+from mbtrack_ros.core.dynamics import (
+    MotionConfig, concatenate_noise, draw_motion_noise, move_particles, predict)
 from mbtrack_ros.core.mrf import belief_propagation
-from mbtrack_ros.core.resampling import normalize_log_weights, systematic_resample
+from mbtrack_ros.core.resampling import (
+    ResamplingError, normalize_log_weight_rows, normalize_log_weights, systematic_indices,
+    systematic_resample)
 from mbtrack_ros.core.state import STATE_DIM, THETA, VX, VY, X, Y
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
@@ -177,14 +180,18 @@ def _initial_cloud(state: np.ndarray, n: int, config: FilterConfig,
     return cloud
 
 
-def _visible(result: Any, k: int, names: list[str]) -> dict[str, float]:
+def _visible_rows(result: Any, count: int, names: list[str]) -> list[dict[str, float]]:
+    """Per target k < ``count``, camera name -> expected visible fraction from the
+    likelihood result's (K, C) ``visible_fraction`` (all empty when it has none or another
+    shape)."""
     vf = getattr(result, 'visible_fraction', None)
     if vf is None:
-        return {}
+        return [{} for _ in range(count)]
     vf = np.asarray(vf)
-    if vf.ndim != 2 or vf.shape[0] <= k or vf.shape[1] != len(names):
-        return {}
-    return {name: float(vf[k, c]) for c, name in enumerate(names)}
+    if vf.ndim != 2 or vf.shape[1] != len(names):
+        return [{} for _ in range(count)]
+    rows = vf[:count].tolist()
+    return [dict(zip(names, rows[k])) if k < len(rows) else {} for k in range(count)]
 
 
 class _MarginalParticleFilter:
@@ -233,36 +240,68 @@ class _MarginalParticleFilter:
 
     def _propagate(self, ids: list[int], dt: float,
                    rng: np.random.Generator) -> list[np.ndarray]:
-        """Algorithm 1 predict, first loop: resample by weight, sample the 1-body dynamics."""
-        out = []
+        """Algorithm 1 predict, first loop: resample by weight, sample the 1-body dynamics.
+
+        Per track, in track order, the draws of :func:`systematic_resample` then those of
+        :func:`predict`; the particles of all tracks then move in one pass (the same
+        numbers as one ``predict`` per track). Returns views of one (K N, 6) array."""
         n = int(self.config.particles)
-        for tid in ids:
-            w = np.exp(self._logw[tid])
-            idx = systematic_resample(w, n, rng)
-            out.append(predict(self._particles[tid][idx], dt, self.config.motion, rng,
-                               floor=self.floor, exits=self.exits))
-        return out
+        if not ids:
+            return []
+        logw = [self._logw[tid] for tid in ids]
+        noise = []
+        if len({lw.shape[0] for lw in logw}) == 1:
+            # all tracks' weights at once (rows: the same numbers as one track at a time)
+            w = np.exp(np.stack(logw))
+            totals = w.sum(axis=1)
+            if not (np.isfinite(totals).all() and (totals > 0).all()):
+                raise ResamplingError('track weights must have a positive finite sum')
+            offsets = np.empty(len(ids))
+            for k in range(len(ids)):     # systematic_resample's draw, then predict's
+                offsets[k] = rng.random()
+                noise.append(draw_motion_noise(n, dt, self.config.motion, rng))
+            idx = systematic_indices(w, totals, offsets, n)
+            chosen = [self._particles[tid][idx[k]] for k, tid in enumerate(ids)]
+        else:
+            chosen = []
+            for tid, lw in zip(ids, logw):
+                chosen.append(self._particles[tid][systematic_resample(np.exp(lw), n, rng)])
+                noise.append(draw_motion_noise(n, dt, self.config.motion, rng))
+        moved = np.concatenate(chosen) if len(chosen) > 1 else chosen[0]
+        move_particles(moved, dt, self.config.motion, concatenate_noise(noise),
+                       floor=self.floor, exits=self.exits)
+        return [moved[k * n:(k + 1) * n] for k in range(len(ids))]
 
     def _finish(self, ids: list[int], particles: list[np.ndarray],
                 log_prior: list[np.ndarray], loglik: list[np.ndarray],
                 result: Any) -> dict[int, TrackUpdate]:
-        updates = {}
-        degenerate = 0
+        lls = []
         for k, tid in enumerate(ids):
             ll = np.asarray(loglik[k], dtype=np.float64)
             if ll.shape != (particles[k].shape[0],):
                 raise FilterError(f'likelihood for track {tid} has shape {ll.shape}, '
                                   f'expected ({particles[k].shape[0]},)')
-            # Algorithm 1 / 000 Eq. 41: posterior weight = prior weight x likelihood
-            lw, flat = normalize_log_weights(log_prior[k] + ll)
-            degenerate += int(flat)
+            lls.append(ll)
+        # Algorithm 1 / 000 Eq. 41: posterior weight = prior weight x likelihood, normalised
+        # for all tracks at once when they have as many particles (the usual case)
+        if len({ll.shape[0] for ll in lls}) == 1:
+            rows, flat = normalize_log_weight_rows(np.stack(log_prior) + np.stack(lls))
+            posterior = list(zip(rows, flat.tolist(), np.exp(rows)))
+        else:
+            posterior = []
+            for lp, ll in zip(log_prior, lls):
+                lw, degenerate_k = normalize_log_weights(lp + ll)
+                posterior.append((lw, degenerate_k, np.exp(lw)))
+        updates = {}
+        visible = _visible_rows(result, len(ids), self.camera_names)
+        for k, tid in enumerate(ids):
+            lw, _, w = posterior[k]
             self._particles[tid] = particles[k]
             self._logw[tid] = lw
-            w = np.exp(lw)
             mean, cov = summarize_particles(particles[k], w)
-            updates[tid] = TrackUpdate(mean=mean, covariance=cov,
-                                       visible_fraction=_visible(result, k, self.camera_names),
+            updates[tid] = TrackUpdate(mean=mean, covariance=cov, visible_fraction=visible[k],
                                        particles=particles[k], weights=w)
+        degenerate = sum(int(p[1]) for p in posterior)
         self.stats['degenerate_tracks'] = float(degenerate)
         return updates
 

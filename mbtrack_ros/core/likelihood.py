@@ -135,7 +135,7 @@ def _normalised_priors(weights: np.ndarray, n: int, k: int, log_weights: bool) -
             raise LikelihoodError(f'target {k}: all log-weights are -inf/NaN')
         w = np.exp(w - top)
     else:
-        if np.any(np.isnan(w)) or np.any(w < 0) or np.any(np.isinf(w)):
+        if not np.isfinite(w).all() or (w < 0).any():
             raise LikelihoodError(f'target {k}: weights must be finite and >= 0')
     total = w.sum()
     if not total > 0:
@@ -143,6 +143,24 @@ def _normalised_priors(weights: np.ndarray, n: int, k: int, log_weights: bool) -
     return w / total
 
 
+def _normalised_prior_list(weights: Sequence[np.ndarray], parts: Sequence[np.ndarray],
+                           log_weights: bool) -> list[np.ndarray]:
+    """:func:`_normalised_priors` of every target; linear weights of targets with as many
+    particles are checked and normalised in one pass (numpy sums each row on its own: the
+    same numbers), any failure is reported by the target-by-target path."""
+    sizes = {p.shape[0] for p in parts}
+    if not log_weights and len(sizes) == 1 and 0 not in sizes:
+        w = np.array([np.asarray(x, dtype=np.float64).reshape(-1) for x in weights]) \
+            if all(np.size(x) == parts[0].shape[0] for x in weights) else None
+        if w is not None and np.isfinite(w).all() and not (w < 0).any():
+            total = w.sum(axis=1)
+            if (total > 0).all():
+                return list(w / total[:, None])
+    return [_normalised_priors(w, p.shape[0], k, log_weights)
+            for k, (w, p) in enumerate(zip(weights, parts))]
+
+
+_CPUS = os.cpu_count() or 1   # threads of _map by default (os.cpu_count reads /sys: once)
 _NO_BUFFER = np.zeros((1, 1, 1))   # workspace argument of the separable evaluation (unused)
 _NO_BINS = np.zeros((0, 0), np.int16)   # bins argument of a camera not quantised yet
 
@@ -281,7 +299,7 @@ class MeasurementModel:
         arr = np.asarray(states, dtype=np.float64)
         if arr.ndim != 2 or arr.shape[1] != STATE_DIM:
             raise LikelihoodError(f'{what} must be (N, {STATE_DIM}), got {arr.shape}')
-        if not np.all(np.isfinite(arr)):
+        if not np.isfinite(arr).all():
             raise LikelihoodError(f'{what} contain non-finite values')
         return arr
 
@@ -408,8 +426,7 @@ class MeasurementModel:
         else:
             if len(weights) != len(parts):
                 raise LikelihoodError(f'{len(weights)} weight sets for {len(parts)} targets')
-            priors = [_normalised_priors(w, p.shape[0], k, log_weights)
-                      for k, (w, p) in enumerate(zip(weights, parts))]
+            priors = _normalised_prior_list(weights, parts, log_weights)
         n_k = [p.shape[0] for p in parts]
         starts = np.concatenate([[0], np.cumsum(n_k)]).astype(np.int64)
         n_targets = len(parts)
@@ -491,7 +508,7 @@ class MeasurementModel:
         release the GIL); per-camera stage timings then overlap. The calling thread is one
         of them: it takes items in turn with the pool's threads instead of sleeping until
         they finish (one thread fewer to wake per call)."""
-        workers = self.config.threads or (os.cpu_count() or 1)
+        workers = self.config.threads or _CPUS
         workers = min(workers, len(items))
         if workers <= 1:
             return [fn(item) for item in items]

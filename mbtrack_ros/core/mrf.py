@@ -20,6 +20,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import math
+
 import numpy as np
 
 __all__ = ['BeliefPropagationResult', 'MRFError', 'belief_propagation',
@@ -55,10 +57,12 @@ def exclusion_potential(xy_a: np.ndarray, xy_b: np.ndarray, *, radius: float = 0
     return np.where(d2 > radius * radius, 1.0, epsilon)
 
 
-def _clouds_apart(xy_a: np.ndarray, xy_b: np.ndarray, radius: float) -> bool:
-    """True if the bounding boxes of two particle clouds are farther apart than ``radius``
-    (then every pair is, the potential is constant and the edge carries no information)."""
-    gap = np.maximum(xy_a.min(axis=0) - xy_b.max(axis=0), xy_b.min(axis=0) - xy_a.max(axis=0))
+def _boxes_apart(box_a: tuple[np.ndarray, np.ndarray], box_b: tuple[np.ndarray, np.ndarray],
+                 radius: float) -> bool:
+    """True if two particle clouds' bounding boxes ``(min (2,), max (2,))`` are farther apart
+    than ``radius`` (then every pair is, the potential is constant and the edge carries no
+    information)."""
+    gap = np.maximum(box_a[0] - box_b[1], box_b[0] - box_a[1])
     gap = np.maximum(gap, 0.0)
     return float(gap @ gap) > radius * radius
 
@@ -84,7 +88,8 @@ def _kl(new: list[np.ndarray], old: list[np.ndarray]) -> float:
     total = 0.0
     for b, a in zip(new, old):
         mask = b > 0
-        total += float(np.sum(b[mask] * np.log(b[mask] / np.maximum(a[mask], 1e-300))))
+        bm = b[mask]
+        total += float((bm * np.log(bm / np.maximum(a[mask], 1e-300))).sum())
     return total
 
 
@@ -123,7 +128,7 @@ def belief_propagation(xy: Sequence[np.ndarray], prior_weights: Sequence[np.ndar
             raise MRFError(f'target {k}: positions {pts.shape} and weights {w.shape} '
                            'do not match')
         total = w.sum()
-        if not np.isfinite(total) or total <= 0 or np.any(w < 0):
+        if not math.isfinite(total) or total <= 0 or (w < 0).any():
             raise MRFError(f'target {k}: prior weights must be >= 0 with a positive sum')
         priors.append(w / total)
     if edges is None:
@@ -138,13 +143,21 @@ def belief_propagation(xy: Sequence[np.ndarray], prior_weights: Sequence[np.ndar
     potentials = dict(potentials or {})
     # psi[(h, k)]: (N_h, N_k), both directions share one matrix (the potential is symmetric)
     psi: dict[tuple[int, int], np.ndarray] = {}
+    boxes: dict[int, tuple[np.ndarray, np.ndarray]] = {}    # per cloud, computed once
+
+    def box(k: int) -> tuple[np.ndarray, np.ndarray]:
+        if k not in boxes:
+            pts = np.asarray(xy[k])[:, :2]
+            boxes[k] = (pts.min(axis=0), pts.max(axis=0))
+        return boxes[k]
+
     for h, k in sorted(edge_set):
         mat = potentials.get((h, k))
         if mat is None and (k, h) in potentials:
             mat = potentials[(k, h)].T
         if mat is None:
             a, b = np.asarray(xy[h])[:, :2], np.asarray(xy[k])[:, :2]
-            if _clouds_apart(a, b, radius):
+            if _boxes_apart(box(h), box(k), radius):
                 continue  # constant potential: its messages are uniform, drop the edge
             mat = exclusion_potential(a, b, radius=radius, epsilon=epsilon)
         psi[(h, k)] = np.asarray(mat, dtype=np.float64)

@@ -8,10 +8,13 @@ and the caller gets a flag so it can report the degeneracy.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-__all__ = ['ResamplingError', 'effective_sample_size', 'logsumexp', 'normalize_log_weights',
-           'normalized_weights', 'systematic_resample']
+__all__ = ['ResamplingError', 'effective_sample_size', 'logsumexp', 'normalize_log_weight_rows',
+           'normalize_log_weights', 'normalized_weights', 'systematic_indices',
+           'systematic_resample']
 
 
 class ResamplingError(ValueError):
@@ -24,10 +27,10 @@ def logsumexp(a: np.ndarray) -> float:
     The package's one log-sum-exp (scipy's costs ~0.5 ms per call in per-frame loops).
     """
     a = np.asarray(a, dtype=np.float64)
-    top = float(np.max(a)) if a.size else -np.inf
-    if not np.isfinite(top):
+    top = float(a.max()) if a.size else -np.inf
+    if not math.isfinite(top):
         return top
-    return top + float(np.log(np.sum(np.exp(a - top))))
+    return top + float(np.log(np.exp(a - top).sum()))
 
 
 def normalize_log_weights(log_weights: np.ndarray) -> tuple[np.ndarray, bool]:
@@ -43,13 +46,37 @@ def normalize_log_weights(log_weights: np.ndarray) -> tuple[np.ndarray, bool]:
     lw = np.asarray(log_weights, dtype=np.float64)
     if lw.ndim != 1 or lw.size == 0:
         raise ResamplingError(f'log-weights must be a non-empty 1-D array, got shape {lw.shape}')
-    lw = np.where(np.isnan(lw), -np.inf, lw)
-    if np.any(lw == np.inf):
+    out, degenerate = normalize_log_weight_rows(lw[None, :])
+    return out[0], bool(degenerate[0])
+
+
+def normalize_log_weight_rows(log_weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`normalize_log_weights` of every row of (K, N) log-weights in one pass (the
+    same numbers as row by row: numpy sums each contiguous row on its own).
+
+    Returns:
+        ``(normalised (K, N), degenerate (K,) bool)``.
+    """
+    lw = np.asarray(log_weights, dtype=np.float64)
+    if lw.ndim != 2 or lw.shape[1] == 0:
+        raise ResamplingError(f'log-weight rows must be a (K, N > 0) array, got {lw.shape}')
+    if np.isnan(lw).any():
+        lw = np.where(np.isnan(lw), -np.inf, lw)
+    if (lw == np.inf).any():
         raise ResamplingError('log-weights contain +inf')
-    norm = logsumexp(lw)
-    if not np.isfinite(norm):
-        return np.full(lw.size, -np.log(lw.size)), True
-    return lw - norm, False
+    top = lw.max(axis=1)
+    degenerate = ~np.isfinite(top)               # every weight -inf
+    if degenerate.any():
+        top = np.where(degenerate, 0.0, top)
+    # log sum exp per row (as logsumexp): top + log(sum(exp(lw - top)))
+    sums = np.exp(lw - top[:, None]).sum(axis=1)
+    if degenerate.any():
+        sums[degenerate] = 1.0                   # no log(0) warning; replaced below
+    norm = top + np.log(sums)
+    out = lw - norm[:, None]
+    if degenerate.any():
+        out[degenerate] = -np.log(lw.shape[1])
+    return out, degenerate
 
 
 def normalized_weights(log_weights: np.ndarray) -> tuple[np.ndarray, bool]:
@@ -85,12 +112,24 @@ def systematic_resample(weights: np.ndarray, count: int,
     w = np.asarray(weights, dtype=np.float64)
     if count < 1:
         raise ResamplingError(f'resampling needs count >= 1, got {count}')
-    total = w.sum() if w.ndim == 1 else np.nan
-    if w.ndim != 1 or w.size == 0 or not np.isfinite(total) or total <= 0 or np.any(w < 0):
+    total = float(w.sum()) if w.ndim == 1 else math.nan
+    if w.ndim != 1 or w.size == 0 or not math.isfinite(total) or total <= 0 or (w < 0).any():
         raise ResamplingError('weights must be a non-empty 1-D array of non-negative numbers '
                               'with a positive finite sum')
-    cumulative = np.cumsum(w / total)
-    cumulative[-1] = 1.0  # guard against round-off leaving the last bin short
-    positions = (rng.random() + np.arange(count)) / count
-    idx = np.searchsorted(cumulative, positions, side='right')
-    return np.minimum(idx, w.size - 1).astype(np.int64)
+    return systematic_indices(w[None, :], np.array([total]), np.array([rng.random()]),
+                              count)[0]
+
+
+def systematic_indices(weights: np.ndarray, totals: np.ndarray, offsets: np.ndarray,
+                       count: int) -> np.ndarray:
+    """The indices of :func:`systematic_resample` for K weight rows at once (checked by the
+    caller): rows (K, N) of non-negative weights, their sums ``totals`` (K,) and the uniform
+    draws ``offsets`` (K,) in [0, 1). Returns (K, count) int64, each row sorted (the same
+    numbers as one call per row: cumulative sums run along each row)."""
+    cumulative = np.cumsum(weights / totals[:, None], axis=1)
+    cumulative[:, -1] = 1.0  # guard against round-off leaving the last bin short
+    positions = (offsets[:, None] + np.arange(count)) / count
+    idx = np.empty((weights.shape[0], count), np.int64)
+    for k in range(weights.shape[0]):
+        idx[k] = np.searchsorted(cumulative[k], positions[k], side='right')
+    return np.minimum(idx, weights.shape[1] - 1, out=idx)

@@ -29,6 +29,8 @@ Camera names are sanitised to ``[A-Za-z0-9_]`` in field names.
 from __future__ import annotations
 
 import colorsys
+import copy
+import functools
 import math
 import re
 from collections.abc import Mapping, Sequence
@@ -36,11 +38,10 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
-from builtin_interfaces.msg import Duration
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import Pose, PoseArray
+from geometry_msgs.msg import Point, Pose, PoseArray, Quaternion, Vector3
 from sensor_msgs.msg import PointCloud2, PointField
-from std_msgs.msg import Header
+from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from mbtrack_ros.core.state import SIT, THETA, VX, VY, X, Y, FrameResult, TrackEstimate
@@ -83,12 +84,21 @@ def tracks_dtype(cameras: Sequence[str]) -> np.dtype:
     return np.dtype([(n, '<u4' if n == 'id' else '<f4') for n in names])
 
 
-def _pose(track: TrackEstimate, z: float = 0.0) -> Pose:
-    pose = Pose()
-    pose.position.x, pose.position.y, pose.position.z = (
-        float(track.mean[X]), float(track.mean[Y]), float(z))
-    q = yaw_to_quaternion(float(track.mean[THETA]))
-    pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w = q
+# Default messages copied (shallow) instead of constructed: a generated message's __init__
+# builds every default sub-message (a Marker: header, pose, texture image, mesh file, ...),
+# which the builders below would replace anyway. The copies share the defaults they do not
+# set; the builders always assign new sub-messages and never change a shared one.
+_POSE = Pose()
+_MARKER = Marker()
+
+
+def _pose(track: TrackEstimate, z: float = 0.0, *, upright: bool = False) -> Pose:
+    """The track's floor position at height ``z``, turned by its yaw (``upright``: no turn)."""
+    pose = copy.copy(_POSE)
+    pose.position = Point(x=float(track.mean[X]), y=float(track.mean[Y]), z=float(z))
+    qx, qy, qz, qw = (0.0, 0.0, 0.0, 1.0) if upright \
+        else yaw_to_quaternion(float(track.mean[THETA]))
+    pose.orientation = Quaternion(x=qx, y=qy, z=qz, w=qw)
     return pose
 
 
@@ -106,27 +116,45 @@ def _camera_visibility(track: TrackEstimate, camera: str) -> float:
     return float(track.visible_fraction.get(camera, 0.0))
 
 
+@functools.lru_cache(maxsize=8)
+def _cloud_layout(cameras: tuple[str, ...]) -> tuple[np.dtype, tuple[PointField, ...]]:
+    """The point dtype and PointFields of ``~/tracks`` for these cameras (built once; the
+    fields are shared by every cloud, never changed)."""
+    dtype = tracks_dtype(cameras)
+    fields = tuple(PointField(name=n, offset=int(dtype.fields[n][1]), count=1,
+                              datatype=PointField.UINT32 if n == 'id' else PointField.FLOAT32)
+                   for n in dtype.names)
+    return dtype, fields
+
+
 def tracks_cloud(result: FrameResult, cameras: Sequence[str],
                  frame_id: str = 'room') -> PointCloud2:
     """``~/tracks``: one PointCloud2 point per track (fields in the module docstring)."""
-    dtype = tracks_dtype(cameras)
-    points = np.zeros(len(result.tracks), dtype=dtype)
-    for i, t in enumerate(result.tracks):
-        cov = np.asarray(t.covariance, dtype=np.float64)
-        per_cam = [_camera_visibility(t, c) for c in cameras]
-        row = {'x': t.mean[X], 'y': t.mean[Y], 'z': 0.0, 'id': t.track_id,
-               'existence': t.existence, 'visibility': max(per_cam, default=0.0),
-               'vx': t.mean[VX], 'vy': t.mean[VY], 'cov_xx': cov[0, 0], 'cov_xy': cov[0, 1],
-               'cov_yy': cov[1, 1], 'height': t.height}
-        row.update({field_name(c): v for c, v in zip(cameras, per_cam)})
-        points[i] = tuple(row[n] for n in dtype.names)
+    cameras = tuple(cameras)
+    dtype, fields = _cloud_layout(cameras)
+    tracks = result.tracks
+    points = np.zeros(len(tracks), dtype=dtype)
+    if tracks:
+        per_cam = np.array([[_camera_visibility(t, c) for c in cameras] for t in tracks],
+                           dtype=np.float64).reshape(len(tracks), len(cameras))
+        columns = {
+            'x': [t.mean[X] for t in tracks], 'y': [t.mean[Y] for t in tracks],
+            'id': [t.track_id for t in tracks], 'existence': [t.existence for t in tracks],
+            'visibility': [max(row, default=0.0) for row in per_cam.tolist()],
+            'vx': [t.mean[VX] for t in tracks], 'vy': [t.mean[VY] for t in tracks],
+            'height': [t.height for t in tracks]}
+        cov = [np.asarray(t.covariance, dtype=np.float64) for t in tracks]
+        columns['cov_xx'] = [c[0, 0] for c in cov]
+        columns['cov_xy'] = [c[0, 1] for c in cov]
+        columns['cov_yy'] = [c[1, 1] for c in cov]
+        for name, values in columns.items():
+            points[name] = values
+        for k, c in enumerate(cameras):
+            points[field_name(c)] = per_cam[:, k]
     msg = PointCloud2()
     msg.header = make_header(result.stamp_ns, frame_id)
     msg.height, msg.width = 1, len(points)
-    msg.fields = [
-        PointField(name=n, offset=int(dtype.fields[n][1]), count=1,
-                   datatype=PointField.UINT32 if n == 'id' else PointField.FLOAT32)
-        for n in dtype.names]
+    msg.fields = list(fields)
     msg.is_bigendian = False
     msg.point_step = dtype.itemsize
     msg.row_step = dtype.itemsize * len(points)
@@ -141,12 +169,29 @@ def track_color(track_id: int) -> tuple[float, float, float]:
     return colorsys.hsv_to_rgb(hue, 0.85, 0.95)
 
 
-def _marker(header: Header, ns: str, track_id: int, action: int) -> Marker:
-    m = Marker()
+def _marker(header: Header, ns: str, track_id: int, action: int, *, kind: int = 0,
+            pose: Pose | None = None, scale: tuple[float, float, float] | None = None,
+            color: tuple[float, float, float, float] | None = None, text: str = '') -> Marker:
+    """A marker (a shallow copy of the default one, see ``_MARKER``) with new sub-messages
+    for what is given; lifetime zero = forever (tracks are removed with explicit DELETE
+    markers)."""
+    m = copy.copy(_MARKER)
     m.header = header
-    m.ns, m.id, m.action = ns, int(track_id), action
-    m.lifetime = Duration()  # forever: tracks are removed with explicit DELETE markers
+    m.ns, m.id, m.action, m.type = ns, int(track_id), action, kind
+    if pose is not None:
+        m.pose = pose
+    if scale is not None:
+        m.scale = Vector3(x=scale[0], y=scale[1], z=scale[2])
+    if color is not None:
+        m.color = ColorRGBA(r=color[0], g=color[1], b=color[2], a=color[3])
+    if text:
+        m.text = text
     return m
+
+
+def _clip01(value: float) -> float:
+    """``value`` clipped to [0, 1] (NaN stays NaN, as ``np.clip``)."""
+    return min(max(float(value), 0.0), 1.0)
 
 
 def markers_message(result: FrameResult, frame_id: str = 'room', *,
@@ -155,35 +200,27 @@ def markers_message(result: FrameResult, frame_id: str = 'room', *,
     existence and a heading arrow; DELETE markers for the tracks that ended this frame and for
     ``also_delete`` (e.g. tracks shown before that are not reported any more)."""
     header = make_header(result.stamp_ns, frame_id)
-    out = MarkerArray()
+    markers = []
     for t in result.tracks:
         r, g, b = track_color(t.track_id)
-        height = float(t.height) * (1.0 - 0.3 * float(np.clip(t.mean[SIT], 0.0, 1.0)))
-        body = _marker(header, 'people', t.track_id, Marker.ADD)
-        body.type = Marker.CYLINDER
-        body.pose = _pose(t, 0.5 * height)
-        body.scale.x = body.scale.y = BODY_DIAMETER
-        body.scale.z = max(height, 1e-3)
-        body.color.r, body.color.g, body.color.b = r, g, b
-        body.color.a = float(0.25 + 0.5 * np.clip(t.existence, 0.0, 1.0))
-        label = _marker(header, 'labels', t.track_id, Marker.ADD)
-        label.type = Marker.TEXT_VIEW_FACING
-        label.pose = _pose(t, height + 0.25)
-        label.pose.orientation.z, label.pose.orientation.w = 0.0, 1.0
-        label.scale.z = 0.25
-        label.color.r, label.color.g, label.color.b, label.color.a = r, g, b, 1.0
-        label.text = f'{t.track_id} ({t.existence:.2f})'
-        arrow = _marker(header, 'heading', t.track_id, Marker.ADD)
-        arrow.type = Marker.ARROW
-        arrow.pose = _pose(t, 0.05)
-        arrow.scale.x, arrow.scale.y, arrow.scale.z = 0.5, 0.08, 0.08
-        arrow.color.r, arrow.color.g, arrow.color.b, arrow.color.a = r, g, b, 0.9
-        out.markers += [body, label, arrow]
+        height = float(t.height) * (1.0 - 0.3 * _clip01(t.mean[SIT]))
+        markers += [
+            _marker(header, 'people', t.track_id, Marker.ADD, kind=Marker.CYLINDER,
+                    pose=_pose(t, 0.5 * height),
+                    scale=(BODY_DIAMETER, BODY_DIAMETER, max(height, 1e-3)),
+                    color=(r, g, b, float(0.25 + 0.5 * _clip01(t.existence)))),
+            _marker(header, 'labels', t.track_id, Marker.ADD, kind=Marker.TEXT_VIEW_FACING,
+                    pose=_pose(t, height + 0.25, upright=True), scale=(0.0, 0.0, 0.25),
+                    color=(r, g, b, 1.0), text=f'{t.track_id} ({t.existence:.2f})'),
+            _marker(header, 'heading', t.track_id, Marker.ADD, kind=Marker.ARROW,
+                    pose=_pose(t, 0.05), scale=(0.5, 0.08, 0.08), color=(r, g, b, 0.9))]
     shown = {t.track_id for t in result.tracks}
     gone = list(dict.fromkeys([*result.ended, *also_delete]))
     for track_id in (i for i in gone if i not in shown):
-        out.markers += [_marker(header, ns, track_id, Marker.DELETE)
-                        for ns in ('people', 'labels', 'heading')]
+        markers += [_marker(header, ns, track_id, Marker.DELETE)
+                    for ns in ('people', 'labels', 'heading')]
+    out = MarkerArray()
+    out.markers = markers
     return out
 
 
