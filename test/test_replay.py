@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import csv
+import os
+import sys
 
 import numpy as np
 import pytest
@@ -213,6 +215,38 @@ def test_background_writer_in_a_process_writes_the_bag_in_order_and_reports_erro
     assert unused._child.returncode == 0
     with AnyReader([tmp_path / 'unused']) as reader:
         assert not list(reader.messages())
+
+
+@pytest.mark.skipif(not sys.platform.startswith('linux'), reason='/proc and F_GETPIPE_SZ')
+def test_background_writer_child_at_lower_priority_writes_everything(tmp_path):
+    """With ``niceness`` the writer child runs that much nicer than the caller, its pipe is
+    enlarged (so the tracker's writes do not wait for it), and every result still reaches
+    the bag in order."""
+    import fcntl
+    import functools
+
+    from rosbags.highlevel import AnyReader
+
+    from conftest import make_room
+    from mbtrack_ros.commands.output_writer import BackgroundWriter
+    from mbtrack_ros.core.state import FrameResult, TrackEstimate
+    from mbtrack_ros.nodes.output_bag import OutputBagWriter
+
+    out = tmp_path / 'tracks.mcap'
+    writer = BackgroundWriter(functools.partial(OutputBagWriter, out, make_room()),
+                              process=True, niceness=5)
+    own = os.getpriority(os.PRIO_PROCESS, 0)
+    assert os.getpriority(os.PRIO_PROCESS, writer._child.pid) == min(own + 5, 19)
+    limit = int(open('/proc/sys/fs/pipe-max-size').read())
+    assert fcntl.fcntl(writer._child.stdin.fileno(), 1032) >= min(1 << 20, limit)  # GETPIPE
+    for k in range(300):
+        writer.write(FrameResult(stamp_ns=k + 1, tracks=[TrackEstimate(
+            track_id=1, mean=np.full(6, 0.01 * k), covariance=np.eye(6), height=1.7)]))
+    writer.close()
+    with AnyReader([out]) as reader:
+        stamps = [stamp for conn, stamp, _ in reader.messages()
+                  if conn.topic == '/tracker_node/people']
+    assert stamps == list(range(1, 301))
 
 
 def test_background_writer_keeps_order_snapshots_results_and_reports_errors():

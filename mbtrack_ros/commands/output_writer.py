@@ -25,6 +25,11 @@ __all__ = ['BackgroundWriter', 'output_bag_writer', 'serve']
 # ~0.9 ms (load 6): each write releases the interpreter lock, and taking it back waits for
 # the reader thread.
 _PIPE_BUFFER = 32768
+# Linux: fcntl F_SETPIPE_SZ, and the size asked for the pipe to the child (capped by
+# /proc/sys/fs/pipe-max-size): ~500 frame results, so that a child running behind at a
+# lower priority does not block the tracker's writes.
+_F_SETPIPE_SZ = 1031
+_PIPE_SIZE = 1 << 20
 
 
 def output_bag_writer(path, camera_names: list[str], frame_id: str):
@@ -54,10 +59,13 @@ class BackgroundWriter:
         wait: with ``process``, wait until the child has built the writer (its error, e.g.
             an existing bag, raised here); with False the child starts (its imports, ~1 s)
             while the caller goes on, and :meth:`ready` (or the first :meth:`write`) waits.
+        niceness: with ``process``, the child's niceness above the caller's (0: the same):
+            it then takes the CPU the tracker's threads leave, and a larger pipe holds what
+            it has not written yet (``close`` waits for it).
     """
 
     def __init__(self, writer, depth: int = 8, *, process: bool = False,
-                 wait: bool = True) -> None:
+                 wait: bool = True, niceness: int = 0) -> None:
         self._error: BaseException | None = None
         self._child: subprocess.Popen | None = None
         self._starting = False
@@ -67,6 +75,8 @@ class BackgroundWriter:
                 [sys.executable, '-c', 'from mbtrack_ros.commands.output_writer import '
                  'serve; serve()'],
                 stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env, bufsize=_PIPE_BUFFER)
+            if niceness:
+                _lower_priority(self._child.pid, self._child.stdin.fileno(), niceness)
             self._send(writer)
             self._starting = True
             if wait:
@@ -161,6 +171,21 @@ class BackgroundWriter:
             self._child.wait()
         if self._error is not None:
             raise self._error
+
+
+def _lower_priority(pid: int, pipe_fd: int, niceness: int) -> None:
+    """Raise the niceness of process ``pid`` by ``niceness`` and enlarge the pipe that
+    feeds it, where the system allows (best effort: neither changes what is written)."""
+    try:
+        os.setpriority(os.PRIO_PROCESS, pid, os.getpriority(os.PRIO_PROCESS, 0) + niceness)
+    except (AttributeError, OSError):
+        pass
+    try:
+        import fcntl
+        with open('/proc/sys/fs/pipe-max-size') as limit:
+            fcntl.fcntl(pipe_fd, _F_SETPIPE_SZ, min(_PIPE_SIZE, int(limit.read())))
+    except (ImportError, OSError, ValueError):  # not Linux: the default pipe
+        pass
 
 
 def serve() -> None:

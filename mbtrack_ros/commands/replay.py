@@ -45,6 +45,9 @@ from mbtrack_ros.recording.csvfiles import (
 __all__ = ['add_parser', 'run']
 
 _PROG = 'mbtrack replay'
+# The tracks.mcap writer runs at this niceness above the replay: it takes the CPU the
+# tracker's threads leave (docs/live_measurements.md, "Offline speed, part 6").
+_WRITER_NICENESS = 10
 
 
 class _UserError(Exception):
@@ -332,7 +335,7 @@ def _output_bag(out: Path, calibration: RoomCalibration):
         shutil.rmtree(path)  # replaced like tracks.csv
     return BackgroundWriter(functools.partial(output_bag_writer, path, list(calibration.names),
                                               calibration.frame_id),
-                            process=True, wait=False)
+                            process=True, wait=False, niceness=_WRITER_NICENESS)
 
 
 def _writer_ready(outputs: BackgroundWriter | None) -> None:
