@@ -205,15 +205,18 @@ def test_a_close_neighbour_an_occluder_low_visibility_or_a_stranger_do_not_updat
 
 def test_bad_adaptation_config_is_refused():
     for bad in ({'rate': -0.1}, {'rate': 1.5}, {'min_free': 2.0}, {'max_distance': 0.0},
-                {'neighbour_radius': -1.0}):
+                {'neighbour_radius': -1.0}, {'interval': -1.0}, {'min_travel': -0.5}):
         with pytest.raises(DetectionError, match='adaptation'):
             AdaptationConfig(**bad)
 
 
-@pytest.mark.parametrize('rate', [0.0, 0.2])
-def test_tracker_adapts_only_when_enabled(rate):
-    """End to end: a person walking alone; with a rate the tracker's model (the object the
-    filter's likelihood reads) learns, without it it stays as acquired."""
+@pytest.mark.parametrize('rate, speed, learns', [(0.0, 0.6, False), (0.2, 0.6, True),
+                                                  (0.2, 0.0, False)])
+def test_tracker_adapts_only_when_enabled_and_after_walking(rate, speed, learns):
+    """End to end: a person walking (speed m/s) or standing alone; with a rate the
+    tracker's model (the object the filter's likelihood reads) learns once the track has
+    walked ``min_travel`` (a standing one, like a false track on a screen, never does),
+    without a rate it stays as acquired."""
     rng = np.random.default_rng(8)
     calib = make_room()
     bgs = backgrounds(calib)
@@ -222,7 +225,7 @@ def test_tracker_adapts_only_when_enabled(rate):
     tracker.detection.config = replace(tracker.detection.config, relocate_interval=0.5)
     acquired, actions, learnt = {}, [], {}
     for k in range(45):
-        people = [person(1.5 + 0.04 * k, 2.4, theta=0.0)] if k >= 2 else []
+        people = [person(1.5 + speed / FPS * k, 2.4, theta=0.0)] if k >= 2 else []
         res = tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, people, rng))
         for tid, m in tracker.models.items():
             acquired.setdefault(tid, (m.view_angles.copy(), m.histograms.copy()))
@@ -234,8 +237,10 @@ def test_tracker_adapts_only_when_enabled(rate):
     tid, model = next(iter(tracker.models.items()))
     changed = model.histograms.shape != acquired[tid][1].shape \
         or not np.array_equal(model.histograms, acquired[tid][1])
-    assert changed == (rate > 0)
-    assert (('blend' in actions or 'new view' in actions) == (rate > 0))
+    assert changed == learns
+    assert ('blend' in actions or 'new view' in actions) == learns
     interval = tracker.detection.config.adaptation.interval * FPS   # frames
     for frames in learnt.values():     # each track at most once per interval
         assert np.all(np.diff(sorted(frames)) >= interval - 1e-9), frames
+    if learns:   # not before it walked min_travel (1 m at 0.6 m/s: 1.7 s, 25 frames)
+        assert min(min(f) for f in learnt.values()) >= 2 + 1.0 / speed * FPS

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+import time
 from dataclasses import replace
 import sys
 from collections import Counter
@@ -85,6 +86,15 @@ def main(argv: list[str] | None = None) -> int:
         over = {k: type(getattr(det.config.adaptation, k))(float(v))
                 for k, v in (a.split('=', 1) for a in args.set)}
         det.config = replace(det.config, adaptation=replace(det.config.adaptation, **over))
+        adapt, cpu = det._adapt, {'s': 0.0, 'n': 0}
+
+        def timed_adapt(*a, **kw):   # CPU time of the adaptation step (process_time)
+            c0 = time.process_time()
+            adapt(*a, **kw)
+            cpu['s'] += time.process_time() - c0
+            cpu['n'] += 1
+
+        det._adapt = timed_adapt
         add = tracker.add_track
 
         def keep_acquired(model, state, stamp_ns, track_id=None):
@@ -141,7 +151,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f'  adapted - acquired: mean {np.mean(adapted - frozen):.2f}, '
               f'better in {100 * np.mean(adapted > frozen):.1f} % of track-frames')
     print('  adaptation decisions:', dict(actions), f'(adaptation step {adapt_cpu:.2f} s '
-          f'wall in all, {frames} frame sets)')
+          f'wall, {cpu["s"]:.2f} s CPU in all over {frames} frame sets, called on '
+          f'{cpu["n"]}: {1e3 * cpu["s"] / max(frames, 1):.2f} ms CPU per frame set)')
     if seen:
         own, other = np.array(seen).T
         pct = [10, 25, 50, 75, 90]

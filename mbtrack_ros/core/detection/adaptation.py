@@ -5,8 +5,9 @@ saw the newcomer unoccluded (003 §4.1); the sides it turns later are interpolat
 two nearest key views (003 Eq. 1-2). The papers leave updating it to future work. Here a
 confirmed track's model learns from a camera only where the view is unambiguous:
 
-- the track is reported, its existence is high and no other track stands within a floor
-  radius (in a group a model would learn its neighbours);
+- the track is reported, its existence is high, it has walked some distance since it was
+  first seen (a false track on a static thing has not) and no other track stands within a
+  floor radius (in a group a model would learn its neighbours);
 - in that camera its visibility ``xi_v`` (001) is high and the silhouettes of the tracks
   closer to the camera leave most of its silhouette free and inside the image;
 - the part histograms seen at its estimate are already close to what the model expects at
@@ -54,6 +55,10 @@ class AdaptationConfig:
         foreground_only: learn only from the silhouette's foreground pixels (the
             estimate's silhouette also covers some background beside the person).
         interval: seconds between two adaptations of one track (slow, and cheap).
+        min_travel: metres the track's estimate must have been from where it was first
+            seen: a false track on something static (a changing screen, a bootstrap
+            ghost) would learn its changes and live on (clear-room: such tracks lived
+            2-3 times longer without this).
     """
 
     rate: float = 0.0
@@ -64,6 +69,7 @@ class AdaptationConfig:
     max_distance: float = 0.3
     foreground_only: bool = True
     interval: float = 0.5
+    min_travel: float = 1.0
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.rate <= 1.0:
@@ -72,9 +78,9 @@ class AdaptationConfig:
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise DetectionError(f'adaptation {name} must be in [0, 1]')
         if not (self.neighbour_radius >= 0 and 0.0 < self.max_distance <= 1.0
-                and self.interval >= 0):
-            raise DetectionError('adaptation neighbour_radius and interval must be >= 0 '
-                                 'and max_distance in (0, 1]')
+                and self.interval >= 0 and self.min_travel >= 0):
+            raise DetectionError('adaptation neighbour_radius, interval and min_travel '
+                                 'must be >= 0 and max_distance in (0, 1]')
 
 
 @dataclass

@@ -231,6 +231,8 @@ class AutoDetection:
         self.exit_checks: list[dict] = []  # per frame: the exit rescue's view of each exit
         self.adaptations: list[dict] = []  # per frame: the appearance adaptation's decisions
         self._adapted: dict[int, int] = {}  # track id -> stamp of its last model adaptation
+        self._first_xy: dict[int, np.ndarray] = {}  # track id -> where it was first updated
+        self._travelled: set[int] = set()  # tracks that went adaptation.min_travel from it
         self._pending: _Pending | None = None  # what search() needs from the last update()
         self._worker: ThreadPoolExecutor | None = None  # one thread: background, search
         self._foreground: tuple[list[str], Future] | None = None  # start_foreground()'s job
@@ -265,6 +267,8 @@ class AutoDetection:
         self._shown_since.clear()
         self._rescued.clear()
         self._adapted.clear()
+        self._first_xy.clear()
+        self._travelled.clear()
         self.detector.reset()
         self._last_stamp = None
         self._pending = None
@@ -466,6 +470,8 @@ class AutoDetection:
             self._shown_since.pop(tid, None)
             self._rescued.pop(tid, None)
             self._adapted.pop(tid, None)
+            self._first_xy.pop(tid, None)
+            self._travelled.discard(tid)
         self._note_reporting(stamp_ns, tracks, means, ended)
         t3 = time.perf_counter()
         if cfg.adaptation.rate > 0 and tracks and evidence:
@@ -629,14 +635,21 @@ class AutoDetection:
         """Appearance adaptation (:func:`adaptation.adapt_models`) of the tracks that stay
         reported with high existence and were not born or moved within
         ``relocate_interval`` (a young or just-moved track may sit on the wrong person),
-        each at most once per ``adaptation.interval``."""
+        each at most once per ``adaptation.interval``, and only once it has been
+        ``adaptation.min_travel`` from where it was first seen."""
         cfg = self.config.adaptation
         ids = [t.track_id for t in tracks]
+        for k, tid in enumerate(ids):
+            if tid in ended:
+                continue
+            start = self._first_xy.setdefault(tid, means[k, [X, Y]].copy())
+            if np.hypot(*(means[k, [X, Y]] - start)) >= cfg.min_travel:
+                self._travelled.add(tid)
         due = int(cfg.interval * 1e9)
         eligible = np.array([
             tid not in ended and tid in self.aux and self.reported(tid)
             and self.aux[tid].existence >= cfg.min_existence
-            and not self._placed_recently(tid, stamp_ns)
+            and not self._placed_recently(tid, stamp_ns) and tid in self._travelled
             and int(stamp_ns) - self._adapted.get(tid, int(stamp_ns) - due) >= due
             for tid in ids])
         if not eligible.any():
