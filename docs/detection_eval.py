@@ -125,6 +125,8 @@ def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False,
                                                 if c in cal.cameras})
             for d in tracker.detection.decisions:
                 events.append({'kind': 'decision', 'frame': fs.index, **d})
+            for a in getattr(tracker.detection, 'adaptations', []):  # h-adapt's decisions
+                events.append({'kind': 'adapt', 'frame': fs.index, **a})
             for c in getattr(tracker.detection, 'exit_checks', []):  # h-reid's exit rescue
                 events.append({'kind': 'exit_check', 'frame': fs.index, **c})
                 if c['rescued']:      # the exit rule named it, the rescue kept it

@@ -168,13 +168,16 @@ class PersonModel:
         return va, vb, wa
 
     def add_view(self, angle: float, hists: np.ndarray, *,
-                 merge_angle: float = MERGE_ANGLE) -> None:
+                 merge_angle: float = MERGE_ANGLE, rate: float = 0.5) -> None:
         """Add a key view (3, 512) seen under relative angle ``angle`` (radians).
 
-        A view closer than ``merge_angle`` to an existing one is averaged into it (angles
-        averaged on the circle, histograms per part; a part missing in one of them is taken
-        from the other).
+        A view closer than ``merge_angle`` to an existing one is blended into it instead:
+        histograms per part ``(1 - rate) old + rate new`` and the angle moved by ``rate``
+        of the difference on the circle (``rate`` 0.5: the average, as acquisition merges
+        two cameras; a part missing in one of them is taken from the other).
         """
+        if not 0.0 < rate <= 1.0:
+            raise AppearanceError(f'rate must be in (0, 1], got {rate}')
         hists = np.asarray(hists, dtype=np.float64)
         if hists.shape != (N_PARTS, N_BINS):
             raise AppearanceError(f'a key view is (3, 512) histograms, got {hists.shape}')
@@ -190,14 +193,38 @@ class PersonModel:
                 seen_old = old.sum(axis=1) > 0
                 seen_new = hists.sum(axis=1) > 0
                 both = (seen_old & seen_new)[:, None]
-                merged = np.where(both, 0.5 * (old + hists), np.where(seen_new[:, None],
-                                                                       hists, old))
+                merged = np.where(both, (1.0 - rate) * old + rate * hists,
+                                  np.where(seen_new[:, None], hists, old))
                 self.histograms[j] = _normalise(merged)
                 self.view_angles[j] = float(_wrap(self.view_angles[j]
-                                                  + 0.5 * _wrap(angle - self.view_angles[j])))
+                                                  + rate * _wrap(angle - self.view_angles[j])))
                 return
         self.view_angles = np.append(self.view_angles, angle)
         self.histograms = np.concatenate([self.histograms, hists[None]], axis=0)
+
+    def adapt(self, angle: float, hists: np.ndarray, rate: float, *,
+              merge_angle: float = MERGE_ANGLE) -> bool:
+        """Learn part histograms (3, 512) observed under relative angle ``angle`` slowly:
+        blended at ``rate`` into the key view within ``merge_angle`` (:meth:`add_view`), or,
+        for an angle the model has no key view for, a new key view that starts as the
+        model's interpolation there (003 Eq. 1-2) moved by ``rate`` toward the observation
+        (the interpolation is what the tracker used for that angle until now). Parts
+        without mass in the observation are left as they are. Returns True when a key view
+        was added."""
+        hists = _normalise(np.asarray(hists, dtype=np.float64))
+        if hists.shape != (N_PARTS, N_BINS):
+            raise AppearanceError(f'a key view is (3, 512) histograms, got {hists.shape}')
+        angle = float(_wrap(angle))
+        near = self.view_angles.size and \
+            float(np.min(np.abs(_wrap(angle - self.view_angles)))) < merge_angle
+        if near:
+            self.add_view(angle, hists, merge_angle=merge_angle, rate=rate)
+            return False
+        start = self.interpolate(np.array([angle]))[0]
+        seen = (hists.sum(axis=1) > 0)[:, None]
+        self.add_view(angle, np.where(seen, (1.0 - rate) * start + rate * hists, start),
+                      merge_angle=merge_angle)
+        return True
 
 
 def _check_bins(bins: np.ndarray, silhouettes: Silhouettes) -> np.ndarray:

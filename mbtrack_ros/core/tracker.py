@@ -79,6 +79,9 @@ class TrackerConfig:
             and the likelihood's smallest visible area are scaled with it. 1: the images
             as they come; a speed option (docs/live_measurements.md, part 3). Tracks are in
             room coordinates whatever the scale.
+        adaptation_rate: with detection, blending rate of the slow, occlusion-aware
+            appearance-model adaptation of confirmed tracks (``AdaptationConfig.rate``,
+            :mod:`mbtrack_ros.core.detection.adaptation`); 0 = off, the default.
     """
 
     algorithm: str = 'hjs'
@@ -103,6 +106,7 @@ class TrackerConfig:
     pipeline_search: bool = False
     detection_every: int = 1
     image_scale: float = 1.0
+    adaptation_rate: float = 0.0
 
     def __post_init__(self) -> None:
         def bad(msg: str) -> None:
@@ -141,6 +145,10 @@ class TrackerConfig:
         if self.spare_support is not None and not (
                 isinstance(self.spare_support, (int, float)) and 0 <= self.spare_support <= 1):
             bad(f'spare_support must be a number in [0, 1], got {self.spare_support!r}')
+        if isinstance(self.adaptation_rate, bool) or not (
+                isinstance(self.adaptation_rate, (int, float))
+                and 0 <= self.adaptation_rate <= 1):
+            bad(f'adaptation_rate must be a number in [0, 1], got {self.adaptation_rate!r}')
         if isinstance(self.image_scale, bool) or not (
                 isinstance(self.image_scale, (int, float)) and 0 < self.image_scale <= 1):
             bad(f'image_scale must be a number in (0, 1], got {self.image_scale!r}')
@@ -150,6 +158,7 @@ class TrackerConfig:
 
     def detection_config(self):
         """The automatic-detection parameters this configuration sets (003 §4)."""
+        from mbtrack_ros.core.detection.adaptation import AdaptationConfig
         from mbtrack_ros.core.detection.detector import DetectorConfig
         from mbtrack_ros.core.detection.manager import AutoDetectionConfig
         from mbtrack_ros.core.detection.release import ReleaseConfig
@@ -159,7 +168,9 @@ class TrackerConfig:
         release = replace(ReleaseConfig(), timeout=float(self.release_time))
         if self.spare_support is not None:
             release = replace(release, spare_support=float(self.spare_support))
-        config = AutoDetectionConfig(detector=detector, release=release, sigma=float(self.sigma))
+        config = AutoDetectionConfig(detector=detector, release=release, sigma=float(self.sigma),
+                                     adaptation=AdaptationConfig(
+                                         rate=float(self.adaptation_rate)))
         return _pixels_scaled(config, float(self.image_scale))
 
     def filter_config(self) -> FilterConfig:

@@ -64,6 +64,9 @@ detection.every                 int        run the detection pipeline (release, 
                                            background, search) on every k-th frame set
                                            only (1; a speed option that costs accuracy,
                                            see docs/live_measurements.md)
+detection.adaptation_rate       double     blending rate of the slow appearance-model
+                                           adaptation of confirmed, unoccluded tracks;
+                                           0 = off (0.0, docs/detection.md)
 ==============================  =========  =================================================
 """
 from __future__ import annotations
@@ -186,6 +189,9 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
                                 _fr(0.0, 1.0)),
     'detection.every': (1, 'run the detection pipeline on every k-th frame set only (speed '
                         'option, TrackerConfig.detection_every)', _ir(1, 30)),
+    'detection.adaptation_rate': (0.0, 'blending rate of the slow appearance-model adaptation '
+                                  'of confirmed, unoccluded tracks '
+                                  '(TrackerConfig.adaptation_rate); 0 = off', _fr(0.0, 1.0)),
 }
 
 

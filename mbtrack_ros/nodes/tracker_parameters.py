@@ -18,5 +18,6 @@ TRACKER_PARAMETERS: dict[str, tuple[str, type]] = {
     'detection.threshold': ('detection_threshold', float),
     'detection.spare_support': ('spare_support', float),
     'detection.every': ('detection_every', int),
+    'detection.adaptation_rate': ('adaptation_rate', float),
     'tracker.image_scale': ('image_scale', float),
 }

@@ -30,6 +30,7 @@ from mbtrack_ros.core.appearance import (
 from mbtrack_ros.core.camera import RoomCalibration
 from mbtrack_ros.core.detection import DetectionError
 from mbtrack_ros.core.detection.acquisition import AcquisitionConfig, acquire
+from mbtrack_ros.core.detection.adaptation import AdaptationConfig, adapt_models
 from mbtrack_ros.core.detection.background import BackgroundBank, BackgroundConfig
 from mbtrack_ros.core.detection.detector import (
     Detection, Detector, DetectorConfig, FrameEvidence, is_ceiling)
@@ -52,6 +53,8 @@ class AutoDetectionConfig:
 
     Attributes:
         background, detector, release, acquisition, existence: per-stage parameters.
+        adaptation: the slow appearance-model adaptation of confirmed tracks
+            (:mod:`~mbtrack_ros.core.detection.adaptation`; ``rate`` 0, the default, is off).
         sigma: appearance likelihood width (003 Eq. 3), as the tracker's.
         clutter_distance: Bhattacharyya distance whose likelihood is the "not visible"
             clutter likelihood ``p_0`` (001 Eq. 23).
@@ -126,6 +129,7 @@ class AutoDetectionConfig:
     release: ReleaseConfig = field(default_factory=ReleaseConfig)
     acquisition: AcquisitionConfig = field(default_factory=AcquisitionConfig)
     existence: AuxiliaryConfig = field(default_factory=AuxiliaryConfig)
+    adaptation: AdaptationConfig = field(default_factory=AdaptationConfig)
     sigma: float = 0.12
     clutter_distance: float = 0.5
     visibility_particles: int = 6
@@ -225,6 +229,10 @@ class AutoDetection:
         self._shown_since: dict[int, int] = {}  # id -> birth, move or last hidden stamp
         self._rescued: dict[int, int] = {}  # id -> stamp of its last exit rescue
         self.exit_checks: list[dict] = []  # per frame: the exit rescue's view of each exit
+        self.adaptations: list[dict] = []  # per frame: the appearance adaptation's decisions
+        self._adapted: dict[int, int] = {}  # track id -> stamp of its last model adaptation
+        self._first_xy: dict[int, np.ndarray] = {}  # track id -> where it was first updated
+        self._travelled: set[int] = set()  # tracks that went adaptation.min_travel from it
         self._pending: _Pending | None = None  # what search() needs from the last update()
         self._worker: ThreadPoolExecutor | None = None  # one thread: background, search
         self._foreground: tuple[list[str], Future] | None = None  # start_foreground()'s job
@@ -258,6 +266,9 @@ class AutoDetection:
         self._released.clear()
         self._shown_since.clear()
         self._rescued.clear()
+        self._adapted.clear()
+        self._first_xy.clear()
+        self._travelled.clear()
         self.detector.reset()
         self._last_stamp = None
         self._pending = None
@@ -347,6 +358,7 @@ class AutoDetection:
         t0 = time.perf_counter()
         self.reach_moves = {}
         self.exit_checks = []
+        self.adaptations = []
         self._first_seen = {t.track_id: self._first_seen.get(t.track_id, int(stamp_ns))
                             for t in tracks}
         dt = 0.0 if self._last_stamp is None else max(stamp_ns - self._last_stamp, 0) / 1e9
@@ -457,10 +469,15 @@ class AutoDetection:
             self._placed.pop(tid, None)
             self._shown_since.pop(tid, None)
             self._rescued.pop(tid, None)
+            self._adapted.pop(tid, None)
+            self._first_xy.pop(tid, None)
+            self._travelled.discard(tid)
         self._note_reporting(stamp_ns, tracks, means, ended)
         t3 = time.perf_counter()
+        if cfg.adaptation.rate > 0 and tracks and evidence:
+            self._adapt(stamp_ns, tracks, models, means, sils, evidence, ended)
         self.timings = {'detect_render': t1 - t0, 'detect_background': t2 - t1,
-                        'detect_existence': t3 - t2}
+                        'detect_existence': t3 - t2, 'detect_adapt': time.perf_counter() - t3}
         self._pending = _Pending(int(stamp_ns), images, tracks, models, means, shapes,
                                  evidence, ended)
         return ended
@@ -560,7 +577,7 @@ class AutoDetection:
         self.timings['detect_search'] = found.timings['detect_find'] \
             + time.perf_counter() - t0
         self.timings['detect'] = sum(self.timings.get(k, 0.0) for k in (
-            'detect_render', 'detect_background', 'detect_existence',
+            'detect_render', 'detect_background', 'detect_existence', 'detect_adapt',
             'detect_background_update', 'detect_search'))
         return births
 
@@ -611,6 +628,42 @@ class AutoDetection:
         return aux is None or aux.reported or self.config.report_hidden
 
     # -- helpers --------------------------------------------------------------------------
+    def _adapt(self, stamp_ns: int, tracks: Sequence[TrackEstimate],
+               models: Mapping[int, PersonModel], means: np.ndarray,
+               sils: Mapping[str, object], evidence: Mapping[str, FrameEvidence],
+               ended: Sequence[int]) -> None:
+        """Appearance adaptation (:func:`adaptation.adapt_models`) of the tracks that stay
+        reported with high existence and were not born or moved within
+        ``relocate_interval`` (a young or just-moved track may sit on the wrong person),
+        each at most once per ``adaptation.interval``, and only once it has been
+        ``adaptation.min_travel`` from where it was first seen."""
+        cfg = self.config.adaptation
+        ids = [t.track_id for t in tracks]
+        for k, tid in enumerate(ids):
+            if tid in ended:
+                continue
+            start = self._first_xy.setdefault(tid, means[k, [X, Y]].copy())
+            if np.hypot(*(means[k, [X, Y]] - start)) >= cfg.min_travel:
+                self._travelled.add(tid)
+        due = int(cfg.interval * 1e9)
+        eligible = np.array([
+            tid not in ended and tid in self.aux and self.reported(tid)
+            and self.aux[tid].existence >= cfg.min_existence
+            and not self._placed_recently(tid, stamp_ns) and tid in self._travelled
+            and int(stamp_ns) - self._adapted.get(tid, int(stamp_ns) - due) >= due
+            for tid in ids])
+        if not eligible.any():
+            return
+        side = [n for n in self.side if n in evidence and n in sils]
+        self.adaptations = adapt_models(
+            cfg, self.calibration, {n: evidence[n].bins for n in side},
+            {n: sils[n] for n in side}, means, ids, [models.get(tid) for tid in ids],
+            eligible, [self.aux[tid].visibility if tid in self.aux else {} for tid in ids],
+            {n: evidence[n].foreground for n in side})
+        for r in self.adaptations:
+            if r['action'] != 'inconsistent':
+                self._adapted[r['id']] = int(stamp_ns)
+
     def _identify(self, det: Detection, model: PersonModel, tracks: Sequence[TrackEstimate],
                   keep: Sequence[int], means: np.ndarray, models: Mapping[int, PersonModel],
                   evidence: Mapping[str, FrameEvidence], moved: set[int], stamp_ns: int
