@@ -205,13 +205,16 @@ def test_live_replay_differs_with_another_seed(recording, tmp_path):
     assert diffs and max(diffs) > 0.01
 
 
-def test_bench_offline_speed_runs_the_fast_profile(recording, capsys):
-    """`mbtrack bench --live` also times the offline replay with the fast profile: its
-    parameter file reaches the replay (fewer particles in the replay's own line)."""
-    from mbtrack_ros.commands.bench_live import FAST_PROFILE, run_offline
+@pytest.mark.parametrize('profile', ['FAST_PROFILE', 'OFFLINE_PROFILE'])
+def test_bench_offline_speed_runs_the_profiles(recording, capsys, profile):
+    """`mbtrack bench --live` also times the offline replay with the fast and the offline
+    profiles: the parameter file reaches the replay (fewer particles in the replay's own
+    line)."""
+    from mbtrack_ros.commands import bench_live
 
-    fast = run_offline(recording, seed=SEED, params=FAST_PROFILE)
-    assert fast['frames'] == FRAMES and fast['params'] == str(FAST_PROFILE)
+    params = getattr(bench_live, profile)
+    fast = bench_live.run_offline(recording, seed=SEED, params=params)
+    assert fast['frames'] == FRAMES and fast['params'] == str(params)
     assert '(hjs, N=50)' in capsys.readouterr().err  # the profile's particle count
     assert fast['cpu_seconds'] > 0
     assert fast['x_real_time'] == pytest.approx(FRAMES / fast['wall_seconds'] / 15.0)
