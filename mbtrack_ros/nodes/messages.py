@@ -87,7 +87,9 @@ def tracks_dtype(cameras: Sequence[str]) -> np.dtype:
 # Default messages copied (shallow) instead of constructed: a generated message's __init__
 # builds every default sub-message (a Marker: header, pose, texture image, mesh file, ...),
 # which the builders below would replace anyway. The copies share the defaults they do not
-# set; the builders always assign new sub-messages and never change a shared one.
+# set (the builders always assign new sub-messages and never change a shared one), except
+# a marker's lists (points, colors, uv_coordinates): each marker gets its own empty ones, so
+# a caller appending points to a returned marker changes no other marker.
 _POSE = Pose()
 _MARKER = Marker()
 
@@ -176,6 +178,7 @@ def _marker(header: Header, ns: str, track_id: int, action: int, *, kind: int = 
     for what is given; lifetime zero = forever (tracks are removed with explicit DELETE
     markers)."""
     m = copy.copy(_MARKER)
+    m.points, m.colors, m.uv_coordinates = [], [], []
     m.header = header
     m.ns, m.id, m.action, m.type = ns, int(track_id), action, kind
     if pose is not None:
