@@ -118,15 +118,17 @@ def test_markers_add_and_delete_ended():
 
 def test_markers_do_not_share_their_lists():
     """The builders copy one default Marker: a caller appending points or colours to one
-    returned marker (e.g. to draw a trail) changes no other marker, now or later."""
+    returned marker (e.g. to draw a trail) or giving it a lifetime in place changes no
+    other marker, now or later."""
     from geometry_msgs.msg import Point
 
     first = markers_message(make_result(seed=2, ended=[7]))
     first.markers[0].points.append(Point(x=1.0))
     first.markers[0].colors.append(first.markers[0].color)
+    first.markers[0].lifetime.sec = 5
     later = markers_message(make_result(seed=3, ended=[7]))
     assert all(len(m.points) == 0 and len(m.colors) == 0 and len(m.uv_coordinates) == 0
-               for m in [*first.markers[1:], *later.markers])
+               and m.lifetime.sec == 0 for m in [*first.markers[1:], *later.markers])
 
 
 def test_diagnostics_warn_on_missing_camera():

@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
+from builtin_interfaces.msg import Duration
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point, Pose, PoseArray, Quaternion, Vector3
 from sensor_msgs.msg import PointCloud2, PointField
@@ -88,8 +89,9 @@ def tracks_dtype(cameras: Sequence[str]) -> np.dtype:
 # builds every default sub-message (a Marker: header, pose, texture image, mesh file, ...),
 # which the builders below would replace anyway. The copies share the defaults they do not
 # set (the builders always assign new sub-messages and never change a shared one), except
-# a marker's lists (points, colors, uv_coordinates): each marker gets its own empty ones, so
-# a caller appending points to a returned marker changes no other marker.
+# a marker's lists (points, colors, uv_coordinates) and lifetime: each marker gets its own,
+# so a caller appending points to a returned marker, or setting its lifetime in place,
+# changes no other marker.
 _POSE = Pose()
 _MARKER = Marker()
 
@@ -179,6 +181,7 @@ def _marker(header: Header, ns: str, track_id: int, action: int, *, kind: int = 
     markers)."""
     m = copy.copy(_MARKER)
     m.points, m.colors, m.uv_coordinates = [], [], []
+    m.lifetime = Duration()  # its own (0 = forever): a caller may set a lifetime in place
     m.header = header
     m.ns, m.id, m.action, m.type = ns, int(track_id), action, kind
     if pose is not None:
