@@ -423,6 +423,31 @@ def test_logsumexp_matches_scipy_and_handles_minus_infinity(rng):
     assert logsumexp(np.zeros(0)) == -np.inf
 
 
+def test_logsumexp_rows_equal_the_former_one_row_logsumexp():
+    """The one log-sum-exp: every row gives, bit for bit, what the former 1-D version
+    (max, then log of the sum of exponentials) gave, also for rows whose max is -inf, +inf
+    or NaN."""
+    from mbtrack_ros.core.resampling import logsumexp, logsumexp_rows
+
+    def former(a):
+        top = float(np.max(a))
+        return top if not np.isfinite(top) else top + float(np.log(np.sum(np.exp(a - top))))
+
+    rng = np.random.default_rng(8)
+    for _ in range(100):
+        k, n = int(rng.integers(1, 6)), int(rng.integers(1, 60))
+        a = rng.normal(size=(k, n)) * 10.0 ** rng.uniform(-3, 3) + rng.uniform(-700, 700)
+        a[rng.random((k, n)) < 0.1] = -np.inf
+        a[int(rng.integers(k))] = rng.choice([np.full(n, -np.inf), np.r_[np.inf, a[0, 1:]],
+                                              np.r_[np.nan, a[0, 1:]], a[0]][
+                                                  int(rng.integers(4))])
+        got = logsumexp_rows(a)
+        for r in range(k):
+            ref = former(a[r])
+            assert got[r] == ref or (np.isnan(ref) and np.isnan(got[r]))
+            assert logsumexp(a[r]) == ref or (np.isnan(ref) and np.isnan(logsumexp(a[r])))
+
+
 # -- the batched filter stages against track-by-track reference versions -----------------------
 def _normalize_1d(log_weights):
     """The former one-track normalisation (np.where for NaN, logsumexp, uniform fallback)."""

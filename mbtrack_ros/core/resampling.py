@@ -12,9 +12,9 @@ import math
 
 import numpy as np
 
-__all__ = ['ResamplingError', 'effective_sample_size', 'logsumexp', 'normalize_log_weight_rows',
-           'normalize_log_weights', 'normalized_weights', 'systematic_indices',
-           'systematic_resample']
+__all__ = ['ResamplingError', 'effective_sample_size', 'logsumexp', 'logsumexp_rows',
+           'normalize_log_weight_rows', 'normalize_log_weights', 'normalized_weights',
+           'systematic_indices', 'systematic_resample']
 
 
 class ResamplingError(ValueError):
@@ -24,13 +24,27 @@ class ResamplingError(ValueError):
 def logsumexp(a: np.ndarray) -> float:
     """``log sum exp a`` of a 1-D array; -inf entries allowed, all -inf (or empty) -> -inf.
 
-    The package's one log-sum-exp (scipy's costs ~0.5 ms per call in per-frame loops).
+    The package's one log-sum-exp (scipy's costs ~0.5 ms per call in per-frame loops):
+    :func:`logsumexp_rows` of one row.
     """
     a = np.asarray(a, dtype=np.float64)
-    top = float(a.max()) if a.size else -np.inf
-    if not math.isfinite(top):
-        return top
-    return top + float(np.log(np.exp(a - top).sum()))
+    if not a.size:
+        return -math.inf
+    return float(logsumexp_rows(a.reshape(1, -1))[0])
+
+
+def logsumexp_rows(a: np.ndarray) -> np.ndarray:
+    """``log sum exp`` of every row of (K, N > 0) ``a``, as ``max + log sum exp(a - max)``;
+    a row whose max is not finite (all -inf, or +inf / NaN in it) gives that max."""
+    a = np.asarray(a, dtype=np.float64)
+    top = a.max(axis=1)
+    finite = np.isfinite(top)
+    if finite.all():
+        return top + np.log(np.exp(a - top[:, None]).sum(axis=1))
+    safe = np.where(finite, top, 0.0)
+    sums = np.exp(a - safe[:, None]).sum(axis=1)
+    sums[~finite] = 1.0                          # no log(0) warning; the max is returned
+    return np.where(finite, safe + np.log(sums), top)
 
 
 def normalize_log_weights(log_weights: np.ndarray) -> tuple[np.ndarray, bool]:
@@ -64,16 +78,9 @@ def normalize_log_weight_rows(log_weights: np.ndarray) -> tuple[np.ndarray, np.n
         lw = np.where(np.isnan(lw), -np.inf, lw)
     if (lw == np.inf).any():
         raise ResamplingError('log-weights contain +inf')
-    top = lw.max(axis=1)
-    degenerate = ~np.isfinite(top)               # every weight -inf
-    if degenerate.any():
-        top = np.where(degenerate, 0.0, top)
-    # log sum exp per row (as logsumexp): top + log(sum(exp(lw - top)))
-    sums = np.exp(lw - top[:, None]).sum(axis=1)
-    if degenerate.any():
-        sums[degenerate] = 1.0                   # no log(0) warning; replaced below
-    norm = top + np.log(sums)
-    out = lw - norm[:, None]
+    norm = logsumexp_rows(lw)
+    degenerate = ~np.isfinite(norm)              # every weight -inf
+    out = lw - np.where(degenerate, 0.0, norm)[:, None]
     if degenerate.any():
         out[degenerate] = -np.log(lw.shape[1])
     return out, degenerate
