@@ -24,6 +24,7 @@ With all noises zero the model is exact constant-velocity motion.
 """
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -148,21 +149,18 @@ def _move(out, dt, decay, dv, max_speed, dp, turn, orientation_speed, dtheta, fl
         out[i, VY] = vy
 
 
-_REGIONS: dict[tuple, np.ndarray] = {}    # the regions array of each (floor, exits) seen
-
-
 def _regions(floor: tuple[float, float, float, float] | None,
              exits: Sequence[tuple[float, float, float, float]]) -> np.ndarray:
     """The (R, 4) regions argument of :func:`_move`: none, the floor, or the floor followed by
-    the exits (kept per floor and exits: a filter passes the same ones every frame; the
+    the exits (cached per floor and exits: a filter passes the same ones every frame; the
     cached arrays are never written)."""
     try:
-        key = (floor, tuple(exits))
-        cached = _REGIONS.get(key)
+        return _cached_regions(floor, tuple(exits))
     except TypeError:                       # unhashable (lists): built every time
-        key, cached = None, None
-    if cached is not None:
-        return cached
+        return _build_regions(floor, exits)
+
+
+def _build_regions(floor, exits) -> np.ndarray:
     regions = _NO_REGIONS
     if floor is not None:
         try:
@@ -174,9 +172,10 @@ def _regions(floor: tuple[float, float, float, float] | None,
                                 f'{floor!r}, {exits!r}')
     elif len(exits):
         raise DynamicsError('exits need a floor')
-    if key is not None and len(_REGIONS) < 64:
-        _REGIONS[key] = regions
     return regions
+
+
+_cached_regions = functools.lru_cache(maxsize=64)(_build_regions)
 
 
 def predict(particles: np.ndarray, dt: float, config: MotionConfig,
