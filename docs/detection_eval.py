@@ -42,6 +42,7 @@ from mbtrack_ros.core.camera import RoomCalibration
 from mbtrack_ros.core.detection.background import BackgroundBank
 from mbtrack_ros.core.detection.detector import is_ceiling
 from mbtrack_ros.core.detection import release as release_module
+from mbtrack_ros.core.detection.manager import AutoDetectionConfig
 from mbtrack_ros.core.shape import BodyShape, rasterize
 from mbtrack_ros.commands.replay import tracker_values_from_params
 from mbtrack_ros.core.tracker import Tracker, TrackerConfig
@@ -64,10 +65,12 @@ def _screen(x: float, y: float) -> bool:
 
 def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False,
         release: dict[str, float] | None = None, params: Path | None = None,
-        exit_rescue: float | None = None) -> None:
+        exit_rescue: float | None = None,
+        detection: dict[str, float] | None = None) -> None:
     """Track ``rec`` with automatic detection (the tracker settings of a tracker_node
     parameter file ``params`` if given, as ``mbtrack replay --params``) into ``out``
-    (``exit_rescue``: that ``AutoDetectionConfig`` field instead of its default)."""
+    (``exit_rescue`` and ``detection``: those ``AutoDetectionConfig`` fields instead of
+    their defaults, e.g. ``{'beside_support': 0.25}``)."""
     out.mkdir(parents=True, exist_ok=True)
     cal = RoomCalibration.load(rec / 'calibration.yaml')
     events: list[dict] = []
@@ -110,6 +113,9 @@ def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False,
         if exit_rescue is not None:
             det = tracker.detection
             det.config = replace(det.config, exit_rescue=exit_rescue)
+        if detection:  # opt-in identity rules of AutoDetectionConfig, e.g. beside_support
+            det = tracker.detection
+            det.config = replace(det.config, **detection)
         if release:  # ReleaseConfig fields overridden, e.g. spare_support=0 (no spare rule)
             det = tracker.detection
             det.releaser = release_module.Releaser(tracker.calibration,  # image_scale's size
@@ -748,14 +754,23 @@ def main(argv: list[str] | None = None) -> int:
                    help='override a ReleaseConfig field (repeatable), e.g. spare_support=0')
     r.add_argument('--exit-rescue', type=float, default=None, metavar='COVERAGE',
                    help='AutoDetectionConfig.exit_rescue (h-reid; 0 = off, the default)')
+    r.add_argument('--detection', action='append', default=[], metavar='FIELD=VALUE',
+                   help='override a scalar AutoDetectionConfig field (repeatable), e.g. '
+                        'beside_support=0.25')
     args = p.parse_args(argv)
     if args.cmd == 'run':
         try:
             release = {k: float(v) for k, v in (a.split('=', 1) for a in args.release)}
+            detection = {k: float(v) for k, v in (a.split('=', 1) for a in args.detection)}
         except ValueError:
-            p.error(f'--release needs FIELD=NUMBER, got {args.release}')
+            p.error(f'--release and --detection need FIELD=NUMBER, got '
+                    f'{args.release + args.detection}')
+        fields = AutoDetectionConfig.__dataclass_fields__
+        for k in detection:
+            if k not in fields or fields[k].type not in ('float', 'int'):
+                p.error(f'--detection: {k} is not a scalar AutoDetectionConfig field')
         run(args.rec, args.out, args.seed, args.no_people_cue, release, args.params,
-            args.exit_rescue)
+            args.exit_rescue, detection)
     elif args.cmd == 'report':
         report(args.out, args.rec)
     else:

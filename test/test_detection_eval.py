@@ -91,3 +91,19 @@ def test_end_class_tells_premature_from_left_and_nobody(detection_eval):
     assert detection_eval.end_class(d, frames, stays, 8, 20) == ('nobody', -1)
     unmatched = SimpleNamespace(track_id=np.full(15, 7), person_id=np.full(15, -1))
     assert detection_eval.end_class(unmatched, frames, stays, 7, 20) == ('nobody', -1)
+
+
+def test_run_takes_scalar_detection_fields_and_refuses_others(detection_eval, monkeypatch,
+                                                               tmp_path):
+    """``run --detection FIELD=VALUE`` hands scalar AutoDetectionConfig fields to run();
+    an unknown field or a nested config is a usage error (exit 2) before any tracking."""
+    seen = {}
+    monkeypatch.setattr(detection_eval, 'run', lambda *a: seen.setdefault('args', a))
+    argv = ['run', str(tmp_path / 'rec'), str(tmp_path / 'out')]
+    detection_eval.main(argv + ['--detection', 'beside_support=0.25',
+                                '--detection', 'exit_rescue=0.5'])
+    assert seen['args'][-1] == {'beside_support': 0.25, 'exit_rescue': 0.5}
+    for bad in ('no_such_field=1', 'background=1', 'beside_support=high'):
+        with pytest.raises(SystemExit) as err:
+            detection_eval.main(argv + ['--detection', bad])
+        assert err.value.code == 2
