@@ -8,6 +8,16 @@
     .venv/bin/python docs/detection_eval.py decisions OUT REC [OUT REC]  # moves right?
     .venv/bin/python docs/detection_eval.py exits OUT REC [OUT REC]    # premature exits?
     .venv/bin/python docs/detection_eval.py releases OUT REC [OUT REC]  # late releases: why?
+    .venv/bin/python docs/detection_eval.py suite OUT [--seeds 0 1 3] [--recordings cr1 ...]
+                     [--jobs 2] [--frames N] [run options]   # the whole issue-4 benchmark
+
+``suite`` is the one command behind the score tables of docs/detection.md: it renders the
+clear-room recordings it is missing (``crS``: ``mbtrack synth clear-room --seed S``,
+``crncS``: the same with ``--no-ceiling``) into OUT/rec, runs every recording with every
+tracker seed into OUT/runs/REC_sS (``--jobs`` at a time, with progress; runs that finished
+before are kept, so an interrupted suite resumes), and writes OUT/table.md (``table`` and
+``totals``), OUT/scores.json and OUT/scores.png (MOTA and identity switches per person of
+each run against the issue's targets).
 
 ``run`` steps :class:`~mbtrack_ros.core.tracker.Tracker` with ``detection=True`` exactly as
 ``mbtrack replay REC --out OUT --eval REC/ground_truth.csv --seed S`` does (same
@@ -31,9 +41,16 @@ whether the track's person was still in the room afterwards (premature).
 from __future__ import annotations
 
 import argparse
+from concurrent.futures import ThreadPoolExecutor, as_completed
+import contextlib
 from dataclasses import replace
+import io
 import json
+import re
+import shutil
+import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -326,7 +343,8 @@ def totals(pairs: list[tuple[Path, Path]]) -> None:
           f'{sum(r.misses for r in res)}, false pos {sum(r.false_positives for r in res)}, '
           f'mismatches {sum(r.mismatches for r in res)}; releases {len(leave)}: > 1.5 s '
           f'{sum(v > 1.5 for v in leave)}, > 5 s {sum(v > 5 for v in leave)}, median {median}; '
-          'longest per recording ' + ', '.join(f'{k} {v:.1f} s' for k, v in longest.items()))
+          'longest per recording ' + ', '.join(
+              f'{k} {v:.1f} s' if np.isfinite(v) else f'{k} -' for k, v in longest.items()))
     for key, what in (('enter', 'from the first ground-truth row'),
                       ('enter_seen', 'from fully visible in two cameras')):
         v = sorted(x for a in runs for x in a[key])
@@ -732,6 +750,127 @@ def classes(pairs: list[tuple[Path, Path]]) -> None:
               f'switch, walking {q("speed")} m/s at the switch')
 
 
+SUITE_RECORDINGS = ('cr1', 'cr2', 'cr3', 'crnc1', 'crnc2', 'crnc3')
+MOTA_TARGET, SWITCH_TARGET = 0.85, 0.1     # issue 4: MOTA >= 85 %, <= 0.1 switches/person
+
+
+def synth_args(name: str) -> list[str]:
+    """``mbtrack synth`` arguments of a suite recording: ``crS`` is clear-room with random
+    seed S and the ceiling camera, ``crncS`` the same without it."""
+    m = re.fullmatch(r'(crnc|cr)(\d+)', name)
+    if m is None:
+        raise ValueError(f'{name}: a suite recording is crS or crncS (S a seed), e.g. cr1')
+    return ['clear-room', '--seed', m[2]] + (['--no-ceiling'] if m[1] == 'crnc' else [])
+
+
+def suite(out: Path, seeds: list[int], recordings: list[str], jobs: int = 2,
+          frames: int | None = None, run_args: list[str] = ()) -> int:
+    """Render the missing recordings, run each with each seed (``run_args``: options of
+    ``run``), write the tables, scores.json and scores.png; returns an exit code."""
+    rec_root, runs_root = out / 'rec', out / 'runs'
+    for name in recordings:
+        rec = rec_root / name
+        if (rec / 'ground_truth.csv').exists():
+            continue
+        shutil.rmtree(rec, ignore_errors=True)           # a render cut short
+        print(f'rendering {name} (mbtrack synth {" ".join(synth_args(name))}) ...', flush=True)
+        preset, *options = synth_args(name)
+        cmd = [sys.executable, '-m', 'mbtrack_ros.cli', 'synth', preset, str(rec), *options]
+        proc = subprocess.run(cmd + (['--frames', str(frames)] if frames else []),
+                              capture_output=True, text=True)
+        if proc.returncode:
+            print(f'detection_eval suite: rendering {name} failed: '
+                  f'{(proc.stderr or proc.stdout).strip().splitlines()[-1:]}', file=sys.stderr)
+            return 1
+    todo = [(name, seed) for seed in seeds for name in recordings]
+
+    def one(job: tuple[str, int]) -> tuple[str, float]:
+        name, seed = job
+        dest = runs_root / f'{name}_s{seed}'
+        if (dest / 'events.json').exists():              # written last by run()
+            return 'kept', 0.0
+        start = time.monotonic()
+        proc = subprocess.run([sys.executable, str(Path(__file__).resolve()), 'run',
+                               str(rec_root / name), str(dest), '--seed', str(seed),
+                               *run_args], capture_output=True, text=True)
+        if proc.returncode:
+            lines = (proc.stderr or proc.stdout).strip().splitlines()
+            raise RuntimeError(lines[-1] if lines else f'exit code {proc.returncode}')
+        return 'ran', time.monotonic() - start
+
+    failed = 0
+    with ThreadPoolExecutor(max(1, jobs)) as pool:
+        futures = {pool.submit(one, job): job for job in todo}
+        for k, fut in enumerate(as_completed(futures), 1):
+            name, seed = futures[fut]
+            try:
+                how, took = fut.result()
+            except RuntimeError as err:
+                failed += 1
+                print(f'[{k}/{len(todo)}] {name} seed {seed}: failed: {err}', flush=True)
+                continue
+            r = _analyse(runs_root / f'{name}_s{seed}', rec_root / name)['result']
+            print(f'[{k}/{len(todo)}] {name} seed {seed}: {how}'
+                  + (f' in {took:.0f} s' if how == 'ran' else '')
+                  + f', MOTA {100 * r.mota:.1f} %, {r.mismatches} switches for '
+                  f'{r.persons} people', flush=True)
+    if failed:
+        print(f'detection_eval suite: {failed} of {len(todo)} runs failed', file=sys.stderr)
+        return 1
+    pairs = [(runs_root / f'{name}_s{seed}', rec_root / name) for name, seed in todo]
+    text = io.StringIO()
+    with contextlib.redirect_stdout(text):
+        table(pairs)
+        print()
+        totals(pairs)
+    (out / 'table.md').write_text(text.getvalue(), encoding='utf-8')
+    scores = []
+    for (name, seed), (run_dir, rec) in zip(todo, pairs):
+        r = _analyse(run_dir, rec)['result']
+        scores.append({'recording': name, 'seed': seed, 'mota': r.mota, 'motp_mm': r.motp_mm,
+                       'mismatches': r.mismatches, 'people': r.persons, 'tracks': r.tracks,
+                       'switches_per_person': r.mismatches / r.persons})
+    (out / 'scores.json').write_text(json.dumps({'run_args': list(run_args), 'runs': scores},
+                                                indent=1), encoding='utf-8')
+    plot_scores(scores, out / 'scores.png')
+    print(text.getvalue().rstrip())
+    met = sum(s['mota'] >= MOTA_TARGET for s in scores), \
+        sum(s['switches_per_person'] <= SWITCH_TARGET + 1e-9 for s in scores)
+    print(f'targets: MOTA >= {100 * MOTA_TARGET:.0f} % on {met[0]} of {len(scores)} runs, '
+          f'<= {SWITCH_TARGET} switches per person on {met[1]} of {len(scores)}; '
+          f'{out / "table.md"}, {out / "scores.png"}')
+    return 0
+
+
+def plot_scores(scores: list[dict], path: Path) -> None:
+    """Two bar charts, one bar per run grouped by recording: MOTA and identity switches per
+    person, each with the issue's target as a dashed line."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(max(6.0, 0.45 * len(scores) + 2), 5.5), dpi=100,
+                 layout='constrained')
+    FigureCanvasAgg(fig)
+    ordered = sorted(scores, key=lambda s: (s['recording'], s['seed']))
+    names = [f"{s['recording']} s{s['seed']}" for s in ordered]
+    x = np.arange(len(ordered))
+    for k, (key, scale, target, label) in enumerate((
+            ('mota', 100.0, 100 * MOTA_TARGET, 'MOTA (%)'),
+            ('switches_per_person', 1.0, SWITCH_TARGET, 'identity switches per person'))):
+        ax = fig.add_subplot(2, 1, k + 1)
+        v = np.array([s[key] * scale for s in ordered])
+        good = v >= target if key == 'mota' else v <= target + 1e-9
+        ax.bar(x, v, color=np.where(good, 'tab:green', 'tab:red'))
+        ax.axhline(target, color='k', ls='--', lw=1, label=f'target {target:g}')
+        ax.set_ylabel(label)
+        ax.set_xticks(x, names if k else [''] * len(x), rotation=60, ha='right', fontsize=8)
+        ax.legend(loc='upper right', fontsize=8)
+        if key == 'mota':
+            ax.set_ylim(max(0.0, min(v.min() - 5, target - 10)), 100)
+    fig.suptitle(f'automatic detection on clear-room: {len(ordered)} runs')
+    fig.savefig(path)
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest='cmd', required=True)
@@ -757,7 +896,28 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument('--detection', action='append', default=[], metavar='FIELD=VALUE',
                    help='override a scalar AutoDetectionConfig field (repeatable), e.g. '
                         'beside_support=0.25')
-    args = p.parse_args(argv)
+    r.add_argument('--check-only', action='store_true', help=argparse.SUPPRESS)
+    u = sub.add_parser('suite', help='render the clear-room recordings, run them all, '
+                                     'write table.md, scores.json and scores.png')
+    u.add_argument('out', type=Path)
+    u.add_argument('--seeds', type=int, nargs='+', default=[0, 1, 3])
+    u.add_argument('--recordings', nargs='+', default=list(SUITE_RECORDINGS),
+                   metavar='crS|crncS')
+    u.add_argument('--jobs', type=int, default=2, help='runs at a time (default 2)')
+    u.add_argument('--frames', type=int, default=None,
+                   help='frames per rendered recording (default the preset\'s 1800)')
+    args, extra = p.parse_known_args(argv)
+    if args.cmd == 'suite':
+        for name in args.recordings:
+            try:
+                synth_args(name)
+            except ValueError as err:
+                p.error(str(err))
+        if extra:       # options of run, checked by run's own parser first (exit 2)
+            main(['run', 'REC', 'OUT', *extra, '--check-only'])
+        return suite(args.out, args.seeds, args.recordings, args.jobs, args.frames, extra)
+    if extra:
+        p.error(f'unrecognized arguments: {" ".join(extra)}')
     if args.cmd == 'run':
         try:
             release = {k: float(v) for k, v in (a.split('=', 1) for a in args.release)}
@@ -769,6 +929,8 @@ def main(argv: list[str] | None = None) -> int:
         for k in detection:
             if k not in fields or fields[k].type not in ('float', 'int'):
                 p.error(f'--detection: {k} is not a scalar AutoDetectionConfig field')
+        if args.check_only:   # suite's check of the run options it passes on
+            return 0
         run(args.rec, args.out, args.seed, args.no_people_cue, release, args.params,
             args.exit_rescue, detection)
     elif args.cmd == 'report':

@@ -1,5 +1,6 @@
 """The "fully visible in two cameras" clock of docs/detection_eval.py (issue #4 entering)."""
 import importlib.util
+import json
 from pathlib import Path
 
 import numpy as np
@@ -107,3 +108,47 @@ def test_run_takes_scalar_detection_fields_and_refuses_others(detection_eval, mo
         with pytest.raises(SystemExit) as err:
             detection_eval.main(argv + ['--detection', bad])
         assert err.value.code == 2
+
+
+def test_suite_recording_names_map_to_synth_arguments(detection_eval):
+    assert detection_eval.synth_args('cr3') == ['clear-room', '--seed', '3']
+    assert detection_eval.synth_args('crnc12') == ['clear-room', '--seed', '12',
+                                                   '--no-ceiling']
+    for bad in ('cr', 'crx1', 'lanz1', 'cr1 '):
+        with pytest.raises(ValueError, match='crS or crncS'):
+            detection_eval.synth_args(bad)
+
+
+def test_suite_renders_runs_scores_and_resumes(detection_eval, tmp_path, capsys):
+    """A one-recording suite on a 30-frame clear-room render: the scores it writes are
+    those of the run's own tracks.csv, the PNG is written, and a second call keeps the run
+    (same tracks.csv file, not run again)."""
+    out = tmp_path / 'suite'
+    assert detection_eval.main(['suite', str(out), '--seeds', '0', '--recordings', 'crnc1',
+                                '--frames', '30', '--jobs', '1']) == 0
+    run_dir, rec = out / 'runs' / 'crnc1_s0', out / 'rec' / 'crnc1'
+    assert (rec / 'ground_truth.csv').exists() and (run_dir / 'tracks.csv').exists()
+    scores = json.loads((out / 'scores.json').read_text())['runs']
+    direct = detection_eval._analyse(run_dir, rec)['result']
+    assert [(s['recording'], s['seed']) for s in scores] == [('crnc1', 0)]
+    assert scores[0]['mota'] == pytest.approx(direct.mota)
+    assert scores[0]['mismatches'] == direct.mismatches and scores[0]['people'] > 0
+    assert '| crnc1_s0 |' in (out / 'table.md').read_text()
+    assert (out / 'scores.png').read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+    first = capsys.readouterr().out
+    assert '[1/1] crnc1 seed 0: ran' in first and 'targets: MOTA >= 85 %' in first
+    stamp = (run_dir / 'tracks.csv').stat().st_mtime_ns
+    assert detection_eval.main(['suite', str(out), '--seeds', '0', '--recordings', 'crnc1',
+                                '--jobs', '1']) == 0
+    assert '[1/1] crnc1 seed 0: kept' in capsys.readouterr().out
+    assert (run_dir / 'tracks.csv').stat().st_mtime_ns == stamp
+
+
+def test_suite_refuses_bad_recordings_and_run_options_before_rendering(detection_eval,
+                                                                       tmp_path):
+    for extra in (['--recordings', 'cr1', 'hall2'], ['--detection', 'no_such_field=1'],
+                  ['--no-such-option']):
+        with pytest.raises(SystemExit) as err:
+            detection_eval.main(['suite', str(tmp_path / 'o'), *extra])
+        assert err.value.code == 2
+    assert not (tmp_path / 'o').exists()
