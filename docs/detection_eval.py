@@ -122,6 +122,7 @@ def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False,
     release_module.Releaser.duplicates = logged_duplicates
     release_module.Releaser.exited = logged_exited
     rows: list[TrackRow] = []
+    seen: list[str] = []            # OUT/visibility.csv: the posterior xi_v per camera
     with RecordingReader(rec / 'bag') as reader:
         cal = cal.subset([n for n in cal.names if n in reader.cameras])
         values = tracker_values_from_params(params) if params is not None else {}
@@ -159,10 +160,14 @@ def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False,
             for tid in sorted(set(tracker.track_ids) - live):   # new, or a released id reused
                 events.append({'kind': 'birth', 'frame': fs.index, 'id': int(tid)})
             live = set(tracker.track_ids)
+            seen.extend(f'{fs.index},{t.track_id},{n},{v:.4f}' for t in result.tracks
+                        for n, v in sorted(t.visibility.items()))
             rows.extend(TrackRow(stamp_ns=fs.stamp_ns, frame=fs.index, track_id=t.track_id,
                                  x=float(t.mean[0]), y=float(t.mean[1]),
                                  existence=t.existence) for t in result.tracks)
     write_tracks(out / 'tracks.csv', rows)
+    (out / 'visibility.csv').write_text('\n'.join(['frame,track_id,camera,visibility', *seen])
+                                        + '\n', encoding='utf-8')
     (out / 'events.json').write_text(json.dumps(events), encoding='utf-8')
     res = clear_mot(rows, read_ground_truth(rec / 'ground_truth.csv'))
     print(f'MOTA {100 * res.mota:.1f} % MOTP {res.motp_mm:.0f} mm mismatches '
@@ -572,6 +577,47 @@ def lag(pairs: list[tuple[Path, Path]]) -> None:
               f'{np.nanmedian(along[walk]):.3f} m | {hidden} / {off} |')
 
 
+def visibility(pairs: list[tuple[Path, Path]], every: int = 3) -> None:
+    """The posterior visibility xi_v of each matched track (OUT/visibility.csv) against how
+    much of its person the camera shows (ground truth rasterised with the tracker's shape
+    model, nearer people in front, the image border cutting): per class of person-camera
+    pair - ``seen`` (>= 90 % of the whole silhouette visible), ``hidden`` (<= 10 %),
+    ``partly`` (between) - how often xi_v >= 0.5, standing and sitting apart; every
+    ``every``-th frame."""
+    total: dict[tuple[str, bool], list[int]] = {}
+    for out, rec in pairs:
+        tracks, truth, _, _ = _load(out, rec)
+        cal = RoomCalibration.load(rec / 'calibration.yaml')
+        xi: dict[tuple[int, int], dict[str, float]] = {}
+        lines = (out / 'visibility.csv').read_text(encoding='utf-8').splitlines()[1:]
+        for line in lines:
+            f, t, n, v = line.split(',')
+            xi.setdefault((int(f), int(t)), {})[n] = float(v)
+        d, frames = _matching(tracks, truth)
+        gt: dict[int, list] = {}
+        for r in truth:
+            gt.setdefault(r.frame, []).append(r)
+        counts: dict[tuple[str, bool], list[int]] = {}
+        for f, t, p in zip(frames, d.track_id, d.person_id):
+            if t < 0 or p < 0 or f % every or (int(f), int(t)) not in xi:
+                continue
+            me = next(r for r in gt[int(f)] if r.person_id == p)
+            shown = _visible_fractions(cal, gt[int(f)], int(p), whole=True)
+            for n, v in xi[(int(f), int(t))].items():
+                if n not in shown:
+                    continue
+                kind = 'seen' if shown[n] >= 0.9 else 'hidden' if shown[n] <= 0.1 else 'partly'
+                for c in (counts, total):
+                    c.setdefault((kind, bool(me.sitting)), [0, 0])
+                    c[(kind, bool(me.sitting))][0] += 1
+                    c[(kind, bool(me.sitting))][1] += v >= 0.5
+        print(out.name, '; '.join(f'{k}{" sitting" if s else ""}: {a} pairs, xi_v >= 0.5 in '
+                                  f'{100 * b / a:.0f} %' for (k, s), (a, b) in
+                                  sorted(counts.items())))
+    print('all', '; '.join(f'{k}{" sitting" if s else ""}: {a} pairs, xi_v >= 0.5 in '
+                           f'{100 * b / a:.0f} %' for (k, s), (a, b) in sorted(total.items())))
+
+
 def decisions(pairs: list[tuple[Path, Path]]) -> None:
     total: dict[tuple[str, str], int] = {}
     for out, rec in pairs:
@@ -885,7 +931,8 @@ def main(argv: list[str] | None = None) -> int:
     s.add_argument('rec', type=Path)
     t = sub.add_parser('table')
     t.add_argument('pairs', type=Path, nargs='+')
-    for name in ('lag', 'decisions', 'totals', 'spares', 'classes', 'exits', 'releases'):
+    for name in ('lag', 'decisions', 'totals', 'spares', 'classes', 'exits', 'releases',
+                 'visibility'):
         sub.add_parser(name).add_argument('pairs', type=Path, nargs='+')
     r.add_argument('--params', type=Path, default=None, metavar='NODE.yaml',
                    help='tracker settings of a tracker_node parameter file (config/*.yaml)')
@@ -940,7 +987,7 @@ def main(argv: list[str] | None = None) -> int:
             p.error(f'{args.cmd} needs OUT REC pairs')
         {'table': table, 'lag': lag, 'decisions': decisions, 'totals': totals,
          'spares': spares, 'classes': classes, 'exits': exits,
-         'releases': releases}[args.cmd](
+         'releases': releases, 'visibility': visibility}[args.cmd](
             list(zip(args.pairs[::2], args.pairs[1::2])))
     return 0
 
