@@ -134,6 +134,14 @@ def test_suite_renders_runs_scores_and_resumes(detection_eval, tmp_path, capsys)
     assert scores[0]['mota'] == pytest.approx(direct.mota)
     assert scores[0]['mismatches'] == direct.mismatches and scores[0]['people'] > 0
     assert '| crnc1_s0 |' in (out / 'table.md').read_text()
+    # the posterior visibility per camera of every reported track row
+    vis = (run_dir / 'visibility.csv').read_text().splitlines()
+    assert vis[0] == 'frame,track_id,camera,visibility'
+    rows = {(int(f), int(t)) for f, t in (line.split(',')[:2] for line in vis[1:])}
+    shown = {tuple(map(int, line.split(',')[1:3])) for line in
+             (run_dir / 'tracks.csv').read_text().splitlines()[1:]}
+    assert rows and rows <= shown
+    assert all(0.0 <= float(line.split(',')[3]) <= 1.0 for line in vis[1:])
     assert (out / 'scores.png').read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
     first = capsys.readouterr().out
     assert '[1/1] crnc1 seed 0: ran' in first and 'targets: MOTA >= 85 %' in first
