@@ -83,6 +83,21 @@ def test_experiments_side_by_side_with_baselines(recording, tmp_path, capsys):
     capsys.readouterr()
 
 
+def test_experiments_keep_the_papers_exclusion_radius(recording, tmp_path, monkeypatch,
+                                                       capsys):
+    """000 §VI is reproduced with its r = 0.4 m, not the tracker's default 0.3 m."""
+    from mbtrack_ros.commands import replay
+    from mbtrack_ros.core.tracker import TrackerConfig
+
+    seen = []
+    original = replay._config
+    monkeypatch.setattr(replay, '_config', lambda args: seen.append(original(args)) or seen[-1])
+    assert main(['experiments', str(recording), '--out', str(tmp_path / 'exp'),
+                 '--runs', 'hjs:20', '--max-frames', '2']) == 0
+    assert [c.mrf_radius for c in seen] == [0.4] and TrackerConfig().mrf_radius == 0.3
+    capsys.readouterr()
+
+
 def test_experiments_bad_run_is_one_line_error(recording, tmp_path, capsys):
     code = main(['experiments', str(recording), '--out', str(tmp_path / 'e'),
                  '--runs', 'pdaf:many'])

@@ -51,6 +51,11 @@ def test_replay_options_beat_the_params_file(tmp_path):
     mixed = config('--params', str(params), '--particles', '70', '--seed', '3')
     assert (mixed.particles, mixed.subsample, mixed.seed) == (70, 2, 3)
     assert config('--subsample', '3').subsample == 3
+    assert config().mrf_radius == 0.3
+    assert config('--mrf-radius', '0.4').mrf_radius == 0.4
+    params.write_text('tracker_node:\n  ros__parameters:\n    tracker:\n      mrf_radius: 0.25\n')
+    assert config('--params', str(params)).mrf_radius == 0.25
+    assert config('--params', str(params), '--mrf-radius', '0.35').mrf_radius == 0.35
     assert config().detection_every == 1
     assert config('--detection-every', '3').detection_every == 3
     params.write_text('tracker_node:\n  ros__parameters:\n    detection:\n      every: 2\n')

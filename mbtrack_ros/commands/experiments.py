@@ -22,6 +22,7 @@ __all__ = ['add_parser', 'run']
 _PROG = 'mbtrack experiments'
 # 004 baselines (Kalman-filter based): they report no particles, so no posterior-mass curve
 _NO_PARTICLES = frozenset({'pdaf', 'jpdaf', 'jlf'})
+PAPER_MRF_RADIUS = 0.4   # 000 §VI-A; the tracker's default is 0.3 (TrackerConfig.mrf_radius)
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -83,7 +84,8 @@ def _replay(recording: Path, out: Path, alg: str, n: int, seed: int, max_frames:
     particles = alg not in _NO_PARTICLES
     argv = ['replay', str(recording), '--out', str(out), '--init-from', str(gt),
             '--algorithm', alg, '--seed', str(seed), '--d-occ', str(d_occ),
-            '--sigma', str(sigma)] + (['--save-particles'] if particles else [])
+            '--sigma', str(sigma), '--mrf-radius', str(PAPER_MRF_RADIUS)]
+    argv += ['--save-particles'] if particles else []
     argv += ['--joint-particles', str(n)] if alg == 'joint' else ['--particles', str(n)]
     if not mrf:
         argv.append('--no-mrf')

@@ -80,6 +80,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                         help='joint particles of --algorithm joint (default 10000)')
     parser.add_argument('--no-mrf', action='store_true',
                         help='disable the spatial-exclusion MRF prior (ablation)')
+    parser.add_argument('--mrf-radius', type=float, default=None, metavar='R',
+                        help='spatial-exclusion radius of the MRF prior, metres (default '
+                             '0.3; 000 uses 0.4)')
     parser.add_argument('--sigma', type=float, default=None,
                         help='likelihood width sigma (default 0.12)')
     parser.add_argument('--d-occ', type=float, default=None,
@@ -162,7 +165,7 @@ def _config(args: argparse.Namespace) -> TrackerConfig:
     try:
         values = tracker_values_from_params(args.params) if args.params is not None else {}
         for name in ('algorithm', 'particles', 'joint_particles', 'sigma', 'd_occ',
-                     'subsample', 'detection_every', 'image_scale'):
+                     'mrf_radius', 'subsample', 'detection_every', 'image_scale'):
             if getattr(args, name) is not None:  # an explicit option beats the file
                 values[name] = getattr(args, name)
         if args.no_mrf:

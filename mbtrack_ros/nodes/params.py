@@ -47,7 +47,7 @@ tracker.image_scale             double     the tracker works on the images resiz
 tracker.joint_particles         int        joint-filter particles (10000)
 tracker.sigma                   double     likelihood width, 000 Eq. 19 (0.12)
 tracker.d_occ                   double     occlusion penalty, 000 Eq. 26 (0.15)
-tracker.mrf_radius              double     exclusion radius, m, 000 §VI-A (0.4)
+tracker.mrf_radius              double     exclusion radius, m (0.3; 000 §VI-A: 0.4)
 tracker.use_mrf                 bool       spatial-exclusion MRF prior (true)
 tracker.seed                    int        random seed, -1 = fresh entropy (-1)
 tracker.release_time            double     s without foreground support before a track is
@@ -174,7 +174,8 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
     'tracker.joint_particles': (10_000, 'joint-filter particles', _ir(1, 1_000_000)),
     'tracker.sigma': (0.12, 'likelihood width sigma (000 Eq. 19)', _fr(1e-4, 10.0)),
     'tracker.d_occ': (0.15, 'occlusion penalty d_occ (000 Eq. 26)', _fr(0.0, 10.0)),
-    'tracker.mrf_radius': (0.4, 'spatial exclusion radius, m (000 §VI-A)', _fr(0.0, 5.0)),
+    'tracker.mrf_radius': (0.3, 'spatial exclusion radius, m (000 §VI-A: 0.4)',
+                           _fr(0.0, 5.0)),
     'tracker.use_mrf': (True, 'apply the spatial-exclusion MRF prior', {}),
     'tracker.seed': (-1, 'random seed; -1 = fresh entropy', _ir(-1, 2 ** 31 - 1)),
     'tracker.release_time': (1.0, 's without foreground support before a track is released '
