@@ -179,8 +179,10 @@ def _predict_numpy(particles, dt, config, rng, floor=None):
 
 @pytest.mark.parametrize('seed', range(6))
 def test_predict_equals_numpy_version_bit_for_bit(seed):
-    """The one-pass numba motion model gives exactly the numpy expressions' states and
-    leaves the generator in the same state (same draws in the same order)."""
+    """The one-pass numba motion model gives the numpy expressions' states and leaves the
+    generator in exactly the same state (same draws in the same order). The states agree to
+    the last bit or two: on CPUs with AVX-512 NumPy's arctan2 is a SIMD routine that
+    differs from the C library's (numba's) in the last bit for ~7 % of inputs."""
     rng = np.random.default_rng(seed)
     for trial in range(20):
         cfg = MotionConfig(velocity_noise=float(rng.choice([0.0, 0.6, 3.0])),
@@ -200,7 +202,8 @@ def test_predict_equals_numpy_version_bit_for_bit(seed):
         a_rng, b_rng = np.random.default_rng(trial), np.random.default_rng(trial)
         a = _predict_numpy(p, dt, cfg, a_rng, floor)
         b = predict(p, dt, cfg, b_rng, floor=floor)
-        np.testing.assert_array_equal(b, a)
+        np.testing.assert_allclose(b, a, rtol=1e-14, atol=1e-14)
+        np.testing.assert_array_equal(b[:, 5], a[:, 5])            # sit flips: exact
         assert a_rng.random() == b_rng.random()
         if floor is not None and dt >= 0.5:
             assert np.all((b[:, 0] >= -2.0) & (b[:, 0] <= 2.5))
