@@ -46,8 +46,8 @@ class TrackerConfig:
             or walk side by side are 0.42-0.5 m apart centre to centre, and at 0.4 the prior
             pushed their tracks apart and off them (30 clear-room runs with automatic
             detection: 141 -> 103 identity switches, MOTA 95.46 -> 95.65 %;
-            docs/detection.md, "The exclusion radius"). ``mbtrack experiments`` keeps 0.4
-            for 000 §VI.
+            docs/detection.md, "Fresh recordings, the suite and the exclusion radius").
+            ``mbtrack experiments`` keeps 0.4 for 000 §VI.
         mrf_epsilon: floor of the exclusion potential.
         use_mrf: apply the MRF prior (False = ablation of 000 §VI-C).
         theta_bp: BP stopping threshold (000 Eq. 43: 0.01).
