@@ -174,3 +174,21 @@ def test_half_size_tracks_within_a_few_centimetres_of_full_size():
     err_half = np.array([np.linalg.norm(half[k] - gt[k]) for k in keys])
     assert np.median(apart) < 0.06
     assert err_half.mean() < err_full.mean() + 0.03
+
+
+def test_node_defaults_are_the_trackers_defaults():
+    """Every tracker setting the node reads has the default of TrackerConfig (or, where
+    TrackerConfig leaves it to the detection pipeline with None, of that pipeline): the
+    node and `mbtrack replay` without --params track alike."""
+    pytest.importorskip('rclpy')
+    from mbtrack_ros.nodes.params import GLOBAL_PARAMETERS, TRACKER_PARAMETERS
+
+    config = TrackerConfig()
+    pipeline = config.detection_config()
+    left_to_pipeline = {'detection_threshold': pipeline.detector.threshold,
+                        'spare_support': pipeline.release.spare_support}
+    for key, (field, _) in TRACKER_PARAMETERS.items():
+        ours = getattr(config, field)
+        if ours is None:
+            ours = left_to_pipeline[field]
+        assert GLOBAL_PARAMETERS[key][0] == ours, key
