@@ -1,6 +1,7 @@
 """The "fully visible in two cameras" clock of docs/detection_eval.py (issue #4 entering)."""
 import importlib.util
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -145,6 +146,19 @@ def test_suite_renders_runs_scores_and_resumes(detection_eval, tmp_path, capsys)
     assert (out / 'scores.png').read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
     first = capsys.readouterr().out
     assert '[1/1] crnc1 seed 0: ran' in first and 'targets: MOTA >= 85 %' in first
+    # 'visibility' counts xi_v >= 0.5 per class: all 1 -> 100 %, all 0 -> 0 %, same pairs
+    shares = {}
+    for value in ('1.0', '0.0'):
+        (run_dir / 'visibility.csv').write_text('\n'.join(
+            [vis[0]] + [line.rsplit(',', 1)[0] + ',' + value for line in vis[1:]]) + '\n')
+        detection_eval.visibility([(run_dir, rec)], every=1)
+        last = capsys.readouterr().out.splitlines()[-1]
+        shares[value] = re.findall(r'(\w+(?: sitting)?): (\d+) pairs, xi_v >= 0.5 in (\d+) %',
+                                   last)
+    assert shares['1.0'] and {s for *_, s in shares['1.0']} == {'100'}
+    assert {s for *_, s in shares['0.0']} == {'0'}
+    assert [c[:2] for c in shares['1.0']] == [c[:2] for c in shares['0.0']]
+    (run_dir / 'visibility.csv').write_text('\n'.join(vis) + '\n')
     stamp = (run_dir / 'tracks.csv').stat().st_mtime_ns
     assert detection_eval.main(['suite', str(out), '--seeds', '0', '--recordings', 'crnc1',
                                 '--jobs', '1']) == 0
