@@ -10,19 +10,10 @@ a few seconds before is the track of someone coming in (docs/detection.md, "Fres
 recordings, the suite and the exclusion radius").
 """
 import csv
-import importlib.util
-import sys
-from pathlib import Path
 
-_spec = importlib.util.spec_from_file_location(
-    'detection_eval', Path(__file__).resolve().parents[1] / 'detection_eval.py')
-de = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(de)
+from _eval import detection_eval as de, pairs
 
-args = [Path(a) for a in sys.argv[1:]]
-if not args or len(args) % 2:
-    sys.exit('usage: exit_entering.py OUT REC [OUT REC ...]')
-for out, rec in zip(args[::2], args[1::2]):
+for out, rec in pairs('exit_entering.py OUT REC [OUT REC ...]'):
     tracks: dict[int, list] = {}
     for r in csv.DictReader(open(out / 'tracks.csv', encoding='utf-8')):
         tracks.setdefault(int(r['track_id']), []).append(

@@ -6,22 +6,13 @@ For every person-frame that the CLEAR-MOT matching pairs with a track (runs of
 ``detection_eval.py run``), the floor distance between the track and the person, split by
 the ground truth's ``sitting`` flag: count, median and 90th percentile.
 """
-import importlib.util
-import sys
-from pathlib import Path
 
 import numpy as np
 
-_spec = importlib.util.spec_from_file_location(
-    'detection_eval', Path(__file__).resolve().parents[1] / 'detection_eval.py')
-de = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(de)
+from _eval import detection_eval as de, pairs
 
-args = [Path(a) for a in sys.argv[1:]]
-if not args or len(args) % 2:
-    sys.exit('usage: sitting_error.py OUT REC [OUT REC ...]')
 dist: dict[bool, list[float]] = {True: [], False: []}
-for out, rec in zip(args[::2], args[1::2]):
+for out, rec in pairs('sitting_error.py OUT REC [OUT REC ...]'):
     tracks, truth, _, _ = de._load(out, rec)
     d, frames = de._matching(tracks, truth)
     shown = {(t.frame, t.track_id): (t.x, t.y) for t in tracks}

@@ -6,14 +6,10 @@ Rows of OUT/tracks.csv that the CLEAR-MOT matching pairs with no ground-truth pe
 (false positives), grouped by track: the N tracks with the most such rows, with their
 first and last unmatched frame and place.
 """
-import importlib.util
 import sys
 from pathlib import Path
 
-_spec = importlib.util.spec_from_file_location(
-    'detection_eval', Path(__file__).resolve().parents[1] / 'detection_eval.py')
-de = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(de)
+from _eval import detection_eval as de
 
 if len(sys.argv) not in (3, 4):
     sys.exit('usage: unmatched_tracks.py OUT REC [N]')
