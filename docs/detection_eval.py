@@ -83,11 +83,12 @@ def _screen(x: float, y: float) -> bool:
 def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False,
         release: dict[str, float] | None = None, params: Path | None = None,
         exit_rescue: float | None = None,
-        detection: dict[str, float] | None = None) -> None:
+        detection: dict[str, float] | None = None, frames: int | None = None) -> None:
     """Track ``rec`` with automatic detection (the tracker settings of a tracker_node
     parameter file ``params`` if given, as ``mbtrack replay --params``) into ``out``
     (``exit_rescue`` and ``detection``: those ``AutoDetectionConfig`` fields instead of
-    their defaults, e.g. ``{'beside_support': 0.25}``)."""
+    their defaults, e.g. ``{'beside_support': 0.25}``; ``frames``: only the first frame
+    sets, scored against the ground truth of those frames)."""
     out.mkdir(parents=True, exist_ok=True)
     cal = RoomCalibration.load(rec / 'calibration.yaml')
     events: list[dict] = []
@@ -144,6 +145,8 @@ def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False,
             tracker.detection.background = BackgroundBank(bg, calibration=tracker.calibration)
         live: set[int] = set()
         for fs in reader.frames():
+            if frames is not None and fs.index >= frames:
+                break
             frame['index'] = fs.index
             result = tracker.step(fs.stamp_ns, {c: im for c, im in fs.images.items()
                                                 if c in cal.cameras})
@@ -169,7 +172,10 @@ def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False,
     (out / 'visibility.csv').write_text('\n'.join(['frame,track_id,camera,visibility', *seen])
                                         + '\n', encoding='utf-8')
     (out / 'events.json').write_text(json.dumps(events), encoding='utf-8')
-    res = clear_mot(rows, read_ground_truth(rec / 'ground_truth.csv'))
+    truth = read_ground_truth(rec / 'ground_truth.csv')
+    if frames is not None:
+        truth = [g for g in truth if g.frame < frames]
+    res = clear_mot(rows, truth)
     print(f'MOTA {100 * res.mota:.1f} % MOTP {res.motp_mm:.0f} mm mismatches '
           f'{res.mismatches} people {res.persons} tracks {res.tracks}')
 
@@ -952,6 +958,9 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument('--detection', action='append', default=[], metavar='FIELD=VALUE',
                    help='override a scalar AutoDetectionConfig field (repeatable), e.g. '
                         'beside_support=0.25')
+    r.add_argument('--frames', type=int, default=None, metavar='N',
+                   help='only the first N frame sets (a quick look; the other commands '
+                        'read the whole ground truth)')
     r.add_argument('--check-only', action='store_true', help=argparse.SUPPRESS)
     u = sub.add_parser('suite', help='render the clear-room recordings, run them all, '
                                      'write table.md, scores.json and scores.png')
@@ -988,7 +997,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.check_only:   # suite's check of the run options it passes on
             return 0
         run(args.rec, args.out, args.seed, args.no_people_cue, release, args.params,
-            args.exit_rescue, detection)
+            args.exit_rescue, detection, args.frames)
     elif args.cmd == 'report':
         report(args.out, args.rec)
     else:
