@@ -47,6 +47,7 @@ TURN_RATE = 3.0   # rad/s, heading changes while walking
 MAX_SPEED = 1.5   # m/s
 SIT_TIME = 1.2    # s, sitting down / standing up
 MIN_GAP = 0.42    # m, hard distance between walking people
+SIDESTEP = 0.6    # m/s, sideways step into the doorway of someone leaving beside it
 
 
 def _wrap(angle: float) -> float:
@@ -306,8 +307,9 @@ class Crowd:
         dv = float(np.clip(v_target - w.speed, -ACCEL * dt, ACCEL * dt))
         w.speed = float(np.clip(w.speed + dv, 0.0, MAX_SPEED))
         if w.sit == 0.0:
+            before = w.pos
             w.pos = w.pos + w.speed * dt * np.array([np.cos(w.theta), np.sin(w.theta)])
-            self._keep_inside(w)
+            self._keep_inside(w, dt, before)
         # gait: one cycle (two steps) per 0.8 H metres, amplitude grows with speed
         w.phase = float((w.phase + 2 * np.pi * w.speed * dt / (0.8 * w.height)) % (2 * np.pi))
         target_stride = min(1.0, w.speed / 1.1) ** 0.7 if w.speed > 0.02 else 0.0
@@ -363,7 +365,7 @@ class Crowd:
                 return True
         return False
 
-    def _keep_inside(self, w: Walker) -> None:
+    def _keep_inside(self, w: Walker, dt: float, before: np.ndarray) -> None:
         room = self.room
         # in the doorway or corridor (entering, or leaving until gone: not pulled back to
         # the floor for its last frame)
@@ -371,7 +373,14 @@ class Crowd:
                                      and w.tasks[0][3] == 'door'):
             x0, x1 = room.door[0] + 0.3, room.door[1] - 0.3
             if abs(w.pos[1] - room.depth) < 0.5:
-                w.pos[0] = np.clip(w.pos[0], x0, x1)
+                inside = float(np.clip(w.pos[0], x0, x1))
+                # step sideways into the opening at SIDESTEP, not in one frame (a 0.55 m
+                # jump in 1/15 s before); the wall holds whoever comes from the room and is
+                # not in the opening yet
+                step = SIDESTEP * dt
+                w.pos[0] += float(np.clip(inside - w.pos[0], -step, step))
+                if abs(w.pos[0] - inside) > 1e-9 and before[1] < room.depth:
+                    w.pos[1] = min(w.pos[1], room.depth - 1e-3)
             return
         x0, y0, x1, y1 = room.walkable
         w.pos = np.clip(w.pos, [x0, y0], [x1, y1])
