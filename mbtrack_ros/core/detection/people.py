@@ -26,7 +26,10 @@ A place is person-like if ``min_views`` cameras see it, the motion fraction reac
 ``min_score`` (multi-view consistency: motion or clutter edges in one view do not line up
 with evidence in the others). Places are taken greedily, most moving first, and the motion
 inside a taken place's region is explained away (it no longer counts for the others), so
-the places on a person's lines of sight are not taken too.
+the places on a person's lines of sight are not taken too. Each place is then refined
+near where it was taken, with only the other places' bodies explained away: among the
+places that move nearly as much, the one whose outline in the last frame is most
+person-like (:meth:`PeopleCue._refine`).
 
 Per place and camera three nested masks are returned (:meth:`PeopleCue.regions`): a larger
 body (not to be learnt: arms, a lean, the grid's position error), the tested body (possible
@@ -321,7 +324,8 @@ class PeopleCue:
         keep the places on its lines of sight out); in a camera where two people stand side
         by side in the image, that region also takes the second person's near half, whose
         smallest moving fraction over the cameras then peaks off him (0.43 m on the first
-        frames of ``mbtrack synth clear-room --seed 2``, 0.14 m refined)."""
+        frames of ``mbtrack synth clear-room --seed 2``, 0.09 m refined;
+        ``docs/diag/cue_places.py``)."""
         cfg = self.config
         if cfg.refine_radius <= 0:
             return xy[chosen]
