@@ -103,8 +103,8 @@ def test_run_takes_scalar_detection_fields_and_refuses_others(detection_eval, mo
     monkeypatch.setattr(detection_eval, 'run', lambda *a: seen.setdefault('args', a))
     argv = ['run', str(tmp_path / 'rec'), str(tmp_path / 'out')]
     detection_eval.main(argv + ['--detection', 'beside_support=0.25',
-                                '--detection', 'exit_rescue=0.5'])
-    assert seen['args'][-1] == {'beside_support': 0.25, 'exit_rescue': 0.5}
+                                '--detection', 'exit_rescue=0.5', '--frames', '30'])
+    assert seen['args'][-2:] == ({'beside_support': 0.25, 'exit_rescue': 0.5}, 30)
     for bad in ('no_such_field=1', 'background=1', 'beside_support=high'):
         with pytest.raises(SystemExit) as err:
             detection_eval.main(argv + ['--detection', bad])
@@ -164,6 +164,12 @@ def test_suite_renders_runs_scores_and_resumes(detection_eval, tmp_path, capsys)
                                 '--jobs', '1']) == 0
     assert '[1/1] crnc1 seed 0: kept' in capsys.readouterr().out
     assert (run_dir / 'tracks.csv').stat().st_mtime_ns == stamp
+    # run --frames N: the first N frame sets of the same run (the tracker is causal)
+    detection_eval.main(['run', str(rec), str(tmp_path / 'short'), '--frames', '12'])
+    full = (run_dir / 'tracks.csv').read_text().splitlines()
+    short = (tmp_path / 'short' / 'tracks.csv').read_text().splitlines()
+    assert short == [line for line in full if line == full[0] or int(line.split(',')[1]) < 12]
+    assert len(short) > 1 and 'MOTA' in capsys.readouterr().out
 
 
 def test_suite_refuses_bad_recordings_and_run_options_before_rendering(detection_eval,
