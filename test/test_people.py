@@ -134,7 +134,8 @@ def _refined_straightforward(cue: PeopleCue, frames, greedy: np.ndarray) -> np.n
         top = near & (motion >= cfg.min_motion) \
             & (motion >= cfg.refine_share * motion[near].max())
         new = xy[np.flatnonzero(top)[np.argmax(score[top])]] if top.any() else place
-        if len(others) and np.linalg.norm(others - new, axis=1).min() < cfg.nms_radius:
+        kept = np.array(out + list(greedy[k + 1:])).reshape(-1, 2)
+        if len(kept) and np.linalg.norm(kept - new, axis=1).min() < cfg.nms_radius:
             new = place
         out.append(new)
     return np.array(out)

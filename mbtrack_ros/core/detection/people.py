@@ -341,8 +341,11 @@ class PeopleCue:
                 & (motion >= cfg.refine_share * motion.max())
             place = xy[int(np.argmax(np.where(top, score, -np.inf)))] if top.any() \
                 else xy[best]
-            if len(others) and np.linalg.norm(others - place, axis=1).min() < cfg.nms_radius:
-                place = xy[best]             # two places must stay nms_radius apart
+            # two places must stay nms_radius apart (the refined ones before this one, the
+            # ones still to refine as taken)
+            kept = np.array(out + [xy[c] for c in chosen[k + 1:]]).reshape(-1, 2)
+            if len(kept) and np.linalg.norm(kept - place, axis=1).min() < cfg.nms_radius:
+                place = xy[best]
             out.append(place)
         return np.array(out)
 
