@@ -178,7 +178,7 @@ def _predict_numpy(particles, dt, config, rng, floor=None):
 
 
 @pytest.mark.parametrize('seed', range(6))
-def test_predict_equals_numpy_version_bit_for_bit(seed):
+def test_predict_equals_numpy_version(seed):
     """The one-pass numba motion model gives the numpy expressions' states and leaves the
     generator in exactly the same state (same draws in the same order). The states agree to
     the last bit or two: on CPUs with AVX-512 NumPy's arctan2 is a SIMD routine that

@@ -1,7 +1,9 @@
-"""Shared by the diagnostics that read ``detection_eval.py run`` outputs: that module, and
-the OUT REC pairs of a command line."""
+"""Shared by the diagnostics: the ``detection_eval.py`` module and the OUT REC pairs of a
+command line (for those that read ``run`` outputs), and the tracker stepped over a
+recording as ``run`` steps it (for those that look inside it)."""
 import importlib.util
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 _spec = importlib.util.spec_from_file_location(
@@ -16,3 +18,24 @@ def pairs(usage: str) -> list[tuple[Path, Path]]:
     if not args or len(args) % 2:
         sys.exit(f'usage: {usage}')
     return list(zip(args[::2], args[1::2]))
+
+
+def tracked_frames(rec: Path, seed: int, last: int, **config) -> Iterator[tuple]:
+    """(frame set, tracker result, tracker) per frame up to frame ``last``: the tracker
+    with automatic detection as ``detection_eval.py run`` builds it (same seed; ``config``:
+    TrackerConfig values on top, e.g. ``mrf_radius=0.4``)."""
+    from mbtrack_ros.core.camera import RoomCalibration
+    from mbtrack_ros.core.tracker import Tracker, TrackerConfig
+    from mbtrack_ros.recording.bag import RecordingReader
+
+    cal = RoomCalibration.load(rec / 'calibration.yaml')
+    with RecordingReader(rec / 'bag') as reader:
+        cal = cal.subset([n for n in cal.names if n in reader.cameras])
+        tracker = Tracker(cal, TrackerConfig.from_dict({'seed': seed, 'detection': True,
+                                                        **config}))
+        for fs in reader.frames():
+            result = tracker.step(fs.stamp_ns, {c: im for c, im in fs.images.items()
+                                                if c in cal.cameras})
+            yield fs, result, tracker
+            if fs.index >= last:
+                return

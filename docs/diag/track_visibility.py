@@ -13,25 +13,15 @@ from pathlib import Path
 
 import numpy as np
 
-from mbtrack_ros.core.camera import RoomCalibration
-from mbtrack_ros.core.tracker import Tracker, TrackerConfig
-from mbtrack_ros.recording.bag import RecordingReader
+from _eval import tracked_frames
 
 rec = Path(sys.argv[1])
 seed, track_id, first, last = (int(v) for v in sys.argv[2:6])
 radius = {'mrf_radius': float(sys.argv[6])} if len(sys.argv) > 6 else {}
-cal = RoomCalibration.load(rec / 'calibration.yaml')
-with RecordingReader(rec / 'bag') as reader:
-    cal = cal.subset([n for n in cal.names if n in reader.cameras])
-    tracker = Tracker(cal, TrackerConfig.from_dict({'seed': seed, 'detection': True, **radius}))
-    for fs in reader.frames():
-        res = tracker.step(fs.stamp_ns, {c: im for c, im in fs.images.items()
-                                         if c in cal.cameras})
-        if fs.index >= first and fs.index % 5 == 0:
-            for t in res.tracks:
-                if t.track_id == track_id:
-                    print(fs.index, np.round(t.mean, 2), f'existence {t.existence:.2f}',
-                          'xi_v', {k: round(v, 2) for k, v in t.visibility.items()},
-                          'w*', {k: round(v, 2) for k, v in t.visible_fraction.items()})
-        if fs.index >= last:
-            break
+for fs, res, _ in tracked_frames(rec, seed, last, **radius):
+    if fs.index >= first and fs.index % 5 == 0:
+        for t in res.tracks:
+            if t.track_id == track_id:
+                print(fs.index, np.round(t.mean, 2), f'existence {t.existence:.2f}',
+                      'xi_v', {k: round(v, 2) for k, v in t.visibility.items()},
+                      'w*', {k: round(v, 2) for k, v in t.visible_fraction.items()})
