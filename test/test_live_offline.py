@@ -132,6 +132,9 @@ def live_tracks(recording: Path, seed: int, *, sync_timeout: float = 5.0,
             # (GIL, first numba compilation) while another camera runs 3 frames ahead; the
             # set would then go out incomplete and the tracks differ from the offline replay
             '-p', 'image_reliability:=reliable', '-p', 'max_pending_sets:=100',
+            # ~/tracks kept for a listener that lags (it shares the executor): with depth
+            # 10 one run under load received 56 of 60 messages
+            '-p', 'qos_depth:=100',
             '-p', 'use_sim_time:=true', '-p', f'sync.timeout:={sync_timeout}',
             '-p', f'tracker.pipeline_search:={str(pipeline_search).lower()}'])
     except Exception:

@@ -111,7 +111,33 @@ def test_detection_parameter_reaches_the_tracker(room_calibration, context, tmp_
         node.destroy_node()
 
 
+def test_qos_depth_reaches_image_subscriptions_and_outputs(room_calibration, context):
+    from rclpy.qos import ReliabilityPolicy
+    node = start(context, '-p', f'calibration_file:={room_calibration}',
+                 '-p', 'image_reliability:=reliable', '-p', 'qos_depth:=77')
+    try:
+        images = [s for s in node._subs if s.topic_name.endswith('image_raw')]
+        assert len(images) == len(node.params.cameras)
+        for sub in images:
+            assert sub.qos_profile.depth == 77
+            assert sub.qos_profile.reliability == ReliabilityPolicy.RELIABLE
+        for pub in (node.pub_people, node.pub_tracks, node.pub_markers, node.pub_diag,
+                    *node.pub_debug.values()):
+            assert pub.qos_profile.depth == 77
+    finally:
+        node.destroy_node()
+    # best effort keeps the sensor-data profile, whatever the depth
+    node = start(context, '-p', f'calibration_file:={room_calibration}', '-p', 'qos_depth:=77')
+    try:
+        sub = next(s for s in node._subs if s.topic_name.endswith('image_raw'))
+        assert sub.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT
+        assert node.pub_people.qos_profile.depth == 77
+    finally:
+        node.destroy_node()
+
+
 BAD = [
+    (['-p', 'qos_depth:=0'], "'qos_depth': value out of range"),
     (['-p', 'tracker.particles:=0'], "'tracker.particles': value out of range"),
     (['-p', 'tracker.subsample:=0'], "'tracker.subsample': value out of range"),
     (['-p', 'tracker.image_scale:=1.5'], "'tracker.image_scale': value out of range"),
@@ -319,7 +345,10 @@ def test_end_to_end_bag_player_tracker_subscriber(recording, context, tmp_path):
     node = start(context, '-p', f'calibration_file:={recording / "calibration.yaml"}',
                  '-p', f'init_ground_truth:={recording / "ground_truth.csv"}',
                  '-p', 'tracker.seed:=0', '-p', 'max_pending_sets:=100',
-                 '-p', 'image_reliability:=reliable',  # no frame lost on a loaded machine
+                 # no frame lost on a loaded machine: reliable images, and queues deep
+                 # enough for callbacks that stall a few seconds (CI lost a third of a
+                 # second's frames with the default depth 10: 9.64 Hz input rate)
+                 '-p', 'image_reliability:=reliable', '-p', 'qos_depth:=100',
                  '-p', f'output_bag:={tmp_path / "out"}', step_thread=True)
     listener = rclpy.create_node('e2e_listener', context=context)
     qos = QoSProfile(depth=200, reliability=ReliabilityPolicy.RELIABLE)

@@ -165,6 +165,9 @@ def _run_live(args: argparse.Namespace, rec: Path, info: dict
         'output_bag': args.out / 'tracks.mcap', 'tracker.seed': args.seed,
         # a replay may not lose frames: the player publishes reliably, so ask for it
         'image_reliability': 'reliable',
+        # and queue as deep as the player does (2 s at 15 Hz): a busy moment of the
+        # tracker's callbacks then delays frames instead of losing them
+        'qos_depth': 30,
     }
     if args.init_from_ground_truth:
         tracker_params['init_ground_truth'] = rec / 'ground_truth.csv'

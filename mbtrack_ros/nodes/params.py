@@ -11,6 +11,9 @@ cameras                         string[]   cameras to use (default: all in the c
 image_transport                 string     ``raw`` or ``compressed`` for every camera (raw)
 image_reliability               string     ``best_effort`` (sensor data QoS) or ``reliable``
                                            (no frame lost when replaying a bag)
+qos_depth                       int        history depth of reliable image subscriptions
+                                           and of every output publisher: a reliable
+                                           peer lagging more messages loses the oldest (10)
 camera.<name>.image_topic       string     (``/<name>/image_raw``, ``.../compressed``)
 camera.<name>.transport         string     per-camera override of ``image_transport``
 camera.<name>.camera_info_topic string     optional CameraInfo topic for a size check ('')
@@ -126,6 +129,7 @@ class NodeParams:
     max_pending_sets: int
     executor: str = 'events'
     warm_up: bool = True
+    qos_depth: int = 10
 
     @property
     def camera_names(self) -> list[str]:
@@ -147,6 +151,9 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
     'image_transport': ('raw', 'raw | compressed: default image transport', {}),
     'image_reliability': ('best_effort', 'best_effort (sensor data QoS) | reliable: image '
                           'subscriptions; reliable loses no frame of a replayed bag', {}),
+    'qos_depth': (10, 'history depth of reliable image subscriptions and of the outputs; '
+                  'a reliable subscriber (or camera) lagging more messages loses the oldest',
+                  _ir(1, 1000)),
     'sync.slop': (0.01, 'largest stamp spread within one frame set, s', _fr(0.0, 1.0)),
     'sync.timeout': (0.2, 'message-time wait for a late camera, s', _fr(0.001, 10.0)),
     'output_frame_id': ('', 'frame id of all outputs; empty = calibration frame', {}),
@@ -291,7 +298,7 @@ def declare_and_read(node: Node) -> tuple[NodeParams, RoomCalibration]:
         diagnostics_period_ns=int(round(v['diagnostics_period'] * 1e9)),
         init_ground_truth=gt, output_bag=str(v['output_bag']),
         max_pending_sets=int(v['max_pending_sets']), executor=executor,
-        warm_up=bool(v['warm_up']))
+        warm_up=bool(v['warm_up']), qos_depth=int(v['qos_depth']))
     return params, calibration
 
 

@@ -58,7 +58,6 @@ from mbtrack_ros.recording.sync import FrameSet, FrameSetSynchronizer
 
 __all__ = ['GroundTruthInitializer', 'TrackerNode', 'main', 'make_executor', 'spin']
 
-OUTPUT_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 WARN_PERIOD_S = 10.0
 RATE_WINDOW_NS = 1_000_000_000  # input rates in /diagnostics: the last second of stamps
 
@@ -215,19 +214,20 @@ class TrackerNode(Node):
             except OutputBagError as err:
                 raise ParamsError(f'output_bag: {err}') from err
 
-        # outputs
-        self.pub_people = self.create_publisher(PoseArray, '~/people', OUTPUT_QOS)
-        self.pub_tracks = self.create_publisher(PointCloud2, '~/tracks', OUTPUT_QOS)
-        self.pub_markers = self.create_publisher(MarkerArray, '~/markers', OUTPUT_QOS)
+        # outputs: reliable, keep the last qos_depth messages for a subscriber that lags
+        output_qos = QoSProfile(depth=p.qos_depth, reliability=ReliabilityPolicy.RELIABLE)
+        self.pub_people = self.create_publisher(PoseArray, '~/people', output_qos)
+        self.pub_tracks = self.create_publisher(PointCloud2, '~/tracks', output_qos)
+        self.pub_markers = self.create_publisher(MarkerArray, '~/markers', output_qos)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics',
-                                              OUTPUT_QOS)
-        self.pub_debug = {c: self.create_publisher(Image, f'~/debug/{c}/occlusion', OUTPUT_QOS)
+                                              output_qos)
+        self.pub_debug = {c: self.create_publisher(Image, f'~/debug/{c}/occlusion', output_qos)
                           for c in p.camera_names}
         # inputs: cheap callbacks, one mutually exclusive group per camera (frames of one
         # camera stay in order under a multi-threaded executor)
         self._subs = []
         image_qos = qos_profile_sensor_data if p.image_reliability == 'best_effort' else \
-            QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+            QoSProfile(depth=p.qos_depth, reliability=ReliabilityPolicy.RELIABLE)
         for cam in p.cameras:
             group = MutuallyExclusiveCallbackGroup()
             kind = CompressedImage if cam.transport == 'compressed' else Image
