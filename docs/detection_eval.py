@@ -35,7 +35,9 @@ whether the old track was reported at the switch frame (not: hidden or ended).
 ``decisions`` checks each move, hidden move, id reuse and drop of the identity check
 against the ground truth: was the person at the detection the one the track (for a reuse:
 the released track) was matched to in the 15 matched frames before (same / other /
-unmatched: the track followed nobody)? ``exits`` tells, per release by the exit rule,
+unmatched: the track followed nobody)? With ``reuse_time`` it also gives the appearance
+distance (``appearance.model_distance``) of every released track a detection could have
+taken the id of, by whether that track had been the same person. ``exits`` tells, per release by the exit rule,
 whether the track's person was still in the room afterwards (premature).
 """
 from __future__ import annotations
@@ -627,6 +629,7 @@ def visibility(pairs: list[tuple[Path, Path]], every: int = 3) -> None:
 
 def decisions(pairs: list[tuple[Path, Path]]) -> None:
     total: dict[tuple[str, str], int] = {}
+    reuse_distances: dict[str, list[float]] = {}     # label -> appearance distances
     for out, rec in pairs:
         tracks, truth, events, _ = _load(out, rec)
         d, frames = _matching(tracks, truth)
@@ -634,16 +637,31 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
         for r in truth:
             gt.setdefault(r.frame, []).append(r)
         counts: dict[tuple[str, str], int] = {}
+
+        def previous_person(tid: int, f: int) -> int | None:
+            """The person track ``tid`` was matched to most in its last 15 matched frames
+            of the 60 before frame ``f`` (None: matched to nobody)."""
+            sel = (d.track_id == tid) & (frames < f) & (frames >= f - 60)
+            before = d.person_id[sel][-15:]
+            return None if not before.size else int(np.bincount(before).argmax())
+
         for e in events:
+            if e['kind'] == 'decision' and e.get('reuse') and gt.get(e['frame']):
+                # every released track a detection could have taken the id of (reuse_time):
+                # its appearance distance to the detection, labelled by who it was
+                at = min(gt[e['frame']], key=lambda r: np.hypot(r.x - e['xy'][0],
+                                                               r.y - e['xy'][1])).person_id
+                for tid, _, unlike in e['reuse']:
+                    who = previous_person(int(tid), e['frame'])
+                    label = 'same' if who == at else 'unmatched' if who is None else 'other'
+                    reuse_distances.setdefault(label, []).append(float(unlike))
             words = e['action'].split() if e['kind'] == 'decision' else []
             if not words or words[0] not in ('move', 'drop', 'reuse') or not gt.get(e['frame']):
                 continue
             f = e['frame']
             tid = int(words[1] if words[0] != 'drop' else e['action'].split('track ')[1].split()[0])
             at = min(gt[f], key=lambda r: np.hypot(r.x - e['xy'][0], r.y - e['xy'][1])).person_id
-            sel = (d.track_id == tid) & (frames < f) & (frames >= f - 60)
-            before = d.person_id[sel][-15:]
-            who = None if not before.size else int(np.bincount(before).argmax())
+            who = previous_person(tid, f)
             kind = words[0] + (' hidden' if 'hidden' in e['action'] else
                                ' beside' if 'beside' in e['action'] else '')
             key = (kind, 'same' if who == at else 'unmatched' if who is None else 'other')
@@ -651,6 +669,11 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
             total[key] = total.get(key, 0) + 1
         print(out.name, ', '.join(f'{k} {v}: {n}' for (k, v), n in sorted(counts.items())))
     print('all', ', '.join(f'{k} {v}: {n}' for (k, v), n in sorted(total.items())))
+    for label, values in sorted(reuse_distances.items()):
+        q = np.percentile(values, [0, 25, 50, 75, 100])
+        print(f'reuse candidates, released track was the {label} person: {len(values)}, '
+              f'appearance distance min / quartiles / max '
+              + ' / '.join(f'{v:.3f}' for v in q))
 
 
 def _visible_fractions(cal: RoomCalibration, people: list, person: int, *,

@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from mbtrack_ros.core.appearance import (AppearanceError, PersonModel,
-                                         bhattacharyya_distance_sq, model_from_images,
+                                         bhattacharyya_distance_sq, model_distance,
+                                         model_from_images,
                                          part_histograms, quantize, relative_angle,
                                          single_target_loglik, view_weights)
 from mbtrack_ros.core.camera import Camera, RoomCalibration, look_at
@@ -84,6 +85,31 @@ def test_bhattacharyya_hand_values():
     assert bhattacharyya_distance_sq(h, m) == pytest.approx(1.0 - np.sqrt(0.5))
     batch = bhattacharyya_distance_sq(np.stack([h, k]), m)
     np.testing.assert_allclose(batch, [1 - np.sqrt(0.5)] * 2)
+
+
+def test_model_distance_hand_values():
+    """Views averaged, then the Bhattacharyya distance per part, averaged over the parts
+    both models have seen."""
+    def one_bin(*bins):        # (V, 3, 512): view v has all of part p in bins[v][p]
+        h = np.zeros((len(bins), 3, 512))
+        for v, parts in enumerate(bins):
+            for p, b in enumerate(parts):
+                if b is not None:
+                    h[v, p, b] = 1.0
+        return PersonModel(1.75, 0.5, view_angles=np.linspace(0, np.pi, len(bins),
+                                                               endpoint=False), histograms=h)
+
+    a = one_bin((1, 2, 3), (1, 2, 5))         # legs: half bin 3, half bin 5 over the views
+    assert model_distance(a, a) == pytest.approx(0.0)
+    assert model_distance(a, one_bin((7, 8, 9))) == pytest.approx(1.0)
+    # head and torso equal, legs 1 - sqrt(0.5) apart (squared): sqrt of it, / 3 parts
+    b = one_bin((1, 2, 3))
+    assert model_distance(a, b) == pytest.approx(np.sqrt(1 - np.sqrt(0.5)) / 3)
+    # a part one model never saw is left out (the head here)
+    c = one_bin((None, 2, 3), (None, 2, 5))
+    assert model_distance(c, b) == pytest.approx(np.sqrt(1 - np.sqrt(0.5)) / 2)
+    assert model_distance(one_bin((None, None, None)), a) == 1.0
+    assert model_distance(a, b) == pytest.approx(model_distance(b, a))
 
 
 def test_interpolation_hand_weights():

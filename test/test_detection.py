@@ -1029,14 +1029,17 @@ def test_a_hidden_track_beside_a_detection_is_moved_there_instead_of_a_birth(
         assert 'birth' in actions and not any(a.startswith('move') for a in actions)
 
 
-@pytest.mark.parametrize('reuse_time, place, reused', [
-    (2.0, (2.5, 2.5), True), (0.0, (2.5, 2.5), False), (2.0, (4.6, 4.5), False)])
+@pytest.mark.parametrize('reuse_time, place, back, reused', [
+    (2.0, (2.5, 2.5), True, True), (0.0, (2.5, 2.5), True, False),
+    (2.0, (4.6, 4.5), True, False), (2.0, (2.5, 2.5), False, False)])
 def test_a_person_re_found_soon_after_the_release_gets_the_released_id(
-        reuse_time, place, reused):
+        reuse_time, place, back, reused):
     """A standing person vanishes (their track is released after the 1 s timeout) and is
     detected again at the same place 0.3 s later: within ``reuse_time`` the new track takes
     the released id; with ``reuse_time`` 0, or in the entry zone (the person left the room
-    and somebody else comes in), a new id is issued."""
+    and somebody else comes in), a new id is issued. The id ends (``FrameResult.ended``)
+    at the release when it cannot come back, ``reuse_time`` after it when nobody took it
+    (the person stayed away), never when it was taken: an id never returns after it ended."""
     from dataclasses import replace
 
     rng = np.random.default_rng(5)
@@ -1046,17 +1049,28 @@ def test_a_person_re_found_soon_after_the_release_gets_the_released_id(
     det = tracker.detection
     det.config = replace(det.config, reuse_time=reuse_time)
     stand = [person(*place, theta=0.0)]
-    ended_at, ids = None, []
-    for k in range(60):
-        gone = 12 <= k < 12 + 15 + 5 if ended_at is None else k < ended_at + 5
+    released_at, ids, ended = None, [], {}
+    for k in range(75):
+        gone = 12 <= k < 12 + 15 + 5 if released_at is None else \
+            (k < released_at + 5 or not back)
         r = tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, [] if gone else stand,
                                                           rng))
-        if r.ended and ended_at is None:
-            assert r.ended == [1]
-            ended_at = k
+        for tid in r.ended:
+            assert tid not in ended, 'an id ends once'
+            ended[tid] = k
+        if released_at is None and k > 0 and ids[-1] == [1] and not tracker.track_ids:
+            released_at = k
         ids.append(sorted(tracker.track_ids))
-    assert ended_at is not None and ids[ended_at] == []
-    assert ids[-1] == ([1] if reused else [2])
+    assert released_at is not None
+    assert ids[-1] == ([1] if reused else [2] if back else [])
+    if reused:
+        assert 1 not in ended
+    elif back or reuse_time == 0:
+        assert ended[1] == released_at
+    else:       # lost for reuse_time, then ended
+        assert ended[1] == released_at + round(reuse_time * FPS)
+    for tid, k in ended.items():
+        assert all(tid not in later for later in ids[k:]), 'an ended id came back'
 
 
 def test_detection_every_kth_frame_set_holds_existence_in_between(monkeypatch):

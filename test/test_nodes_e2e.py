@@ -82,7 +82,7 @@ def test_detection_parameter_reaches_the_tracker(room_calibration, context, tmp_
     node = start(context, '-p', f'calibration_file:={room_calibration}',
                  '-p', 'tracker.particles:=50', '-p', 'tracker.release_time:=1.5',
                  '-p', 'detection.threshold:=2.5', '-p', 'tracker.subsample:=2',
-                 '-p', 'detection.spare_support:=0.0')
+                 '-p', 'detection.spare_support:=0.0', '-p', 'detection.reuse_time:=0.5')
     try:
         assert node.params.tracker.detection is True
         assert node.tracker.config.detection is True and node.tracker.config.particles == 50
@@ -92,6 +92,7 @@ def test_detection_parameter_reaches_the_tracker(room_calibration, context, tmp_
         assert cfg.release.timeout == 1.5 and cfg.detector.threshold == 2.5
         assert cfg.release.spare_support == 0.0  # the spare-track rule switched off
         assert node.tracker.detection.releaser.config.spare_support == 0.0
+        assert cfg.reuse_time == 0.5 and node.tracker.detection.config.reuse_time == 0.5
     finally:
         node.destroy_node()
     node = start(context, '-p', f'calibration_file:={room_calibration}',
@@ -139,6 +140,7 @@ def test_qos_depth_reaches_image_subscriptions_and_outputs(room_calibration, con
 BAD = [
     (['-p', 'qos_depth:=0'], "'qos_depth': value out of range"),
     (['-p', 'tracker.particles:=0'], "'tracker.particles': value out of range"),
+    (['-p', 'detection.reuse_time:=-1.0'], "'detection.reuse_time': value out of range"),
     (['-p', 'tracker.subsample:=0'], "'tracker.subsample': value out of range"),
     (['-p', 'tracker.image_scale:=1.5'], "'tracker.image_scale': value out of range"),
     (['-p', 'tracker.image_scale:=0.0'], 'image_scale must be a number in (0, 1], got 0.0'),

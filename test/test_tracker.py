@@ -159,6 +159,8 @@ def test_same_seed_same_result():
     ({'release_time': 0.0}, 'release_time'),
     ({'detection_threshold': float('inf')}, 'detection_threshold'),
     ({'spare_support': 1.5}, 'spare_support'),
+    ({'reuse_time': -0.5}, 'reuse_time'),
+    ({'reuse_time': float('inf')}, 'reuse_time'),
 ])
 def test_config_validation(kw, msg):
     with pytest.raises(TrackerError, match=msg):

@@ -20,7 +20,8 @@ from mbtrack_ros.core.shape import BodyShape, Silhouettes, rasterize
 from mbtrack_ros.core.state import STATE_DIM, THETA, X, Y
 
 __all__ = ['N_BINS', 'N_PARTS', 'AppearanceError', 'PersonModel', 'bhattacharyya_distance_sq',
-           'key_view_loglik', 'key_view_stack', 'model_from_images', 'part_histograms',
+           'key_view_loglik', 'key_view_stack', 'model_distance', 'model_from_images',
+           'part_histograms',
            'quantize', 'relative_angle', 'single_target_loglik', 'view_weights']
 
 N_BINS = _kernels.N_BINS
@@ -225,6 +226,21 @@ class PersonModel:
         self.add_view(angle, np.where(seen, (1.0 - rate) * start + rate * hists, start),
                       merge_angle=merge_angle)
         return True
+
+
+def model_distance(a: PersonModel, b: PersonModel) -> float:
+    """How unlike two people look: the Bhattacharyya distance (003 Eq. 4) between their
+    view-averaged part histograms, averaged over the parts both models have seen (1.0, the
+    largest, when they share none). Views are averaged because the two models' key views
+    were taken from different angles."""
+    ha, hb = a.completed_histograms(), b.completed_histograms()
+    if not len(ha) or not len(hb):
+        return 1.0
+    ma, mb = _normalise(ha.mean(axis=0)), _normalise(hb.mean(axis=0))     # (3, 512)
+    both = (ma.sum(axis=1) > 0) & (mb.sum(axis=1) > 0)
+    if not both.any():
+        return 1.0
+    return float(np.sqrt(bhattacharyya_distance_sq(ma[both], mb[both])).mean())
 
 
 def _check_bins(bins: np.ndarray, silhouettes: Silhouettes) -> np.ndarray:

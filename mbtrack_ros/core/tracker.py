@@ -60,6 +60,9 @@ class TrackerConfig:
         spare_support: exclusive support below which a track overlapping another one is
             spare and released like an unsupported one (``ReleaseConfig.spare_support``;
             None: its default, 0: off).
+        reuse_time: s during which a released track is only lost and a person re-found
+            nearby who looks like it takes its id back (``AutoDetectionConfig.reuse_time``;
+            None: its default, 0: released tracks end at once).
         detection_threshold: smallest combined log response of a detection (None: the
             detector's default).
         detection: automatic detection, model acquisition and release of people (003 §4)
@@ -107,6 +110,7 @@ class TrackerConfig:
     release_time: float = 1.0
     detection_threshold: float | None = None
     spare_support: float | None = None
+    reuse_time: float | None = None
     subsample: int = 1
     pipeline_search: bool = False
     detection_every: int = 1
@@ -150,6 +154,10 @@ class TrackerConfig:
         if self.spare_support is not None and not (
                 isinstance(self.spare_support, (int, float)) and 0 <= self.spare_support <= 1):
             bad(f'spare_support must be a number in [0, 1], got {self.spare_support!r}')
+        if self.reuse_time is not None and (
+                isinstance(self.reuse_time, bool) or not isinstance(self.reuse_time, (int, float))
+                or not 0 <= self.reuse_time < float('inf')):
+            bad(f'reuse_time must be a number >= 0, got {self.reuse_time!r}')
         if isinstance(self.adaptation_rate, bool) or not (
                 isinstance(self.adaptation_rate, (int, float))
                 and 0 <= self.adaptation_rate <= 1):
@@ -176,6 +184,8 @@ class TrackerConfig:
         config = AutoDetectionConfig(detector=detector, release=release, sigma=float(self.sigma),
                                      adaptation=AdaptationConfig(
                                          rate=float(self.adaptation_rate)))
+        if self.reuse_time is not None:
+            config = replace(config, reuse_time=float(self.reuse_time))
         return _pixels_scaled(config, float(self.image_scale))
 
     def filter_config(self) -> FilterConfig:
@@ -450,6 +460,7 @@ class Tracker:
                     self.relocate_track(t.track_id, state)
             tracks = [t for t in tracks
                       if t.track_id not in ended and self.detection.reported(t.track_id)]
+            ended = self.detection.finished(ended)   # lost ones end when they cannot return
             self._search_pending = True
             if search:
                 self.search()

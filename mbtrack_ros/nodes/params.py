@@ -63,6 +63,9 @@ detection.threshold             double     smallest combined log response of a n
 detection.spare_support         double     exclusive support below which a track that
                                            overlaps another one is released as spare;
                                            0 = off (0.25)
+detection.reuse_time            double     s a released track stays lost: a person re-found
+                                           within 1 m who looks like it takes its id back
+                                           (no new id); it ends after that (2.0; 0 = at once)
 detection.every                 int        run the detection pipeline (release, existence,
                                            background, search) on every k-th frame set
                                            only (1; a speed option that costs accuracy,
@@ -84,6 +87,7 @@ from rclpy.exceptions import (
 from rclpy.node import Node
 
 from mbtrack_ros.core.camera import CalibrationError, RoomCalibration
+from mbtrack_ros.core.detection.manager import AutoDetectionConfig
 from mbtrack_ros.core.detection.release import ReleaseConfig
 from mbtrack_ros.core.tracker import TrackerConfig, TrackerError
 from mbtrack_ros.nodes.tracker_parameters import TRACKER_PARAMETERS
@@ -195,6 +199,10 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
                                 'below which a track that overlaps another one is released as '
                                 'spare (ReleaseConfig.spare_support); 0 = off',
                                 _fr(0.0, 1.0)),
+    'detection.reuse_time': (AutoDetectionConfig().reuse_time, 'seconds a released track '
+                             'stays lost, its id given back to a person re-found within '
+                             'AutoDetectionConfig.reuse_radius who looks like it; it ends '
+                             'after (0 = at once)', _fr(0.0, 60.0)),
     'detection.every': (1, 'run the detection pipeline on every k-th frame set only (speed '
                         'option, TrackerConfig.detection_every)', _ir(1, 30)),
     'detection.adaptation_rate': (0.0, 'blending rate of the slow appearance-model adaptation '

@@ -17,6 +17,7 @@ TRACKER_PARAMETERS: dict[str, tuple[str, type]] = {
     'tracker.use_mrf': ('use_mrf', bool), 'tracker.release_time': ('release_time', float),
     'detection.threshold': ('detection_threshold', float),
     'detection.spare_support': ('spare_support', float),
+    'detection.reuse_time': ('reuse_time', float),
     'detection.every': ('detection_every', int),
     'detection.adaptation_rate': ('adaptation_rate', float),
     'tracker.image_scale': ('image_scale', float),

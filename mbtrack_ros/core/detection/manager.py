@@ -25,7 +25,7 @@ import numpy as np
 
 from mbtrack_ros.core import _kernels
 from mbtrack_ros.core.appearance import (
-    PersonModel, key_view_loglik, key_view_stack, quantize, relative_angle,
+    PersonModel, key_view_loglik, key_view_stack, model_distance, quantize, relative_angle,
     single_target_loglik, view_weights)
 from mbtrack_ros.core.camera import RoomCalibration
 from mbtrack_ros.core.detection import DetectionError
@@ -77,12 +77,16 @@ class AutoDetectionConfig:
             appearance gain (the nearest such track not born or moved within
             ``relocate_interval``; docs/detection.md: most identity switches on clear-room
             were a birth beside a hidden track).
-        reuse_time, reuse_radius: a new track born within ``reuse_radius`` metres of where
-            a track was released less than ``reuse_time`` seconds ago (outside the entry
-            zones) takes that track's id (the released track's person re-found); 0
-            disables, the default: the ROS interface promises ids that are never reused
-            within a run (a released id has had its deletion markers), so this is an
-            opt-in for offline evaluation.
+        reuse_time, reuse_radius: a track released outside the entry zones is *lost* for
+            ``reuse_time`` seconds: a new track born within ``reuse_radius`` metres of where
+            it was released takes its id (the released track's person re-found) when the
+            two look alike (``reuse_distance``). The id ends (:meth:`finished`) only when
+            that time has passed unused, so the ROS interface's promise holds: an id never
+            comes back after it ended. 0 ends released tracks at once.
+        reuse_distance: largest appearance distance (``appearance.model_distance``, in
+            [0, 1]) between a released track's model and a detection's for the detection
+            to take the released id; 1 accepts any (docs/detection.md, "Lost tracks":
+            0.5 let 9 of 16 same-person reuses and 2 of 19 other-person ones through).
         duplicate_by_reporting: of two tracks on one person (release ``merge_radius``,
             ``merge_time``) release the one reported without a break for the shorter time
             (born, moved or hidden later) instead of the younger one.
@@ -139,8 +143,9 @@ class AutoDetectionConfig:
     relocate_margin: float = -3.0
     relocate_interval: float = 2.0
     relocate_hidden: bool = True
-    reuse_time: float = 0.0
+    reuse_time: float = 2.0
     reuse_radius: float = 1.0
+    reuse_distance: float = 0.5
     duplicate_by_reporting: bool = True
     reach_radius: float = 0.5
     reach_directions: int = 8
@@ -152,8 +157,10 @@ class AutoDetectionConfig:
     def __post_init__(self) -> None:
         if not self.relocate_radius >= 0 or not np.isfinite(self.relocate_margin):
             raise DetectionError('relocate_radius must be >= 0 and relocate_margin finite')
-        if not (self.reuse_time >= 0 and self.reuse_radius >= 0):
-            raise DetectionError('reuse_time and reuse_radius must be >= 0')
+        if not (self.reuse_time >= 0 and self.reuse_radius >= 0
+                and 0 <= self.reuse_distance <= 1):
+            raise DetectionError('reuse_time and reuse_radius must be >= 0, reuse_distance '
+                                 'in [0, 1]')
         if not self.sigma > 0 or not self.clutter_distance > 0:
             raise DetectionError('sigma and clutter_distance must be > 0')
         if not self.beside_support >= 0:
@@ -225,7 +232,9 @@ class AutoDetection:
         self.reach_moves: dict[int, np.ndarray] = {}
         self._first_seen: dict[int, int] = {}  # track id -> stamp of its first update
         self._placed: dict[int, int] = {}  # track id -> stamp of its birth or last move
-        self._released: dict[int, tuple[int, np.ndarray]] = {}  # id -> (stamp, floor xy)
+        # released id -> (stamp, floor xy, its appearance model) for reuse_time
+        self._released: dict[int, tuple[int, np.ndarray, PersonModel | None]] = {}
+        self._lost_ended: list[int] = []  # released ids whose reuse_time passed unreused
         self._shown_since: dict[int, int] = {}  # id -> birth, move or last hidden stamp
         self._rescued: dict[int, int] = {}  # id -> stamp of its last exit rescue
         self.exit_checks: list[dict] = []  # per frame: the exit rescue's view of each exit
@@ -264,6 +273,7 @@ class AutoDetection:
         self._first_seen.clear()
         self._placed.clear()
         self._released.clear()
+        self._lost_ended.clear()
         self._shown_since.clear()
         self._rescued.clear()
         self._adapted.clear()
@@ -472,7 +482,7 @@ class AutoDetection:
             self._adapted.pop(tid, None)
             self._first_xy.pop(tid, None)
             self._travelled.discard(tid)
-        self._note_reporting(stamp_ns, tracks, means, ended)
+        self._note_reporting(stamp_ns, tracks, means, ended, models)
         t3 = time.perf_counter()
         if cfg.adaptation.rate > 0 and tracks and evidence:
             self._adapt(stamp_ns, tracks, models, means, sils, evidence, ended)
@@ -623,6 +633,16 @@ class AutoDetection:
                 t.visibility = dict(aux.visibility)
                 t.existence = float(aux.existence)
 
+    def finished(self, released: Sequence[int]) -> list[int]:
+        """The ids that end now, of ``released`` (this frame's :meth:`update`) and of those
+        released before: a released track whose person may be re-found (``reuse_time``) is
+        only *lost* until its reuse window has passed unused (not reported, like a hidden
+        track); it ends then, and an id that is re-used never ends. Ids are thus never
+        reused after they ended. With ``reuse_time`` 0 every released id ends at once."""
+        done = [t for t in self._lost_ended if t not in self._released]
+        self._lost_ended = []
+        return done + [int(t) for t in released if int(t) not in self._released]
+
     def reported(self, track_id: int) -> bool:
         aux = self.aux.get(int(track_id))
         return aux is None or aux.reported or self.config.report_hidden
@@ -711,7 +731,7 @@ class AutoDetection:
                                         moved, stamp_ns, info)
             beside = best is not None
         if best is None:
-            reused = self._reusable(det, stamp_ns, models)
+            reused = self._reusable(det, model, models, info)
             info['action'] = 'birth' if reused is None else f'reuse {reused}'
             self.decisions.append(info)
             return Birth(model=model, state=state, detection=det, track_id=reused)
@@ -845,38 +865,48 @@ class AutoDetection:
         return alone, beside[:k], spare
 
     def _note_reporting(self, stamp_ns: int, tracks: Sequence[TrackEstimate],
-                        means: np.ndarray, ended: Sequence[int]) -> None:
+                        means: np.ndarray, ended: Sequence[int],
+                        models: Mapping[int, PersonModel]) -> None:
         """After a frame's release: where the released tracks were (``reuse_time``) and
         the tracks not reported now (reported without a break since, for the duplicate
         rule)."""
-        self._remember_released(stamp_ns, tracks, means, ended)
+        self._remember_released(stamp_ns, tracks, means, ended, models)
         for t in tracks:
             if t.track_id not in ended and not self.reported(t.track_id):
                 self._shown_since[t.track_id] = int(stamp_ns)
 
     def _remember_released(self, stamp_ns: int, tracks: Sequence[TrackEstimate],
-                           means: np.ndarray, ended: Sequence[int]) -> None:
+                           means: np.ndarray, ended: Sequence[int],
+                           models: Mapping[int, PersonModel]) -> None:
         """Keep where and when the tracks released this frame were, for ``reuse_time``
         (not those released in an entry zone: their person left the room)."""
         horizon = int(self.config.reuse_time * 1e9)
-        self._released = {t: v for t, v in self._released.items()
-                          if int(stamp_ns) - v[0] < horizon}
+        expired = [t for t, v in self._released.items() if int(stamp_ns) - v[0] >= horizon]
+        for t in expired:
+            del self._released[t]
+        self._lost_ended.extend(expired)
         if horizon <= 0:
             return
         in_entry = self.calibration.in_entry_zone(means[:, [X, Y]])
         for k, t in enumerate(tracks):
             if t.track_id in ended and not in_entry[k]:
-                self._released[int(t.track_id)] = (int(stamp_ns), means[k, [X, Y]])
+                self._released[int(t.track_id)] = (int(stamp_ns), means[k, [X, Y]],
+                                                   models.get(t.track_id))
 
-    def _reusable(self, det: Detection, stamp_ns: int, models: Mapping[int, PersonModel]
-                  ) -> int | None:
+    def _reusable(self, det: Detection, model: PersonModel,
+                  models: Mapping[int, PersonModel], info: dict) -> int | None:
         """The id of the track released nearest the detection, within ``reuse_radius``
-        metres and ``reuse_time`` seconds, not live (and forgets it), or None."""
+        metres and ``reuse_time`` seconds, not live, whose appearance model is within
+        ``reuse_distance`` of the detection's (and forgets it), or None; each candidate's
+        distance and model distance go to ``info['reuse']``."""
         best = None
-        for tid, (stamp, xy) in self._released.items():
+        for tid, (_, xy, old) in self._released.items():
             d = float(np.hypot(*(xy - det.xy)))
-            if tid not in models and d <= self.config.reuse_radius \
-                    and (best is None or d < best[1]):
+            if tid in models or d > self.config.reuse_radius:
+                continue
+            unlike = model_distance(old, model) if old is not None else 1.0
+            info.setdefault('reuse', []).append((int(tid), round(d, 2), round(unlike, 3)))
+            if unlike <= self.config.reuse_distance and (best is None or d < best[1]):
                 best = (tid, d)
         if best is None:
             return None
