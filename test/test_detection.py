@@ -562,7 +562,7 @@ def test_tracker_detects_tracks_and_releases_a_painted_person():
             t = res.tracks[0]
             existence.append(t.existence)
             assert set(t.visibility) <= set(calib.cameras)
-        if res.ended and ended is None:
+        if res.released and ended is None:
             ended = k
     assert born is not None and (born - enter) / FPS <= 0.5
     assert ended is not None and 0 < (ended - leave) / FPS <= 1.5
@@ -611,7 +611,7 @@ def test_a_person_standing_below_the_ceiling_camera_is_not_learnt_into_its_backg
         images = paint(calib, bgs, [person(*below)], rng)
         res = tracker.step(stamp, images)
         ids |= {t.track_id for t in res.tracks}
-        assert not res.ended, f'track released at frame {k}'
+        assert not res.released, f'track released at frame {k}'
         if k >= 20:
             assert len(res.tracks) == 1, f'frame {k}: {len(res.tracks)} tracks'
     # the ceiling camera still sees the person as foreground after 10 s
@@ -1114,7 +1114,7 @@ def test_detection_every_kth_frame_set_holds_existence_in_between(monkeypatch):
                 assert (t.existence, t.visibility) == before  # (or those of a new track)
                 held += 1
             last[t.track_id] = (t.existence, dict(t.visibility))
-        if res.ended:
+        if res.released:
             assert k % every == 0  # releases happen on detection frame sets only
             ended = k if ended is None else ended
     assert calls == stamps[::every]

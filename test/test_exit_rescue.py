@@ -128,7 +128,7 @@ def test_a_person_standing_at_the_door_keeps_the_id_of_a_track_pushed_into_the_e
     for k in range(16, 40):
         res = tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, standing(k), rng))
         ids |= {t.track_id for t in res.tracks}
-        ended += res.ended
+        ended += res.released
         last = res
     if rescue > 0:
         assert ended == [] and ids == {1} and tracker.track_ids == [1]
@@ -163,7 +163,7 @@ def test_a_person_who_walks_out_is_still_released_within_1_5_s_with_the_rescue(c
             last_truth = frame.index
         res = tracker.step(frame.stamp_ns, frame.images)
         checks += tracker.detection.exit_checks
-        if res.ended and ended is None and last_truth is not None:
+        if res.released and ended is None and last_truth is not None:
             ended = frame.index
     assert ended is not None and 0 <= (ended - last_truth) / synth.fps <= 1.5
     assert not any(c['rescued'] for c in checks) and tracker.track_ids == []

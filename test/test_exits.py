@@ -215,7 +215,7 @@ def test_a_person_who_walks_out_is_released_within_1_5_s(ceiling):
             last_truth = frame.index
         res = tracker.step(frame.stamp_ns, frame.images)
         born |= {t.track_id for t in res.tracks}
-        if res.ended and ended is None and last_truth is not None:
+        if res.released and ended is None and last_truth is not None:
             ended = frame.index
     assert len(born) == 1 and last_truth is not None
     assert ended is not None and 0 <= (ended - last_truth) / synth.fps <= 1.5

@@ -165,7 +165,7 @@ def test_the_track_of_a_person_who_walked_out_ends_sooner_with_the_doorway_rule(
     for frame in synth:
         if frame.ground_truth:
             last_truth = frame.index
-        if tracker.step(frame.stamp_ns, frame.images).ended and ended is None:
+        if tracker.step(frame.stamp_ns, frame.images).released and ended is None:
             ended = frame.index
     assert last_truth is not None and ended is not None
     delay = (ended - last_truth) / synth.fps

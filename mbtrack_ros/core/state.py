@@ -52,11 +52,15 @@ class FrameResult:
     Attributes:
         stamp_ns: the frame set's stamp, integer nanoseconds (image header time).
         tracks: the reported tracks, ordered by id.
-        ended: ids of tracks released at this frame.
+        ended: ids that end at this frame: they never come back.
         timings: seconds spent per stage (``predict``, ``update``, ``detect`` ...).
+        released: ids of tracks released at this frame (no longer tracked). With
+            ``AutoDetectionConfig.reuse_time`` a released track is first lost, its id kept
+            for a person re-found nearby, and ends later (or never, when re-found).
     """
 
     stamp_ns: int
     tracks: list[TrackEstimate] = field(default_factory=list)
     ended: list[int] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
+    released: list[int] = field(default_factory=list)

@@ -443,6 +443,7 @@ class Tracker:
         timings.update(self.filter.timings)
         timings['filter'] = t2 - t1
         ended: list[int] = []
+        released: list[int] = []
         if self.detection is not None and not detect:  # detection_every: the last decisions
             self.detection.carry(tracks)
             tracks = [t for t in tracks if self.detection.reported(t.track_id)]
@@ -460,13 +461,15 @@ class Tracker:
                     self.relocate_track(t.track_id, state)
             tracks = [t for t in tracks
                       if t.track_id not in ended and self.detection.reported(t.track_id)]
-            ended = self.detection.finished(ended)   # lost ones end when they cannot return
+            released = ended
+            ended = self.detection.finished(released)   # lost ones end when they cannot return
             self._search_pending = True
             if search:
                 self.search()
             timings.update(self.detection.timings)
         timings['total'] = time.perf_counter() - t0
-        return FrameResult(stamp_ns=stamp_ns, tracks=tracks, ended=ended, timings=timings)
+        return FrameResult(stamp_ns=stamp_ns, tracks=tracks, ended=ended, timings=timings,
+                           released=released)
 
     def search(self) -> list[int]:
         """The detection search and acquisition of the last step (003 §4.1-4.2), if pending:
