@@ -37,8 +37,9 @@ against the ground truth: was the person at the detection the one the track (for
 the released track) was matched to in the 15 matched frames before (same / other /
 unmatched: the track followed nobody)? With ``reuse_time`` it also gives the appearance
 distance (``appearance.model_distance``) of every released track a detection could have
-taken the id of, by whether that track had been the same person. ``exits`` tells, per release by the exit rule,
-whether the track's person was still in the room afterwards (premature).
+taken the id of, by whether that track had been the same person. ``exits`` tells, per
+release by the exit rule, whether the track's person was still in the room afterwards
+(premature).
 """
 from __future__ import annotations
 
