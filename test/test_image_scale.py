@@ -186,7 +186,8 @@ def test_node_defaults_are_the_trackers_defaults():
     config = TrackerConfig()
     pipeline = config.detection_config()
     left_to_pipeline = {'detection_threshold': pipeline.detector.threshold,
-                        'spare_support': pipeline.release.spare_support}
+                        'spare_support': pipeline.release.spare_support,
+                        'reuse_time': pipeline.reuse_time}
     for key, (field, _) in TRACKER_PARAMETERS.items():
         ours = getattr(config, field)
         if ours is None:
