@@ -1030,16 +1030,18 @@ def test_a_hidden_track_beside_a_detection_is_moved_there_instead_of_a_birth(
 
 
 @pytest.mark.parametrize('reuse_time, place, back, reused', [
-    (2.0, (2.5, 2.5), True, True), (0.0, (2.5, 2.5), True, False),
-    (2.0, (4.6, 4.5), True, False), (2.0, (2.5, 2.5), False, False)])
+    (2.0, (2.5, 2.5), 'same', True), (0.0, (2.5, 2.5), 'same', False),
+    (2.0, (4.6, 4.5), 'same', False), (2.0, (2.5, 2.5), None, False),
+    (2.0, (2.5, 2.5), 'other', False)])
 def test_a_person_re_found_soon_after_the_release_gets_the_released_id(
         reuse_time, place, back, reused):
     """A standing person vanishes (their track is released after the 1 s timeout) and is
     detected again at the same place 0.3 s later: within ``reuse_time`` the new track takes
-    the released id; with ``reuse_time`` 0, or in the entry zone (the person left the room
-    and somebody else comes in), a new id is issued. The id ends (``FrameResult.ended``)
-    at the release when it cannot come back, ``reuse_time`` after it when nobody took it
-    (the person stayed away), never when it was taken: an id never returns after it ended."""
+    the released id; with ``reuse_time`` 0, in the entry zone (the person left the room
+    and somebody else comes in), or when somebody who looks different stands there
+    (``reuse_distance``), a new id is issued. The id ends (``FrameResult.ended``) at the
+    release when it cannot come back, ``reuse_time`` after it when nobody took it, never
+    when it was taken: an id never returns after it ended."""
     from dataclasses import replace
 
     rng = np.random.default_rng(5)
@@ -1049,11 +1051,13 @@ def test_a_person_re_found_soon_after_the_release_gets_the_released_id(
     det = tracker.detection
     det.config = replace(det.config, reuse_time=reuse_time)
     stand = [person(*place, theta=0.0)]
+    other = [person(*place, theta=0.0, colours=(SKIN, (200, 190, 40), (150, 40, 120)))]
     released_at, ids, ended = None, [], {}
     for k in range(75):
         gone = 12 <= k < 12 + 15 + 5 if released_at is None else \
-            (k < released_at + 5 or not back)
-        r = tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, [] if gone else stand,
+            (k < released_at + 5 or back is None)
+        who = stand if released_at is None or back == 'same' else other
+        r = tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, [] if gone else who,
                                                           rng))
         for tid in r.ended:
             assert tid not in ended, 'an id ends once'
@@ -1065,7 +1069,7 @@ def test_a_person_re_found_soon_after_the_release_gets_the_released_id(
     assert ids[-1] == ([1] if reused else [2] if back else [])
     if reused:
         assert 1 not in ended
-    elif back or reuse_time == 0:
+    elif reuse_time == 0 or back == 'same':     # cannot come back: ends at the release
         assert ended[1] == released_at
     else:       # lost for reuse_time, then ended
         assert ended[1] == released_at + round(reuse_time * FPS)
