@@ -21,8 +21,8 @@ from mbtrack_ros.core.state import STATE_DIM, THETA, X, Y
 
 __all__ = ['N_BINS', 'N_PARTS', 'AppearanceError', 'PersonModel', 'bhattacharyya_distance_sq',
            'key_view_loglik', 'key_view_stack', 'model_distance', 'model_from_images',
-           'part_histograms',
-           'quantize', 'relative_angle', 'single_target_loglik', 'view_weights']
+           'part_histograms', 'quantize', 'relative_angle', 'single_target_loglik',
+           'view_weights']
 
 N_BINS = _kernels.N_BINS
 N_PARTS = _kernels.N_PARTS

@@ -449,19 +449,18 @@ class Tracker:
             tracks = [t for t in tracks if self.detection.reported(t.track_id)]
         elif self.detection is not None:  # 003 §4: release; 001: existence and visibility
             frame_bins = getattr(self.measurement, 'frame_bins', None)
-            ended = self.detection.update(stamp_ns, images, tracks, self._models,
-                                          bins=frame_bins() if frame_bins else None)
-            for tid in ended:
+            released = self.detection.update(stamp_ns, images, tracks, self._models,
+                                             bins=frame_bins() if frame_bins else None)
+            for tid in released:
                 self.remove_track(tid)
             for t in tracks:   # a lagging track catches up (AutoDetectionConfig.reach_move)
-                if t.track_id in self.detection.reach_moves and t.track_id not in ended:
+                if t.track_id in self.detection.reach_moves and t.track_id not in released:
                     state = t.mean.copy()
                     state[[X, Y]] = self.detection.reach_moves[t.track_id]
                     state[SIT] = float(state[SIT] >= 0.5)      # the mean holds p(sitting)
                     self.relocate_track(t.track_id, state)
             tracks = [t for t in tracks
-                      if t.track_id not in ended and self.detection.reported(t.track_id)]
-            released = ended
+                      if t.track_id not in released and self.detection.reported(t.track_id)]
             ended = self.detection.finished(released)   # lost ones end when they cannot return
             self._search_pending = True
             if search:

@@ -639,8 +639,7 @@ class AutoDetection:
         only *lost* until its reuse window has passed unused (not reported, like a hidden
         track); it ends then, and an id that is re-used never ends. Ids are thus never
         reused after they ended. With ``reuse_time`` 0 every released id ends at once."""
-        done = [t for t in self._lost_ended if t not in self._released]
-        self._lost_ended = []
+        done, self._lost_ended = self._lost_ended, []
         return done + [int(t) for t in released if int(t) not in self._released]
 
     def reported(self, track_id: int) -> bool:
