@@ -116,8 +116,8 @@ def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False,
                            'doorway': bool(doorway is not None and doorway[k])})
         return ended
 
-    def logged_duplicates(self, stamp, ids, xy, shown_since=None):
-        ended = duplicates(self, stamp, ids, xy, shown_since)
+    def logged_duplicates(self, stamp, ids, xy, shown_since=None, prefer=None):
+        ended = duplicates(self, stamp, ids, xy, shown_since, prefer)
         events.extend({'kind': 'end', 'frame': frame['index'], 'id': int(t),
                        'reason': 'duplicate'} for t in ended)
         return ended
@@ -157,6 +157,8 @@ def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False,
                 events.append({'kind': 'decision', 'frame': fs.index, **d})
             for a in getattr(tracker.detection, 'adaptations', []):  # h-adapt's decisions
                 events.append({'kind': 'adapt', 'frame': fs.index, **a})
+            for c in getattr(tracker.detection, 'duplicate_checks', []):
+                events.append({'kind': 'duplicate_check', 'frame': fs.index, **c})
             for c in getattr(tracker.detection, 'exit_checks', []):  # h-reid's exit rescue
                 events.append({'kind': 'exit_check', 'frame': fs.index, **c})
                 if c['rescued']:      # the exit rule named it, the rescue kept it

@@ -9,6 +9,7 @@ from mbtrack_ros.core.appearance import quantize
 from mbtrack_ros.core.camera import Camera, RoomCalibration, look_at
 from mbtrack_ros.core.detection import DetectionError
 from mbtrack_ros.core.detection.acquisition import acquire
+from mbtrack_ros.core.detection.manager import AutoDetectionConfig
 from mbtrack_ros.core.detection.background import BackgroundBank, BackgroundConfig
 from mbtrack_ros.core.detection.detector import (
     Detection, Detector, DetectorConfig, FrameEvidence, _vetoes, is_ceiling)
@@ -511,6 +512,13 @@ def test_duplicate_tracks_release_the_one_reported_for_the_shorter_time():
     assert rel.duplicates(0, [1, 7], np.zeros((2, 2)), shown_since=[5, 5]) == [7]
     with pytest.raises(DetectionError):
         rel.duplicates(0, [1, 7], np.zeros((2, 2)), shown_since=[5])
+    # a judge of the pair overrules the rule; when it abstains (None) the rule holds
+    asked = []
+    assert rel.duplicates(0, [1, 7], np.zeros((2, 2)), shown_since=[5, 5],
+                          prefer=lambda a, b: asked.append((a, b)) or 7) == [1]
+    assert asked == [(1, 7)]
+    assert rel.duplicates(0, [1, 7], np.zeros((2, 2)), shown_since=[5, 5],
+                          prefer=lambda a, b: None) == [7]
 
 
 def test_auto_detection_tracks_with_side_cameras_and_rejects_bad_images():
@@ -1077,6 +1085,47 @@ def test_a_person_re_found_soon_after_the_release_gets_the_released_id(
         assert all(tid not in later for later in ids[k:]), 'an ended id came back'
 
 
+
+@pytest.mark.parametrize('margin', [AutoDetectionConfig().duplicate_margin, float('inf')])
+def test_of_two_tracks_on_one_person_the_one_whose_model_fits_stays(margin):
+    """Track 1 follows a person in blue, track 2 a person in yellow; the person in blue
+    leaves and, at the same frame, track 1 jumps onto the person in yellow (a track that
+    stayed behind when its person walked out and took over somebody else's). After the
+    merge time one of the two is released: with ``duplicate_margin`` the one whose model
+    does not explain the yellow person (1, although reported for longer); without it the
+    shorter reported one (2), which leaves the yellow person with the wrong id."""
+    from dataclasses import replace
+
+    rng = np.random.default_rng(3)
+    calib = make_room()
+    bgs = backgrounds(calib)
+    tracker = _detecting_tracker(calib, bgs, seed=2)
+    det = tracker.detection
+    det.config = replace(det.config, duplicate_margin=margin)
+    blue = person(2.0, 2.4, theta=0.0)
+    yellow = person(4.0, 3.0, theta=0.0, colours=(SKIN, (200, 190, 40), (150, 40, 120)))
+    released, jump, checks = {}, 30, []
+    for k in range(60):
+        if k == jump:
+            assert tracker.track_ids == [1, 2]      # 1 on blue, 2 on yellow
+            tracker.relocate_track(1, yellow[0])
+        people = ([blue] if k < jump else []) + ([yellow] if k >= 8 else [])
+        r = tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, people, rng))
+        for tid in r.released:
+            released.setdefault(tid, k)
+        checks += det.duplicate_checks
+    assert released == ({1: jump + round(0.5 * FPS)} if np.isfinite(margin)
+                        else {2: jump + round(0.5 * FPS)})
+    assert tracker.track_ids == ([2] if np.isfinite(margin) else [1])
+    if np.isfinite(margin):     # judged once: track 2's model fits by far
+        assert len(checks) == 1 and checks[0]['ids'] == (1, 2) and checks[0]['keep'] == 2
+        assert checks[0]['gain'] < -margin and checks[0]['cameras'] >= 2
+    else:
+        assert checks == []
+    for bad in (-1.0, float('nan')):
+        with pytest.raises(DetectionError, match='duplicate_margin'):
+            AutoDetectionConfig(duplicate_margin=bad)
+
 def test_detection_every_kth_frame_set_holds_existence_in_between(monkeypatch):
     """``detection_every=3``: the detection pipeline runs on frame sets 0, 3, 6, ... only;
     the frame sets between report the tracks with the last existence and visibility, and
@@ -1253,7 +1302,7 @@ def test_reach_counts_foreground_only_where_no_other_track_is():
     person of the bootstrap (a ghost: the background's not-yet-known foreground); with the
     detector's exclusion radius there is no place near the other track at all; bad
     settings raise."""
-    from mbtrack_ros.core.detection.manager import AutoDetection, AutoDetectionConfig
+    from mbtrack_ros.core.detection.manager import AutoDetection
     from mbtrack_ros.core.detection.release import paint_blobs
 
     calib = make_room()

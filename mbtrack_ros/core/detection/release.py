@@ -43,7 +43,7 @@ such a track usually still stands on its person (h-rel2, docs/detection.md).
 """
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import cv2
@@ -405,7 +405,8 @@ class Releaser:
         return ended
 
     def duplicates(self, stamp_ns: int, ids: Sequence[int], xy: np.ndarray,
-                   shown_since: Sequence[int] | None = None) -> list[int]:
+                   shown_since: Sequence[int] | None = None,
+                   prefer: Callable[[int, int], int | None] | None = None) -> list[int]:
         """Ids of tracks that shadowed another one for ``merge_time`` seconds: of each
         such pair the younger one (larger id), or with ``shown_since`` the one reported
         without a break for the shorter time (later stamp; ties: the larger id). A track
@@ -416,6 +417,8 @@ class Releaser:
             stamp_ns: frame stamp; ids: K track ids; xy: (K, 2) floor positions, metres.
             shown_since: optional (K,) stamps since which each track has been reported
                 without a break (its birth, last move or last hidden frame).
+            prefer: optional judge of a due pair: called with the two ids, returns the
+                id to keep (the other is released) or None for the rule above.
         """
         cfg = self.config
         xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
@@ -433,7 +436,9 @@ class Releaser:
         for p in close:
             since = self._close.setdefault(p, int(stamp_ns))
             if (int(stamp_ns) - since) / 1e9 >= cfg.merge_time:
-                out.add(max(p, key=rank.__getitem__))
+                keep = prefer(*p) if prefer is not None else None
+                out.add(max(p, key=rank.__getitem__) if keep not in p
+                        else p[0] if keep == p[1] else p[1])
         for p in list(self._close):
             if p[0] in out or p[1] in out:
                 del self._close[p]
