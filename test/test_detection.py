@@ -538,6 +538,9 @@ def test_auto_detection_tracks_with_side_cameras_and_rejects_bad_images():
 
 
 # -- tracker integration -----------------------------------------------------------------
+YELLOW = (SKIN, (200, 190, 40), (150, 40, 120))     # clothes of somebody who looks different
+
+
 def _detecting_tracker(calib, bgs, seed, **config):
     """A Tracker with automatic detection, background bootstrapped from ``bgs``."""
     from mbtrack_ros.core.tracker import Tracker, TrackerConfig
@@ -546,6 +549,18 @@ def _detecting_tracker(calib, bgs, seed, **config):
                       rng=np.random.default_rng(seed))
     tracker.detection.bootstrap({n: [bgs[n]] for n in calib.cameras})
     return tracker
+
+
+def _painted_room_tracker(seed, **detection):
+    """The painted room (with ceiling camera), its backgrounds and a detecting tracker of
+    tracker seed ``seed`` with these ``AutoDetectionConfig`` fields."""
+    from dataclasses import replace
+
+    calib = make_room()
+    bgs = backgrounds(calib)
+    tracker = _detecting_tracker(calib, bgs, seed=seed)
+    tracker.detection.config = replace(tracker.detection.config, **detection)
+    return calib, bgs, tracker
 
 
 def test_tracker_detects_tracks_and_releases_a_painted_person():
@@ -1050,16 +1065,10 @@ def test_a_person_re_found_soon_after_the_release_gets_the_released_id(
     (``reuse_distance``), a new id is issued. The id ends (``FrameResult.ended``) at the
     release when it cannot come back, ``reuse_time`` after it when nobody took it, never
     when it was taken: an id never returns after it ended."""
-    from dataclasses import replace
-
     rng = np.random.default_rng(5)
-    calib = make_room()
-    bgs = backgrounds(calib)
-    tracker = _detecting_tracker(calib, bgs, seed=4)
-    det = tracker.detection
-    det.config = replace(det.config, reuse_time=reuse_time)
+    calib, bgs, tracker = _painted_room_tracker(4, reuse_time=reuse_time)
     stand = [person(*place, theta=0.0)]
-    other = [person(*place, theta=0.0, colours=(SKIN, (200, 190, 40), (150, 40, 120)))]
+    other = [person(*place, theta=0.0, colours=YELLOW)]
     released_at, ids, ended = None, [], {}
     for k in range(75):
         gone = 12 <= k < 12 + 15 + 5 if released_at is None else \
@@ -1094,16 +1103,11 @@ def test_of_two_tracks_on_one_person_the_one_whose_model_fits_stays(margin):
     merge time one of the two is released: with ``duplicate_margin`` the one whose model
     does not explain the yellow person (1, although reported for longer); without it the
     shorter reported one (2), which leaves the yellow person with the wrong id."""
-    from dataclasses import replace
-
     rng = np.random.default_rng(3)
-    calib = make_room()
-    bgs = backgrounds(calib)
-    tracker = _detecting_tracker(calib, bgs, seed=2)
+    calib, bgs, tracker = _painted_room_tracker(2, duplicate_margin=margin)
     det = tracker.detection
-    det.config = replace(det.config, duplicate_margin=margin)
     blue = person(2.0, 2.4, theta=0.0)
-    yellow = person(4.0, 3.0, theta=0.0, colours=(SKIN, (200, 190, 40), (150, 40, 120)))
+    yellow = person(4.0, 3.0, theta=0.0, colours=YELLOW)
     released, jump, checks = {}, 30, []
     for k in range(60):
         if k == jump:
