@@ -943,25 +943,13 @@ class AutoDetection:
         def prefer(a: int, b: int) -> int | None:
             ka, kb = index[a], index[b]
             ma, mb = models.get(a), models.get(b)
-            fits = {}
+            fits = []
             if ma is not None and mb is not None and ma.view_angles.size \
                     and mb.view_angles.size:
                 states = np.stack([means[ka], means[kb]]).astype(np.float64)
                 states[:, [X, Y]] = 0.5 * (means[ka, [X, Y]] + means[kb, [X, Y]])
-                for n in self.side:
-                    if n not in evidence:
-                        continue
-                    cam = self.calibration.cameras[n]
-                    sil = rasterize(cam, states, [ma.shape, mb.shape])
-                    if np.any(sil.area < 0.5 * np.maximum(sil.full_area, 1)) \
-                            or np.any(sil.area <= 0):
-                        continue
-                    rel = relative_angle(states[:, THETA],
-                                         cam.viewing_angle(states[:, [X, Y]]))
-                    hists = np.stack([ma.interpolate(rel[:1])[0], mb.interpolate(rel[1:])[0]])
-                    fits[n] = single_target_loglik(evidence[n].bins, sil, hists,
-                                                   sigma=self.config.sigma)
-            gain = float(np.mean([f[0] - f[1] for f in fits.values()])) if fits else 0.0
+                fits = self._pair_logliks(states, (ma, mb), evidence)
+            gain = float(np.mean([f[0] - f[1] for f in fits])) if fits else 0.0
             keep = (a if gain > 0 else b) if abs(gain) > self.config.duplicate_margin \
                 else None
             self.duplicate_checks.append({'ids': (int(a), int(b)), 'gain': round(gain, 3),
@@ -973,22 +961,29 @@ class AutoDetection:
                   evidence: Mapping[str, FrameEvidence]) -> float:
         """Mean over side cameras of ``log p(y_c | candidate) - log p(y_c | track)`` under
         the track's appearance model (003 Eq. 3), cameras seeing both silhouettes only."""
-        cfg = self.config
         states = np.stack([track, candidate]).astype(np.float64)
         states[1, THETA] = track[THETA]
-        gains = []
+        gains = [float(ll[1] - ll[0])
+                 for ll in self._pair_logliks(states, (model, model), evidence)]
+        return float(np.mean(gains)) if gains else float('-inf')
+
+    def _pair_logliks(self, states: np.ndarray, models: tuple[PersonModel, PersonModel],
+                      evidence: Mapping[str, FrameEvidence]) -> list[np.ndarray]:
+        """(2,) log-likelihoods (003 Eq. 3) of ``models[i]`` at ``states[i]`` (2, 6), one
+        per side camera whose image holds at least half of both silhouettes."""
+        out = []
         for n in self.side:
             if n not in evidence:
                 continue
             cam = self.calibration.cameras[n]
-            sil = rasterize(cam, states, model.shape)
+            sil = rasterize(cam, states, [m.shape for m in models])
             if np.any(sil.area < 0.5 * np.maximum(sil.full_area, 1)) or np.any(sil.area <= 0):
                 continue
             rel = relative_angle(states[:, THETA], cam.viewing_angle(states[:, [X, Y]]))
-            ll = single_target_loglik(evidence[n].bins, sil, model.interpolate(rel),
-                                      sigma=cfg.sigma)
-            gains.append(float(ll[1] - ll[0]))
-        return float(np.mean(gains)) if gains else float('-inf')
+            hists = np.stack([m.interpolate(rel[i:i + 1])[0] for i, m in enumerate(models)])
+            out.append(single_target_loglik(evidence[n].bins, sil, hists,
+                                            sigma=self.config.sigma))
+        return out
 
     @staticmethod
     def _shape(model: PersonModel | None, track: TrackEstimate) -> BodyShape:
