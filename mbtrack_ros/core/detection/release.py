@@ -437,8 +437,10 @@ class Releaser:
             since = self._close.setdefault(p, int(stamp_ns))
             if (int(stamp_ns) - since) / 1e9 >= cfg.merge_time:
                 keep = prefer(*p) if prefer is not None else None
-                out.add(max(p, key=rank.__getitem__) if keep not in p
-                        else p[0] if keep == p[1] else p[1])
+                if keep in p:           # the judge decided: the other one goes
+                    out.add(p[1] if keep == p[0] else p[0])
+                else:
+                    out.add(max(p, key=rank.__getitem__))
         for p in list(self._close):
             if p[0] in out or p[1] in out:
                 del self._close[p]
