@@ -1,6 +1,6 @@
 from glob import glob
 
-from setuptools import find_packages, setup
+from setuptools import find_namespace_packages, setup
 
 package_name = 'mbtrack_ros'
 
@@ -30,7 +30,9 @@ PYPI_RUNTIME = [
 setup(
     name=package_name,
     version='0.1.0',
-    packages=find_packages(exclude=['test']),
+    # the data folders too (namespace packages), so that setuptools installs their files
+    # without warning that they look like packages it was not told about
+    packages=find_namespace_packages(include=[package_name, package_name + '.*']),
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
