@@ -167,6 +167,10 @@ def test_releaser_ends_tracks_beyond_the_exit_margin_only():
         rel.exited([1], xy)
     with pytest.raises(DetectionError, match='exit_margin'):
         ReleaseConfig(exit_margin=-0.1)
+    from mbtrack_ros.core.detection.manager import AutoDetectionConfig
+    for bad in (-0.1, float('nan')):
+        with pytest.raises(DetectionError, match='birth_exit_depth'):
+            AutoDetectionConfig(birth_exit_depth=bad)
 
 
 def _leaver(crowd):
@@ -182,14 +186,16 @@ def _leaver(crowd):
 
 
 @pytest.mark.parametrize('ceiling', [True, False])
-def test_a_person_who_walks_out_is_released_within_1_5_s(ceiling):
+@pytest.mark.parametrize('rules', ['exit', 'default'])
+def test_a_person_who_walks_out_is_released_within_1_5_s(ceiling, rules):
     """A short synth recording: the track is released within 1.5 s of the ground truth's
-    last row (the person crossing the wall); with the ceiling camera it follows the person
-    through the door and the exit rule releases it (without exits the person, visible in
-    the corridor, held it at the floor edge; measured, docs/detection.md "Exits"). Without
-    the ceiling camera (seed 4) the track loses the person at the door and the support
-    timeout ends it first. The doorway rule is off here (it ends the track earlier still:
-    test_release_doorway)."""
+    last row (the person crossing the wall). ``exit``: the doorway rule off and the exit
+    margin of before the fifteenth session (0.3 m); with the ceiling camera the track
+    follows the person through the door and the exit rule releases it (without exits the
+    person, visible in the corridor, held it at the floor edge; measured, docs/detection.md
+    "Exits"). Without the ceiling camera (seed 4) the track loses the person at the door and
+    the support timeout ends it first. ``default``: the doorway rule ends the track before
+    it reaches today's exit margin, 0.6 m (test_release_doorway)."""
     from mbtrack_ros.core.tracker import Tracker, TrackerConfig
     from mbtrack_ros.synth import Synthesizer
 
@@ -197,8 +203,9 @@ def test_a_person_who_walks_out_is_released_within_1_5_s(ceiling):
                         width=320, height=240, ceiling=ceiling)
     assert synth.calibration.exits
     tracker = Tracker(synth.calibration, TrackerConfig(detection=True, seed=0))
-    tracker.detection.releaser = Releaser(
-        synth.calibration, replace(tracker.detection.releaser.config, doorway_band=0.0))
+    if rules == 'exit':
+        tracker.detection.releaser = Releaser(synth.calibration, replace(
+            tracker.detection.releaser.config, doorway_band=0.0, exit_margin=0.3))
     exited = []
     original = tracker.detection.releaser.exited
 
@@ -219,7 +226,7 @@ def test_a_person_who_walks_out_is_released_within_1_5_s(ceiling):
             ended = frame.index
     assert len(born) == 1 and last_truth is not None
     assert ended is not None and 0 <= (ended - last_truth) / synth.fps <= 1.5
-    if ceiling:
+    if ceiling and rules == 'exit':
         assert exited == sorted(born)
     assert tracker.track_ids == []
 
@@ -273,16 +280,17 @@ def test_hidden_exit_particles_score_their_targets_mean_in_that_camera():
             assert hidden.any() == (name in ('cam2', 'cam3'))
 
 
-def test_no_birth_deeper_into_an_exit_than_half_the_release_margin():
-    """A confirmed detection in the doorway beyond exit_margin / 2 starts no track (it
-    would be released at once); one just inside the exit does."""
+def test_no_birth_deeper_into_an_exit_than_the_birth_depth():
+    """A confirmed detection in the doorway deeper than birth_exit_depth starts no track
+    (its person is in the doorway or beyond); one just inside the exit does."""
     from mbtrack_ros.core.appearance import PersonModel
     from mbtrack_ros.core.detection.detector import Detection, FrameEvidence
     from mbtrack_ros.core.detection.manager import AutoDetection, _Found, _Pending
 
     calib = make_calibration(default_room(), width=160, height=120)
     auto = AutoDetection(calib)
-    margin = auto.config.release.exit_margin
+    margin = 2 * auto.config.birth_exit_depth
+    assert margin < auto.config.release.exit_margin      # such a track would not end at once
     image = np.zeros((120, 160, 3), np.uint8)
     evidence = {'cam0': FrameEvidence(image, np.zeros((120, 160), bool))}
     pending = _Pending(0, {'cam0': image}, [], {}, np.zeros((0, 6)), [], evidence, [])

@@ -53,6 +53,8 @@ def test_replay_options_beat_the_params_file(tmp_path):
     assert config('--subsample', '3').subsample == 3
     assert config().mrf_radius == 0.3
     assert config('--mrf-radius', '0.4').mrf_radius == 0.4
+    assert not config().motion.orientation_follows_velocity
+    assert config('--paper-motion').motion.orientation_follows_velocity   # 000 §VI
     params.write_text('tracker_node:\n  ros__parameters:\n    tracker:\n      mrf_radius: 0.25\n')
     assert config('--params', str(params)).mrf_radius == 0.25
     assert config('--params', str(params), '--mrf-radius', '0.35').mrf_radius == 0.35

@@ -149,7 +149,11 @@ def test_the_track_of_a_person_who_walked_out_ends_sooner_with_the_doorway_rule(
     stays behind at the door. The plain support timeout ended it 1.13 s after the person
     crossed the wall (their last ground-truth row), the doorway rule 0.40 s after. The
     reach is off (``reach_radius`` 0): it moves the lagging track after its person into
-    the exit (ended 0.2 s after without the doorway rule), which is not what this compares."""
+    the exit (ended 0.2 s after without the doorway rule), which is not what this compares.
+    The motion is the coupled one of 000 (``orientation_follows_velocity``), with which the
+    track lags: with the default motion its velocity follows the person and the track ends
+    0.40 s after their last row without the doorway rule too."""
+    from mbtrack_ros.core.dynamics import MotionConfig
     from mbtrack_ros.core.tracker import Tracker, TrackerConfig
     from mbtrack_ros.synth import Synthesizer
     from mbtrack_ros.synth.presets import Preset
@@ -157,7 +161,8 @@ def test_the_track_of_a_person_who_walked_out_ends_sooner_with_the_doorway_rule(
 
     synth = Synthesizer(Preset('leaver', 'one person leaves', 200, None, _leaver), seed=4,
                         width=320, height=240, ceiling=False)
-    tracker = Tracker(synth.calibration, TrackerConfig(detection=True, seed=0))
+    tracker = Tracker(synth.calibration, TrackerConfig(
+        detection=True, seed=0, motion=MotionConfig(orientation_follows_velocity=True)))
     tracker.detection.config = replace(tracker.detection.config, reach_radius=0.0)
     config = replace(tracker.detection.releaser.config, doorway_band=band)
     tracker.detection.releaser = Releaser(synth.calibration, config)

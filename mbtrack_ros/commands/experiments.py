@@ -84,7 +84,7 @@ def _replay(recording: Path, out: Path, alg: str, n: int, seed: int, max_frames:
     particles = alg not in _NO_PARTICLES
     argv = ['replay', str(recording), '--out', str(out), '--init-from', str(gt),
             '--algorithm', alg, '--seed', str(seed), '--d-occ', str(d_occ),
-            '--sigma', str(sigma), '--mrf-radius', str(PAPER_MRF_RADIUS)]
+            '--sigma', str(sigma), '--mrf-radius', str(PAPER_MRF_RADIUS), '--paper-motion']
     argv += ['--save-particles'] if particles else []
     argv += ['--joint-particles', str(n)] if alg == 'joint' else ['--particles', str(n)]
     if not mrf:

@@ -34,6 +34,7 @@ import yaml
 
 from mbtrack_ros.commands.output_writer import BackgroundWriter, output_bag_writer
 from mbtrack_ros.core.camera import CalibrationError, RoomCalibration
+from mbtrack_ros.core.dynamics import MotionConfig
 from mbtrack_ros.core.filters import FilterError
 from mbtrack_ros.core.initiation import InitiationError, initial_tracks, plan_key_views
 from mbtrack_ros.core.likelihood import LikelihoodError
@@ -83,6 +84,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument('--mrf-radius', type=float, default=None, metavar='R',
                         help='spatial-exclusion radius of the MRF prior, metres (default '
                              '0.3; 000 uses 0.4)')
+    parser.add_argument('--paper-motion', action='store_true',
+                        help='the motion of 000 §VI: a walking body faces its direction of '
+                             'motion (the default keeps orientation apart from velocity: '
+                             'MotionConfig.orientation_follows_velocity)')
     parser.add_argument('--sigma', type=float, default=None,
                         help='likelihood width sigma (default 0.12)')
     parser.add_argument('--d-occ', type=float, default=None,
@@ -172,6 +177,8 @@ def _config(args: argparse.Namespace) -> TrackerConfig:
             values['use_mrf'] = False
         if args.pipeline_search:
             values['pipeline_search'] = True
+        if args.paper_motion:
+            values['motion'] = MotionConfig(orientation_follows_velocity=True)
         values.update(seed=args.seed, detection=args.init_from is None)
         return TrackerConfig.from_dict(values)
     except TrackerError as err:
