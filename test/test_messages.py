@@ -9,7 +9,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from sensor_msgs.msg import PointField
 from visualization_msgs.msg import Marker
 
-from mbtrack_ros.core.state import FrameResult, TrackEstimate
+from mbtrack_ros.core.state import WALKING_SPEED, FrameResult, TrackEstimate
 from mbtrack_ros.nodes.conversions import stamp_to_ns
 from mbtrack_ros.nodes.messages import (
     TRACK_FIELDS, DiagnosticsSnapshot, debug_overlay, delete_all_markers, diagnostics_message,
@@ -71,16 +71,22 @@ def test_empty_cloud_is_valid():
 
 
 def test_people_pose_yaw_and_position():
-    result = make_result(seed=1)
+    """The yaw is the direction of walking, or the body orientation of a track slower than
+    WALKING_SPEED."""
+    result = make_result(seed=1, n=4)
+    result.tracks[3].mean[[2, 3]] = (0.1, -0.15)                    # 0.18 m/s: standing
     msg = people_message(result)
     assert msg.header.frame_id == 'room' and stamp_to_ns(msg.header.stamp) == STAMP
-    assert len(msg.poses) == 3
-    for pose, t in zip(msg.poses, result.tracks):
+    assert len(msg.poses) == 4
+    for k, (pose, t) in enumerate(zip(msg.poses, result.tracks)):
         q = pose.orientation
         assert abs(q.x) < 1e-12 and abs(q.y) < 1e-12
         np.testing.assert_allclose(q.z ** 2 + q.w ** 2, 1.0)
         yaw = 2 * math.atan2(q.z, q.w)
-        np.testing.assert_allclose(math.remainder(yaw - t.mean[4], 2 * math.pi), 0,
+        walking = math.hypot(t.mean[2], t.mean[3]) >= WALKING_SPEED
+        assert walking == (k < 3)
+        expected = math.atan2(t.mean[3], t.mean[2]) if walking else t.mean[4]
+        np.testing.assert_allclose(math.remainder(yaw - expected, 2 * math.pi), 0,
                                    atol=1e-9)
         assert (pose.position.x, pose.position.y, pose.position.z) == (
             t.mean[0], t.mean[1], 0.0)
@@ -238,7 +244,7 @@ def _reference_pose(track, z=0.0):
     pose = Pose()
     pose.position.x, pose.position.y, pose.position.z = (
         float(track.mean[0]), float(track.mean[1]), float(z))
-    q = yaw_to_quaternion(float(track.mean[4]))
+    q = yaw_to_quaternion(track.heading())
     pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w = q
     return pose
 

@@ -7,14 +7,17 @@ A particle (one hypothesis of one person) is a row of a float64 array of width
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ['STATE_DIM', 'X', 'Y', 'VX', 'VY', 'THETA', 'SIT', 'FrameResult', 'TrackEstimate']
+__all__ = ['STATE_DIM', 'X', 'Y', 'VX', 'VY', 'THETA', 'SIT', 'WALKING_SPEED', 'FrameResult',
+           'TrackEstimate']
 
 X, Y, VX, VY, THETA, SIT = range(6)
 STATE_DIM = 6
+WALKING_SPEED = 0.2   # m/s: a track at least this fast is reported facing its motion
 
 
 @dataclass
@@ -43,6 +46,16 @@ class TrackEstimate:
     existence: float = 1.0
     particles: np.ndarray | None = None
     weights: np.ndarray | None = None
+
+    def heading(self, walking_speed: float = WALKING_SPEED) -> float:
+        """Radians: the direction of the mean velocity when the person walks (at least
+        ``walking_speed`` m/s), else the body orientation. The orientation is what fits the
+        appearance model, which is annotated automatically and often wrongly
+        (``MotionConfig.orientation_follows_velocity``); the velocity is the person's."""
+        vx, vy = float(self.mean[VX]), float(self.mean[VY])
+        if math.hypot(vx, vy) >= walking_speed:
+            return math.atan2(vy, vx)
+        return float(self.mean[THETA])
 
 
 @dataclass

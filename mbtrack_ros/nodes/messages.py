@@ -45,7 +45,7 @@ from sensor_msgs.msg import PointCloud2, PointField
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
-from mbtrack_ros.core.state import SIT, THETA, VX, VY, X, Y, FrameResult, TrackEstimate
+from mbtrack_ros.core.state import SIT, VX, VY, X, Y, FrameResult, TrackEstimate
 from mbtrack_ros.nodes.conversions import ns_to_stamp
 
 __all__ = [
@@ -97,17 +97,20 @@ _MARKER = Marker()
 
 
 def _pose(track: TrackEstimate, z: float = 0.0, *, upright: bool = False) -> Pose:
-    """The track's floor position at height ``z``, turned by its yaw (``upright``: no turn)."""
+    """The track's floor position at height ``z``, turned by its heading (the direction of
+    walking, or the body orientation of a person standing: ``TrackEstimate.heading``;
+    ``upright``: no turn)."""
     pose = copy.copy(_POSE)
     pose.position = Point(x=float(track.mean[X]), y=float(track.mean[Y]), z=float(z))
     qx, qy, qz, qw = (0.0, 0.0, 0.0, 1.0) if upright \
-        else yaw_to_quaternion(float(track.mean[THETA]))
+        else yaw_to_quaternion(track.heading())
     pose.orientation = Quaternion(x=qx, y=qy, z=qz, w=qw)
     return pose
 
 
 def people_message(result: FrameResult, frame_id: str = 'room') -> PoseArray:
-    """``~/people``: one pose per reported track (floor point z = 0, yaw = body orientation)."""
+    """``~/people``: one pose per reported track (floor point z = 0, yaw = heading: the
+    direction of walking, or the body orientation of a person standing)."""
     msg = PoseArray()
     msg.header = make_header(result.stamp_ns, frame_id)
     msg.poses = [_pose(t) for t in result.tracks]
