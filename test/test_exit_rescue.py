@@ -16,6 +16,7 @@ from mbtrack_ros.core.shape import BodyShape, rasterize
 from mbtrack_ros.core.state import TrackEstimate
 
 from test_detection import FPS, _detecting_tracker, backgrounds, make_room, paint, person
+from test_exits import FORMER_EXIT_MARGIN
 
 EXIT = (4.2, 4.7, 5.1, 6.2)          # beyond the painted room's north edge (floor y <= 4.7)
 AT_DOOR = (4.5, 4.5)                 # a person standing on the floor right at the door
@@ -115,9 +116,9 @@ def test_a_person_standing_at_the_door_keeps_the_id_of_a_track_pushed_into_the_e
     rng = np.random.default_rng(6)
     tracker = _detecting_tracker(calib, bgs, seed=3)
     tracker.detection.config = replace(tracker.detection.config, exit_rescue=rescue)
-    # the exit margin the rescue was measured with (0.3 m; PUSHED is 0.4 m deep)
+    # the exit margin the rescue was measured with (PUSHED is 0.4 m deep)
     tracker.detection.releaser = Releaser(
-        calib, replace(tracker.detection.releaser.config, exit_margin=0.3))
+        calib, replace(tracker.detection.releaser.config, exit_margin=FORMER_EXIT_MARGIN))
 
     def standing(k):
         return [person(*AT_DOOR, theta=-1.2)]
@@ -158,7 +159,8 @@ def test_a_person_who_walks_out_is_still_released_within_1_5_s_with_the_rescue(c
     tracker.detection.config = replace(tracker.detection.config, exit_rescue=0.5)
     if ceiling:   # the exit rule, not the doorway rule, ends it (as in test_exits)
         tracker.detection.releaser = Releaser(synth.calibration, replace(
-            tracker.detection.releaser.config, doorway_band=0.0, exit_margin=0.3))
+            tracker.detection.releaser.config, doorway_band=0.0,
+            exit_margin=FORMER_EXIT_MARGIN))
     last_truth = ended = None
     checks = []
     for frame in synth:

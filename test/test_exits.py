@@ -13,6 +13,8 @@ from mbtrack_ros.core.detection.detector import Detector, DetectorConfig
 from mbtrack_ros.core.detection.release import ReleaseConfig, Releaser
 from mbtrack_ros.core.dynamics import DynamicsError, MotionConfig, predict
 from mbtrack_ros.synth.presets import Preset
+
+FORMER_EXIT_MARGIN = 0.3   # m: ReleaseConfig.exit_margin before the fifteenth session
 from mbtrack_ros.synth.room import default_room, make_calibration
 
 from conftest import make_room
@@ -205,7 +207,7 @@ def test_a_person_who_walks_out_is_released_within_1_5_s(ceiling, rules):
     tracker = Tracker(synth.calibration, TrackerConfig(detection=True, seed=0))
     if rules == 'exit':
         tracker.detection.releaser = Releaser(synth.calibration, replace(
-            tracker.detection.releaser.config, doorway_band=0.0, exit_margin=0.3))
+            tracker.detection.releaser.config, doorway_band=0.0, exit_margin=FORMER_EXIT_MARGIN))
     exited = []
     original = tracker.detection.releaser.exited
 

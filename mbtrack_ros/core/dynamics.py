@@ -40,7 +40,7 @@ import numpy as np
 from numba import njit
 
 from mbtrack_ros.core._kernels import wrap_angle
-from mbtrack_ros.core.state import SIT, STATE_DIM, THETA, VX, VY, X, Y
+from mbtrack_ros.core.state import SIT, STATE_DIM, THETA, VX, VY, WALKING_SPEED, X, Y
 
 __all__ = ['DynamicsError', 'MotionConfig', 'concatenate_noise', 'draw_motion_noise',
            'move_particles', 'predict']
@@ -71,7 +71,7 @@ class MotionConfig:
     velocity_noise: float = 0.6
     position_noise: float = 0.15
     orientation_noise: float = 1.0
-    orientation_speed: float = 0.2
+    orientation_speed: float = WALKING_SPEED
     sit_flip_rate: float = 0.05
     max_speed: float = 3.0
     velocity_damping: float = 0.0

@@ -17,7 +17,7 @@ __all__ = ['STATE_DIM', 'X', 'Y', 'VX', 'VY', 'THETA', 'SIT', 'WALKING_SPEED', '
 
 X, Y, VX, VY, THETA, SIT = range(6)
 STATE_DIM = 6
-WALKING_SPEED = 0.2   # m/s: a track at least this fast is reported facing its motion
+WALKING_SPEED = 0.2   # m/s: a body this fast faces its motion (reported heading, 000's motion)
 
 
 @dataclass
