@@ -14,6 +14,7 @@ from rclpy.context import Context  # noqa: E402
 
 from conftest import REPO, make_room  # noqa: E402
 from mbtrack_ros.core.tracker import Tracker, TrackerConfig, TrackerError  # noqa: E402
+from mbtrack_ros.core.dynamics import MotionConfig  # noqa: E402
 
 FAST = REPO / 'config' / 'clear_room_fast.yaml'
 OFFLINE = REPO / 'config' / 'clear_room_offline.yaml'
@@ -55,6 +56,14 @@ def test_replay_options_beat_the_params_file(tmp_path):
     assert config('--mrf-radius', '0.4').mrf_radius == 0.4
     assert not config().motion.orientation_follows_velocity
     assert config('--paper-motion').motion.orientation_follows_velocity   # 000 §VI
+    # the node's motion.* parameters, and --paper-motion on top of the file's other values
+    params.write_text('tracker_node:\n  ros__parameters:\n    motion:\n'
+                      '      velocity_noise: 0.4\n      orientation_follows_velocity: true\n')
+    assert config('--params', str(params)).motion == MotionConfig(
+        velocity_noise=0.4, orientation_follows_velocity=True)
+    params.write_text('tracker_node:\n  ros__parameters:\n    motion:\n      max_speed: 2\n')
+    assert config('--params', str(params), '--paper-motion').motion == MotionConfig(
+        max_speed=2.0, orientation_follows_velocity=True)
     params.write_text('tracker_node:\n  ros__parameters:\n    tracker:\n      mrf_radius: 0.25\n')
     assert config('--params', str(params)).mrf_radius == 0.25
     assert config('--params', str(params), '--mrf-radius', '0.35').mrf_radius == 0.35
@@ -76,6 +85,16 @@ def test_replay_params_file_refuses_unknown_keys(tmp_path):
     bad = tmp_path / 'bad.yaml'
     bad.write_text('tracker_node:\n  ros__parameters:\n    tracker:\n      subsampel: 2\n')
     with pytest.raises(TrackerError, match='subsampel'):
+        tracker_values_from_params(bad)
+    bad.write_text('tracker_node:\n  ros__parameters:\n    motion:\n      velocty_noise: 1\n')
+    with pytest.raises(TrackerError, match='velocty_noise'):
+        tracker_values_from_params(bad)
+    bad.write_text('tracker_node:\n  ros__parameters:\n    tracker:\n      particles: "50"\n')
+    with pytest.raises(TrackerError, match="tracker.particles: expected int, got '50'"):
+        tracker_values_from_params(bad)
+    bad.write_text('tracker_node:\n  ros__parameters:\n    motion:\n'
+                   '      orientation_follows_velocity: 1\n')
+    with pytest.raises(TrackerError, match='expected bool'):
         tracker_values_from_params(bad)
     with pytest.raises(TrackerError, match='not a tracker_node parameter file'):
         tracker_values_from_params(tmp_path / 'missing.yaml')

@@ -189,7 +189,8 @@ def test_node_defaults_are_the_trackers_defaults():
                         'spare_support': pipeline.release.spare_support,
                         'reuse_time': pipeline.reuse_time}
     for key, (field, _) in TRACKER_PARAMETERS.items():
-        ours = getattr(config, field)
+        owner = config.motion if field.startswith('motion.') else config
+        ours = getattr(owner, field.removeprefix('motion.'))
         if ours is None:
             ours = left_to_pipeline[field]
         assert GLOBAL_PARAMETERS[key][0] == ours, key

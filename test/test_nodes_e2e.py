@@ -20,6 +20,7 @@ from rclpy.executors import MultiThreadedExecutor  # noqa: E402
 from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
 
 from conftest import REPO, playing  # noqa: E402
+from mbtrack_ros.core.dynamics import MotionConfig  # noqa: E402
 from mbtrack_ros.nodes import tracker_node  # noqa: E402
 from mbtrack_ros.nodes.params import ParamsError  # noqa: E402
 from mbtrack_ros.nodes.tracker_node import TrackerNode  # noqa: E402
@@ -112,6 +113,22 @@ def test_detection_parameter_reaches_the_tracker(room_calibration, context, tmp_
         node.destroy_node()
 
 
+def test_motion_parameters_reach_the_tracker(room_calibration, context):
+    node = start(context, '-p', f'calibration_file:={room_calibration}')
+    try:   # the defaults are MotionConfig's: the node moves particles as replay does
+        assert node.tracker.config.motion == MotionConfig()
+    finally:
+        node.destroy_node()
+    node = start(context, '-p', f'calibration_file:={room_calibration}',
+                 '-p', 'motion.orientation_follows_velocity:=true',
+                 '-p', 'motion.velocity_noise:=0.4', '-p', 'motion.max_speed:=2.5')
+    try:
+        assert node.tracker.config.motion == MotionConfig(
+            orientation_follows_velocity=True, velocity_noise=0.4, max_speed=2.5)
+    finally:
+        node.destroy_node()
+
+
 def test_qos_depth_reaches_image_subscriptions_and_outputs(room_calibration, context):
     from rclpy.qos import ReliabilityPolicy
     node = start(context, '-p', f'calibration_file:={room_calibration}',
@@ -149,6 +166,9 @@ BAD = [
     (['-p', 'sync.slop:=1'], "'sync.slop': wrong type"),
     (['-p', 'sync.slop:=0.5', '-p', 'sync.timeout:=0.2'], 'must exceed sync.slop'),
     (['-p', 'tracker.algorithm:=magic'], "tracker.algorithm: 'magic' is not one of"),
+    (['-p', 'motion.velocity_noise:=-0.1'], "'motion.velocity_noise': value out of range"),
+    (['-p', 'motion.orientation_follows_velocity:=1.0'],
+     "'motion.orientation_follows_velocity': wrong type"),
     (['-p', 'cameras:=[cam0,cam9]'], 'unknown camera(s) cam9'),
     (['-p', 'init_ground_truth:=/nonexistent/gt.csv'], 'does not exist'),
 ]

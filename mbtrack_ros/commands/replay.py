@@ -34,7 +34,6 @@ import yaml
 
 from mbtrack_ros.commands.output_writer import BackgroundWriter, output_bag_writer
 from mbtrack_ros.core.camera import CalibrationError, RoomCalibration
-from mbtrack_ros.core.dynamics import MotionConfig
 from mbtrack_ros.core.filters import FilterError
 from mbtrack_ros.core.initiation import InitiationError, initial_tracks, plan_key_views
 from mbtrack_ros.core.likelihood import LikelihoodError
@@ -69,8 +68,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument('--out', type=Path, required=True, metavar='OUTDIR',
                         help='output directory (created)')
     parser.add_argument('--params', type=Path, default=None, metavar='NODE.yaml',
-                        help='take the tracker settings (tracker.*, detection.threshold, '
-                             'detection.every) '
+                        help='take the tracker settings (tracker.*, motion.*, '
+                             'detection.threshold, detection.every, ...) '
                              'from a tracker_node parameter file (config/*.yaml); the '
                              'options below override it')
     parser.add_argument('--algorithm', default=None,
@@ -87,7 +86,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument('--paper-motion', action='store_true',
                         help='the motion of 000 §VI: a walking body faces its direction of '
                              'motion (the default keeps orientation apart from velocity: '
-                             'MotionConfig.orientation_follows_velocity)')
+                             'MotionConfig.orientation_follows_velocity, node parameter '
+                             'motion.orientation_follows_velocity)')
     parser.add_argument('--sigma', type=float, default=None,
                         help='likelihood width sigma (default 0.12)')
     parser.add_argument('--d-occ', type=float, default=None,
@@ -144,24 +144,28 @@ def _resolve_inputs(args: argparse.Namespace) -> tuple[Path, RoomCalibration]:
 # tracker_node parameter (under ``tracker_node: ros__parameters:``) -> TrackerConfig field;
 # ``tracker.seed`` is left to ``--seed`` (a replay is always seeded)
 def tracker_values_from_params(path: Path) -> dict:
-    """TrackerConfig values of a tracker_node parameter file (the ``tracker.*`` and
-    ``detection.*`` entries of ``TRACKER_PARAMETERS``, the node's own map); raises
+    """TrackerConfig values of a tracker_node parameter file (the ``tracker.*``,
+    ``motion.*`` and ``detection.*`` entries of ``TRACKER_PARAMETERS``, the node's own map); raises
     TrackerError on an unreadable file or unknown key."""
-    from mbtrack_ros.nodes.tracker_parameters import TRACKER_PARAMETERS  # no rclpy
+    from mbtrack_ros.nodes.tracker_parameters import (  # no rclpy
+        TRACKER_PARAMETERS, tracker_config_values)
     try:
         doc = yaml.safe_load(Path(path).read_text())
         params = doc['tracker_node']['ros__parameters']
     except (OSError, yaml.YAMLError, KeyError, TypeError) as err:
         raise TrackerError(f'{path}: not a tracker_node parameter file ({err})') from err
     flat: dict = {}
-    for section in ('tracker', 'detection'):
+    for section in ('tracker', 'detection', 'motion'):
         for key, value in (params.get(section) or {}).items():
             flat[f'{section}.{key}'] = value
-    unknown = sorted(k for k in flat if k.startswith('tracker.') and k != 'tracker.seed'
-                     and k not in TRACKER_PARAMETERS)
+    unknown = sorted(k for k in flat if k.startswith(('tracker.', 'motion.'))
+                     and k != 'tracker.seed' and k not in TRACKER_PARAMETERS)
     if unknown:
         raise TrackerError(f'{path}: unknown tracker parameter(s) {", ".join(unknown)}')
-    return {field: flat[key] for key, (field, _) in TRACKER_PARAMETERS.items() if key in flat}
+    try:
+        return tracker_config_values(flat)
+    except TrackerError as err:
+        raise TrackerError(f'{path}: {err}') from err
 
 
 def _config(args: argparse.Namespace) -> TrackerConfig:
@@ -177,8 +181,8 @@ def _config(args: argparse.Namespace) -> TrackerConfig:
             values['use_mrf'] = False
         if args.pipeline_search:
             values['pipeline_search'] = True
-        if args.paper_motion:
-            values['motion'] = MotionConfig(orientation_follows_velocity=True)
+        if args.paper_motion:    # on top of the file's other motion values
+            values.setdefault('motion', {})['orientation_follows_velocity'] = True
         values.update(seed=args.seed, detection=args.init_from is None)
         return TrackerConfig.from_dict(values)
     except TrackerError as err:

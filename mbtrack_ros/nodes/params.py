@@ -73,6 +73,14 @@ detection.every                 int        run the detection pipeline (release, 
 detection.adaptation_rate       double     blending rate of the slow appearance-model
                                            adaptation of confirmed, unoccluded tracks;
                                            0 = off (0.0, docs/detection.md)
+motion.velocity_noise           double     velocity diffusion, m/s per sqrt(s) (0.6)
+motion.position_noise           double     extra position diffusion, m per sqrt(s) (0.15)
+motion.orientation_noise        double     orientation diffusion, rad per sqrt(s) (1.0)
+motion.max_speed                double     velocities are clipped to this, m/s (3.0)
+motion.orientation_follows_velocity
+                                bool       a walking body faces its direction of motion,
+                                           as in 000 §VI (false: the orientation is a
+                                           random walk of its own, docs/detection.md)
 ==============================  =========  =================================================
 """
 from __future__ import annotations
@@ -87,10 +95,11 @@ from rclpy.exceptions import (
 from rclpy.node import Node
 
 from mbtrack_ros.core.camera import CalibrationError, RoomCalibration
+from mbtrack_ros.core.dynamics import MotionConfig
 from mbtrack_ros.core.detection.manager import AutoDetectionConfig
 from mbtrack_ros.core.detection.release import ReleaseConfig
 from mbtrack_ros.core.tracker import TrackerConfig, TrackerError
-from mbtrack_ros.nodes.tracker_parameters import TRACKER_PARAMETERS
+from mbtrack_ros.nodes.tracker_parameters import TRACKER_PARAMETERS, tracker_config_values
 
 __all__ = ['EXECUTORS', 'RELIABILITIES', 'TRACKER_PARAMETERS', 'TRANSPORTS', 'CameraInput',
            'NodeParams', 'ParamsError', 'declare_and_read']
@@ -147,6 +156,8 @@ def _fr(lo: float, hi: float) -> dict[str, Any]:
 def _ir(lo: int, hi: int) -> dict[str, Any]:
     return {'integer_range': [IntegerRange(from_value=lo, to_value=hi, step=1)]}
 
+
+_MOTION = MotionConfig()
 
 # name -> (default, description, extra descriptor fields). The one place parameters live.
 GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
@@ -208,6 +219,17 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
     'detection.adaptation_rate': (0.0, 'blending rate of the slow appearance-model adaptation '
                                   'of confirmed, unoccluded tracks '
                                   '(TrackerConfig.adaptation_rate); 0 = off', _fr(0.0, 1.0)),
+    'motion.velocity_noise': (_MOTION.velocity_noise, 'velocity diffusion of the motion '
+                              'model, m/s per sqrt(s) (000 §VI-A)', _fr(0.0, 10.0)),
+    'motion.position_noise': (_MOTION.position_noise, 'extra position diffusion, m per '
+                              'sqrt(s)', _fr(0.0, 10.0)),
+    'motion.orientation_noise': (_MOTION.orientation_noise, 'orientation diffusion, rad per '
+                                 'sqrt(s)', _fr(0.0, 10.0)),
+    'motion.max_speed': (_MOTION.max_speed, 'velocities are clipped to this norm, m/s',
+                         _fr(0.01, 20.0)),
+    'motion.orientation_follows_velocity': (
+        _MOTION.orientation_follows_velocity, 'a walking body faces its direction of motion '
+        '(000 §VI); false: the orientation is a random walk of its own', {}),
 }
 
 
@@ -284,14 +306,13 @@ def declare_and_read(node: Node) -> tuple[NodeParams, RoomCalibration]:
     gt = str(v['init_ground_truth'])
     if gt and not Path(gt).is_file():
         raise ParamsError(f'init_ground_truth {gt!r} does not exist')
-    tracker_values: dict[str, Any] = {
-        field: kind(v[name]) for name, (field, kind) in TRACKER_PARAMETERS.items()}
-    tracker_values.update(
-        seed=None if v['tracker.seed'] < 0 else int(v['tracker.seed']),
-        # automatic detection (003 §4, 001) inside Tracker.step
-        detection=bool(v['detection.enabled']) and not gt)  # ground truth starts tracks
-    known = {f.name for f in fields(TrackerConfig)}
     try:
+        tracker_values = tracker_config_values(v)
+        tracker_values.update(
+            seed=None if v['tracker.seed'] < 0 else int(v['tracker.seed']),
+            # automatic detection (003 §4, 001) inside Tracker.step
+            detection=bool(v['detection.enabled']) and not gt)  # ground truth starts tracks
+        known = {f.name for f in fields(TrackerConfig)}
         tracker = TrackerConfig.from_dict({k: x for k, x in tracker_values.items()
                                            if k in known})
     except TrackerError as err:
