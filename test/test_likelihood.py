@@ -82,8 +82,10 @@ def _brute_w_star(masks, dist, prior, target, p, exclude):
 
 
 @pytest.mark.parametrize('n_targets,n_particles,seed,zeros', [
-    (2, 4, 0, 0), (3, 3, 1, 0), (3, 5, 2, 0), (3, 5, 4, 3)])
+    (2, 4, 0, 0), (3, 3, 1, 0), (3, 5, 2, 0), (3, 5, 4, 3),
+    (3, (2, 6, 3), 5, 2)])     # unequal counts (docs/diag/variant_crowd_particles.patch)
 def test_hjs_incremental_equals_brute_force(n_targets, n_particles, seed, zeros):
+    counts = n_particles if isinstance(n_particles, tuple) else (n_particles,) * n_targets
     rng = np.random.default_rng(seed)
     cam = _camera('cam', (0.0, -3.5, 1.2))
     mm = MeasurementModel(_room(cam), LikelihoodConfig(d_occ=D_OCC))
@@ -91,9 +93,9 @@ def test_hjs_incremental_equals_brute_force(n_targets, n_particles, seed, zeros)
     mm.set_images({'cam': image})
     bins = quantize(image)
     models = [_random_model(rng, 1.6 + 0.1 * k) for k in range(n_targets)]
-    particles = [_random_particles(rng, (0.3 * k - 0.3, 0.4 * k), n_particles)
+    particles = [_random_particles(rng, (0.3 * k - 0.3, 0.4 * k), counts[k])
                  for k in range(n_targets)]
-    weights = [rng.random(n_particles) + 0.05 for _ in range(n_targets)]
+    weights = [rng.random(counts[k]) + 0.05 for k in range(n_targets)]
     for j in range(zeros):                                   # particles with zero prior
         weights[j % n_targets][j // n_targets] = 0.0
     dbg = mm.hjs_debug('cam', particles, weights, models)

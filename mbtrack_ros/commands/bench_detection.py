@@ -89,8 +89,8 @@ def _models(calibration: RoomCalibration, images: dict, truth: list) -> list:
     return out
 
 
-def _entering(cal: RoomCalibration, scene: list, empty: list, seed: int) -> dict:
-    auto = AutoDetection(cal, rng=np.random.default_rng(seed))
+def _entering(cal: RoomCalibration, scene: list, empty: list) -> dict:
+    auto = AutoDetection(cal)
     _bootstrap(auto, empty)
     total, cpu, search, found = [], [], [], 0
     for i, f in enumerate(scene):
@@ -135,8 +135,8 @@ def _tracked(cal: RoomCalibration, scene: list, empty: list, seed: int) -> dict:
             'tracks_mean': float(np.mean(tracks)) if tracks else 0.0}
 
 
-def _empty_room(cal: RoomCalibration, scene: list, empty: list, seed: int) -> dict:
-    auto = AutoDetection(cal, rng=np.random.default_rng(seed))
+def _empty_room(cal: RoomCalibration, scene: list, empty: list) -> dict:
+    auto = AutoDetection(cal)
     _bootstrap(auto, empty)
     total, cpu = [], []
     for i, f in enumerate(scene):
@@ -164,10 +164,10 @@ def bench_detection(*, frames: int = 30, seed: int = 0,
         tag = '5cams' if ceiling else '4cams'
         _, empty = _render(False, boot + (frames + 1 if ceiling else 0), seed, ceiling, size)
         cal, scene = _render(True, frames + 1, seed, ceiling, size)
-        out[f'entering_{tag}'] = _entering(cal, scene, empty[:boot], seed)
+        out[f'entering_{tag}'] = _entering(cal, scene, empty[:boot])
         out[f'tracked_{tag}'] = _tracked(cal, scene, empty[:boot], seed)
         if ceiling:
-            out[f'empty_{tag}'] = _empty_room(cal, empty[boot:], empty[:boot], seed)
+            out[f'empty_{tag}'] = _empty_room(cal, empty[boot:], empty[:boot])
     return out
 
 

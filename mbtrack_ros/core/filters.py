@@ -212,10 +212,18 @@ class _MarginalParticleFilter:
         self._particles: dict[int, np.ndarray] = {}
         self._logw: dict[int, np.ndarray] = {}
         self._models: dict[int, Any] = {}
+        self._streams: dict[int, np.random.Generator] = {}
 
     def add(self, track_id: int, model: PersonModel, state: np.ndarray,
             rng: np.random.Generator) -> None:
-        """Start a track with N particles around ``state`` (6,)."""
+        """Start a track with N particles around ``state`` (6,).
+
+        ``rng`` draws the initial cloud and stays the track's generator: :meth:`step` draws
+        the track's resampling and motion noise from it (the generator given to ``step``
+        is not used for tracks). Given the same generator as ``step`` the filter runs as
+        with one shared stream; given a stream of its own per track (what
+        :class:`~mbtrack_ros.core.tracker.Tracker` does), a track's draws do not depend on
+        how many other tracks there are or what they drew."""
         if track_id in self._particles:
             raise FilterError(f'track {track_id} already exists')
         s = _check_state(state)
@@ -223,11 +231,12 @@ class _MarginalParticleFilter:
         self._particles[track_id] = _initial_cloud(s, n, self.config, rng)
         self._logw[track_id] = np.full(n, -np.log(n))
         self._models[track_id] = model
+        self._streams[track_id] = rng
 
     def remove(self, track_id: int) -> None:
         if track_id not in self._particles:
             raise FilterError(f'no track {track_id}')
-        for store in (self._particles, self._logw, self._models):
+        for store in (self._particles, self._logw, self._models, self._streams):
             del store[track_id]
 
     def track_ids(self) -> list[int]:
@@ -237,14 +246,15 @@ class _MarginalParticleFilter:
         self._particles.clear()
         self._logw.clear()
         self._models.clear()
+        self._streams.clear()
 
-    def _propagate(self, ids: list[int], dt: float,
-                   rng: np.random.Generator) -> list[np.ndarray]:
+    def _propagate(self, ids: list[int], dt: float) -> list[np.ndarray]:
         """Algorithm 1 predict, first loop: resample by weight, sample the 1-body dynamics.
 
-        Per track, in track order, the draws of :func:`systematic_resample` then those of
-        :func:`predict`; the particles of all tracks then move in one pass (the same
-        numbers as one ``predict`` per track). Returns views of one (K N, 6) array."""
+        Per track, from the track's generator (see :meth:`add`), the draws of
+        :func:`systematic_resample` then those of :func:`predict`; the particles of all
+        tracks then move in one pass (the same numbers as one ``predict`` per track).
+        Returns views of one (K N, 6) array."""
         n = int(self.config.particles)
         if not ids:
             return []
@@ -257,16 +267,18 @@ class _MarginalParticleFilter:
             if not (np.isfinite(totals).all() and (totals > 0).all()):
                 raise ResamplingError('track weights must have a positive finite sum')
             offsets = np.empty(len(ids))
-            for k in range(len(ids)):     # systematic_resample's draw, then predict's
-                offsets[k] = rng.random()
-                noise.append(draw_motion_noise(n, dt, self.config.motion, rng))
+            for k, tid in enumerate(ids):     # systematic_resample's draw, then predict's
+                stream = self._streams[tid]
+                offsets[k] = stream.random()
+                noise.append(draw_motion_noise(n, dt, self.config.motion, stream))
             idx = systematic_indices(w, totals, offsets, n)
             chosen = [self._particles[tid][idx[k]] for k, tid in enumerate(ids)]
         else:
             chosen = []
             for tid, lw in zip(ids, logw):
-                chosen.append(self._particles[tid][systematic_resample(np.exp(lw), n, rng)])
-                noise.append(draw_motion_noise(n, dt, self.config.motion, rng))
+                stream = self._streams[tid]
+                chosen.append(self._particles[tid][systematic_resample(np.exp(lw), n, stream)])
+                noise.append(draw_motion_noise(n, dt, self.config.motion, stream))
         moved = np.concatenate(chosen) if len(chosen) > 1 else chosen[0]
         move_particles(moved, dt, self.config.motion, concatenate_noise(noise),
                        floor=self.floor, exits=self.exits)
@@ -325,7 +337,7 @@ class HJSFilter(_MarginalParticleFilter):
         if not ids:
             return {}
         t0 = time.perf_counter()
-        particles = self._propagate(ids, dt, rng)
+        particles = self._propagate(ids, dt)
         t1 = time.perf_counter()
         n = [p.shape[0] for p in particles]
         if self.config.use_mrf and len(ids) > 1:
@@ -363,7 +375,7 @@ class SeparableFilter(_MarginalParticleFilter):
         if not ids:
             return {}
         t0 = time.perf_counter()
-        particles = self._propagate(ids, dt, rng)
+        particles = self._propagate(ids, dt)
         t1 = time.perf_counter()
         models = [self._models[t] for t in ids]
         result = measurement.separable(particles, models)

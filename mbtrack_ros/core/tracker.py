@@ -264,6 +264,8 @@ class Tracker:
             calibration = calibration.scaled_by(scale)
         self.calibration = calibration  # the cameras at the size the tracker works at
         self.rng = rng if rng is not None else np.random.default_rng(self.config.seed)
+        # every track draws from a stream of its own (see _stream), seeded from this
+        self._entropy = int(self.rng.integers(2 ** 63))
         try:
             self.filter: TrackingFilter = make_filter(self.config.algorithm, calibration,
                                                       self.config)
@@ -287,8 +289,7 @@ class Tracker:
         self.detection = None
         if self.config.detection:
             from mbtrack_ros.core.detection.manager import AutoDetection
-            self.detection = AutoDetection(calibration, self.config.detection_config(),
-                                           rng=self.rng)
+            self.detection = AutoDetection(calibration, self.config.detection_config())
 
     @property
     def track_ids(self) -> list[int]:
@@ -330,7 +331,7 @@ class Tracker:
             raise TrackerError(f'track id {track_id} is live or was never issued')
         track_id = int(track_id) if reused else self._next_id
         try:
-            self.filter.add(track_id, model, s, self.rng)
+            self.filter.add(track_id, model, s, self._stream(track_id, stamp_ns))
         except FilterError as err:
             raise TrackerError(str(err)) from err
         if not reused:
@@ -340,6 +341,17 @@ class Tracker:
         if self.detection is not None:
             self.detection.register(track_id, stamp_ns)
         return track_id
+
+    def _stream(self, track_id: int, stamp_ns: int) -> np.random.Generator:
+        """The random generator of a track started (or restarted) at ``stamp_ns``: seeded
+        by the tracker's seed, the id and the stamp only. A track's particles then do not
+        depend on how many other tracks there are or what they drew, so a change that
+        touches one track (a birth a frame later, a release elsewhere in the room) leaves
+        the draws of the others as they were; with one shared generator it reordered
+        every later draw of every track (docs/detection.md, "One random stream per
+        track")."""
+        key = (int(track_id) % 2 ** 64, int(stamp_ns) % 2 ** 64)
+        return np.random.default_rng(np.random.SeedSequence(self._entropy, spawn_key=key))
 
     def remove_track(self, track_id: int) -> None:
         """End a track; its id is not reused."""
@@ -362,7 +374,7 @@ class Tracker:
         model = self._models[track_id]
         try:
             self.filter.remove(track_id)
-            self.filter.add(track_id, model, s, self.rng)
+            self.filter.add(track_id, model, s, self._stream(track_id, self._last_stamp or 0))
         except FilterError as err:
             raise TrackerError(str(err)) from err
 

@@ -41,10 +41,13 @@ from mbtrack_ros.core.detection.release import (
 from mbtrack_ros.core.existence import (
     AuxiliaryConfig, TrackAuxiliary, coverage_log_ratio, predictive_loglik,
 )
+from mbtrack_ros.core.resampling import systematic_indices
 from mbtrack_ros.core.shape import BodyShape, rasterize
 from mbtrack_ros.core.state import SIT, THETA, VX, VY, X, Y, TrackEstimate
 
 __all__ = ['AutoDetection', 'AutoDetectionConfig', 'Birth']
+
+_MID = np.array([0.5])     # offset of the systematic selection of visibility particles
 
 
 @dataclass(frozen=True)
@@ -235,14 +238,14 @@ class AutoDetection:
     Args:
         calibration: the room.
         config: pipeline parameters.
-        rng: random generator (particle subsampling for the visibility likelihood).
+
+    The pipeline draws no random numbers: it is deterministic given the tracks.
     """
 
-    def __init__(self, calibration: RoomCalibration, config: AutoDetectionConfig | None = None,
-                 *, rng: np.random.Generator | None = None) -> None:
+    def __init__(self, calibration: RoomCalibration, config: AutoDetectionConfig | None = None
+                 ) -> None:
         self.calibration = calibration
         self.config = cfg = config or AutoDetectionConfig()
-        self.rng = rng if rng is not None else np.random.default_rng(0)
         self.background = BackgroundBank(cfg.background, calibration=calibration)
         self.detector = Detector(calibration, cfg.detector)
         self.releaser = Releaser(calibration, cfg.release)
@@ -1132,8 +1135,10 @@ class AutoDetection:
             if t.particles is not None and len(t.particles):
                 p = t.particles
                 w = t.weights if t.weights is not None else np.full(len(p), 1.0 / len(p))
-                idx = self.rng.choice(len(p), size=min(cfg.visibility_particles, len(p)),
-                                      p=w / w.sum())
+                # systematic selection at the weights' quantiles (no draw: a shared
+                # generator would tie every track's sample to the number of tracks)
+                idx = systematic_indices(w[None], np.array([w.sum()]), _MID,
+                                         min(cfg.visibility_particles, len(p)))[0]
                 rows.append(p[idx])
             else:
                 rows.append(t.mean[None])
