@@ -227,30 +227,33 @@ def test_key_views_skip_occluded_frames():
 @pytest.mark.parametrize('algorithm', ['hjs', 'separable'])
 def test_a_track_draws_are_its_own(algorithm):
     """Each track has its own random stream: whether a third track, far from the others,
-    is born, lives or ends leaves the particles of tracks 1 and 2 bit for bit as they are;
-    the same seed gives the same run, another seed another one."""
+    is born before them (taking id 1), lives, ends or is born later leaves the particles
+    of the tracks at (1, 1) and (3, 3) bit for bit as they are; the same seed gives the
+    same run, another seed another one."""
+    near, far, other = np.array([1.0, 1.0]), np.array([3.0, 3.0]), np.array([1.0, 3.2])
+
     def run(third: str, seed: int = 1):
         cfg = TrackerConfig(algorithm=algorithm, particles=50, seed=seed)
-        tr = Tracker(room(), cfg, measurement=StandIn(
-            [np.array([1.0, 1.0]), np.array([3.0, 3.0]), np.array([1.0, 3.2])]))
-        tr.add_track(Model(), [1, 1, 0, 0, 0, 0], 0)
-        tr.add_track(Model(), [3, 3, 0, 0, 0, 0], 0)
+        order = [other, near, far] if third == 'first' else [near, far, other]
+        tr = Tracker(room(), cfg, measurement=StandIn(order))
+        if third == 'first':
+            tr.add_track(Model(), [*other, 0, 0, 0, 0], 0)
+        ids = [tr.add_track(Model(), [*xy, 0, 0, 0, 0], 0) for xy in (near, far)]
         if third in ('ends', 'lives'):
-            tr.add_track(Model(), [1, 3.2, 0, 0, 0, 0], 0)
+            extra = tr.add_track(Model(), [*other, 0, 0, 0, 0], 0)
         out = None
         for k in range(1, 7):
             if k == 3 and third == 'ends':
-                tr.remove_track(3)
+                tr.remove_track(extra)
             if k == 3 and third == 'born':
-                tr.add_track(Model(), [1, 3.2, 0, 0, 0, 0], k * 100_000_000)
+                tr.add_track(Model(), [*other, 0, 0, 0, 0], k * 100_000_000)
             out = {t.track_id: t for t in tr.step(k * 100_000_000, {}).tracks}
-        return out
+        return [out[t] for t in ids]
 
     alone = run('none')
-    for third in ('lives', 'ends', 'born'):
-        other = run(third)
-        for tid in (1, 2):
-            np.testing.assert_array_equal(other[tid].particles, alone[tid].particles)
-            np.testing.assert_array_equal(other[tid].weights, alone[tid].weights)
-    np.testing.assert_array_equal(run('none')[1].particles, alone[1].particles)
-    assert not np.array_equal(run('none', seed=2)[1].particles, alone[1].particles)
+    for third in ('first', 'lives', 'ends', 'born'):
+        for mine, theirs in zip(run(third), alone):
+            np.testing.assert_array_equal(mine.particles, theirs.particles)
+            np.testing.assert_array_equal(mine.weights, theirs.weights)
+    np.testing.assert_array_equal(run('none')[0].particles, alone[0].particles)
+    assert not np.array_equal(run('none', seed=2)[0].particles, alone[0].particles)

@@ -331,7 +331,7 @@ class Tracker:
             raise TrackerError(f'track id {track_id} is live or was never issued')
         track_id = int(track_id) if reused else self._next_id
         try:
-            self.filter.add(track_id, model, s, self._stream(track_id, stamp_ns))
+            self.filter.add(track_id, model, s, self._stream(s, stamp_ns))
         except FilterError as err:
             raise TrackerError(str(err)) from err
         if not reused:
@@ -342,15 +342,17 @@ class Tracker:
             self.detection.register(track_id, stamp_ns)
         return track_id
 
-    def _stream(self, track_id: int, stamp_ns: int) -> np.random.Generator:
-        """The random generator of a track started (or restarted) at ``stamp_ns``: seeded
-        by the tracker's seed, the id and the stamp only. A track's particles then do not
-        depend on how many other tracks there are or what they drew, so a change that
-        touches one track (a birth a frame later, a release elsewhere in the room) leaves
-        the draws of the others as they were; with one shared generator it reordered
-        every later draw of every track (docs/detection.md, "One random stream per
-        track")."""
-        key = (int(track_id) % 2 ** 64, int(stamp_ns) % 2 ** 64)
+    def _stream(self, state: np.ndarray, stamp_ns: int) -> np.random.Generator:
+        """The random generator of a track started (or restarted) at ``state`` (6,) at
+        ``stamp_ns``: seeded by the tracker's seed, the stamp and the floor place (mm)
+        only, not by the track's id, which depends on how many tracks were born before.
+        A track's particles then do not depend on how many other tracks there are or
+        what they drew, so a change that touches one track (a birth a frame later, a
+        release elsewhere in the room) leaves the draws of the others as they were; with
+        one shared generator it reordered every later draw of every track
+        (docs/detection.md, "One random stream per track")."""
+        key = tuple(int(v) % 2 ** 64 for v in (stamp_ns, round(float(state[X]) * 1000),
+                                                round(float(state[Y]) * 1000)))
         return np.random.default_rng(np.random.SeedSequence(self._entropy, spawn_key=key))
 
     def remove_track(self, track_id: int) -> None:
@@ -374,7 +376,7 @@ class Tracker:
         model = self._models[track_id]
         try:
             self.filter.remove(track_id)
-            self.filter.add(track_id, model, s, self._stream(track_id, self._last_stamp or 0))
+            self.filter.add(track_id, model, s, self._stream(s, self._last_stamp or 0))
         except FilterError as err:
             raise TrackerError(str(err)) from err
 
