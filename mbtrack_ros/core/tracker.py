@@ -251,7 +251,9 @@ class Tracker:
             to :meth:`step`; with ``config.image_scale`` below 1 the tracker keeps its
             cameras resized in :attr:`calibration` and resizes the images.
         config: tracker parameters.
-        rng: random generator; default ``np.random.default_rng(config.seed)``.
+        rng: random generator; default ``np.random.default_rng(config.seed)``. One draw
+            from it seeds the tracks' own streams (:meth:`_stream`); the joint filter
+            draws from it directly.
         measurement: optional measurement model (default: the real
             :class:`~mbtrack_ros.core.likelihood.MeasurementModel` built from ``config``).
     """
