@@ -443,8 +443,9 @@ def _crossing_run(algorithm: str, seed: int, frames: int = 45) -> tuple[bool, in
 
 def test_hjs_keeps_identities_through_an_occlusion_where_separable_fails():
     # 80 seeds (about 30 s): the 8 seeds this test had at first gave HJS 7/8, separable
-    # 2/8 with one random generator shared by the tracks, 6/8 and 5/8 with one stream per
-    # track; on 80 seeds HJS 55, separable 48 (13 runs only HJS right, 6 only separable)
+    # 2/8 with one random generator shared by the tracks, 5/8 and 6/8 with one stream per
+    # track; on 80 seeds HJS 55, separable 48 (13 runs only HJS right, 6 only separable;
+    # docs/diag/twins_crossing.py)
     seeds = range(80)
     runs = [_crossing_run('hjs', s) for s in seeds]
     hjs = sum(ok for ok, _ in runs)

@@ -149,7 +149,8 @@ def test_the_track_of_a_person_who_walked_out_ends_sooner_with_the_doorway_rule(
     stays behind at the door. The plain support timeout ended it 1.13 s after the person
     crossed the wall (their last ground-truth row), the doorway rule 0.40 s after (tracker
     seeds 1-5; on seed 0 the person got a second track on the way in, ended 1.00 and 0.87
-    s after). The median over tracker seeds 0-2 is compared. The reach is off
+    s after; ``docs/diag/walk_out.py --no-ceiling --reach-radius 0 --paper-motion
+    --doorway-band B --seed S``). The median over tracker seeds 0-2 is compared. The reach is off
     (``reach_radius`` 0): it moves the lagging track after its person into the exit (ended
     0.2 s after without the doorway rule), which is not what this compares. The motion is
     the coupled one of 000 (``orientation_follows_velocity``), with which the track lags:

@@ -1,17 +1,22 @@
 """Run-by-run comparison of two ``detection_eval.py suite`` outputs (eleventh session).
 
-Usage: compare_scores.py A/scores.json B/scores.json
+Usage: compare_scores.py A/scores.json[,A2/scores.json...] B/scores.json[,B2/...]
 
-For the runs (recording, seed) both hold: on how many B has fewer / more / as many
-identity switches as A, and higher / lower MOTA; then the totals of each.
+For the runs (recording, seed) both sides hold (a side may join several suites, e.g. the
+seeds 0-4 and the held-out seeds of one tree): on how many B has fewer / more / as many
+identity switches as A, and higher / lower MOTA; then the totals of each, the switches per
+tracker seed (all recordings together), and Welch's t and the Mann-Whitney test of those
+per-seed totals (scipy).
 """
 import json
 import sys
 
+from scipy import stats
+
 if len(sys.argv) != 3:
-    sys.exit('usage: compare_scores.py A/scores.json B/scores.json')
-a, b = ({(r['recording'], r['seed']): r for r in json.load(open(p, encoding='utf-8'))['runs']}
-        for p in sys.argv[1:])
+    sys.exit('usage: compare_scores.py A/scores.json[,...] B/scores.json[,...]')
+a, b = ({(r['recording'], r['seed']): r for p in arg.split(',')
+         for r in json.load(open(p, encoding='utf-8'))['runs']} for arg in sys.argv[1:])
 both = sorted(a.keys() & b.keys())
 if not both:
     sys.exit('compare_scores: no run in common')
@@ -20,6 +25,15 @@ mota = [b[k]['mota'] - a[k]['mota'] for k in both]
 print(f'{len(both)} runs: switches fewer in B on {sum(v < 0 for v in sw)}, more on '
       f'{sum(v > 0 for v in sw)}, equal on {sum(v == 0 for v in sw)}; MOTA higher on '
       f'{sum(v > 0 for v in mota)}, lower on {sum(v < 0 for v in mota)}')
+seeds = sorted({k[1] for k in both})
+per_seed = {}
 for name, runs in (('A', a), ('B', b)):
+    per_seed[name] = [sum(runs[k]['mismatches'] for k in both if k[1] == s) for s in seeds]
     print(f'{name}: {sum(runs[k]["mismatches"] for k in both)} switches, mean MOTA '
-          f'{100 * sum(runs[k]["mota"] for k in both) / len(both):.2f} %')
+          f'{100 * sum(runs[k]["mota"] for k in both) / len(both):.2f} %; per tracker seed '
+          f'{seeds}: {per_seed[name]}')
+if len(seeds) > 1:
+    welch = stats.ttest_ind(per_seed['B'], per_seed['A'], equal_var=False)
+    ranks = stats.mannwhitneyu(per_seed['B'], per_seed['A'])
+    print(f'per-seed switches, B against A: Welch t = {welch.statistic:.2f} '
+          f'(p = {welch.pvalue:.2f}), Mann-Whitney p = {ranks.pvalue:.2f}')

@@ -85,7 +85,7 @@ motion.orientation_follows_velocity
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -312,9 +312,7 @@ def declare_and_read(node: Node) -> tuple[NodeParams, RoomCalibration]:
             seed=None if v['tracker.seed'] < 0 else int(v['tracker.seed']),
             # automatic detection (003 §4, 001) inside Tracker.step
             detection=bool(v['detection.enabled']) and not gt)  # ground truth starts tracks
-        known = {f.name for f in fields(TrackerConfig)}
-        tracker = TrackerConfig.from_dict({k: x for k, x in tracker_values.items()
-                                           if k in known})
+        tracker = TrackerConfig.from_dict(tracker_values)
     except TrackerError as err:
         raise ParamsError(str(err)) from err
     _check_algorithm(tracker.algorithm)
