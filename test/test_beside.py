@@ -14,6 +14,7 @@ from mbtrack_ros.core.detection.detector import Detection, FrameEvidence
 from mbtrack_ros.core.detection.manager import AutoDetection, AutoDetectionConfig
 from mbtrack_ros.core.shape import BodyShape, render_labels
 from mbtrack_ros.core.state import TrackEstimate
+from mbtrack_ros.core.tracker import TrackerConfig, TrackerError
 
 from test_detection import (FPS, H, W, _detecting_tracker, _track_painted, backgrounds,
                             make_room, paint, person)
@@ -75,7 +76,8 @@ def test_a_bootstrap_ghost_is_no_support_of_a_track():
     assert alone > 0.8
 
 
-def _lagging(monkeypatch, beside_support, lag=0.42, frames=14, tracked=36, until='decision'):
+def _lagging(monkeypatch, beside_support, lag=0.42, frames=14, tracked=36, until='decision',
+             beside_threshold=0.0, decisions=None):
     """A person walking at 0.3 m/s along y = 2.6 m, tracked as track 1 for ``tracked``
     frames (36: longer than ``relocate_interval``); then, before each step (until the first
     decision, or always with ``until=None``), track 1
@@ -85,7 +87,9 @@ def _lagging(monkeypatch, beside_support, lag=0.42, frames=14, tracked=36, until
     move it (``relocate_margin`` huge), the reach is off, and it stays reported (on the
     recordings such tracks had existence 0.99-1.0 when the birth came; in this painted
     room its existence falls, and a hidden track is the other rule's,
-    ``relocate_hidden``). Returns the tracker and the decisions' actions."""
+    ``relocate_hidden``). ``beside_threshold`` 0: any detection beside it may be born.
+    Returns the tracker and the decisions' actions (the whole records are appended to
+    ``decisions`` when given)."""
     monkeypatch.setattr(AutoDetection, 'reported', lambda self, tid: True)
     rng = np.random.default_rng(3)
     calib = make_room(ceiling=False)
@@ -93,7 +97,8 @@ def _lagging(monkeypatch, beside_support, lag=0.42, frames=14, tracked=36, until
     tracker = _detecting_tracker(calib, bgs, seed=2)
     det = tracker.detection
     det.config = replace(det.config, reach_radius=0.0, relocate_margin=1e9,
-                         relocate_hidden=False, beside_support=beside_support)
+                         relocate_hidden=False, beside_support=beside_support,
+                         beside_threshold=beside_threshold)
 
     def walker(k):
         return [person(2.0 + 0.02 * k, 2.6, theta=0.0)]
@@ -105,6 +110,8 @@ def _lagging(monkeypatch, beside_support, lag=0.42, frames=14, tracked=36, until
             tracker.relocate_track(1, _state(2.0 + 0.02 * (k - 1) - lag, 2.6 - lag))
         tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, walker(k), rng))
         actions += [d['action'] for d in det.decisions]
+        if decisions is not None:
+            decisions += det.decisions
     return tracker, actions
 
 
@@ -204,3 +211,55 @@ def test_only_a_single_track_losing_its_support_is_moved():
     assert moved is None and all(with_det < 0.25 for _, _, with_det in record), record
     moved, record = _decide([(3.3, 2.6), lagging], people_xy=((2.6, 2.6), (3.3, 2.6)))
     assert moved == 1 and record[0][2] > 0.25, record
+
+
+def test_beside_threshold_must_be_a_finite_number_not_below_zero():
+    for bad in (-0.5, float('nan'), float('inf')):
+        with pytest.raises(DetectionError):
+            AutoDetectionConfig(beside_threshold=bad)
+        with pytest.raises(TrackerError, match='beside_threshold'):
+            TrackerConfig(beside_threshold=bad)
+    with pytest.raises(TrackerError, match='beside_threshold'):
+        TrackerConfig(beside_threshold=True)
+
+
+def test_the_tracker_config_hands_beside_threshold_to_the_pipeline():
+    assert TrackerConfig(beside_threshold=2.0).detection_config().beside_threshold == 2.0
+    assert TrackerConfig().detection_config().beside_threshold == \
+        AutoDetectionConfig().beside_threshold
+
+
+def test_a_weak_detection_beside_a_track_starts_no_track(monkeypatch):
+    """The person's detection beside their lagging track (moved neither by the gain nor
+    by the support rule) is born with ``beside_threshold`` 0; a threshold just above its
+    score drops it, and the track stays the only one."""
+    decisions = []
+    tracker, actions = _lagging(monkeypatch, 0.0, beside_threshold=0.0, decisions=decisions)
+    assert actions == ['birth'] and decisions[0]['near'], decisions
+    tracker, actions = _lagging(monkeypatch, 0.0, beside_threshold=decisions[0]['score'] + 0.01)
+    assert 'birth' not in actions and 'drop (weak beside a track)' in actions, actions
+    assert tracker.track_ids == [1]
+
+
+def test_a_strong_detection_of_a_newcomer_beside_a_track_is_born():
+    """The newcomer 0.7 m beside a tracked person scores above the default
+    ``beside_threshold`` and is born; a threshold above its score drops it."""
+    scores = {}
+    for threshold in (AutoDetectionConfig.beside_threshold, 1e6):
+        rng = np.random.default_rng(4)
+        calib = make_room(ceiling=False)
+        bgs = backgrounds(calib)
+        tracker = _detecting_tracker(calib, bgs, seed=3)
+        tracker.detection.config = replace(tracker.detection.config, relocate_margin=1e9,
+                                           beside_threshold=threshold)
+        a = person(2.5, 2.5, theta=0.0)
+        _track_painted(tracker, calib, bgs, rng, 36, lambda k: [a])
+        decisions = []
+        for k in range(36, 52):
+            b = person(2.5 + 0.02 * (k - 36), 3.2, theta=0.0)
+            tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, [a, b], rng))
+            decisions += tracker.detection.decisions
+        scores[threshold] = ([d['action'] for d in decisions], len(tracker.track_ids))
+    default, high = scores[AutoDetectionConfig.beside_threshold], scores[1e6]
+    assert default == (['birth'], 2), default
+    assert 'birth' not in high[0] and high[1] == 1, high

@@ -187,6 +187,7 @@ def test_node_defaults_are_the_trackers_defaults():
     pipeline = config.detection_config()
     left_to_pipeline = {'detection_threshold': pipeline.detector.threshold,
                         'spare_support': pipeline.release.spare_support,
+                        'beside_threshold': pipeline.beside_threshold,
                         'reuse_time': pipeline.reuse_time}
     for key, (field, _) in TRACKER_PARAMETERS.items():
         owner = config.motion if field.startswith('motion.') else config

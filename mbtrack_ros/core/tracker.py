@@ -65,6 +65,9 @@ class TrackerConfig:
             None: its default, 0: released tracks end at once).
         detection_threshold: smallest combined log response of a detection (None: the
             detector's default).
+        beside_threshold: smallest score of a detection that starts a track within 1 m of
+            another track (``AutoDetectionConfig.beside_threshold``; None: its default,
+            0: the detector's threshold alone).
         detection: automatic detection, model acquisition and release of people (003 §4)
             with visibility/existence probabilities (001), see
             :mod:`mbtrack_ros.core.detection.manager`.
@@ -109,6 +112,7 @@ class TrackerConfig:
     detection: bool = False
     release_time: float = 1.0
     detection_threshold: float | None = None
+    beside_threshold: float | None = None
     spare_support: float | None = None
     reuse_time: float | None = None
     subsample: int = 1
@@ -151,6 +155,11 @@ class TrackerConfig:
                 isinstance(self.detection_threshold, (int, float))
                 and np.isfinite(self.detection_threshold)):
             bad(f'detection_threshold must be a finite number, got {self.detection_threshold!r}')
+        if self.beside_threshold is not None and not (
+                isinstance(self.beside_threshold, (int, float))
+                and not isinstance(self.beside_threshold, bool)
+                and 0 <= self.beside_threshold < float('inf')):
+            bad(f'beside_threshold must be a finite number >= 0, got {self.beside_threshold!r}')
         if self.spare_support is not None and not (
                 isinstance(self.spare_support, (int, float)) and 0 <= self.spare_support <= 1):
             bad(f'spare_support must be a number in [0, 1], got {self.spare_support!r}')
@@ -186,6 +195,8 @@ class TrackerConfig:
                                          rate=float(self.adaptation_rate)))
         if self.reuse_time is not None:
             config = replace(config, reuse_time=float(self.reuse_time))
+        if self.beside_threshold is not None:
+            config = replace(config, beside_threshold=float(self.beside_threshold))
         return _pixels_scaled(config, float(self.image_scale))
 
     def filter_config(self) -> FilterConfig:

@@ -60,6 +60,9 @@ detection.enabled               bool       automatic detection, model acquisitio
                                            init_ground_truth (true)
 detection.threshold             double     smallest combined log response of a new
                                            detection (1.0)
+detection.beside_threshold      double     smallest score of a detection that starts a
+                                           track within 1 m of another track; 0 = the
+                                           threshold above alone (3.0)
 detection.spare_support         double     exclusive support below which a track that
                                            overlaps another one is released as spare;
                                            0 = off (0.25)
@@ -206,6 +209,11 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
                           '(TrackerConfig.detection); off when init_ground_truth is set', {}),
     'detection.threshold': (1.0, 'smallest combined log response of a new detection',
                             _fr(-100.0, 100.0)),
+    'detection.beside_threshold': (AutoDetectionConfig().beside_threshold, 'smallest '
+                                   'combined log response of a detection that starts a track '
+                                   'within AutoDetectionConfig.relocate_radius of another '
+                                   'track (the fringe of a tracked person is no newcomer); '
+                                   '0 = detection.threshold alone', _fr(0.0, 100.0)),
     'detection.spare_support': (ReleaseConfig().spare_support, 'exclusive foreground support '
                                 'below which a track that overlaps another one is released as '
                                 'spare (ReleaseConfig.spare_support); 0 = off',

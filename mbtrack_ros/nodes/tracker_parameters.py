@@ -22,6 +22,7 @@ TRACKER_PARAMETERS: dict[str, tuple[str, type]] = {
     'tracker.d_occ': ('d_occ', float), 'tracker.mrf_radius': ('mrf_radius', float),
     'tracker.use_mrf': ('use_mrf', bool), 'tracker.release_time': ('release_time', float),
     'detection.threshold': ('detection_threshold', float),
+    'detection.beside_threshold': ('beside_threshold', float),
     'detection.spare_support': ('spare_support', float),
     'detection.reuse_time': ('reuse_time', float),
     'detection.every': ('detection_every', int),

@@ -139,6 +139,11 @@ class AutoDetectionConfig:
             (:meth:`AutoDetection._lagging_beside`; docs/detection.md, "Births beside a
             live track"); 0 disables, the default: 0.25 cut the switches on the twelve
             clear-room runs of seeds 0/1 (89 -> 73) but not on seed 3 (40 -> 52).
+        beside_threshold: smallest detection score (combined log response) for a birth
+            within ``relocate_radius`` of a track that the detection did not move: weak
+            detections beside a track are mostly the fringe of that track's person or a
+            gap between people, not a new person (docs/detection.md, "Weak births beside a
+            track"); 0 keeps the detector's threshold alone.
         birth_exit_depth: metres; a confirmed detection deeper than this inside an exit
             starts or moves no track (its person is in the doorway or beyond). 0.15 m, half
             the exit release margin of before the fifteenth session, where it was tied to
@@ -172,6 +177,7 @@ class AutoDetectionConfig:
     reach_age: float = 4.0
     exit_rescue: float = 0.0
     beside_support: float = 0.0
+    beside_threshold: float = 3.0
     birth_exit_depth: float = 0.15
 
     def __post_init__(self) -> None:
@@ -187,6 +193,9 @@ class AutoDetectionConfig:
             raise DetectionError('sigma and clutter_distance must be > 0')
         if not self.beside_support >= 0:
             raise DetectionError('beside_support must be >= 0')
+        if not (np.isfinite(self.beside_threshold) and self.beside_threshold >= 0):
+            raise DetectionError(f'beside_threshold must be a finite number >= 0, got '
+                                 f'{self.beside_threshold}')
         if self.visibility_particles < 1:
             raise DetectionError('visibility_particles must be >= 1')
         if not (self.reach_radius >= 0 and self.reach_directions >= 1
@@ -757,6 +766,10 @@ class AutoDetection:
             best = self._lagging_beside(det, model, tracks, keep, means, models, evidence,
                                         moved, stamp_ns, info)
             beside = best is not None
+        if best is None and 'near' in info and det.score < cfg.beside_threshold:
+            info['action'] = 'drop (weak beside a track)'
+            self.decisions.append(info)
+            return None
         if best is None:
             reused = self._reusable(det, model, models, info)
             info['action'] = 'birth' if reused is None else f'reuse {reused}'
