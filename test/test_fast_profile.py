@@ -74,9 +74,10 @@ def test_replay_options_beat_the_params_file(tmp_path):
     assert config('--params', str(params), '--detection-every', '4').detection_every == 4
     # every tracker setting the node reads, the replay reads too (one map, TRACKER_PARAMETERS)
     params.write_text('tracker_node:\n  ros__parameters:\n    tracker:\n      release_time: 2.0\n'
-                      '    detection:\n      spare_support: 0.4\n')
+                      '    detection:\n      spare_support: 0.4\n      beside_threshold: 2.5\n')
     both = config('--params', str(params))
-    assert (both.release_time, both.spare_support) == (2.0, 0.4)
+    assert (both.release_time, both.spare_support, both.beside_threshold) == (2.0, 0.4, 2.5)
+    assert both.detection_config().beside_threshold == 2.5
 
 
 def test_replay_params_file_refuses_unknown_keys(tmp_path):
