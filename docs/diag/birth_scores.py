@@ -65,7 +65,7 @@ def main() -> None:
     if args[:1] == ['--threshold']:
         threshold, args = float(args[1]), args[2:]
     sys.argv = [sys.argv[0]] + args
-    pairs = run_pairs(__doc__.splitlines()[2])
+    pairs = run_pairs(__doc__.splitlines()[2].removeprefix('Usage: '))
     rows = {out: births(out, rec) for out, rec in pairs}
     every = [r for rs in rows.values() for r in rs]
     print(f'{len(every)} births on {len(pairs)} runs')
