@@ -740,12 +740,15 @@ class AutoDetection:
         clear-room both right and wrong moves had gains from -3 to +12 nats per camera,
         docs/detection.md); still, moving instead of a birth lowered the switches on every
         clear-room recording measured, and the interval stops a track hopping through a
-        group.
+        group. A detection that no track takes and that has a track within
+        ``relocate_radius`` must also score ``beside_threshold`` to be born: weaker ones
+        there are mostly the fringe of that track's person or a gap between people.
         """
         cfg = self.config
         state = det.state.copy()
         info = {'xy': (float(det.xy[0]), float(det.xy[1])), 'score': float(det.score)}
         best = None
+        near = []                   # (id, distance, gain) of the tracks the check compared
         for k in keep:
             tid = tracks[k].track_id
             d = float(np.hypot(*(means[k, [X, Y]] - det.xy)))
@@ -754,9 +757,11 @@ class AutoDetection:
                     or not ref.view_angles.size:
                 continue
             gain = self._explains(ref, means[k], state, evidence)
-            info.setdefault('near', []).append((int(tid), round(d, 2), round(gain, 3)))
+            near.append((int(tid), round(d, 2), round(gain, 3)))
             if gain > cfg.relocate_margin and (best is None or gain > best[1]):
                 best = (k, gain)
+        if near:
+            info['near'] = near
         hidden = False
         if best is None and cfg.relocate_hidden:
             best = self._nearest_hidden(det, tracks, keep, means, models, moved, stamp_ns)
@@ -766,7 +771,7 @@ class AutoDetection:
             best = self._lagging_beside(det, model, tracks, keep, means, models, evidence,
                                         moved, stamp_ns, info)
             beside = best is not None
-        if best is None and 'near' in info and det.score < cfg.beside_threshold:
+        if best is None and near and det.score < cfg.beside_threshold:
             info['action'] = 'drop (weak beside a track)'
             self.decisions.append(info)
             return None
