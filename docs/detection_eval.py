@@ -662,11 +662,18 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
             if not words or words[0] not in ('move', 'drop', 'reuse') or not gt.get(e['frame']):
                 continue
             f = e['frame']
-            tid = int(words[1] if words[0] != 'drop' else e['action'].split('track ')[1].split()[0])
+            weak = e['action'].startswith('drop (weak beside')
+            if weak:    # beside_threshold's drop: labelled by the nearest track compared
+                tid = int(min(e['near'], key=lambda n: n[1])[0])
+            else:
+                tid = int(words[1] if words[0] != 'drop'
+                          else e['action'].split('track ')[1].split()[0])
             at = min(gt[f], key=lambda r: np.hypot(r.x - e['xy'][0], r.y - e['xy'][1])).person_id
             who = previous_person(tid, f)
-            kind = words[0] + (' hidden' if 'hidden' in e['action'] else
+            kind = words[0] + (' weak' if weak else ' hidden' if 'hidden' in e['action'] else
                                ' beside' if 'beside' in e['action'] else '')
+            if words[0] == 'move' and kind == 'move':   # the identity check's moves by score
+                kind += ' (score < 3)' if e['score'] < 3.0 else ' (score >= 3)'
             key = (kind, 'same' if who == at else 'unmatched' if who is None else 'other')
             counts[key] = counts.get(key, 0) + 1
             total[key] = total.get(key, 0) + 1
