@@ -673,7 +673,9 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
             kind = words[0] + (' weak' if weak else ' hidden' if 'hidden' in e['action'] else
                                ' beside' if 'beside' in e['action'] else '')
             if words[0] == 'move' and kind == 'move':   # the identity check's moves by score
-                kind += ' (score < 3)' if e['score'] < 3.0 else ' (score >= 3)'
+                weak_below = AutoDetectionConfig().beside_threshold
+                kind += f' (score < {weak_below:g})' if e['score'] < weak_below \
+                    else f' (score >= {weak_below:g})'
             key = (kind, 'same' if who == at else 'unmatched' if who is None else 'other')
             counts[key] = counts.get(key, 0) + 1
             total[key] = total.get(key, 0) + 1
