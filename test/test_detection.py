@@ -1094,6 +1094,29 @@ def test_a_person_re_found_soon_after_the_release_gets_the_released_id(
         assert all(tid not in later for later in ids[k:]), 'an ended id came back'
 
 
+@pytest.mark.parametrize('reuse_time', [AutoDetectionConfig().reuse_time, 2.0])
+def test_a_person_re_found_2_5_s_after_the_release_keeps_her_id_by_default(reuse_time):
+    """A person whose track was released is detected again at the same place 2.5 s
+    later (on clear-room a person who stood up from her chair was re-found 2.4-2.9 s after
+    her track's release, docs/detection.md "Longer reuse"): the default ``reuse_time``
+    (3 s) gives her the released id back; with the former 2 s the id has ended and a new
+    one is issued."""
+    rng = np.random.default_rng(5)
+    calib, bgs, tracker = _painted_room_tracker(4, reuse_time=reuse_time)
+    stand = [person(2.5, 2.5, theta=0.0)]
+    gap = round(2.5 * FPS)
+    released_at, ids = None, []
+    for k in range(120):
+        gone = 12 <= k if released_at is None else k < released_at + gap
+        tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, [] if gone else stand,
+                                                      rng))
+        if released_at is None and k > 0 and ids[-1] == [1] and not tracker.track_ids:
+            released_at = k
+        ids.append(sorted(tracker.track_ids))
+    assert released_at is not None and released_at + gap < 110
+    assert ids[-1] == ([1] if reuse_time >= 2.5 else [2]), (reuse_time, ids[-1])
+
+
 
 @pytest.mark.parametrize('margin', [AutoDetectionConfig().duplicate_margin, float('inf')])
 def test_of_two_tracks_on_one_person_the_one_whose_model_fits_stays(margin):

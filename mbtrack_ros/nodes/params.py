@@ -68,7 +68,7 @@ detection.spare_support         double     exclusive support below which a track
                                            0 = off (0.25)
 detection.reuse_time            double     s a released track stays lost: a person re-found
                                            within 1 m who looks like it takes its id back
-                                           (no new id); it ends after that (2.0; 0 = at once)
+                                           (no new id); it ends after that (3.0; 0 = at once)
 detection.every                 int        run the detection pipeline (release, existence,
                                            background, search) on every k-th frame set
                                            only (1; a speed option that costs accuracy,
