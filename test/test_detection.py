@@ -1098,9 +1098,9 @@ def test_a_person_re_found_soon_after_the_release_gets_the_released_id(
 def test_a_person_re_found_2_5_s_after_the_release_keeps_her_id_by_default(reuse_time):
     """A person whose track was released is detected again at the same place 2.5 s
     later (on clear-room a person who stood up from her chair was re-found 2.4-2.9 s after
-    her track's release, docs/detection.md "Longer reuse"): the default ``reuse_time``
-    (3 s) gives her the released id back; with the former 2 s the id has ended and a new
-    one is issued."""
+    her track's release, docs/detection.md "Weak moves; longer reuse"): the default
+    ``reuse_time`` (3 s) gives her the released id back; with the former 2 s the id has
+    ended and a new one is issued."""
     rng = np.random.default_rng(5)
     calib, bgs, tracker = _painted_room_tracker(4, reuse_time=reuse_time)
     stand = [person(2.5, 2.5, theta=0.0)]
@@ -1115,7 +1115,6 @@ def test_a_person_re_found_2_5_s_after_the_release_keeps_her_id_by_default(reuse
         ids.append(sorted(tracker.track_ids))
     assert released_at is not None and released_at + gap < 110
     assert ids[-1] == ([1] if reuse_time >= 2.5 else [2]), (reuse_time, ids[-1])
-
 
 
 @pytest.mark.parametrize('margin', [AutoDetectionConfig().duplicate_margin, float('inf')])

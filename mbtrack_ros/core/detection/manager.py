@@ -87,13 +87,14 @@ class AutoDetectionConfig:
             that time has passed unused, so the ROS interface's promise holds: an id never
             comes back after it ended. 0 ends released tracks at once. 3 s: a person who
             stood up from a chair and stood still was re-found 2.4-2.9 s after her track's
-            release (docs/detection.md, "Longer reuse").
+            release (docs/detection.md, "Weak moves; longer reuse").
         reuse_distance: largest appearance distance (``appearance.model_distance``, in
             [0, 1]) between a released track's model and a detection's for the detection
             to take the released id; 1 accepts any. 0.55: on sixty clear-room runs the
             released track had followed the detected person for 14 candidates (distances
             0.20-0.75, median 0.48) and another person for 18 (0.64-0.77; docs/detection.md,
-            "Longer reuse"; 0.5 before).
+            "Weak moves; longer reuse"). 0.5 before: on the thirteenth session's tree
+            other-person candidates went down to 0.41 ("Lost tracks").
         duplicate_by_reporting: of two tracks on one person (release ``merge_radius``,
             ``merge_time``) release the one reported without a break for the shorter time
             (born, moved or hidden later) instead of the younger one.
