@@ -633,6 +633,7 @@ def visibility(pairs: list[tuple[Path, Path]], every: int = 3) -> None:
 def decisions(pairs: list[tuple[Path, Path]]) -> None:
     total: dict[tuple[str, str], int] = {}
     reuse_distances: dict[str, list[float]] = {}     # label -> appearance distances
+    weak_below = AutoDetectionConfig().beside_threshold   # moves split at the default
     for out, rec in pairs:
         tracks, truth, events, _ = _load(out, rec)
         d, frames = _matching(tracks, truth)
@@ -673,7 +674,6 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
             kind = words[0] + (' weak' if weak else ' hidden' if 'hidden' in e['action'] else
                                ' beside' if 'beside' in e['action'] else '')
             if words[0] == 'move' and kind == 'move':   # the identity check's moves by score
-                weak_below = AutoDetectionConfig().beside_threshold
                 kind += f' (score < {weak_below:g})' if e['score'] < weak_below \
                     else f' (score >= {weak_below:g})'
             key = (kind, 'same' if who == at else 'unmatched' if who is None else 'other')
