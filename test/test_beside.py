@@ -77,14 +77,16 @@ def test_a_bootstrap_ghost_is_no_support_of_a_track():
 
 
 def _lagging(monkeypatch, beside_support, lag=0.42, frames=14, tracked=36, until='decision',
-             beside_threshold=0.0, decisions=None):
+             beside_threshold=0.0, decisions=None, relocate_margin=1e9,
+             weak_relocate_margin=1e9):
     """A person walking at 0.3 m/s along y = 2.6 m, tracked as track 1 for ``tracked``
     frames (36: longer than ``relocate_interval``); then, before each step (until the first
     decision, or always with ``until=None``), track 1
     is put ``lag`` metres behind them in x and in y (0.6 m off, on the diagonal the corner
     cameras cam0 and cam2 look along: a track that fell behind its person and keeps part
     of their foreground). The appearance gain cannot
-    move it (``relocate_margin`` huge), the reach is off, and it stays reported (on the
+    move it (``relocate_margin`` and ``weak_relocate_margin`` huge unless given), the
+    reach is off, and it stays reported (on the
     recordings such tracks had existence 0.99-1.0 when the birth came; in this painted
     room its existence falls, and a hidden track is the other rule's,
     ``relocate_hidden``). ``beside_threshold`` 0: any detection beside it may be born.
@@ -96,8 +98,9 @@ def _lagging(monkeypatch, beside_support, lag=0.42, frames=14, tracked=36, until
     bgs = backgrounds(calib)
     tracker = _detecting_tracker(calib, bgs, seed=2)
     det = tracker.detection
-    det.config = replace(det.config, reach_radius=0.0, relocate_margin=1e9,
-                         relocate_hidden=False, beside_support=beside_support,
+    det.config = replace(det.config, reach_radius=0.0, relocate_margin=relocate_margin,
+                         weak_relocate_margin=weak_relocate_margin, relocate_hidden=False,
+                         beside_support=beside_support,
                          beside_threshold=beside_threshold)
 
     def walker(k):
@@ -239,6 +242,39 @@ def test_a_weak_detection_beside_a_track_starts_no_track(monkeypatch):
     tracker, actions = _lagging(monkeypatch, 0.0, beside_threshold=decisions[0]['score'] + 0.01)
     assert 'birth' not in actions and 'drop (weak beside a track)' in actions, actions
     assert tracker.track_ids == [1]
+
+
+def test_a_weak_detection_moves_a_track_only_with_the_weak_margin(monkeypatch):
+    """The person's detection beside their lagging track, with gain g for track 1 and
+    score s: scoring at least ``beside_threshold`` it moves the track by
+    ``relocate_margin`` alone; below the threshold it moves it only when g exceeds
+    ``weak_relocate_margin`` (just below g: moved; just above: dropped, and neither moved
+    nor born)."""
+    lax = dict(relocate_margin=-1e9, weak_relocate_margin=-1e9)
+    decisions = []
+    _, actions = _lagging(monkeypatch, 0.0, decisions=decisions, **lax)
+    assert actions == ['move 1'], decisions
+    score = decisions[0]['score']
+    gain = next(g for tid, _, g in decisions[0]['near'] if tid == 1)
+    weak = score + 0.01
+    runs = {'strong, margin above g': dict(beside_threshold=0.0, relocate_margin=-1e9,
+                                           weak_relocate_margin=gain + 0.01),
+            'weak, margin below g': dict(beside_threshold=weak, relocate_margin=-1e9,
+                                         weak_relocate_margin=gain - 0.01),
+            'weak, margin above g': dict(beside_threshold=weak, relocate_margin=-1e9,
+                                         weak_relocate_margin=gain + 0.01)}
+    first = {}
+    for name, kwargs in runs.items():
+        tracker, actions = _lagging(monkeypatch, 0.0, **kwargs)
+        first[name] = actions[0]
+        if name == 'weak, margin above g':
+            assert not any(a.startswith('move') or a == 'birth' for a in actions), actions
+            assert tracker.track_ids == [1]
+    assert first == {'strong, margin above g': 'move 1', 'weak, margin below g': 'move 1',
+                     'weak, margin above g': 'drop (weak beside a track)'}, first
+    for bad in (float('nan'), -float('inf')):
+        with pytest.raises(DetectionError, match='weak_relocate_margin'):
+            AutoDetectionConfig(weak_relocate_margin=bad)
 
 
 def test_a_strong_detection_of_a_newcomer_beside_a_track_is_born():
