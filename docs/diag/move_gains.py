@@ -1,0 +1,77 @@
+"""The identity check's moves by the appearance gain (not of hidden tracks, not by
+``beside_support``) on ``detection_eval.py run`` outputs, each labelled by whether the
+detection's person was the one the moved track had followed (``same``) or another
+(``other``); then counts by detection score (below / at least ``--score``) and by gain
+band (``--gains`` edges), the table of docs/detection.md "Weak moves by their gain".
+
+    .venv/bin/python docs/diag/move_gains.py [--list] [--score 3.0] [--gains 1 1.5 2 3] \
+        OUT REC [OUT REC ...]
+"""
+import argparse
+import collections
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _eval import detection_eval  # noqa: E402
+
+
+def moves(out: Path, rec: Path) -> list[dict]:
+    """Each move by the gain of one run: frame, score, gain, distance, label."""
+    tracks, truth, events, _ = detection_eval._load(out, rec)
+    d, frames = detection_eval._matching(tracks, truth)
+    gt: dict[int, list] = {}
+    for r in truth:
+        gt.setdefault(r.frame, []).append(r)
+    found = []
+    for e in events:
+        action = e['action'] if e['kind'] == 'decision' else ''
+        if not action.startswith('move') or '(' in action or not gt.get(e['frame']):
+            continue
+        f, tid = e['frame'], int(action.split()[1])
+        sel = (d.track_id == tid) & (frames < f) & (frames >= f - 60)
+        before = d.person_id[sel][-15:]   # as `decisions`: whom it followed before
+        who = None if not before.size else int(np.bincount(before).argmax())
+        at = min(gt[f], key=lambda r: np.hypot(r.x - e['xy'][0], r.y - e['xy'][1])).person_id
+        _, dist, gain = next(n for n in e['near'] if n[0] == tid)
+        found.append({'run': out.name, 'frame': f, 'score': e['score'], 'gain': gain,
+                      'distance': dist,
+                      'label': 'same' if who == at else 'nobody' if who is None else 'other'})
+    return found
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    p.add_argument('--score', type=float, default=3.0)
+    p.add_argument('--gains', type=float, nargs='+', default=[1.0, 1.5, 2.0, 3.0])
+    p.add_argument('--list', action='store_true', help='print every move')
+    p.add_argument('pairs', nargs='+', type=Path)
+    args = p.parse_args()
+    if len(args.pairs) % 2:
+        p.error('give OUT REC pairs')
+    rows = []
+    for out, rec in zip(args.pairs[::2], args.pairs[1::2]):
+        rows += moves(out, rec)
+    if args.list:
+        for r in sorted(rows, key=lambda r: (r['score'], r['gain'])):
+            print(f"{r['run']:<10} frame {r['frame']:5d} score {r['score']:5.2f} "
+                  f"gain {r['gain']:6.2f} distance {r['distance']:.2f} {r['label']}")
+    edges = [-np.inf] + sorted(args.gains) + [np.inf]
+    print(f'| gain | score < {args.score:g}: same / other | score >= {args.score:g}: '
+          'same / other |')
+    print('| --- | --- | --- |')
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        cells = []
+        for strong in (False, True):
+            c = collections.Counter(r['label'] for r in rows if lo <= r['gain'] < hi
+                                    and (r['score'] >= args.score) == strong)
+            cells.append(f"{c['same']} / {c['other']}" + (f" (+{c['nobody']} nobody)"
+                                                          if c['nobody'] else ''))
+        print(f'| [{lo:g}, {hi:g}) | {cells[0]} | {cells[1]} |')
+    print(f'{len(rows)} moves')
+
+
+if __name__ == '__main__':
+    main()
