@@ -73,10 +73,10 @@ class AutoDetectionConfig:
             birth (see :meth:`AutoDetection._identify`); negative: "about as well".
         weak_relocate_margin: the same margin for a detection scoring below
             ``beside_threshold`` (the larger of the two applies; ``inf``: such a detection
-            moves no track by the gain). 1.5: on sixty clear-room runs the weak
-            detections' moves with gain below 1.5 went to another person 21 times out of
-            36, those above 2 times out of 19 (docs/detection.md, "Weak moves by their
-            gain").
+            moves no track by the gain). 1.5: on sixty clear-room runs (seeds 0-9, main
+            before this margin) the weak detections' moves with gain below 1.5 went to
+            another person 21 times out of 36, those above 2 times out of 19
+            (docs/detection.md, "Weak moves by their gain").
         relocate_interval: seconds after a track was born or moved during which such a
             detection does not move it again but is dropped (in a crowd at the door a
             young model explains several people about equally well: the track would hop).
