@@ -630,6 +630,25 @@ def visibility(pairs: list[tuple[Path, Path]], every: int = 3) -> None:
                            f'{100 * b / a:.0f} %' for (k, s), (a, b) in sorted(total.items())))
 
 
+def _followed(d, frames: np.ndarray, tid: int, f: int) -> int | None:
+    """The person track ``tid`` was matched to most in its last 15 matched frames of the 60
+    before frame ``f`` (None: matched to nobody); ``d, frames`` from :func:`_matching`."""
+    sel = (d.track_id == tid) & (frames < f) & (frames >= f - 60)
+    before = d.person_id[sel][-15:]
+    return None if not before.size else int(np.bincount(before).argmax())
+
+
+def decision_label(d, frames: np.ndarray, people: list, decision: dict, tid: int) -> str:
+    """Whether a detection decision about track ``tid`` concerned the person that track had
+    followed: 'same', 'other' or 'unmatched' (the track followed nobody). ``people`` are
+    the ground-truth rows of the decision's frame; the detection's person is the one
+    nearest its floor point."""
+    x, y = decision['xy']
+    at = min(people, key=lambda r: np.hypot(r.x - x, r.y - y)).person_id
+    who = _followed(d, frames, tid, decision['frame'])
+    return 'same' if who == at else 'unmatched' if who is None else 'other'
+
+
 def decisions(pairs: list[tuple[Path, Path]]) -> None:
     total: dict[tuple[str, str], int] = {}
     reuse_distances: dict[str, list[float]] = {}     # label -> appearance distances
@@ -641,23 +660,12 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
         for r in truth:
             gt.setdefault(r.frame, []).append(r)
         counts: dict[tuple[str, str], int] = {}
-
-        def previous_person(tid: int, f: int) -> int | None:
-            """The person track ``tid`` was matched to most in its last 15 matched frames
-            of the 60 before frame ``f`` (None: matched to nobody)."""
-            sel = (d.track_id == tid) & (frames < f) & (frames >= f - 60)
-            before = d.person_id[sel][-15:]
-            return None if not before.size else int(np.bincount(before).argmax())
-
         for e in events:
             if e['kind'] == 'decision' and e.get('reuse') and gt.get(e['frame']):
                 # every released track a detection could have taken the id of (reuse_time):
                 # its appearance distance to the detection, labelled by who it was
-                at = min(gt[e['frame']], key=lambda r: np.hypot(r.x - e['xy'][0],
-                                                               r.y - e['xy'][1])).person_id
                 for tid, _, unlike in e['reuse']:
-                    who = previous_person(int(tid), e['frame'])
-                    label = 'same' if who == at else 'unmatched' if who is None else 'other'
+                    label = decision_label(d, frames, gt[e['frame']], e, int(tid))
                     reuse_distances.setdefault(label, []).append(float(unlike))
             words = e['action'].split() if e['kind'] == 'decision' else []
             if not words or words[0] not in ('move', 'drop', 'reuse') or not gt.get(e['frame']):
@@ -669,14 +677,13 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
             else:
                 tid = int(words[1] if words[0] != 'drop'
                           else e['action'].split('track ')[1].split()[0])
-            at = min(gt[f], key=lambda r: np.hypot(r.x - e['xy'][0], r.y - e['xy'][1])).person_id
-            who = previous_person(tid, f)
+            label = decision_label(d, frames, gt[f], e, tid)
             kind = words[0] + (' weak' if weak else ' hidden' if 'hidden' in e['action'] else
                                ' beside' if 'beside' in e['action'] else '')
             if words[0] == 'move' and kind == 'move':   # the identity check's moves by score
                 kind += f' (score < {weak_below:g})' if e['score'] < weak_below \
                     else f' (score >= {weak_below:g})'
-            key = (kind, 'same' if who == at else 'unmatched' if who is None else 'other')
+            key = (kind, label)
             counts[key] = counts.get(key, 0) + 1
             total[key] = total.get(key, 0) + 1
         print(out.name, ', '.join(f'{k} {v}: {n}' for (k, v), n in sorted(counts.items())))

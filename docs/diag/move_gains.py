@@ -19,7 +19,8 @@ from _eval import detection_eval  # noqa: E402
 
 
 def moves(out: Path, rec: Path) -> list[dict]:
-    """Each move by the gain of one run: frame, score, gain, distance, label."""
+    """Each move by the gain of one run: frame, score, gain, distance, label (as
+    ``detection_eval.py decisions`` labels it)."""
     tracks, truth, events, _ = detection_eval._load(out, rec)
     d, frames = detection_eval._matching(tracks, truth)
     gt: dict[int, list] = {}
@@ -30,15 +31,12 @@ def moves(out: Path, rec: Path) -> list[dict]:
         action = e['action'] if e['kind'] == 'decision' else ''
         if not action.startswith('move') or '(' in action or not gt.get(e['frame']):
             continue
-        f, tid = e['frame'], int(action.split()[1])
-        sel = (d.track_id == tid) & (frames < f) & (frames >= f - 60)
-        before = d.person_id[sel][-15:]   # as `decisions`: whom it followed before
-        who = None if not before.size else int(np.bincount(before).argmax())
-        at = min(gt[f], key=lambda r: np.hypot(r.x - e['xy'][0], r.y - e['xy'][1])).person_id
+        tid = int(action.split()[1])
         _, dist, gain = next(n for n in e['near'] if n[0] == tid)
-        found.append({'run': out.name, 'frame': f, 'score': e['score'], 'gain': gain,
-                      'distance': dist,
-                      'label': 'same' if who == at else 'nobody' if who is None else 'other'})
+        found.append({'run': out.name, 'frame': e['frame'], 'score': e['score'],
+                      'gain': gain, 'distance': dist,
+                      'label': detection_eval.decision_label(d, frames, gt[e['frame']], e,
+                                                             tid)})
     return found
 
 
@@ -67,8 +65,8 @@ def main() -> None:
         for strong in (False, True):
             c = collections.Counter(r['label'] for r in rows if lo <= r['gain'] < hi
                                     and (r['score'] >= args.score) == strong)
-            cells.append(f"{c['same']} / {c['other']}" + (f" (+{c['nobody']} nobody)"
-                                                          if c['nobody'] else ''))
+            cells.append(f"{c['same']} / {c['other']}" + (
+                f" (+{c['unmatched']} unmatched)" if c['unmatched'] else ''))
         print(f'| [{lo:g}, {hi:g}) | {cells[0]} | {cells[1]} |')
     print(f'{len(rows)} moves')
 
