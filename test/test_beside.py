@@ -277,25 +277,52 @@ def test_a_weak_detection_moves_a_track_only_with_the_weak_margin(monkeypatch):
             AutoDetectionConfig(weak_relocate_margin=bad)
 
 
+def _newcomer(**config):
+    """A person tracked at (2.5, 2.5) for 36 frames, then a newcomer walking in 0.7 m
+    beside them, with the ``AutoDetectionConfig`` fields ``config``: the decisions' records
+    and the live track ids at the end."""
+    rng = np.random.default_rng(4)
+    calib = make_room(ceiling=False)
+    bgs = backgrounds(calib)
+    tracker = _detecting_tracker(calib, bgs, seed=3)
+    tracker.detection.config = replace(tracker.detection.config, **config)
+    a = person(2.5, 2.5, theta=0.0)
+    _track_painted(tracker, calib, bgs, rng, 36, lambda k: [a])
+    decisions = []
+    for k in range(36, 52):
+        b = person(2.5 + 0.02 * (k - 36), 3.2, theta=0.0)
+        tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, [a, b], rng))
+        decisions += tracker.detection.decisions
+    return decisions, tracker.track_ids
+
+
 def test_a_strong_detection_of_a_newcomer_beside_a_track_is_born():
     """The newcomer 0.7 m beside a tracked person scores above the default
     ``beside_threshold`` and is born; a threshold above its score drops it."""
     scores = {}
     for threshold in (AutoDetectionConfig.beside_threshold, 1e6):
-        rng = np.random.default_rng(4)
-        calib = make_room(ceiling=False)
-        bgs = backgrounds(calib)
-        tracker = _detecting_tracker(calib, bgs, seed=3)
-        tracker.detection.config = replace(tracker.detection.config, relocate_margin=1e9,
-                                           beside_threshold=threshold)
-        a = person(2.5, 2.5, theta=0.0)
-        _track_painted(tracker, calib, bgs, rng, 36, lambda k: [a])
-        decisions = []
-        for k in range(36, 52):
-            b = person(2.5 + 0.02 * (k - 36), 3.2, theta=0.0)
-            tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, [a, b], rng))
-            decisions += tracker.detection.decisions
-        scores[threshold] = ([d['action'] for d in decisions], len(tracker.track_ids))
+        decisions, ids = _newcomer(relocate_margin=1e9, beside_threshold=threshold)
+        scores[threshold] = ([d['action'] for d in decisions], len(ids))
     default, high = scores[AutoDetectionConfig.beside_threshold], scores[1e6]
     assert default == (['birth'], 2), default
     assert 'birth' not in high[0] and high[1] == 1, high
+
+
+def test_a_track_on_a_person_of_its_own_is_not_moved_onto_a_newcomer(monkeypatch):
+    """With any appearance gain enough to move a track, the newcomer's detection beside a
+    tracked person takes that person's track when ``move_support`` is off (above 1); with
+    the default the track keeps its own exclusive support beside the detection (at least
+    ``move_support``), stays on its person and the newcomer is born. The person's detection
+    beside her lagging track still moves it (the detection leaves it spare)."""
+    lax = dict(relocate_margin=-1e9, weak_relocate_margin=-1e9)
+    off, ids_off = _newcomer(move_support=2.0, **lax)
+    assert [d['action'] for d in off] == ['move 1'] and ids_off == [1], off
+    on, ids_on = _newcomer(**lax)
+    assert [d['action'] for d in on] == ['birth'] and ids_on == [1, 2], on
+    left = dict(on[0]['support'])[1]            # the same support with the check off
+    assert AutoDetectionConfig.move_support <= left <= 1 and off[0]['support'] == \
+        on[0]['support'], (on[0], off[0])
+    _, actions = _lagging(monkeypatch, 0.0, **lax)
+    assert actions == ['move 1'], actions
+    with pytest.raises(DetectionError, match='move_support'):
+        AutoDetectionConfig(move_support=-0.1)
