@@ -2,10 +2,14 @@
 ``beside_support``) on ``detection_eval.py run`` outputs, each labelled by whether the
 detection's person was the one the moved track had followed (``same``) or another
 (``other``); then counts by detection score (below / at least ``--score``) and by gain
-band (``--gains`` edges), the table of docs/detection.md "Weak moves by their gain".
+band (``--gains`` edges), the table of docs/detection.md "Weak moves by their gain";
+with ``--support S``, also by the moved track's exclusive support left beside the
+detection (below / at least S; recorded in the decisions since ``move_support``: run with
+``--detection move_support=2`` to have every move), the table of "Moves of tracks on a
+person of their own".
 
     .venv/bin/python docs/diag/move_gains.py [--list] [--score 3.0] [--gains 1 1.5 2 3] \
-        OUT REC [OUT REC ...]
+        [--support 0.3] OUT REC [OUT REC ...]
 """
 import argparse
 import collections
@@ -35,6 +39,7 @@ def moves(out: Path, rec: Path) -> list[dict]:
         _, dist, gain = next(n for n in e['near'] if n[0] == tid)
         found.append({'run': out.name, 'frame': e['frame'], 'score': e['score'],
                       'gain': gain, 'distance': dist,
+                      'support': dict(e.get('support', [])).get(tid, np.nan),
                       'label': detection_eval.decision_label(d, frames, gt[e['frame']], e,
                                                              tid)})
     return found
@@ -44,6 +49,8 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     p.add_argument('--score', type=float, default=3.0)
     p.add_argument('--gains', type=float, nargs='+', default=[1.0, 1.5, 2.0, 3.0])
+    p.add_argument('--support', type=float, default=None,
+                   help='also count the moves by the exclusive support left to the track')
     p.add_argument('--list', action='store_true', help='print every move')
     p.add_argument('pairs', nargs='+', type=Path)
     args = p.parse_args()
@@ -55,7 +62,8 @@ def main() -> None:
     if args.list:
         for r in sorted(rows, key=lambda r: (r['score'], r['gain'])):
             print(f"{r['run']:<10} frame {r['frame']:5d} score {r['score']:5.2f} "
-                  f"gain {r['gain']:6.2f} distance {r['distance']:.2f} {r['label']}")
+                  f"gain {r['gain']:6.2f} distance {r['distance']:.2f} "
+                  f"support {r['support']:.3f} {r['label']}")
     edges = [-np.inf] + sorted(args.gains) + [np.inf]
     print(f'| gain | score < {args.score:g}: same / other | score >= {args.score:g}: '
           'same / other |')
@@ -68,6 +76,20 @@ def main() -> None:
             cells.append(f"{c['same']} / {c['other']}" + (
                 f" (+{c['unmatched']} unmatched)" if c['unmatched'] else ''))
         print(f'| [{lo:g}, {hi:g}) | {cells[0]} | {cells[1]} |')
+    if args.support is not None:
+        print(f'| support left | score < {args.score:g}: same / other | '
+              f'score >= {args.score:g}: same / other |')
+        print('| --- | --- | --- |')
+        for name, test in ((f'< {args.support:g}', lambda v: v < args.support),
+                           (f'>= {args.support:g}', lambda v: v >= args.support),
+                           ('not recorded', lambda v: not np.isfinite(v))):
+            cells = []
+            for strong in (False, True):
+                c = collections.Counter(r['label'] for r in rows if test(r['support'])
+                                        and (r['score'] >= args.score) == strong)
+                cells.append(f"{c['same']} / {c['other']}" + (
+                    f" (+{c['unmatched']} unmatched)" if c['unmatched'] else ''))
+            print(f'| {name} | {cells[0]} | {cells[1]} |')
     print(f'{len(rows)} moves')
 
 
