@@ -87,12 +87,6 @@ class AutoDetectionConfig:
             to another person (10 of 10), those below to the track's own person 47 times
             out of 52 (docs/detection.md, "Moves of tracks on a person of their own").
             Above 1: no track is kept from a move (the support is at most 1).
-        clear_gain: a gain this large moves a track whatever ``move_support`` says: the
-            track's own model clearly prefers the detection. 3: on the same runs the moves
-            with gains of 3 or more went to the track's own person 33 times out of 35
-            (section "Weak moves by their gain"), the moves kept back by the support had
-            gains up to 1.1; on held-out seed 12 a move with gain 14 kept back cost three
-            switches.
         relocate_interval: seconds after a track was born or moved during which such a
             detection does not move it again but is dropped (in a crowd at the door a
             young model explains several people about equally well: the track would hop).
@@ -193,7 +187,6 @@ class AutoDetectionConfig:
     relocate_margin: float = -3.0
     weak_relocate_margin: float = 1.5
     move_support: float = 0.3
-    clear_gain: float = 3.0
     relocate_interval: float = 2.0
     relocate_hidden: bool = True
     reuse_time: float = 3.0
@@ -218,8 +211,6 @@ class AutoDetectionConfig:
                                  f'{self.weak_relocate_margin}')
         if not self.move_support >= 0:
             raise DetectionError(f'move_support must be >= 0, got {self.move_support}')
-        if np.isnan(self.clear_gain):
-            raise DetectionError('clear_gain must be a number or +-inf')
         if not self.duplicate_margin >= 0:
             raise DetectionError(f'duplicate_margin must be >= 0, got {self.duplicate_margin}')
         if not (self.reuse_time >= 0 and self.reuse_radius >= 0
@@ -807,13 +798,11 @@ class AutoDetection:
         if gains:
             # exclusive support with the detection as one more track: a track that keeps
             # move_support of it stands on a person of its own, the detection is another
-            # (unless the track's model clearly prefers the detection: clear_gain)
             _, with_det, _ = self._exclusive_support(det, model, tracks, keep, means, models,
                                                      evidence)
             left = {k: float(with_det[j]) for j, k in enumerate(keep)}
             info['support'] = [(int(tracks[k].track_id), round(left[k], 3)) for k, _ in gains]
-            gains = [(k, g) for k, g in gains
-                     if g >= cfg.clear_gain or not left[k] >= cfg.move_support]
+            gains = [(k, g) for k, g in gains if not left[k] >= cfg.move_support]
         best = max(gains, key=lambda kg: kg[1]) if gains else None
         hidden = False
         if best is None and cfg.relocate_hidden:
