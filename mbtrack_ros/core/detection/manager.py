@@ -85,7 +85,9 @@ class AutoDetectionConfig:
             somebody else (a newcomer walking in past a leaver at the door). 0.3: on sixty
             clear-room runs (seeds 0-9) the moves of tracks left at 0.3 or more all went
             to another person (10 of 10), those below to the track's own person 47 times
-            out of 52 (docs/detection.md, "Moves of tracks on a person of their own").
+            out of 52; on the held-out seeds 10-14 the tracks it kept back had followed
+            another person 4 times and the detection's 4 times (a lagging track in a door
+            crowd; docs/detection.md, "Moves of tracks on a person of their own").
             Above 1: no track is kept from a move (the support is at most 1).
         relocate_interval: seconds after a track was born or moved during which such a
             detection does not move it again but is dropped (in a crowd at the door a
