@@ -766,9 +766,11 @@ class AutoDetection:
         estimate (``log p(y_c | detection) - log p(y_c | track) > relocate_margin``), the
         detection is taken for that track's person and the track is moved there (same id)
         - or, within ``relocate_interval`` of the track's birth or last move, the detection
-        is dropped; otherwise a new track is born. The gain is a weak cue in groups (on
-        clear-room both right and wrong moves had gains from -3 to +12 nats per camera,
-        docs/detection.md); still, moving instead of a birth lowered the switches on every
+        is dropped; otherwise a new track is born. A track the detection would leave
+        ``move_support`` or more of its exclusive support (foreground no other track
+        covers) is not moved: it stands on a person of its own. The gain is a weak cue in
+        groups (on clear-room both right and wrong moves had gains from -3 to +12 nats per
+        camera, docs/detection.md); still, moving instead of a birth lowered the switches on every
         clear-room recording measured, and the interval stops a track hopping through a
         group. A detection scoring below ``beside_threshold`` needs the stricter
         ``weak_relocate_margin`` to move a track (about half of such moves with a small
