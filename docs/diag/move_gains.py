@@ -6,7 +6,8 @@ band (``--gains`` edges), the table of docs/detection.md "Weak moves by their ga
 with ``--support S``, also by the moved track's exclusive support left beside the
 detection (below / at least S; recorded in the decisions since ``move_support``: run with
 ``--detection move_support=2`` to have every move), the table of "Moves of tracks on a
-person of their own".
+person of their own", and every track the gain would have moved that kept at least S
+(the tracks ``move_support`` S keeps back, on runs with that setting), labelled the same way.
 
     .venv/bin/python docs/diag/move_gains.py [--list] [--score 3.0] [--gains 1 1.5 2 3] \
         [--support 0.3] OUT REC [OUT REC ...]
@@ -22,16 +23,23 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _eval import detection_eval  # noqa: E402
 
 
-def moves(out: Path, rec: Path) -> list[dict]:
-    """Each move by the gain of one run: frame, score, gain, distance, label (as
-    ``detection_eval.py decisions`` labels it)."""
+def moves(out: Path, rec: Path, support: float = np.inf) -> tuple[list[dict], list[dict]]:
+    """Each move by the gain of one run (frame, score, gain, distance, support, label as
+    ``detection_eval.py decisions`` labels it), and each track the gain would move whose
+    recorded support was at least ``support`` (frame, track, support, action, label)."""
     tracks, truth, events, _ = detection_eval._load(out, rec)
     d, frames = detection_eval._matching(tracks, truth)
     gt: dict[int, list] = {}
     for r in truth:
         gt.setdefault(r.frame, []).append(r)
-    found = []
+    found, kept = [], []
     for e in events:
+        if e['kind'] == 'decision' and gt.get(e['frame']):
+            kept += [{'run': out.name, 'frame': e['frame'], 'track': int(t), 'support': v,
+                      'action': e['action'],
+                      'label': detection_eval.decision_label(d, frames, gt[e['frame']], e,
+                                                             int(t))}
+                     for t, v in e.get('support', []) if v >= support]
         action = e['action'] if e['kind'] == 'decision' else ''
         if not action.startswith('move') or '(' in action or not gt.get(e['frame']):
             continue
@@ -42,7 +50,7 @@ def moves(out: Path, rec: Path) -> list[dict]:
                       'support': dict(e.get('support', [])).get(tid, np.nan),
                       'label': detection_eval.decision_label(d, frames, gt[e['frame']], e,
                                                              tid)})
-    return found
+    return found, kept
 
 
 def main() -> None:
@@ -56,9 +64,12 @@ def main() -> None:
     args = p.parse_args()
     if len(args.pairs) % 2:
         p.error('give OUT REC pairs')
-    rows = []
+    rows, kept = [], []
+    limit = np.inf if args.support is None else args.support
     for out, rec in zip(args.pairs[::2], args.pairs[1::2]):
-        rows += moves(out, rec)
+        found, high = moves(out, rec, limit)
+        rows += found
+        kept += high
     if args.list:
         for r in sorted(rows, key=lambda r: (r['score'], r['gain'])):
             print(f"{r['run']:<10} frame {r['frame']:5d} score {r['score']:5.2f} "
@@ -90,6 +101,12 @@ def main() -> None:
                 cells.append(f"{c['same']} / {c['other']}" + (
                     f" (+{c['unmatched']} unmatched)" if c['unmatched'] else ''))
             print(f'| {name} | {cells[0]} | {cells[1]} |')
+        for r in kept:
+            print(f"{r['run']:<10} frame {r['frame']:5d} track {r['track']} support "
+                  f"{r['support']:.3f} ({r['action']}): {r['label']}")
+        c = collections.Counter(r['label'] for r in kept)
+        print(f'tracks the gain would move with support >= {args.support:g}: '
+              f"{c['same']} same / {c['other']} other / {c['unmatched']} unmatched")
     print(f'{len(rows)} moves')
 
 

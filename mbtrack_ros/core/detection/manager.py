@@ -799,11 +799,13 @@ class AutoDetection:
                 gains.append((k, gain))
         if near:
             info['near'] = near
+        support = None              # _exclusive_support, computed once per detection
         if gains:
             # exclusive support with the detection as one more track: a track that keeps
             # move_support of it stands on a person of its own, the detection is another
-            _, with_det, _ = self._exclusive_support(det, model, tracks, keep, means, models,
-                                                     evidence)
+            support = self._exclusive_support(det, model, tracks, keep, means, models,
+                                              evidence)
+            with_det = support[1]
             left = {k: float(with_det[j]) for j, k in enumerate(keep)}
             info['support'] = [(int(tracks[k].track_id), round(left[k], 3)) for k, _ in gains]
             gains = [(k, g) for k, g in gains if not left[k] >= cfg.move_support]
@@ -815,7 +817,7 @@ class AutoDetection:
         beside = False
         if best is None and cfg.beside_support > 0:
             best = self._lagging_beside(det, model, tracks, keep, means, models, evidence,
-                                        moved, stamp_ns, info)
+                                        moved, stamp_ns, info, support)
             beside = best is not None
         if best is None and near and det.score < cfg.beside_threshold:
             info['action'] = 'drop (weak beside a track)'
@@ -871,9 +873,12 @@ class AutoDetection:
                         tracks: Sequence[TrackEstimate], keep: Sequence[int],
                         means: np.ndarray, models: Mapping[int, PersonModel],
                         evidence: Mapping[str, FrameEvidence], moved: set[int],
-                        stamp_ns: int, info: dict) -> tuple[int, float] | None:
+                        stamp_ns: int, info: dict,
+                        support: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+                        ) -> tuple[int, float] | None:
         """(index, exclusive support with the detection) of the reported track whose
-        person the detection is, or None (``AutoDetectionConfig.beside_support``).
+        person the detection is, or None (``AutoDetectionConfig.beside_support``);
+        ``support``: :meth:`_exclusive_support` of the same tracks if already computed.
 
         A track that fell 0.5-1 m behind its person keeps some of their foreground (the
         corner cameras look along the gap), so it stays reported, while the detector finds
@@ -893,8 +898,8 @@ class AutoDetection:
         near = np.flatnonzero(gap <= cfg.relocate_radius)
         if not len(near):
             return None
-        alone, with_det, spare = self._exclusive_support(det, model, tracks, keep, means,
-                                                         models, evidence)
+        alone, with_det, spare = support if support is not None else \
+            self._exclusive_support(det, model, tracks, keep, means, models, evidence)
         info['beside'] = [(int(tracks[keep[j]].track_id), round(float(alone[j]), 3),
                            round(float(with_det[j]), 3)) for j in near]
         # the one near track the detection would leave spare (NaN, seen nowhere: none);
