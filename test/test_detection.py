@@ -1117,6 +1117,31 @@ def test_a_person_re_found_2_5_s_after_the_release_keeps_her_id_by_default(reuse
     assert ids[-1] == ([1] if reuse_time >= 2.5 else [2]), (reuse_time, ids[-1])
 
 
+@pytest.mark.parametrize('reuse_radius', [AutoDetectionConfig().reuse_radius, 1.0])
+def test_a_person_re_found_1_3_m_from_her_released_track_keeps_her_id_by_default(
+        reuse_radius):
+    """A person's track is released where she stood, and she is detected again 1.3 m
+    away (on clear-room a track left 1.1-1.3 m behind a person turning along a wall is
+    released as spare and she is found again a few frames later, docs/detection.md
+    "Reuse radius"): the default ``reuse_radius`` (1.5 m) gives her the released id back;
+    with the former 1 m a new id is issued."""
+    rng = np.random.default_rng(5)
+    calib, bgs, tracker = _painted_room_tracker(4, reuse_radius=reuse_radius)
+    stand, moved = [person(2.3, 2.5, theta=0.0)], [person(3.6, 2.5, theta=0.0)]
+    released_at, ids = None, []
+    for k in range(75):
+        if released_at is None:
+            who = [] if k >= 12 else stand
+        else:
+            who = [] if k < released_at + 5 else moved
+        tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, who, rng))
+        if released_at is None and k > 0 and ids[-1] == [1] and not tracker.track_ids:
+            released_at = k
+        ids.append(sorted(tracker.track_ids))
+    assert released_at is not None and released_at + 5 < 60
+    assert ids[-1] == ([1] if reuse_radius >= 1.3 else [2]), (reuse_radius, ids[-1])
+
+
 @pytest.mark.parametrize('margin', [AutoDetectionConfig().duplicate_margin, float('inf')])
 def test_of_two_tracks_on_one_person_the_one_whose_model_fits_stays(margin):
     """Track 1 follows a person in blue, track 2 a person in yellow; the person in blue

@@ -67,7 +67,7 @@ detection.spare_support         double     exclusive support below which a track
                                            overlaps another one is released as spare;
                                            0 = off (0.25)
 detection.reuse_time            double     s a released track stays lost: a person re-found
-                                           within 1 m who looks like it takes its id back
+                                           within 1.5 m who looks like it takes its id back
                                            (no new id); it ends after that (3.0; 0 = at once)
 detection.every                 int        run the detection pipeline (release, existence,
                                            background, search) on every k-th frame set
