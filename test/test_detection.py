@@ -1117,9 +1117,10 @@ def test_a_person_re_found_2_5_s_after_the_release_keeps_her_id_by_default(reuse
     assert ids[-1] == ([1] if reuse_time >= 2.5 else [2]), (reuse_time, ids[-1])
 
 
-@pytest.mark.parametrize('reuse_radius', [AutoDetectionConfig().reuse_radius, 1.0])
+@pytest.mark.parametrize('reuse_radius, reused', [(AutoDetectionConfig().reuse_radius, True),
+                                                  (1.0, False)])
 def test_a_person_re_found_1_3_m_from_her_released_track_keeps_her_id_by_default(
-        reuse_radius):
+        reuse_radius, reused):
     """A person's track is released where she stood, and she is detected again 1.3 m
     away (on clear-room a track left 1.1-1.3 m behind a person turning along a wall is
     released as spare and she is found again a few frames later, docs/detection.md
@@ -1139,7 +1140,7 @@ def test_a_person_re_found_1_3_m_from_her_released_track_keeps_her_id_by_default
             released_at = k
         ids.append(sorted(tracker.track_ids))
     assert released_at is not None and released_at + 5 < 60
-    assert ids[-1] == ([1] if reuse_radius >= 1.3 else [2]), (reuse_radius, ids[-1])
+    assert ids[-1] == ([1] if reused else [2]), (reuse_radius, ids[-1])
 
 
 @pytest.mark.parametrize('margin', [AutoDetectionConfig().duplicate_margin, float('inf')])
