@@ -7,7 +7,9 @@ with ``--support S``, also by the moved track's exclusive support left beside th
 detection (below / at least S; recorded in the decisions since ``move_support``: run with
 ``--detection move_support=2`` to have every move), the table of "Moves of tracks on a
 person of their own", and every track the gain would have moved that kept at least S
-(the tracks ``move_support`` S keeps back, on runs with that setting), labelled the same way.
+(the tracks ``move_support`` S keeps back, on runs with that setting), labelled the same way,
+with the frames since that track was born or last moved (under ``relocate_interval``, 30
+frames at 15 fps, the detection would have been dropped had the check not taken it out).
 
     .venv/bin/python docs/diag/move_gains.py [--list] [--score 3.0] [--gains 1 1.5 2 3] \
         [--support 0.3] OUT REC [OUT REC ...]
@@ -33,14 +35,17 @@ def moves(out: Path, rec: Path, support: float = np.inf) -> tuple[list[dict], li
     for r in truth:
         gt.setdefault(r.frame, []).append(r)
     found, kept = [], []
+    placed: dict[int, int] = {}     # track id -> frame of its birth or last move
     for e in events:
         if e['kind'] == 'decision' and gt.get(e['frame']):
             kept += [{'run': out.name, 'frame': e['frame'], 'track': int(t), 'support': v,
-                      'action': e['action'],
+                      'action': e['action'], 'since': e['frame'] - placed.get(int(t), -9999),
                       'label': detection_eval.decision_label(d, frames, gt[e['frame']], e,
                                                              int(t))}
                      for t, v in e.get('support', []) if v >= support]
         action = e['action'] if e['kind'] == 'decision' else ''
+        if e['kind'] == 'birth' or action.startswith('move'):   # hidden and beside too
+            placed[int(e['id'] if e['kind'] == 'birth' else action.split()[1])] = e['frame']
         if not action.startswith('move') or '(' in action or not gt.get(e['frame']):
             continue
         tid = int(action.split()[1])
@@ -103,7 +108,8 @@ def main() -> None:
             print(f'| {name} | {cells[0]} | {cells[1]} |')
         for r in kept:
             print(f"{r['run']:<10} frame {r['frame']:5d} track {r['track']} support "
-                  f"{r['support']:.3f} ({r['action']}): {r['label']}")
+                  f"{r['support']:.3f} ({r['action']}), placed {r['since']} frames "
+                  f"before: {r['label']}")
         c = collections.Counter(r['label'] for r in kept)
         print(f'tracks the gain would move with support >= {args.support:g}: '
               f"{c['same']} same / {c['other']} other / {c['unmatched']} unmatched")
