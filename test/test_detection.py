@@ -1052,21 +1052,24 @@ def test_a_hidden_track_beside_a_detection_is_moved_there_instead_of_a_birth(
         assert 'birth' in actions and not any(a.startswith('move') for a in actions)
 
 
-@pytest.mark.parametrize('reuse_time, place, back, reused', [
-    (2.0, (2.5, 2.5), 'same', True), (0.0, (2.5, 2.5), 'same', False),
-    (2.0, (4.6, 4.5), 'same', False), (2.0, (2.5, 2.5), None, False),
-    (2.0, (2.5, 2.5), 'other', False)])
+@pytest.mark.parametrize('reuse_time, place, back, entry, reused', [
+    (2.0, (2.5, 2.5), 'same', True, True), (0.0, (2.5, 2.5), 'same', True, False),
+    (2.0, (4.6, 4.5), 'same', True, True), (2.0, (4.6, 4.5), 'same', False, False),
+    (2.0, (4.6, 4.5), 'other', True, False), (2.0, (2.5, 2.5), None, True, False),
+    (2.0, (2.5, 2.5), 'other', True, False)])
 def test_a_person_re_found_soon_after_the_release_gets_the_released_id(
-        reuse_time, place, back, reused):
+        reuse_time, place, back, entry, reused):
     """A standing person vanishes (their track is released after the 1 s timeout) and is
     detected again at the same place 0.3 s later: within ``reuse_time`` the new track takes
-    the released id; with ``reuse_time`` 0, in the entry zone (the person left the room
-    and somebody else comes in), or when somebody who looks different stands there
-    (``reuse_distance``), a new id is issued. The id ends (``FrameResult.ended``) at the
+    the released id, in the entry zone too (``reuse_in_entry_zones``); with ``reuse_time``
+    0, in the entry zone without ``reuse_in_entry_zones`` (the person is taken to have
+    left), or when somebody who looks different stands there (``reuse_distance``; in the
+    entry zone: a newcomer), a new id is issued. The id ends (``FrameResult.ended``) at the
     release when it cannot come back, ``reuse_time`` after it when nobody took it, never
     when it was taken: an id never returns after it ended."""
     rng = np.random.default_rng(5)
-    calib, bgs, tracker = _painted_room_tracker(4, reuse_time=reuse_time)
+    calib, bgs, tracker = _painted_room_tracker(      # entry: the default
+        4, reuse_time=reuse_time, **({} if entry else {'reuse_in_entry_zones': False}))
     stand = [person(*place, theta=0.0)]
     other = [person(*place, theta=0.0, colours=YELLOW)]
     released_at, ids, ended = None, [], {}
@@ -1086,7 +1089,7 @@ def test_a_person_re_found_soon_after_the_release_gets_the_released_id(
     assert ids[-1] == ([1] if reused else [2] if back else [])
     if reused:
         assert 1 not in ended
-    elif reuse_time == 0 or back == 'same':     # cannot come back: ends at the release
+    elif reuse_time == 0 or not entry:  # cannot come back: ends at the release
         assert ended[1] == released_at
     else:       # lost for reuse_time, then ended
         assert ended[1] == released_at + round(reuse_time * FPS)

@@ -98,12 +98,12 @@ class AutoDetectionConfig:
             appearance gain (the nearest such track not born or moved within
             ``relocate_interval``; docs/detection.md: most identity switches on clear-room
             were a birth beside a hidden track).
-        reuse_time, reuse_radius: a track released outside the entry zones is *lost* for
-            ``reuse_time`` seconds: a new track born within ``reuse_radius`` metres of where
-            it was released takes its id (the released track's person re-found) when the
-            two look alike (``reuse_distance``). The id ends (:meth:`finished`) only when
-            that time has passed unused, so the ROS interface's promise holds: an id never
-            comes back after it ended. 0 ends released tracks at once. 3 s: a person who
+        reuse_time, reuse_radius: a released track is *lost* for ``reuse_time`` seconds:
+            a new track born within ``reuse_radius`` metres of where it was released takes
+            its id (the released track's person re-found) when the two look alike
+            (``reuse_distance``). The id ends (:meth:`finished`) only when that time has
+            passed unused, so the ROS interface's promise holds: an id never comes back
+            after it ended. 0 ends released tracks at once. 3 s: a person who
             stood up from a chair and stood still was re-found 2.4-2.9 s after her track's
             release (docs/detection.md, "Weak moves; longer reuse"). 1.5 m (1 m before): a
             track left 1.1-1.3 m behind a person turning along a wall is released as spare
@@ -117,6 +117,12 @@ class AutoDetectionConfig:
             0.20-0.75, median 0.48) and another person for 18 (0.64-0.77; docs/detection.md,
             "Weak moves; longer reuse"). 0.5 before: on the thirteenth session's tree
             other-person candidates went down to 0.41 ("Lost tracks").
+        reuse_in_entry_zones: a track released inside an entry zone is lost for
+            ``reuse_time`` like any other; False: its id ends at once (its person is taken
+            to have left the room). On clear-room the tracks released in front of the door
+            are mostly those of a door crowd whose people are still in the room, and the
+            appearance gate keeps a leaver's id from a newcomer (docs/detection.md, "Reuse
+            in the entry zones").
         duplicate_by_reporting: of two tracks on one person (release ``merge_radius``,
             ``merge_time``) release the one reported without a break for the shorter time
             (born, moved or hidden later) instead of the younger one.
@@ -198,6 +204,7 @@ class AutoDetectionConfig:
     reuse_time: float = 3.0
     reuse_radius: float = 1.5
     reuse_distance: float = 0.55
+    reuse_in_entry_zones: bool = True
     duplicate_by_reporting: bool = True
     duplicate_margin: float = 8.0
     reach_radius: float = 0.5
@@ -979,7 +986,7 @@ class AutoDetection:
                            means: np.ndarray, ended: Sequence[int],
                            models: Mapping[int, PersonModel]) -> None:
         """Keep where and when the tracks released this frame were, for ``reuse_time``
-        (not those released in an entry zone: their person left the room)."""
+        (not those released in an entry zone unless ``reuse_in_entry_zones``)."""
         horizon = int(self.config.reuse_time * 1e9)
         expired = [t for t, v in self._released.items() if int(stamp_ns) - v[0] >= horizon]
         for t in expired:
@@ -987,9 +994,10 @@ class AutoDetection:
         self._lost_ended.extend(expired)
         if horizon <= 0:
             return
-        in_entry = self.calibration.in_entry_zone(means[:, [X, Y]])
+        left = np.zeros(len(tracks), bool) if self.config.reuse_in_entry_zones \
+            else self.calibration.in_entry_zone(means[:, [X, Y]])
         for k, t in enumerate(tracks):
-            if t.track_id in ended and not in_entry[k]:
+            if t.track_id in ended and not left[k]:
                 self._released[int(t.track_id)] = (int(stamp_ns), means[k, [X, Y]],
                                                    models.get(t.track_id))
 
