@@ -994,10 +994,12 @@ class AutoDetection:
         self._lost_ended.extend(expired)
         if horizon <= 0:
             return
-        left = np.zeros(len(tracks), bool) if self.config.reuse_in_entry_zones \
+        # without reuse_in_entry_zones a track released in front of the door is its
+        # person's exit: the id ends at once
+        person_left = np.zeros(len(tracks), bool) if self.config.reuse_in_entry_zones \
             else self.calibration.in_entry_zone(means[:, [X, Y]])
         for k, t in enumerate(tracks):
-            if t.track_id in ended and not left[k]:
+            if t.track_id in ended and not person_left[k]:
                 self._released[int(t.track_id)] = (int(stamp_ns), means[k, [X, Y]],
                                                    models.get(t.track_id))
 
