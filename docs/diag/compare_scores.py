@@ -4,9 +4,9 @@ Usage: compare_scores.py A/scores.json[,A2/scores.json...] B/scores.json[,B2/...
 
 For the runs (recording, seed) both sides hold (a side may join several suites, e.g. the
 seeds 0-4 and the held-out seeds of one tree): on how many B has fewer / more / as many
-identity switches as A, and higher / lower MOTA; then the totals of each, the switches per
-tracker seed (all recordings together), and Welch's t and the Mann-Whitney test of those
-per-seed totals (scipy).
+identity switches as A, and higher / lower MOTA, and each run whose switches differ; then
+the totals of each, the switches per tracker seed (all recordings together), and Welch's
+t and the Mann-Whitney test of those per-seed totals (scipy).
 """
 import json
 import sys
@@ -25,6 +25,9 @@ mota = [b[k]['mota'] - a[k]['mota'] for k in both]
 print(f'{len(both)} runs: switches fewer in B on {sum(v < 0 for v in sw)}, more on '
       f'{sum(v > 0 for v in sw)}, equal on {sum(v == 0 for v in sw)}; MOTA higher on '
       f'{sum(v > 0 for v in mota)}, lower on {sum(v < 0 for v in mota)}')
+for k, v in zip(both, sw):
+    if v:
+        print(f'  {k[0]} seed {k[1]}: {a[k]["mismatches"]} -> {b[k]["mismatches"]} switches')
 seeds = sorted({k[1] for k in both})
 per_seed = {}
 for name, runs in (('A', a), ('B', b)):
