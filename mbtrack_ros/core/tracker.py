@@ -63,6 +63,8 @@ class TrackerConfig:
         reuse_time: s during which a released track is only lost and a person re-found
             nearby who looks like it takes its id back (``AutoDetectionConfig.reuse_time``;
             None: its default, 0: released tracks end at once).
+        reuse_in_entry_zones: whether a track released in an entry zone is lost like any
+            other (``AutoDetectionConfig.reuse_in_entry_zones``; None: its default, on).
         detection_threshold: smallest combined log response of a detection (None: the
             detector's default).
         beside_threshold: smallest score of a detection that starts a track within 1 m of
@@ -115,6 +117,7 @@ class TrackerConfig:
     beside_threshold: float | None = None
     spare_support: float | None = None
     reuse_time: float | None = None
+    reuse_in_entry_zones: bool | None = None
     subsample: int = 1
     pipeline_search: bool = False
     detection_every: int = 1
@@ -167,6 +170,10 @@ class TrackerConfig:
                 isinstance(self.reuse_time, bool) or not isinstance(self.reuse_time, (int, float))
                 or not 0 <= self.reuse_time < float('inf')):
             bad(f'reuse_time must be a number >= 0, got {self.reuse_time!r}')
+        if self.reuse_in_entry_zones is not None and not isinstance(self.reuse_in_entry_zones,
+                                                                    bool):
+            bad(f'reuse_in_entry_zones must be true, false or None, got '
+                f'{self.reuse_in_entry_zones!r}')
         if isinstance(self.adaptation_rate, bool) or not (
                 isinstance(self.adaptation_rate, (int, float))
                 and 0 <= self.adaptation_rate <= 1):
@@ -195,6 +202,8 @@ class TrackerConfig:
                                          rate=float(self.adaptation_rate)))
         if self.reuse_time is not None:
             config = replace(config, reuse_time=float(self.reuse_time))
+        if self.reuse_in_entry_zones is not None:
+            config = replace(config, reuse_in_entry_zones=self.reuse_in_entry_zones)
         if self.beside_threshold is not None:
             config = replace(config, beside_threshold=float(self.beside_threshold))
         return _pixels_scaled(config, float(self.image_scale))

@@ -69,6 +69,9 @@ detection.spare_support         double     exclusive support below which a track
 detection.reuse_time            double     s a released track stays lost: a person re-found
                                            within 1.5 m who looks like it takes its id back
                                            (no new id); it ends after that (3.0; 0 = at once)
+detection.reuse_in_entry_zones  bool       tracks released in front of the door are lost
+                                           like any other (true); false: their ids end at
+                                           once (their people are taken to have left)
 detection.every                 int        run the detection pipeline (release, existence,
                                            background, search) on every k-th frame set
                                            only (1; a speed option that costs accuracy,
@@ -222,6 +225,10 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
                              'stays lost, its id given back to a person re-found within '
                              'AutoDetectionConfig.reuse_radius who looks like it; it ends '
                              'after (0 = at once)', _fr(0.0, 60.0)),
+    'detection.reuse_in_entry_zones': (AutoDetectionConfig().reuse_in_entry_zones, 'a track '
+                                       'released in an entry zone is lost for '
+                                       'detection.reuse_time like any other; false: its id '
+                                       'ends at once (its person is taken to have left)', {}),
     'detection.every': (1, 'run the detection pipeline on every k-th frame set only (speed '
                         'option, TrackerConfig.detection_every)', _ir(1, 30)),
     'detection.adaptation_rate': (0.0, 'blending rate of the slow appearance-model adaptation '

@@ -25,6 +25,7 @@ TRACKER_PARAMETERS: dict[str, tuple[str, type]] = {
     'detection.beside_threshold': ('beside_threshold', float),
     'detection.spare_support': ('spare_support', float),
     'detection.reuse_time': ('reuse_time', float),
+    'detection.reuse_in_entry_zones': ('reuse_in_entry_zones', bool),
     'detection.every': ('detection_every', int),
     'detection.adaptation_rate': ('adaptation_rate', float),
     'tracker.image_scale': ('image_scale', float),
