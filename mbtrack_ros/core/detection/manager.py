@@ -994,14 +994,16 @@ class AutoDetection:
         self._lost_ended.extend(expired)
         if horizon <= 0:
             return
-        # without reuse_in_entry_zones a track released in front of the door is its
-        # person's exit: the id ends at once
-        person_left = np.zeros(len(tracks), bool) if self.config.reuse_in_entry_zones \
-            else self.calibration.in_entry_zone(means[:, [X, Y]])
         for k, t in enumerate(tracks):
-            if t.track_id in ended and not person_left[k]:
-                self._released[int(t.track_id)] = (int(stamp_ns), means[k, [X, Y]],
-                                                   models.get(t.track_id))
+            if t.track_id not in ended:
+                continue
+            # without reuse_in_entry_zones a track released in front of the door is its
+            # person's exit: the id ends at once
+            if not self.config.reuse_in_entry_zones \
+                    and self.calibration.in_entry_zone(means[k, [X, Y]])[0]:
+                continue
+            self._released[int(t.track_id)] = (int(stamp_ns), means[k, [X, Y]],
+                                               models.get(t.track_id))
 
     def _reusable(self, det: Detection, model: PersonModel,
                   models: Mapping[int, PersonModel], info: dict) -> int | None:
