@@ -39,7 +39,8 @@ def moves(out: Path, rec: Path, support: float = np.inf) -> tuple[list[dict], li
     for e in events:
         if e['kind'] == 'decision' and gt.get(e['frame']):
             kept += [{'run': out.name, 'frame': e['frame'], 'track': int(t), 'support': v,
-                      'action': e['action'], 'since': e['frame'] - placed.get(int(t), -9999),
+                      'action': e['action'],
+                      'since': e['frame'] - placed[int(t)] if int(t) in placed else None,
                       'label': detection_eval.decision_label(d, frames, gt[e['frame']], e,
                                                              int(t))}
                      for t, v in e.get('support', []) if v >= support]
@@ -56,6 +57,13 @@ def moves(out: Path, rec: Path, support: float = np.inf) -> tuple[list[dict], li
                       'label': detection_eval.decision_label(d, frames, gt[e['frame']], e,
                                                              tid)})
     return found, kept
+
+
+def _cell(rows: list[dict]) -> str:
+    """'same / other' counts of labelled rows (and the unmatched ones, if any)."""
+    c = collections.Counter(r['label'] for r in rows)
+    return f"{c['same']} / {c['other']}" + (f" (+{c['unmatched']} unmatched)"
+                                            if c['unmatched'] else '')
 
 
 def main() -> None:
@@ -84,13 +92,10 @@ def main() -> None:
     print(f'| gain | score < {args.score:g}: same / other | score >= {args.score:g}: '
           'same / other |')
     print('| --- | --- | --- |')
+    weak = [r for r in rows if r['score'] < args.score]
+    strong = [r for r in rows if r['score'] >= args.score]
     for lo, hi in zip(edges[:-1], edges[1:]):
-        cells = []
-        for strong in (False, True):
-            c = collections.Counter(r['label'] for r in rows if lo <= r['gain'] < hi
-                                    and (r['score'] >= args.score) == strong)
-            cells.append(f"{c['same']} / {c['other']}" + (
-                f" (+{c['unmatched']} unmatched)" if c['unmatched'] else ''))
+        cells = [_cell([r for r in side if lo <= r['gain'] < hi]) for side in (weak, strong)]
         print(f'| [{lo:g}, {hi:g}) | {cells[0]} | {cells[1]} |')
     if args.support is not None:
         print(f'| support left | score < {args.score:g}: same / other | '
@@ -99,17 +104,13 @@ def main() -> None:
         for name, test in ((f'< {args.support:g}', lambda v: v < args.support),
                            (f'>= {args.support:g}', lambda v: v >= args.support),
                            ('not recorded', lambda v: not np.isfinite(v))):
-            cells = []
-            for strong in (False, True):
-                c = collections.Counter(r['label'] for r in rows if test(r['support'])
-                                        and (r['score'] >= args.score) == strong)
-                cells.append(f"{c['same']} / {c['other']}" + (
-                    f" (+{c['unmatched']} unmatched)" if c['unmatched'] else ''))
+            cells = [_cell([r for r in side if test(r['support'])]) for side in (weak, strong)]
             print(f'| {name} | {cells[0]} | {cells[1]} |')
         for r in kept:
             print(f"{r['run']:<10} frame {r['frame']:5d} track {r['track']} support "
-                  f"{r['support']:.3f} ({r['action']}), placed {r['since']} frames "
-                  f"before: {r['label']}")
+                  f"{r['support']:.3f} ({r['action']}), placed "
+                  + (f"{r['since']} frames before" if r['since'] is not None else 'never')
+                  + f": {r['label']}")
         c = collections.Counter(r['label'] for r in kept)
         print(f'tracks the gain would move with support >= {args.support:g}: '
               f"{c['same']} same / {c['other']} other / {c['unmatched']} unmatched")
