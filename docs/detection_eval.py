@@ -37,7 +37,9 @@ against the ground truth: was the person at the detection the one the track (for
 the released track) was matched to in the 15 matched frames before (same / other /
 unmatched: the track followed nobody)? With ``reuse_time`` it also gives the appearance
 distance (``appearance.model_distance``) of every released track a detection could have
-taken the id of, by whether that track had been the same person. ``exits`` tells, per
+taken the id of, by whether that track had been the same person, and lists each one of
+another person (or of nobody) within 0.05 of the ``reuse_distance`` gate or under it (run,
+frame, floor distance, appearance distance, what the detection became). ``exits`` tells, per
 release by the exit rule, whether the track's person was still in the room afterwards
 (premature).
 """
@@ -652,6 +654,8 @@ def decision_label(d, frames: np.ndarray, people: list, decision: dict, tid: int
 def decisions(pairs: list[tuple[Path, Path]]) -> None:
     total: dict[tuple[str, str], int] = {}
     reuse_distances: dict[str, list[float]] = {}     # label -> appearance distances
+    near_gate: list[str] = []       # other people's candidates close to the reuse gate
+    gate = AutoDetectionConfig().reuse_distance + 0.05
     weak_below = AutoDetectionConfig().beside_threshold   # moves split at the default
     for out, rec in pairs:
         tracks, truth, events, _ = _load(out, rec)
@@ -664,9 +668,13 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
             if e['kind'] == 'decision' and e.get('reuse') and gt.get(e['frame']):
                 # every released track a detection could have taken the id of (reuse_time):
                 # its appearance distance to the detection, labelled by who it was
-                for tid, _, unlike in e['reuse']:
+                for tid, dist, unlike in e['reuse']:
                     label = decision_label(d, frames, gt[e['frame']], e, int(tid))
                     reuse_distances.setdefault(label, []).append(float(unlike))
+                    if label != 'same' and unlike <= gate:
+                        near_gate.append(f"  {out.name} frame {e['frame']}: track {tid} "
+                                         f"({label}) {dist:.2f} m from its release, "
+                                         f"appearance {unlike:.3f} -> {e['action']}")
             words = e['action'].split() if e['kind'] == 'decision' else []
             if not words or words[0] not in ('move', 'drop', 'reuse') or not gt.get(e['frame']):
                 continue
@@ -693,6 +701,10 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
         print(f'reuse candidates, released track was the {label} person: {len(values)}, '
               f'appearance distance min / quartiles / max '
               + ' / '.join(f'{v:.3f}' for v in q))
+    if near_gate:
+        print(f'reuse candidates of another person (or nobody) at appearance distance '
+              f'<= {gate:.2f}:')
+        print('\n'.join(near_gate))
 
 
 def _visible_fractions(cal: RoomCalibration, people: list, person: int, *,
