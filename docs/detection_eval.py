@@ -161,6 +161,8 @@ def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False,
                 events.append({'kind': 'adapt', 'frame': fs.index, **a})
             for c in getattr(tracker.detection, 'duplicate_checks', []):
                 events.append({'kind': 'duplicate_check', 'frame': fs.index, **c})
+            for c in getattr(tracker.detection, 'catch_ups', []):   # catch_up's moves
+                events.append({'kind': 'catch_up', 'frame': fs.index, **c})
             for c in getattr(tracker.detection, 'exit_checks', []):  # h-reid's exit rescue
                 events.append({'kind': 'exit_check', 'frame': fs.index, **c})
                 if c['rescued']:      # the exit rule named it, the rescue kept it
@@ -675,6 +677,11 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
                         near_gate.append(f"  {out.name} frame {e['frame']}: track {tid} "
                                          f"({label}) {dist:.2f} m from its release, "
                                          f"appearance {unlike:.3f} -> {e['action']}")
+            if e['kind'] == 'catch_up' and gt.get(e['frame']):  # catch_up's moves, labelled
+                key = ('catch up', decision_label(d, frames, gt[e['frame']], e, int(e['id'])))
+                counts[key] = counts.get(key, 0) + 1
+                total[key] = total.get(key, 0) + 1
+                continue
             words = e['action'].split() if e['kind'] == 'decision' else []
             if not words or words[0] not in ('move', 'drop', 'reuse') or not gt.get(e['frame']):
                 continue

@@ -1350,6 +1350,44 @@ def test_a_lagging_track_is_moved_to_the_place_its_reach_found(move):
         assert not any(moved) and lag > 0.25, lag
 
 
+@pytest.mark.parametrize('catch_up, entry, caught', [
+    (4.0, False, True), (np.inf, False, False), (4.0, True, False)])
+def test_a_supported_track_behind_its_walking_person_catches_up(catch_up, entry, caught):
+    """A track put 0.3 m behind its walking person once still covers enough of them for
+    positive coverage evidence at its mean, so its reach does not act. With ``catch_up``
+    the free foreground its reach finds ahead is better by more than that: it is restarted
+    there and is within 0.08 m of them a frame later. Without it, or where its reach
+    touches an entry zone (a door crowd), the filter alone is still more than 0.12 m
+    behind."""
+    from dataclasses import replace
+
+    rng = np.random.default_rng(5)
+    calib = make_room(ceiling=False)
+    if entry:       # the whole walk inside an entry zone
+        calib = replace(calib, entry_zones=((1.0, 2.0, 3.5, 3.2),))
+    bgs = backgrounds(calib)
+    tracker = _detecting_tracker(calib, bgs, seed=4)
+    tracker.detection.config = replace(tracker.detection.config, reach_age=0.0,
+                                       catch_up=catch_up)
+
+    def walker(k):
+        return [person(1.5 + 0.06 * k, 2.6, theta=0.0)]
+    _track_painted(tracker, calib, bgs, rng, 16, walker)
+    assert tracker.track_ids == [1]
+    tracker.relocate_track(1, np.array([1.5 + 0.06 * 15 - 0.3, 2.6, 0.0, 0.0, 0.0, 0.0]))
+    moved = []
+    for k in (16, 17):
+        res = tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, walker(k), rng))
+        moved.append(1 in tracker.detection.reach_moves)
+        assert res.tracks[0].existence > 0.9      # supported all along: no reach of before
+    lag = 1.5 + 0.06 * 17 - res.tracks[0].mean[0]
+    assert tracker.track_ids == [1]
+    if caught:
+        assert moved[0] and abs(lag) < 0.08, lag
+    else:
+        assert not any(moved) and lag > 0.12, lag
+
+
 def test_reach_counts_foreground_only_where_no_other_track_is():
     """The reach ring's coverage, side and top-down cameras: a place on an untracked
     person's foreground is covered; the same place is not when another track's silhouette
@@ -1396,6 +1434,7 @@ def test_reach_counts_foreground_only_where_no_other_track_is():
         assert covered['free'][n] > 0.8, (n, covered)
         assert covered['tracked'][n] < 0.1, (n, covered)
         assert covered['ghost'][n] < 0.1, (n, covered)
-    for bad in ({'reach_radius': -0.1}, {'reach_directions': 0}, {'reach_age': -1.0}):
+    for bad in ({'reach_radius': -0.1}, {'reach_directions': 0}, {'reach_age': -1.0},
+                {'catch_up': -1.0}, {'catch_up': float('nan')}):
         with pytest.raises(DetectionError):
             AutoDetectionConfig(**bad)
