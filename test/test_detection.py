@@ -1375,17 +1375,19 @@ def test_a_supported_track_behind_its_walking_person_catches_up(catch_up, entry,
     _track_painted(tracker, calib, bgs, rng, 16, walker)
     assert tracker.track_ids == [1]
     tracker.relocate_track(1, np.array([1.5 + 0.06 * 15 - 0.3, 2.6, 0.0, 0.0, 0.0, 0.0]))
-    moved = []
+    moved, logged = [], []
     for k in (16, 17):
         res = tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, walker(k), rng))
         moved.append(1 in tracker.detection.reach_moves)
+        logged.extend(tracker.detection.catch_ups)
         assert res.tracks[0].existence > 0.9      # supported all along: no reach of before
     lag = 1.5 + 0.06 * 17 - res.tracks[0].mean[0]
     assert tracker.track_ids == [1]
     if caught:
         assert moved[0] and abs(lag) < 0.08, lag
+        assert [c['id'] for c in logged] == [1] and logged[0]['gain'] > catch_up
     else:
-        assert not any(moved) and lag > 0.12, lag
+        assert not any(moved) and lag > 0.12 and not logged, lag
 
 
 def test_reach_counts_foreground_only_where_no_other_track_is():
