@@ -1395,8 +1395,9 @@ def test_reach_counts_foreground_only_where_no_other_track_is():
     person's foreground is covered; the same place is not when another track's silhouette
     (blob) at its mean covers that person, nor when the person's pixels are a possible
     person of the bootstrap (a ghost: the background's not-yet-known foreground); with the
-    detector's exclusion radius there is no place near the other track at all; bad
-    settings raise."""
+    detector's exclusion radius there is no place near the other track at all; with
+    ``centre`` (catch_up's call) the track's mean comes first, less covered than the
+    person's place, and the other places are the same; bad settings raise."""
     from mbtrack_ros.core.detection.manager import AutoDetection
     from mbtrack_ros.core.detection.release import paint_blobs
 
@@ -1432,6 +1433,13 @@ def test_reach_counts_foreground_only_where_no_other_track_is():
         at = int(np.argmin(np.linalg.norm(places - person_xy, axis=1)))
         assert np.allclose(places[at], person_xy)
         covered[case] = rings[at]
+        if case == 'free':      # catch_up's call: the mean first, then the same places
+            with_mean, with_rings = det._reach_coverage(
+                0, evidence, sils, means, [shape] * len(means), np.full(len(means), 1.8),
+                centre=True)
+            assert np.allclose(with_mean[0], me[:2]) and np.allclose(with_mean[1:], places)
+            assert with_rings[1:] == rings and all(     # the person is 0.5 m from the mean
+                with_rings[0][n] < rings[at][n] for n in calib.cameras), with_rings[0]
     for n in calib.cameras:
         assert covered['free'][n] > 0.8, (n, covered)
         assert covered['tracked'][n] < 0.1, (n, covered)

@@ -1184,7 +1184,9 @@ class AutoDetection:
         that no other track's silhouette (blob) at its mean covers and that is not a
         possible person of the bootstrap (the background's not-yet-known foreground), over
         the whole area: a track beside a tracked person finds no support in that person,
-        a track that lost its person at the start no support in their old place."""
+        a track that lost its person at the start no support in their old place. With
+        ``centre`` the track's mean itself comes first (whoever is near it), then those
+        places (``catch_up`` compares them with it)."""
         cfg = self.config
         if cfg.reach_radius <= 0:
             return np.zeros((0, 2)), []
