@@ -23,8 +23,9 @@ each run against the issue's targets).
 ``mbtrack replay REC --out OUT --eval REC/ground_truth.csv --seed S`` does (same
 configuration, same random generator, so the same tracks.csv) and also writes
 OUT/events.json: every birth, every release with its reason (exit, support, spare,
-existence, duplicate) and every decision on a confirmed detection next to a track
-(``AutoDetection.decisions``: birth / move / drop, with the appearance gain).
+existence, duplicate), every decision on a confirmed detection next to a track
+(``AutoDetection.decisions``: birth / move / drop, with the appearance gain) and every
+move of the opt-in ``catch_up`` (``AutoDetection.catch_ups``: id, place, gain).
 ``report`` lists, per identity switch of the CLEAR MOT matching, the person, the old and
 new track, where the old track was, how it ended and where the new one was born; the
 false births (farther than 0.5 m from every person; door and screen flagged) and the
@@ -32,8 +33,8 @@ entering / release latencies. ``table`` prints the rows of docs/detection.md. ``
 the distance from each ground-truth person to the nearest reported track (all frames, and
 for people walking faster than 1 m/s the lag along the walking direction) and, per switch,
 whether the old track was reported at the switch frame (not: hidden or ended).
-``decisions`` checks each move, hidden move, id reuse and drop of the identity check
-against the ground truth: was the person at the detection the one the track (for a reuse:
+``decisions`` checks each move, hidden move, id reuse and drop of the identity check,
+and each ``catch_up`` move, against the ground truth: was the person at the detection the one the track (for a reuse:
 the released track) was matched to in the 15 matched frames before (same / other /
 unmatched: the track followed nobody)? With ``reuse_time`` it also gives the appearance
 distance (``appearance.model_distance``) of every released track a detection could have
