@@ -1233,6 +1233,29 @@ class AutoDetection:
                 out[i][n] = float(cov[i])
         return ring[:, [X, Y]], out
 
+    def _catch_up(self, t: TrackEstimate, k: int, cov: Mapping[str, float],
+                  weights: Mapping[str, float],
+                  reach: Callable[..., tuple[np.ndarray, list[dict[str, float]]]]) -> None:
+        """``AutoDetectionConfig.catch_up`` for supported track ``t`` (index ``k``;
+        ``cov``, ``weights``: its cameras' coverage and evidence weights): restart it at the
+        best place of its reach (``reach_moves``, logged in ``catch_ups``) when the free
+        foreground there gives positive coverage evidence, better by more than
+        ``catch_up`` than the free foreground at its mean. Not when the track or a place
+        of its reach lies in an entry zone (a door crowd)."""
+        if self.calibration.in_entry_zone(t.mean[[X, Y]])[0]:
+            return              # before the reach is computed: most door tracks stop here
+        places, rings = reach(k, True)          # the mean first, then its reach
+        if len(places) < 2 or self.calibration.in_entry_zone(places[1:]).any():
+            return
+        gain = self.config.existence.support_gain
+        free = [coverage_log_ratio({n: r.get(n, 0.0) for n in cov}, weights, gain)
+                for r in rings]
+        j = 1 + int(np.argmax(free[1:]))
+        if free[j] > 0.0 and free[j] - free[0] > self.config.catch_up:
+            self.reach_moves[t.track_id] = places[j]
+            self.catch_ups.append({'id': int(t.track_id), 'xy': [float(v) for v in places[j]],
+                                   'gain': round(free[j] - free[0], 3)})
+
     def _visibility_particles(self, tracks: Sequence[TrackEstimate],
                               models: Mapping[int, PersonModel], shapes: Sequence[BodyShape]
                               ) -> tuple[np.ndarray, np.ndarray, list[BodyShape]]:
@@ -1318,20 +1341,8 @@ class AutoDetection:
                         cov, best = ring, evidence
                         if cfg.reach_move and evidence > 0.0:
                             self.reach_moves[t.track_id] = place
-            elif cfg.reach_move and np.isfinite(cfg.catch_up) and cov and reach is not None \
-                    and not self.calibration.in_entry_zone(t.mean[[X, Y]])[0]:
-                # a supported track behind its person catches up (catch_up): the free
-                # foreground of its reach against that at its mean (places[0])
-                places, rings = reach(k, True)
-                if len(places) > 1 and not self.calibration.in_entry_zone(places).any():
-                    free = [coverage_log_ratio({n: r.get(n, 0.0) for n in cov}, weights, gain)
-                            for r in rings]
-                    j = 1 + int(np.argmax(free[1:]))
-                    if free[j] > 0.0 and free[j] - free[0] > cfg.catch_up:
-                        self.reach_moves[t.track_id] = places[j]
-                        self.catch_ups.append({'id': int(t.track_id),
-                                               'xy': [float(v) for v in places[j]],
-                                               'gain': round(free[j] - free[0], 3)})
+            elif cfg.reach_move and np.isfinite(cfg.catch_up) and cov and reach is not None:
+                self._catch_up(t, k, cov, weights, reach)
             aux.update(dt, loglik_visible=vis, loglik_hidden=hid, coverage=cov,
                        visible_fraction=weights)
             t.visibility = dict(aux.visibility)
