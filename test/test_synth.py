@@ -14,7 +14,7 @@ from mbtrack_ros.recording.csvfiles import read_ground_truth
 from mbtrack_ros.synth import (EPOCH_NS, PRESETS, SynthError, Synthesizer, generate,
                                iter_frames, render_view, visible_threshold)
 from mbtrack_ros.synth.body import Ellipsoids, random_clothing
-from mbtrack_ros.synth.motion import MAX_SPEED
+from mbtrack_ros.synth.motion import MAX_SPEED, Crowd
 from mbtrack_ros.synth.presets import Preset
 from mbtrack_ros.synth.room import CameraView, default_room, make_calibration
 
@@ -206,6 +206,31 @@ def test_people_leaving_beside_the_door_step_into_it_without_jumping():
             near_door += abs(p.y - synth.room.depth) < 0.5
             prev[p.person_id] = (p.x, p.y)
     assert near_door > 50                      # people did go through the door
+
+
+def test_someone_leaving_from_beside_the_door_keeps_clear_of_the_wall():
+    """The wall used to hold someone leaving from beside the doorway at the wall itself
+    (y = depth), half the body inside it and 0.3 m off the floor and the door's exit that a
+    tracker follows people on (clear-room seed 1 without the ceiling camera). It holds them
+    at the walkable floor's edge, as everywhere else, until they are in the door's span."""
+    room = default_room()
+    crowd = Crowd(room, np.random.default_rng(0))
+    x0, y0, x1, y1 = room.walkable
+    walker = crowd.add((5.55, 4.55), behaviour='room', theta=np.pi / 2, speed=0.9)
+    walker.tasks = [['goto', np.array([room.door_centre[0], room.depth + 1.3]), 0.9, 'door'],
+                    ['gone']]
+    prev, beside = walker.pos.copy(), 0
+    for _ in range(150):
+        crowd.step(1.0 / 15)
+        if walker.gone:
+            break
+        x, y = walker.pos
+        assert np.hypot(*(walker.pos - prev)) * 15 <= MAX_SPEED + 0.25
+        if y < room.depth and not room.door[0] <= x <= room.door[1]:
+            assert x0 <= x <= x1 and y <= y1 + 1e-9, (x, y)
+            beside += y > y1 - 0.05        # walking along the wall towards the door
+        prev = walker.pos.copy()
+    assert walker.gone and beside >= 3
 
 
 def test_lanz_seq4_twins_are_dressed_identically_and_fully_hidden():
