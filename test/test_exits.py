@@ -234,12 +234,15 @@ def test_a_person_who_walks_out_is_released_within_1_5_s(ceiling, rules):
 
 
 def test_cameras_on_the_door_wall_cannot_see_into_the_exit():
+    """Beyond the wall (the cameras' y, 4.9 m) the exit is hidden from the cameras on the
+    door's wall; its strip between the floor's edge (4.7 m) and the wall is not."""
     calib = make_calibration(default_room(), width=160, height=120)
-    xy = np.array([[4.6, 5.3], [4.3, 6.0], [4.6, 4.5], [2.0, 2.0]])
+    xy = np.array([[4.6, 5.3], [4.3, 6.0], [4.6, 4.5], [2.0, 2.0], [4.6, 4.85], [4.6, 4.95]])
+    assert calib.floor[3] < 4.85 < calib.cameras['cam2'].center[1] == pytest.approx(4.9)
     for name, cam in calib.cameras.items():
         hidden = calib.exit_hidden(name, xy)
         behind = cam.center[1] >= calib.floor[3]          # on the north wall, like the door
-        assert hidden.tolist() == [behind, behind, False, False], name
+        assert hidden.tolist() == [behind, behind, False, False, False, behind], name
     assert {n for n in calib.names if calib.exit_hidden(n, xy[:1])[0]} == {'cam2', 'cam3'}
     assert not make_room().exit_hidden('cam0', xy).any()        # no exits
 

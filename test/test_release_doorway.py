@@ -55,7 +55,7 @@ def test_doorway_witnesses_are_the_cameras_on_the_door_wall():
     witnesses = calib.doorway_witnesses(xy, 0.5)
     assert set(witnesses) == {'cam2', 'cam3'}                 # the north wall's cameras
     for name in ('cam2', 'cam3'):
-        assert calib.exit_hidden(name, xy[1:2])[0]            # the same cameras as the exit's
+        assert calib.exit_hidden(name, xy[2:3])[0]            # the same cameras as the exit's
         # in front of the door (band 0.5 m), in the exit; not 0.6 m off, nor beside the door
         assert witnesses[name].tolist() == [True, True, True, False, False, False]
     assert calib.doorway_witnesses(xy, 0.0)['cam2'].tolist() == [False, True, True, False,

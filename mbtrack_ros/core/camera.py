@@ -284,6 +284,19 @@ def _in_rect(xy: np.ndarray, rect: tuple[float, float, float, float]) -> np.ndar
     return (xy[:, 0] >= x0) & (xy[:, 0] <= x1) & (xy[:, 1] >= y0) & (xy[:, 1] <= y1)
 
 
+def _exit_side(floor: tuple[float, float, float, float],
+               rect: tuple[float, float, float, float]) -> tuple[int, int]:
+    """Which side of the floor an exit lies beyond: ``(axis, sign)``, axis 0 for x and 1
+    for y, sign +1 beyond the maximum and -1 beyond the minimum."""
+    fx0, fy0, fx1, fy1 = floor
+    ex0, ey0, ex1, ey1 = rect
+    if ey0 >= fy1:
+        return 1, 1
+    if ey1 <= fy0:
+        return 1, -1
+    return (0, 1) if ex0 >= fx1 else (0, -1)
+
+
 def _check_exit(rect: Any, floor: tuple[float, float, float, float]
                 ) -> tuple[float, float, float, float]:
     """An exit rectangle as 4 floats; it must be non-empty, outside the floor and share a
@@ -358,20 +371,24 @@ class RoomCalibration:
                       ) -> bool:
         """True when ``camera``'s centre is on the exit's side of the floor border they
         share: it hangs on the wall with the door and looks at the exit from behind it."""
-        cx, cy = self.cameras[camera].center[:2]
-        fx0, fy0, fx1, fy1 = self.floor
-        ex0, ey0, ex1, ey1 = exit_rect
-        return bool((ey0 >= fy1 and cy >= fy1) or (ey1 <= fy0 and cy <= fy0)
-                    or (ex0 >= fx1 and cx >= fx1) or (ex1 <= fx0 and cx <= fx0))
+        axis, sign = _exit_side(self.floor, exit_rect)
+        border = self.floor[axis + 2] if sign > 0 else self.floor[axis]
+        return bool(sign * (self.cameras[camera].center[axis] - border) >= 0.0)
 
     def exit_hidden(self, camera: str, xy: np.ndarray) -> np.ndarray:
         """(K,) True for floor points (K, 2) inside an exit that ``camera`` cannot see: the
-        camera hangs on the wall with the door (``_on_door_wall``)."""
+        camera hangs on the wall with the door (``_on_door_wall``) and the point is level
+        with the camera or beyond it, across the border the exit shares with the floor.
+        The camera's position stands for the wall: the strip of the exit between the
+        floor's edge and the wall is still in the room, in front of the camera."""
         xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
         hidden = np.zeros(len(xy), bool)
+        centre = self.cameras[camera].center[:2]
         for rect in self.exits:
             if self._on_door_wall(camera, rect):
-                hidden |= _in_rect(xy, rect)
+                axis, sign = _exit_side(self.floor, rect)
+                beyond = sign * (xy[:, axis] - centre[axis]) >= 0.0
+                hidden |= _in_rect(xy, rect) & beyond
         return hidden
 
     def doorway_witnesses(self, xy: np.ndarray, band: float) -> dict[str, np.ndarray]:
@@ -382,23 +399,20 @@ class RoomCalibration:
         it; any other camera's view of the doorway also shows the exit, where a person
         who just left may still walk. Cameras with no such point are left out."""
         xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-        fx0, fy0, fx1, fy1 = self.floor
         out: dict[str, np.ndarray] = {}
-        for ex0, ey0, ex1, ey1 in self.exits:
+        for rect in self.exits:
             # the exit grown by the band across the border it shares with the floor
-            if ey0 >= fy1:                      # beyond the floor's y_max side
-                front = (ex0, fy1 - band, ex1, ey1)
-            elif ey1 <= fy0:                    # beyond y_min
-                front = (ex0, ey0, ex1, fy0 + band)
-            elif ex0 >= fx1:                    # beyond x_max
-                front = (fx1 - band, ey0, ex1, ey1)
-            else:                               # beyond x_min
-                front = (ex0, ey0, fx0 + band, ey1)
-            inside = _in_rect(xy, front)
+            axis, sign = _exit_side(self.floor, rect)
+            front = list(rect)
+            if sign > 0:
+                front[axis] = self.floor[axis + 2] - band
+            else:
+                front[axis + 2] = self.floor[axis] + band
+            inside = _in_rect(xy, tuple(front))
             if not inside.any():
                 continue
             for name in self.cameras:
-                if self._on_door_wall(name, (ex0, ey0, ex1, ey1)):
+                if self._on_door_wall(name, rect):
                     out[name] = out.get(name, np.zeros(len(xy), bool)) | inside
         return out
 

@@ -20,10 +20,12 @@ parallel without waiting for each other's Python.
 
 Log-likelihoods are ``-D^2 / (2 sigma^2)`` (000 Eq. 19) summed over cameras; a camera that
 sees fewer than ``min_visible_pixels`` of a silhouette adds 0. With exits in the calibration
-(rectangles beyond a door), a camera on the door's wall cannot see a particle in the exit:
-that particle gets the mean of its target's other particles in that camera
-(``MeasurementModel._without_hidden``), else the wall would pull every track back from
-the doorway (docs/detection.md, "Exits").
+(rectangles beyond a door), a camera on the door's wall cannot see a particle in the exit
+once it is level with the camera or beyond (past the wall): that particle gets the mean of
+its target's other particles in that camera (``MeasurementModel._without_hidden``), else
+the wall would pull every track back from the doorway (docs/detection.md, "Exits"). The
+exit's strip between the floor's edge and the wall is in front of the camera and scored as
+usual (docs/detection.md, "The door-wall cameras see the strip in front of the wall").
 
 How w* enters the foreground term (000 Eq. 33): the image histogram of a part is
 accumulated with per-pixel weight w*(u); the rendered (model) histogram of a part is
