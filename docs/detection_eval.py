@@ -352,7 +352,8 @@ def table(pairs: list[tuple[Path, Path]], analysed: list[dict] | None = None) ->
 
 def totals(pairs: list[tuple[Path, Path]], analysed: list[dict] | None = None) -> None:
     """One line over all runs: mean MOTA, misses, false positives and mismatches summed,
-    release delays (> 1.5 s, > 5 s, median) and the longest release per recording."""
+    release delays (> 1.5 s, > 5 s, median) and the longest release per recording; the
+    release delays again from the person's last ground-truth row; the entering delays."""
     runs = [a | {'rec': rec.name} for (_, rec), a in
             zip(pairs, analysed or [_analyse(o, r) for o, r in pairs])]
     res = [a['result'] for a in runs]
@@ -367,6 +368,14 @@ def totals(pairs: list[tuple[Path, Path]], analysed: list[dict] | None = None) -
           f'{sum(v > 1.5 for v in leave)}, > 5 s {sum(v > 5 for v in leave)}, median {median}; '
           'longest per recording ' + ', '.join(
               f'{k} {v:.1f} s' if np.isfinite(v) else f'{k} -' for k, v in longest.items()))
+    # the same releases counted from the person's last ground-truth row (through the wall:
+    # the exit's strip between the floor's edge and the wall is still the room)
+    gone = sorted((d['end']['frame'] - (d['gone'] - 1)) / FPS
+                  for a in runs for d in a['leave_detail'])
+    if gone:
+        print(f'releases from the last ground-truth row: {len(gone)}, > 1.5 s '
+              f'{sum(v > 1.5 for v in gone)}, before it {sum(v < 0 for v in gone)}, median '
+              f'{np.median(gone):.2f} s')
     for key, what in (('enter', 'from the first ground-truth row'),
                       ('enter_seen', 'from fully visible in two cameras')):
         v = sorted(x for a in runs for x in a[key])
