@@ -25,7 +25,8 @@ once it is level with the camera or beyond (past the wall): that particle gets t
 its target's other particles in that camera (``MeasurementModel._without_hidden``), else
 the wall would pull every track back from the doorway (docs/detection.md, "Exits"). The
 exit's strip between the floor's edge and the wall is in front of the camera and scored as
-usual (docs/detection.md, "The door-wall cameras see the strip in front of the wall").
+usual (docs/detection.md, "The wall beside the door in the synth; the door-wall cameras
+and the strip in front of the wall").
 
 How w* enters the foreground term (000 Eq. 33): the image histogram of a part is
 accumulated with per-pixel weight w*(u); the rendered (model) histogram of a part is
