@@ -39,6 +39,7 @@ for rec in map(Path, sys.argv[1:]):
     for r, d in zip(rows, off):
         if d > 0:
             people.setdefault(r.person_id, []).append((r.frame, float(d)))
-    print(f'{rec.name}: {int((off > 0).sum())} rows off the floor and the exits'
-          + ''.join(f'; person {p} frames {v[0][0]}-{v[-1][0]} ({len(v)} rows, up to '
-                    f'{max(d for _, d in v):.2f} m)' for p, v in sorted(people.items())))
+    n = int((off > 0).sum())
+    print(f'{rec.name}: {n} row{"" if n == 1 else "s"} off the floor and the exits'
+          + ''.join(f'; person {p} frames {v[0][0]}-{v[-1][0]} ({len(v)} of them, up to '
+                    f'{max(d for _, d in v):.3f} m)' for p, v in sorted(people.items())))
