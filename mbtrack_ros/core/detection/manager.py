@@ -158,10 +158,11 @@ class AutoDetectionConfig:
             beside it. Not where the reach touches an entry zone: in the crowds at the door
             the free foreground beside a track is mostly a newcomer or a neighbour whose
             track lags (on cr1 seed 0, 14 switches against 2 with the door included).
-            ``inf`` disables, the default: 4 moved tracks only towards their own person
-            (275 of 275 on ninety clear-room runs) and cut the switches away from the door
-            (15 against 22 on ninety runs), but not in all (62 either way: the door
-            crowds went the other way; docs/detection.md, "Catching up").
+            ``inf`` disables, the default: on the twenty-second session's tree 4 moved
+            tracks only towards their own person (275 of 275 on ninety clear-room runs)
+            and cut the switches away from the door (15 against 22), but not in all (62
+            either way: the door crowds went the other way; docs/detection.md, "Catching
+            up").
         reach_age: seconds a track must have existed before it has a reach: a false birth
             (a shadow, a ghost, the fringe of a person) would keep itself alive on what is
             near it (on main's twelve clear-room runs 26 of 28 false births lived less
@@ -1233,6 +1234,13 @@ class AutoDetection:
                 out[i][n] = float(cov[i])
         return ring[:, [X, Y]], out
 
+    def _ring_evidence(self, ring: Mapping[str, float], cov: Mapping[str, float],
+                       weights: Mapping[str, float]) -> tuple[dict[str, float], float]:
+        """A reach place's coverages on the track's cameras (those of ``cov``; 0 where the
+        place is not seen) and their existence evidence (:func:`coverage_log_ratio`)."""
+        on = {n: ring.get(n, 0.0) for n in cov}
+        return on, coverage_log_ratio(on, weights, self.config.existence.support_gain)
+
     def _catch_up(self, t: TrackEstimate, k: int, cov: Mapping[str, float],
                   weights: Mapping[str, float],
                   reach: Callable[..., tuple[np.ndarray, list[dict[str, float]]]]) -> None:
@@ -1244,12 +1252,10 @@ class AutoDetection:
         of its reach lies in an entry zone (a door crowd)."""
         if self.calibration.in_entry_zone(t.mean[[X, Y]])[0]:
             return              # before the reach is computed: most door tracks stop here
-        places, rings = reach(k, True)          # the mean first, then its reach
+        places, rings = reach(k, centre=True)   # the mean first, then its reach
         if len(places) < 2 or self.calibration.in_entry_zone(places[1:]).any():
             return
-        gain = self.config.existence.support_gain
-        free = [coverage_log_ratio({n: r.get(n, 0.0) for n in cov}, weights, gain)
-                for r in rings]
+        free = [self._ring_evidence(r, cov, weights)[1] for r in rings]
         j = 1 + int(np.argmax(free[1:]))
         if free[j] > 0.0 and free[j] - free[0] > self.config.catch_up:
             self.reach_moves[t.track_id] = places[j]
@@ -1329,14 +1335,13 @@ class AutoDetection:
             side_w = cfg.side_weight if self.ceiling else 1.0
             weights = {n: (float(t.visible_fraction.get(n, 1.0)) * side_w
                            if n in self.side else 1.0) for n in set(cov) | set(vis)}
-            gain = cfg.existence.support_gain
-            best = coverage_log_ratio(cov, weights, gain) if reach is not None and cov else 0.0
+            best = (coverage_log_ratio(cov, weights, cfg.existence.support_gain)
+                    if reach is not None and cov else 0.0)
             if best < 0.0:
                 # the track's reach: its best place counts (AutoDetectionConfig.reach_radius)
                 places, rings = reach(k)
                 for place, ring in zip(places, rings):
-                    ring = {n: ring.get(n, 0.0) for n in cov}
-                    evidence = coverage_log_ratio(ring, weights, gain)
+                    ring, evidence = self._ring_evidence(ring, cov, weights)
                     if evidence > best:
                         cov, best = ring, evidence
                         if cfg.reach_move and evidence > 0.0:
