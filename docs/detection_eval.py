@@ -33,14 +33,16 @@ entering / release latencies. ``table`` prints the rows of docs/detection.md. ``
 the distance from each ground-truth person to the nearest reported track (all frames, and
 for people walking faster than 1 m/s the lag along the walking direction) and, per switch,
 whether the old track was reported at the switch frame (not: hidden or ended).
-``decisions`` checks each move, hidden move, id reuse and drop of the identity check, and
-each ``catch_up`` move, against the ground truth: was the person at the detection the one
-the track (for a reuse: the released track) was matched to in the 15 matched frames before
-(same / other / unmatched: the track followed nobody)? With ``reuse_time`` it also gives
-the appearance distance (``appearance.model_distance``) of every released track a detection
-could have taken the id of, by whether that track had been the same person, and lists each
-one of another person (or of nobody) within 0.05 of the ``reuse_distance`` gate or under it
-(run, frame, floor distance, appearance distance, what the detection became).
+``decisions`` checks each move, hidden move, id reuse (``reuse before a move``: a lost
+track's id given back instead of a move, ``reuse_before_moving``) and drop of the identity
+check, and each ``catch_up`` move, against the ground truth: was the person at the
+detection the one the track (for a reuse: the released track) was matched to in the 15
+matched frames before (same / other / unmatched: the track followed nobody)? With
+``reuse_time`` it also gives the appearance distance (``appearance.model_distance``) of
+every released track a detection could have taken the id of, by whether that track had
+been the same person, and lists each one of another person (or of nobody) within 0.05 of
+the ``reuse_distance`` gate or under it (run, frame, floor distance, appearance distance,
+what the detection became).
 ``exits`` tells, per release by the exit rule, whether the track's person was still in
 the room afterwards (premature).
 """
@@ -704,7 +706,8 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
                           else e['action'].split('track ')[1].split()[0])
             label = decision_label(d, frames, gt[f], e, tid)
             kind = words[0] + (' weak' if weak else ' hidden' if 'hidden' in e['action'] else
-                               ' beside' if 'beside' in e['action'] else '')
+                               ' beside' if 'beside' in e['action'] else
+                               ' before a move' if '(not' in e['action'] else '')
             if words[0] == 'move' and kind == 'move':   # the identity check's moves by score
                 kind += f' (score < {weak_below:g})' if e['score'] < weak_below \
                     else f' (score >= {weak_below:g})'
