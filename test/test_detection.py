@@ -1036,7 +1036,9 @@ def test_a_hidden_track_beside_a_detection_is_moved_there_instead_of_a_birth(
     def hidden(tracker):
         # the appearance gain can never move a track; track 1 counts as hidden
         det = tracker.detection
-        det.config = replace(det.config, relocate_margin=1e9, relocate_hidden=hidden_rule)
+        # (reuse_hidden off: within reuse_radius it would move the track as well)
+        det.config = replace(det.config, relocate_margin=1e9, relocate_hidden=hidden_rule,
+                             reuse_hidden=False)
         monkeypatch.setattr(AutoDetection, 'reported', lambda self, tid: False)
 
     tracker, step = _drifted_walker(36, before_drift=hidden)
@@ -1494,3 +1496,33 @@ def test_a_lost_track_that_looks_like_the_person_is_reused_before_another_is_mov
         assert on_blue == [1]
     else:
         assert moved in actions and 1 not in tracker.track_ids, actions
+
+
+@pytest.mark.parametrize('rule, who, moved', [(True, 'same', True), (False, 'same', False),
+                                              (True, 'other', False)])
+def test_a_hidden_track_1_2_m_away_is_given_back_its_person_when_she_looks_alike(
+        monkeypatch, rule, who, moved):
+    """Track 1 follows a person in blue; from frame 40 it is hidden (not reported) and she
+    stands 1.2 m away, beyond ``relocate_radius``. With ``reuse_hidden`` her detection
+    moves track 1 there (same id), as a lost track's id would be given back within
+    ``reuse_radius``; without it, or when the person there is dressed differently
+    (``reuse_distance``), a new track is born."""
+    from mbtrack_ros.core.detection.manager import AutoDetection
+
+    rng = np.random.default_rng(5)
+    calib, bgs, tracker = _painted_room_tracker(4, reuse_hidden=rule, reach_radius=0.0)
+    here = person(2.0, 2.5, theta=0.0)
+    there = person(3.2, 2.5, theta=0.0, **({} if who == 'same' else {'colours': YELLOW}))
+    actions = []
+    for k in range(52):
+        if k == 40:
+            assert tracker.track_ids == [1]
+            monkeypatch.setattr(AutoDetection, 'reported', lambda self, tid: tid != 1)
+        tracker.step(int(round(k * 1e9 / FPS)),
+                     paint(calib, bgs, [here if k < 40 else there], rng))
+        if k >= 40:
+            actions += [d['action'] for d in tracker.detection.decisions]
+    assert ('move 1 (hidden, far)' in actions) == moved, actions
+    assert ('birth' in actions) == (not moved), actions
+    mean = tracker.filter._particles[1].mean(axis=0)
+    assert (np.hypot(mean[0] - 3.2, mean[1] - 2.5) < 0.3) == moved

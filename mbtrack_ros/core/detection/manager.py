@@ -135,6 +135,14 @@ class AutoDetectionConfig:
             the seven such decisions there the lost track was the detected person's own,
             0.29-0.65 from her detection (five above ``reuse_distance``), the track that
             would have moved 0.70-0.78.
+        reuse_hidden: a detection that would start a new track moves instead the nearest
+            hidden track (not reported, not born or moved within ``relocate_interval``)
+            within ``reuse_radius`` whose model is within ``reuse_distance`` of the
+            detection's: a hidden track is given back its person like a lost one, beyond
+            ``relocate_radius`` too. On crnc2 a person who walked along the doorway and
+            turned back into the room left her track hidden 0.8 m behind her, more than
+            1 m from her detection, and was born again under a new id (docs/detection.md,
+            "Hidden tracks as far as lost ones").
         duplicate_by_reporting: of two tracks on one person (release ``merge_radius``,
             ``merge_time``) release the one reported without a break for the shorter time
             (born, moved or hidden later) instead of the younger one.
@@ -233,6 +241,7 @@ class AutoDetectionConfig:
     reuse_distance: float = 0.55
     reuse_in_entry_zones: bool = True
     reuse_before_moving: bool = True
+    reuse_hidden: bool = True
     duplicate_by_reporting: bool = True
     duplicate_margin: float = 8.0
     reach_radius: float = 0.5
@@ -883,18 +892,26 @@ class AutoDetection:
             info['action'] = 'drop (weak beside a track)'
             self.decisions.append(info)
             return None
+        far = False
         if best is None:
             reused = self._reusable(det, model, models, info)
-            info['action'] = 'birth' if reused is None else f'reuse {reused}'
-            self.decisions.append(info)
-            return Birth(model=model, state=state, detection=det, track_id=reused)
+            if reused is None and cfg.reuse_hidden:
+                # a hidden track within reuse_radius that looks like the detection is
+                # given back its person like a lost one
+                best = self._nearest_hidden(det, tracks, keep, means, models, moved,
+                                            stamp_ns, radius=cfg.reuse_radius, like=model)
+                hidden = far = best is not None
+            if best is None:
+                info['action'] = 'birth' if reused is None else f'reuse {reused}'
+                self.decisions.append(info)
+                return Birth(model=model, state=state, detection=det, track_id=reused)
         tid = tracks[best[0]].track_id
         if not (hidden or beside) and self._placed_recently(tid, stamp_ns):
             info['action'] = f'drop (track {tid} placed recently)'
             self.decisions.append(info)
             return None
-        info['action'] = f'move {tid}' + (' (hidden)' if hidden else ' (beside)' if beside
-                                          else '')
+        info['action'] = f'move {tid}' + (' (hidden, far)' if far else ' (hidden)' if hidden
+                                          else ' (beside)' if beside else '')
         self.decisions.append(info)
         self._placed[tid] = int(stamp_ns)
         self._shown_since[tid] = int(stamp_ns)
@@ -911,12 +928,15 @@ class AutoDetection:
 
     def _nearest_hidden(self, det: Detection, tracks: Sequence[TrackEstimate],
                         keep: Sequence[int], means: np.ndarray,
-                        models: Mapping[int, PersonModel], moved: set[int], stamp_ns: int
+                        models: Mapping[int, PersonModel], moved: set[int], stamp_ns: int,
+                        radius: float | None = None, like: PersonModel | None = None
                         ) -> tuple[int, float] | None:
-        """(index, distance) of the nearest unreported track within ``relocate_radius`` of
-        the detection (a track whose existence fell below the report threshold), or None.
-        Not a track born or moved within ``relocate_interval``: hidden again so soon, its
-        model does not explain the person there."""
+        """(index, distance) of the nearest unreported track within ``radius`` (default
+        ``relocate_radius``) of the detection (a track whose existence fell below the
+        report threshold), or None; with ``like`` only a track whose model is within
+        ``reuse_distance`` of that model (``reuse_hidden``). Not a track born or moved
+        within ``relocate_interval``: hidden again so soon, its model does not explain the
+        person there."""
         best = None
         for k in keep:
             tid = tracks[k].track_id
@@ -925,7 +945,12 @@ class AutoDetection:
             if self._placed_recently(tid, stamp_ns):
                 continue
             d = float(np.hypot(*(means[k, [X, Y]] - det.xy)))
-            if d <= self.config.relocate_radius and (best is None or d < best[1]):
+            if d > (self.config.relocate_radius if radius is None else radius):
+                continue
+            if like is not None and model_distance(models[tid], like) \
+                    > self.config.reuse_distance:
+                continue
+            if best is None or d < best[1]:
                 best = (k, d)
         return best
 
