@@ -834,7 +834,9 @@ class AutoDetection:
         within ``relocate_radius`` it is not born either: weak detections there are mostly
         the fringe of that track's person or a gap between people. Before a track is
         moved (by the gain or hidden), a lost track whose model is nearer the detection's
-        takes its id back instead (``reuse_before_moving``).
+        takes its id back instead (``reuse_before_moving``); before a birth, a released
+        track and then a hidden one within ``reuse_radius`` that look alike are given
+        back their person (``reuse_time``, ``reuse_hidden``).
         """
         cfg = self.config
         state = det.state.copy()
