@@ -670,6 +670,8 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
     reuse_distances: dict[str, list[float]] = {}     # label -> appearance distances
     near_gate: list[str] = []       # other people's candidates close to the reuse gate
     gate = AutoDetectionConfig().reuse_distance + 0.05
+    compared = 0                    # decisions that reached reuse_before_moving's comparison
+    rule_lines: list[str] = []      # those with a lost track near, and reuse_hidden's moves
     weak_below = AutoDetectionConfig().beside_threshold   # moves split at the default
     for out, rec in pairs:
         tracks, truth, events, _ = _load(out, rec)
@@ -679,6 +681,14 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
             gt.setdefault(r.frame, []).append(r)
         counts: dict[tuple[str, str], int] = {}
         for e in events:
+            if e['kind'] == 'decision' and ('unlike' in e or '(hidden, far)' in e['action']):
+                compared += 'unlike' in e
+                if e.get('reuse') or 'unlike' not in e:
+                    moved = (f", track {e['unlike'][0]}'s model {e['unlike'][1]:.3f}, lost "
+                             + ', '.join(f'{t} ({m:.2f} m, {u:.3f})' for t, m, u in e['reuse'])
+                             if 'unlike' in e else '')
+                    rule_lines.append(f"  {out.name} frame {e['frame']}: {e['action']}, score "
+                                      f"{e['score']:.2f}{moved}")
             if e['kind'] == 'decision' and e.get('reuse') and gt.get(e['frame']):
                 # every released track a detection could have taken the id of (reuse_time):
                 # its appearance distance to the detection, labelled by who it was
@@ -721,6 +731,10 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
         print(f'reuse candidates, released track was the {label} person: {len(values)}, '
               f'appearance distance min / quartiles / max '
               + ' / '.join(f'{v:.3f}' for v in q))
+    print(f'{compared} decisions compared the model of the track to be moved with the lost '
+          f"tracks' (reuse_before_moving); those with a lost track within reuse_radius, and "
+          f'the far hidden moves (reuse_hidden):')
+    print('\n'.join(rule_lines))
     if near_gate:
         print(f'reuse candidates of another person (or nobody) at appearance distance '
               f'<= {gate:.2f}:')

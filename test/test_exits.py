@@ -306,3 +306,23 @@ def test_no_birth_deeper_into_an_exit_than_the_birth_depth():
         found.append((det, PersonModel(1.75, 0.5)))
     births = auto._settle(pending, _Found(found, {'detect_find': 0.0}))
     assert [round(b.state[1] - edge, 3) for b in births] == [0.1, round(0.45 * margin, 3)]
+
+
+def test_distance_to_rect_equals_the_nearest_of_dense_boundary_points():
+    """``distance_to_rect`` (used by ``exit_depth``) against brute force: 0 inside, else the
+    distance to the nearest of 4000 points on the rectangle's border (within 2 mm)."""
+    from mbtrack_ros.core.camera import distance_to_rect
+
+    rect = (0.5, 1.0, 3.0, 2.5)
+    rng = np.random.default_rng(0)
+    xy = rng.uniform([-1.0, -0.5], [4.5, 4.0], (300, 2))
+    t = np.linspace(0.0, 1.0, 1000)
+    border = np.concatenate([np.c_[0.5 + 2.5 * t, np.full_like(t, 1.0)],
+                             np.c_[0.5 + 2.5 * t, np.full_like(t, 2.5)],
+                             np.c_[np.full_like(t, 0.5), 1.0 + 1.5 * t],
+                             np.c_[np.full_like(t, 3.0), 1.0 + 1.5 * t]])
+    inside = (xy[:, 0] >= 0.5) & (xy[:, 0] <= 3.0) & (xy[:, 1] >= 1.0) & (xy[:, 1] <= 2.5)
+    brute = np.where(inside, 0.0,
+                     np.linalg.norm(xy[:, None] - border[None], axis=2).min(axis=1))
+    assert inside.any() and (~inside).any()
+    np.testing.assert_allclose(distance_to_rect(xy, rect), brute, atol=2e-3)

@@ -15,26 +15,18 @@ from pathlib import Path
 
 import numpy as np
 
-from mbtrack_ros.core.camera import RoomCalibration
+from mbtrack_ros.core.camera import RoomCalibration, distance_to_rect
 from mbtrack_ros.recording.csvfiles import read_ground_truth
 
 if len(sys.argv) < 2:
     sys.exit('usage: off_floor.py REC [REC ...]')
 
 
-def _distance(xy: np.ndarray, rect) -> np.ndarray:
-    """(K,) distance of points (K, 2) from a closed rectangle (0 inside)."""
-    x0, y0, x1, y1 = rect
-    dx = np.maximum.reduce([x0 - xy[:, 0], xy[:, 0] - x1, np.zeros(len(xy))])
-    dy = np.maximum.reduce([y0 - xy[:, 1], xy[:, 1] - y1, np.zeros(len(xy))])
-    return np.hypot(dx, dy)
-
-
 for rec in map(Path, sys.argv[1:]):
     cal = RoomCalibration.load(rec / 'calibration.yaml')
     rows = read_ground_truth(rec / 'ground_truth.csv')
     xy = np.array([[r.x, r.y] for r in rows]).reshape(-1, 2)
-    off = np.min([_distance(xy, r) for r in (cal.floor, *cal.exits)], axis=0)
+    off = np.min([distance_to_rect(xy, r) for r in (cal.floor, *cal.exits)], axis=0)
     people: dict[int, list[tuple[int, float]]] = {}
     for r, d in zip(rows, off):
         if d > 0:

@@ -284,6 +284,17 @@ def _in_rect(xy: np.ndarray, rect: tuple[float, float, float, float]) -> np.ndar
     return (xy[:, 0] >= x0) & (xy[:, 0] <= x1) & (xy[:, 1] >= y0) & (xy[:, 1] <= y1)
 
 
+def distance_to_rect(xy: np.ndarray, rect: tuple[float, float, float, float]
+                     ) -> np.ndarray:
+    """(K,) distance (metres) of floor points (K, 2) from a closed rectangle
+    ``(x_min, y_min, x_max, y_max)``; 0 inside it."""
+    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    x0, y0, x1, y1 = rect
+    dx = np.maximum.reduce([x0 - xy[:, 0], xy[:, 0] - x1, np.zeros(len(xy))])
+    dy = np.maximum.reduce([y0 - xy[:, 1], xy[:, 1] - y1, np.zeros(len(xy))])
+    return np.hypot(dx, dy)
+
+
 def _exit_side(floor: tuple[float, float, float, float],
                rect: tuple[float, float, float, float]) -> tuple[int, int]:
     """Which side of the floor an exit lies beyond: ``(axis, sign)``, axis 0 for x and 1
@@ -358,13 +369,10 @@ class RoomCalibration:
         depth = np.full(len(xy), np.nan)
         if not self.exits:
             return depth
-        x0, y0, x1, y1 = self.floor
-        dx = np.maximum.reduce([x0 - xy[:, 0], xy[:, 0] - x1, np.zeros(len(xy))])
-        dy = np.maximum.reduce([y0 - xy[:, 1], xy[:, 1] - y1, np.zeros(len(xy))])
         inside = np.zeros(len(xy), bool)
         for rect in self.exits:
             inside |= _in_rect(xy, rect)
-        depth[inside] = np.hypot(dx, dy)[inside]
+        depth[inside] = distance_to_rect(xy[inside], self.floor)
         return depth
 
     def _on_door_wall(self, camera: str, exit_rect: tuple[float, float, float, float]
