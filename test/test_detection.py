@@ -1526,3 +1526,41 @@ def test_a_hidden_track_1_2_m_away_is_given_back_its_person_when_she_looks_alike
     assert ('birth' in actions) == (not moved), actions
     mean = tracker.filter._particles[1].mean(axis=0)
     assert (np.hypot(mean[0] - 3.2, mean[1] - 2.5) < 0.3) == moved
+
+
+@pytest.mark.parametrize('gate, who, moved', [(0.6, 'other', False), (1.0, 'other', True),
+                                              (0.6, 'same', True)])
+def test_a_doubtful_move_needs_the_detection_to_look_like_the_track(
+        monkeypatch, gate, who, moved):
+    """Track 1 follows a person in blue; from frame 40 she is gone and somebody stands 0.75
+    m from the track. The appearance gain is forced into the doubtful band (-1: the
+    track's model explains the detection a little worse than its own estimate). With
+    ``move_distance`` 0.6 a person dressed differently is born as a new track and track 1
+    stays, while the blue person herself still takes track 1 (her model matches); with 1
+    the gain alone decides and track 1 is moved onto the stranger."""
+    from mbtrack_ros.core.detection.manager import AutoDetection
+
+    rng = np.random.default_rng(5)
+    calib, bgs, tracker = _painted_room_tracker(4, move_distance=gate, reach_radius=0.0,
+                                                relocate_hidden=False, reuse_hidden=False)
+    here = person(2.0, 2.5, theta=0.0)
+    there = person(2.75, 2.5, theta=0.0, **({} if who == 'same' else {'colours': YELLOW}))
+    actions, unalike = [], []
+    for k in range(52):
+        if k == 40:
+            assert tracker.track_ids == [1]
+            monkeypatch.setattr(AutoDetection, '_explains', lambda self, *a: -1.0)
+        tracker.step(int(round(k * 1e9 / FPS)),
+                     paint(calib, bgs, [here if k < 40 else there], rng))
+        if k >= 40:
+            actions += [d['action'] for d in tracker.detection.decisions]
+            unalike += [d['unalike'] for d in tracker.detection.decisions if 'unalike' in d]
+    assert ('move 1' in actions) == moved, actions
+    assert ('birth' in actions) == (not moved), actions
+    assert bool(unalike) == (gate < 1.0 and who == 'other'), unalike
+    # the person there is followed by track 1 when it was moved, by a new track 2 if not
+    mean = tracker.filter._particles[1 if moved else 2].mean(axis=0)
+    if who == 'same' or not moved:      # (blue's model drifts off the stranger)
+        assert np.hypot(mean[0] - 2.75, mean[1] - 2.5) < 0.3, mean
+    with pytest.raises(DetectionError):
+        AutoDetectionConfig(move_distance=1.5)

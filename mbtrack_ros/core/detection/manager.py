@@ -89,6 +89,11 @@ class AutoDetectionConfig:
             another person 4 times and the detection's 4 times (a lagging track in a door
             crowd; docs/detection.md, "Moves of tracks on a person of their own").
             Above 1: no track is kept from a move (the support is at most 1).
+        move_distance: a detection the gain would move a track to although the track's
+            model explains it worse than the track's own estimate (gain in
+            ``(relocate_margin, 0]``) must also look like the track: appearance distance
+            (``appearance.model_distance``) at most this; 1 (the default) lets the gain
+            alone decide.
         relocate_interval: seconds after a track was born or moved during which such a
             detection does not move it again but is dropped (in a crowd at the door a
             young model explains several people about equally well: the track would hop).
@@ -234,6 +239,7 @@ class AutoDetectionConfig:
     relocate_margin: float = -3.0
     weak_relocate_margin: float = 1.5
     move_support: float = 0.3
+    move_distance: float = 1.0
     relocate_interval: float = 2.0
     relocate_hidden: bool = True
     reuse_time: float = 3.0
@@ -260,6 +266,8 @@ class AutoDetectionConfig:
         if np.isnan(self.weak_relocate_margin) or self.weak_relocate_margin == -np.inf:
             raise DetectionError(f'weak_relocate_margin must be a number or inf, got '
                                  f'{self.weak_relocate_margin}')
+        if not 0.0 <= self.move_distance <= 1.0:
+            raise DetectionError(f'move_distance must be in [0, 1], got {self.move_distance}')
         if not self.move_support >= 0:
             raise DetectionError(f'move_support must be >= 0, got {self.move_support}')
         if not self.duplicate_margin >= 0:
@@ -846,6 +854,7 @@ class AutoDetection:
         info = {'xy': (float(det.xy[0]), float(det.xy[1])), 'score': float(det.score)}
         near = []                   # (id, distance, gain) of the tracks the check compared
         gains = []                  # (index, gain) of the tracks the gain would move
+        unalike = []                # (id, distance) of those move_distance kept back
         for k in keep:
             tid = tracks[k].track_id
             d = float(np.hypot(*(means[k, [X, Y]] - det.xy)))
@@ -855,10 +864,18 @@ class AutoDetection:
                 continue
             gain = self._explains(ref, means[k], state, evidence)
             near.append((int(tid), round(d, 2), round(gain, 3)))
+            if gain > margin and gain <= 0.0 and cfg.move_distance < 1.0:
+                # a gain in the doubtful band (margin, 0]: the appearance must agree too
+                unlike = model_distance(ref, model)
+                if unlike > cfg.move_distance:
+                    unalike.append((int(tid), round(unlike, 3)))
+                    continue
             if gain > margin:
                 gains.append((k, gain))
         if near:
             info['near'] = near
+        if unalike:
+            info['unalike'] = unalike
         support = None              # _exclusive_support, computed once per detection
         if gains:
             # exclusive support with the detection as one more track: a track that keeps
