@@ -42,7 +42,9 @@ matched frames before (same / other / unmatched: the track followed nobody)? Wit
 every released track a detection could have taken the id of, by whether that track had
 been the same person, and lists each one of another person (or of nobody) within 0.05 of
 the ``reuse_distance`` gate or under it (run, frame, floor distance, appearance distance,
-what the detection became).
+what the detection became), and each track ``move_distance`` kept from a move (whether
+it had followed the detected person, its gain and appearance distance, what the detection
+became).
 ``exits`` tells, per release by the exit rule, whether the track's person was still in
 the room afterwards (premature).
 """
@@ -672,6 +674,7 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
     gate = AutoDetectionConfig().reuse_distance + 0.05
     compared = 0                    # decisions that reached reuse_before_moving's comparison
     rule_lines: list[str] = []      # those with a lost track near, and reuse_hidden's moves
+    kept_back: list[str] = []       # tracks move_distance kept from a move (labelled)
     weak_below = AutoDetectionConfig().beside_threshold   # moves split at the default
     for out, rec in pairs:
         tracks, truth, events, _ = _load(out, rec)
@@ -689,6 +692,14 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
                              if 'unlike' in e else '')
                     rule_lines.append(f"  {out.name} frame {e['frame']}: {e['action']}, score "
                                       f"{e['score']:.2f}{moved}")
+            if e['kind'] == 'decision' and e.get('unalike') and gt.get(e['frame']):
+                # move_distance kept these tracks from a move in the doubtful gain band
+                gains = {int(n[0]): n[2] for n in e.get('near', [])}
+                for tid, unlike in e['unalike']:
+                    label = decision_label(d, frames, gt[e['frame']], e, int(tid))
+                    kept_back.append(f"  {out.name} frame {e['frame']}: track {tid} ({label}), "
+                                     f"gain {gains.get(int(tid), float('nan')):.2f}, "
+                                     f"appearance {unlike:.3f} -> {e['action']}")
             if e['kind'] == 'decision' and e.get('reuse') and gt.get(e['frame']):
                 # every released track a detection could have taken the id of (reuse_time):
                 # its appearance distance to the detection, labelled by who it was
@@ -735,6 +746,10 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
           f"tracks' (reuse_before_moving); those with a lost track within reuse_radius, and "
           f'the far hidden moves (reuse_hidden):')
     print('\n'.join(rule_lines))
+    if kept_back:
+        print(f'{len(kept_back)} tracks kept from a move by move_distance (label: the person '
+              f'the track had followed, against the detection\'s):')
+        print('\n'.join(kept_back))
     if near_gate:
         print(f'reuse candidates of another person (or nobody) at appearance distance '
               f'<= {gate:.2f}:')
