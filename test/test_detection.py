@@ -1458,17 +1458,17 @@ def test_a_lost_track_that_looks_like_the_person_is_reused_before_another_is_mov
         monkeypatch, how, rule):
     """Blue's track (1) is released while she is away; yellow's track (2) is either hidden
     (not reported, ``relocate_hidden``) or left behind when yellow walks off (a move by the
-    appearance gain, margin lowered so that any gain moves). Blue comes back 0.75 m from
-    track 2: with ``reuse_before_moving`` she takes her lost id back (her model fits her,
-    track 2's is yellow's) and track 2 stays; without it track 2 is moved onto her. With
-    ``reuse_distance`` 0 no released id is reused by a birth: the comparison of the two
-    models alone gives blue her id back."""
+    appearance gain, margin lowered and ``move_distance`` off so that any gain moves).
+    Blue comes back 0.75 m from track 2: with ``reuse_before_moving`` she takes her lost
+    id back (her model fits her, track 2's is yellow's) and track 2 stays; without it
+    track 2 is moved onto her. With ``reuse_distance`` 0 no released id is reused by a
+    birth: the comparison of the two models alone gives blue her id back."""
     from mbtrack_ros.core.detection.manager import AutoDetection
 
     rng = np.random.default_rng(5)
     calib, bgs, tracker = _painted_room_tracker(
         4, reuse_before_moving=rule, reach_radius=0.0, reuse_distance=0.0,
-        relocate_margin=1e9 if how == 'hidden' else -1e9)
+        relocate_margin=1e9 if how == 'hidden' else -1e9, move_distance=1.0)
     blue, yellow = person(2.0, 2.5, theta=0.0), person(3.5, 2.5, theta=0.0, colours=YELLOW)
     back = person(2.75, 2.5, theta=0.0)
     released_at, actions = None, []
@@ -1528,19 +1528,20 @@ def test_a_hidden_track_1_2_m_away_is_given_back_its_person_when_she_looks_alike
     assert (np.hypot(mean[0] - 3.2, mean[1] - 2.5) < 0.3) == moved
 
 
-@pytest.mark.parametrize('gate, who, moved', [(0.6, 'other', False), (1.0, 'other', True),
-                                              (0.6, 'same', True)])
+@pytest.mark.parametrize('gate, who, moved', [(None, 'other', False), (1.0, 'other', True),
+                                              (None, 'same', True)])
 def test_a_doubtful_move_needs_the_detection_to_look_like_the_track(
         monkeypatch, gate, who, moved):
     """Track 1 follows a person in blue; from frame 40 she is gone and somebody stands 0.75
     m from the track. The appearance gain is forced into the doubtful band (-1: the
     track's model explains the detection a little worse than its own estimate). With
-    ``move_distance`` 0.6 a person dressed differently is born as a new track and track 1
-    stays, while the blue person herself still takes track 1 (her model matches); with 1
-    the gain alone decides and track 1 is moved onto the stranger."""
+    ``move_distance`` at its default a person dressed differently is born as a new track
+    and track 1 stays, while the blue person herself still takes track 1 (her model
+    matches); with 1 the gain alone decides and track 1 is moved onto the stranger."""
     from mbtrack_ros.core.detection.manager import AutoDetection
 
     rng = np.random.default_rng(5)
+    gate = AutoDetectionConfig().move_distance if gate is None else gate
     calib, bgs, tracker = _painted_room_tracker(4, move_distance=gate, reach_radius=0.0,
                                                 relocate_hidden=False, reuse_hidden=False)
     here = person(2.0, 2.5, theta=0.0)
