@@ -50,7 +50,7 @@ def moves(out: Path, rec: Path, support: float = np.inf) -> tuple[list[dict], li
         if not action.startswith('move') or '(' in action or not gt.get(e['frame']):
             continue
         tid = int(action.split()[1])
-        _, dist, gain = next(n for n in e['near'] if n[0] == tid)
+        dist, gain = next(n for n in e['near'] if n[0] == tid)[1:3]
         found.append({'run': out.name, 'frame': e['frame'], 'score': e['score'],
                       'gain': gain, 'distance': dist,
                       'support': dict(e.get('support', [])).get(tid, np.nan),

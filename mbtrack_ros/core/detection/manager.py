@@ -856,7 +856,8 @@ class AutoDetection:
         margin = cfg.relocate_margin if det.score >= cfg.beside_threshold \
             else max(cfg.relocate_margin, cfg.weak_relocate_margin)
         info = {'xy': (float(det.xy[0]), float(det.xy[1])), 'score': float(det.score)}
-        near = []                   # (id, distance, gain) of the tracks the check compared
+        near = []                   # (id, distance, gain, appearance distance) of the
+        #                             tracks the check compared
         gains = []                  # (index, gain) of the tracks the gain would move
         unalike = []                # (id, distance) of those move_distance kept back
         for k in keep:
@@ -867,13 +868,12 @@ class AutoDetection:
                     or not ref.view_angles.size:
                 continue
             gain = self._explains(ref, means[k], state, evidence)
-            near.append((int(tid), round(d, 2), round(gain, 3)))
-            if gain > margin and gain <= 0.0 and cfg.move_distance < 1.0:
+            unlike = model_distance(ref, model)
+            near.append((int(tid), round(d, 2), round(gain, 3), round(unlike, 3)))
+            if margin < gain <= 0.0 and unlike > cfg.move_distance:
                 # a gain in the doubtful band (margin, 0]: the appearance must agree too
-                unlike = model_distance(ref, model)
-                if unlike > cfg.move_distance:
-                    unalike.append((int(tid), round(unlike, 3)))
-                    continue
+                unalike.append((int(tid), round(unlike, 3)))
+                continue
             if gain > margin:
                 gains.append((k, gain))
         if near:
