@@ -42,7 +42,8 @@ matched frames before (same / other / unmatched: the track followed nobody)? Wit
 every released track a detection could have taken the id of, by whether that track had
 been the same person, and lists each one of another person (or of nobody) within 0.05 of
 the ``reuse_distance`` gate or under it (run, frame, floor distance, appearance distance,
-what the detection became), and each track ``move_distance`` kept from a move (whether
+what the detection became), the appearance distances of the tracks near each birth or reuse by whether they
+had followed the detected person, and each track ``move_distance`` kept from a move (whether
 it had followed the detected person, its gain and appearance distance, what the detection
 became).
 ``exits`` tells, per release by the exit rule, whether the track's person was still in
@@ -675,6 +676,7 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
     compared = 0                    # decisions that reached reuse_before_moving's comparison
     rule_lines: list[str] = []      # those with a lost track near, and reuse_hidden's moves
     kept_back: list[str] = []       # tracks move_distance kept from a move (labelled)
+    birth_near: dict[str, list[float]] = {}     # label -> appearance distances
     weak_below = AutoDetectionConfig().beside_threshold   # moves split at the default
     for out, rec in pairs:
         tracks, truth, events, _ = _load(out, rec)
@@ -700,6 +702,14 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
                     kept_back.append(f"  {out.name} frame {e['frame']}: track {tid} ({label}), "
                                      f"gain {gains.get(int(tid), float('nan')):.2f}, "
                                      f"appearance {unlike:.3f} -> {e['action']}")
+            if e['kind'] == 'decision' and e['action'].startswith(('birth', 'reuse')) \
+                    and gt.get(e['frame']):
+                # appearance distance of each track near a birth (logged since the
+                # twenty-fifth session), by whether it had followed the detected person
+                for n in e.get('near', []):
+                    if len(n) > 3:
+                        label = decision_label(d, frames, gt[e['frame']], e, int(n[0]))
+                        birth_near.setdefault(label, []).append(float(n[3]))
             if e['kind'] == 'decision' and e.get('reuse') and gt.get(e['frame']):
                 # every released track a detection could have taken the id of (reuse_time):
                 # its appearance distance to the detection, labelled by who it was
@@ -741,6 +751,11 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
         q = np.percentile(values, [0, 25, 50, 75, 100])
         print(f'reuse candidates, released track was the {label} person: {len(values)}, '
               f'appearance distance min / quartiles / max '
+              + ' / '.join(f'{v:.3f}' for v in q))
+    for label, values in sorted(birth_near.items()):
+        q = np.percentile(values, [0, 25, 50, 75, 100])
+        print(f'tracks near a birth or reuse that had followed the {label} person: '
+              f'{len(values)}, appearance distance min / quartiles / max '
               + ' / '.join(f'{v:.3f}' for v in q))
     print(f'{compared} decisions compared the model of the track to be moved with the lost '
           f"tracks' (reuse_before_moving); those with a lost track within reuse_radius, and "
