@@ -42,10 +42,10 @@ matched frames before (same / other / unmatched: the track followed nobody)? Wit
 every released track a detection could have taken the id of, by whether that track had
 been the same person, and lists each one of another person (or of nobody) within 0.05 of
 the ``reuse_distance`` gate or under it (run, frame, floor distance, appearance distance,
-what the detection became), the appearance distances of the tracks near each birth or reuse by whether they
-had followed the detected person, and each track ``move_distance`` kept from a move (whether
-it had followed the detected person, its gain and appearance distance, what the detection
-became).
+what the detection became), the appearance distances of the tracks near each birth or
+reuse by whether they had followed the detected person, and each track ``move_distance``
+kept from a move (whether it had followed the detected person, its gain and appearance
+distance, what the detection became).
 ``exits`` tells, per release by the exit rule, whether the track's person was still in
 the room afterwards (premature).
 """

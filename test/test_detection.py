@@ -1528,16 +1528,18 @@ def test_a_hidden_track_1_2_m_away_is_given_back_its_person_when_she_looks_alike
     assert (np.hypot(mean[0] - 3.2, mean[1] - 2.5) < 0.3) == moved
 
 
-@pytest.mark.parametrize('gate, who, moved', [(None, 'other', False), (1.0, 'other', True),
-                                              (None, 'same', True)])
+@pytest.mark.parametrize('gate, who, gain, moved', [
+    (None, 'other', -1.0, False), (1.0, 'other', -1.0, True), (None, 'same', -1.0, True),
+    (None, 'other', 1.0, True)])
 def test_a_doubtful_move_needs_the_detection_to_look_like_the_track(
-        monkeypatch, gate, who, moved):
+        monkeypatch, gate, who, gain, moved):
     """Track 1 follows a person in blue; from frame 40 she is gone and somebody stands 0.75
     m from the track. The appearance gain is forced into the doubtful band (-1: the
     track's model explains the detection a little worse than its own estimate). With
     ``move_distance`` at its default a person dressed differently is born as a new track
     and track 1 stays, while the blue person herself still takes track 1 (her model
-    matches); with 1 the gain alone decides and track 1 is moved onto the stranger."""
+    matches); with 1 the gain alone decides and track 1 is moved onto the stranger. A
+    positive gain (+1) is not doubtful: the stranger takes track 1 whatever the gate."""
     from mbtrack_ros.core.detection.manager import AutoDetection
 
     rng = np.random.default_rng(5)
@@ -1550,7 +1552,7 @@ def test_a_doubtful_move_needs_the_detection_to_look_like_the_track(
     for k in range(52):
         if k == 40:
             assert tracker.track_ids == [1]
-            monkeypatch.setattr(AutoDetection, '_explains', lambda self, *a: -1.0)
+            monkeypatch.setattr(AutoDetection, '_explains', lambda self, *a: gain)
         tracker.step(int(round(k * 1e9 / FPS)),
                      paint(calib, bgs, [here if k < 40 else there], rng))
         if k >= 40:
@@ -1558,10 +1560,11 @@ def test_a_doubtful_move_needs_the_detection_to_look_like_the_track(
             unalike += [d['unalike'] for d in tracker.detection.decisions if 'unalike' in d]
     assert ('move 1' in actions) == moved, actions
     assert ('birth' in actions) == (not moved), actions
-    assert bool(unalike) == (gate < 1.0 and who == 'other'), unalike
+    assert bool(unalike) == (gate < 1.0 and who == 'other' and gain <= 0), unalike
     # the person there is followed by track 1 when it was moved, by a new track 2 if not
     mean = tracker.filter._particles[1 if moved else 2].mean(axis=0)
     if who == 'same' or not moved:      # (blue's model drifts off the stranger)
         assert np.hypot(mean[0] - 2.75, mean[1] - 2.5) < 0.3, mean
-    with pytest.raises(DetectionError):
-        AutoDetectionConfig(move_distance=1.5)
+    for bad in (1.5, -0.1, float('nan')):
+        with pytest.raises(DetectionError):
+            AutoDetectionConfig(move_distance=bad)
