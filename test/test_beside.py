@@ -255,7 +255,7 @@ def test_a_weak_detection_moves_a_track_only_with_the_weak_margin(monkeypatch):
     _, actions = _lagging(monkeypatch, 0.0, decisions=decisions, **lax)
     assert actions == ['move 1'], decisions
     score = decisions[0]['score']
-    gain = next(g for tid, _, g in decisions[0]['near'] if tid == 1)
+    gain = next(n[2] for n in decisions[0]['near'] if n[0] == 1)   # (id, m, gain, distance)
     weak = score + 0.01
     runs = {'strong, margin above g': dict(beside_threshold=0.0, relocate_margin=-1e9,
                                            weak_relocate_margin=gain + 0.01),
