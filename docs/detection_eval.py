@@ -45,7 +45,8 @@ the ``reuse_distance`` gate or under it (run, frame, floor distance, appearance 
 what the detection became), the appearance distances of the tracks near each birth or
 reuse by whether they had followed the detected person, and each track ``move_distance``
 kept from a move (whether it had followed the detected person, its gain and appearance
-distance, what the detection became).
+distance, what the detection became); the appearance distances of the moves and kept-back
+tracks whose gain lay in the doubtful band of ``move_distance``, by label.
 ``exits`` tells, per release by the exit rule, whether the track's person was still in
 the room afterwards (premature).
 """
@@ -677,6 +678,8 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
     rule_lines: list[str] = []      # those with a lost track near, and reuse_hidden's moves
     kept_back: list[str] = []       # tracks move_distance kept from a move (labelled)
     birth_near: dict[str, list[float]] = {}     # label -> appearance distances
+    doubtful: dict[tuple[str, str], list[float]] = {}   # (moved / kept back, label) -> ...
+    band_low = AutoDetectionConfig().relocate_margin
     weak_below = AutoDetectionConfig().beside_threshold   # moves split at the default
     for out, rec in pairs:
         tracks, truth, events, _ = _load(out, rec)
@@ -694,6 +697,20 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
                              if 'unlike' in e else '')
                     rule_lines.append(f"  {out.name} frame {e['frame']}: {e['action']}, score "
                                       f"{e['score']:.2f}{moved}")
+            if e['kind'] == 'decision' and gt.get(e['frame']) \
+                    and e['score'] >= weak_below and e.get('near'):
+                # every move by a gain in the doubtful band (relocate_margin, 0] and every
+                # track move_distance kept back there, with the appearance distance
+                # (the moved track's: 'unlike'; a kept-back one's: 'unalike')
+                gains = {int(n[0]): n[2] for n in e['near']}
+                words = e['action'].split()
+                cands = [(int(t), u, 'kept back') for t, u in e.get('unalike', [])]
+                if words[0] == 'move' and '(' not in e['action'] and 'unlike' in e:
+                    cands.append((int(e['unlike'][0]), e['unlike'][1], 'moved'))
+                for tid, unlike, what in cands:
+                    if band_low < gains.get(tid, np.nan) <= 0.0:
+                        label = decision_label(d, frames, gt[e['frame']], e, tid)
+                        doubtful.setdefault((what, label), []).append(float(unlike))
             if e['kind'] == 'decision' and e.get('unalike') and gt.get(e['frame']):
                 # move_distance kept these tracks from a move in the doubtful gain band
                 gains = {int(n[0]): n[2] for n in e.get('near', [])}
@@ -757,6 +774,10 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
         print(f'tracks near a birth or reuse that had followed the {label} person: '
               f'{len(values)}, appearance distance min / quartiles / max '
               + ' / '.join(f'{v:.3f}' for v in q))
+    for (what, label), values in sorted(doubtful.items()):
+        print(f'gain in ({band_low:g}, 0], {what}, track had followed the {label} person: '
+              f'{len(values)}, appearance distances '
+              + ', '.join(f'{v:.3f}' for v in sorted(values)))
     print(f'{compared} decisions compared the model of the track to be moved with the lost '
           f"tracks' (reuse_before_moving); those with a lost track within reuse_radius, and "
           f'the far hidden moves (reuse_hidden):')

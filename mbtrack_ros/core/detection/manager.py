@@ -860,6 +860,7 @@ class AutoDetection:
         #                             tracks the check compared
         gains = []                  # (index, gain) of the tracks the gain would move
         unalike = []                # (id, distance) of those move_distance kept back
+        likeness = {}               # id -> appearance distance to the detection, once each
         for k in keep:
             tid = tracks[k].track_id
             d = float(np.hypot(*(means[k, [X, Y]] - det.xy)))
@@ -868,7 +869,7 @@ class AutoDetection:
                     or not ref.view_angles.size:
                 continue
             gain = self._explains(ref, means[k], state, evidence)
-            unlike = model_distance(ref, model)
+            unlike = likeness[tid] = model_distance(ref, model)
             near.append((int(tid), round(d, 2), round(gain, 3), round(unlike, 3)))
             if margin < gain <= 0.0 and unlike > cfg.move_distance:
                 # a gain in the doubtful band (margin, 0]: the appearance must agree too
@@ -899,7 +900,9 @@ class AutoDetection:
             # a lost track that looks more like the detection than the track about to be
             # moved takes its id back; that track stays where it is
             tid = tracks[best[0]].track_id
-            unlike = model_distance(models[tid], model)
+            unlike = likeness.get(tid)
+            if unlike is None:          # a hidden track the gain check did not compare
+                unlike = likeness[tid] = model_distance(models[tid], model)
             info['unlike'] = (int(tid), round(unlike, 3))
             reused = self._reusable(det, model, models, info, below=unlike)
             if reused is not None:
