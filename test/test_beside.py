@@ -181,11 +181,12 @@ class _KeyedModel(_Model):
     view_angles = np.zeros(1)
 
 
-def _decide(tracks_xy, people_xy=((2.6, 2.6),), det_xy=(2.6, 2.6)):
+def _decide(tracks_xy, people_xy=((2.6, 2.6),), det_xy=(2.6, 2.6), **config):
     """``AutoDetection._lagging_beside`` on a painted foreground: the index of the track
-    moved onto the detection (or None) and the decision's ``beside`` record."""
+    moved onto the detection (or None) and the decision's ``beside`` record;
+    ``config``: more ``AutoDetectionConfig`` fields."""
     calib = make_room(ceiling=False)
-    auto = AutoDetection(calib, AutoDetectionConfig(beside_support=0.25))
+    auto = AutoDetection(calib, AutoDetectionConfig(beside_support=0.25, **config))
     evidence = {}
     for n, cam in calib.cameras.items():
         fg = np.zeros((H, W), bool)
@@ -214,6 +215,21 @@ def test_only_a_single_track_losing_its_support_is_moved():
     assert moved is None and all(with_det < 0.25 for _, _, with_det in record), record
     moved, record = _decide([(3.3, 2.6), lagging], people_xy=((2.6, 2.6), (3.3, 2.6)))
     assert moved == 1 and record[0][2] > 0.25, record
+
+
+def test_only_a_track_within_beside_radius_is_moved():
+    """The lagging track 0.59 m from the detection of its person is taken within the
+    default 0.6 m; with ``beside_radius`` 0.55 it is not (it is still the one track the
+    detection would leave spare: the record lists it), and a negative radius is
+    refused."""
+    lagging = (2.18, 2.18)
+    assert np.hypot(2.6 - 2.18, 2.6 - 2.18) == pytest.approx(0.594, abs=1e-3)
+    assert AutoDetectionConfig().beside_radius == 0.6
+    assert _decide([lagging])[0] == 0
+    moved, record = _decide([lagging], beside_radius=0.55)
+    assert moved is None and record[0][1] >= 0.25 > record[0][2], record
+    with pytest.raises(DetectionError, match='beside_radius'):
+        AutoDetectionConfig(beside_radius=-0.1)
 
 
 def test_beside_threshold_must_be_a_finite_number_not_below_zero():

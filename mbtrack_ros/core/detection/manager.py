@@ -216,6 +216,13 @@ class AutoDetectionConfig:
             (:meth:`AutoDetection._lagging_beside`; docs/detection.md, "Births beside a
             live track"); 0 disables, the default: 0.25 cut the switches on the twelve
             clear-room runs of seeds 0/1 (89 -> 73) but not on seed 3 (40 -> 52).
+        beside_radius: metres; the track ``beside_support`` moves must be this close to
+            the detection (the count of tracks the detection would leave spare still
+            runs over ``relocate_radius``). 0.6: on the thirty clear-room runs of seeds
+            0-4 (twenty-sixth session, ``beside_support`` 0.25 within 1 m) the thirteen
+            moves of a track that had followed the detected person were 0.45-0.57 m from
+            the detection, six of the seven onto another person 0.70-0.92 m
+            (docs/detection.md, "Births beside a track, within 0.6 m").
         beside_threshold: smallest detection score (combined log response) for a birth
             within ``relocate_radius`` of a track that the detection did not move: weak
             detections beside a track are mostly the fringe of that track's person or a
@@ -261,6 +268,7 @@ class AutoDetectionConfig:
     catch_up: float = float('inf')
     exit_rescue: float = 0.0
     beside_support: float = 0.0
+    beside_radius: float = 0.6
     beside_threshold: float = 3.0
     birth_exit_depth: float = 0.15
 
@@ -284,6 +292,8 @@ class AutoDetectionConfig:
             raise DetectionError('sigma and clutter_distance must be > 0')
         if not self.beside_support >= 0:
             raise DetectionError('beside_support must be >= 0')
+        if not self.beside_radius >= 0:
+            raise DetectionError(f'beside_radius must be >= 0, got {self.beside_radius}')
         if not (np.isfinite(self.beside_threshold) and self.beside_threshold >= 0):
             raise DetectionError(f'beside_threshold must be a finite number >= 0, got '
                                  f'{self.beside_threshold}')
@@ -998,8 +1008,9 @@ class AutoDetection:
         release's measure of a spare track) while it was above before: its foreground was
         the detection's person, and it is moved there instead of a birth beside it. Only
         when exactly one track within ``relocate_radius`` would fall below (in a group
-        at the door several do, and the nearest is often not the person's), and not a
-        spare track, one not reported, or one moved within ``relocate_interval`` (it would
+        at the door several do, and the nearest is often not the person's), that track
+        within ``beside_radius`` of the detection (one farther off was mostly another
+        person's), and not a spare track, one not reported, or one moved within ``relocate_interval`` (it would
         hop through a group; a young track never moved may be: a birth that lags its
         person from the start). A track on a person of its own keeps its
         exclusive support next to a newcomer."""
@@ -1019,6 +1030,8 @@ class AutoDetection:
         if len(losing) != 1:
             return None
         i = int(losing[0])
+        if gap[i] > cfg.beside_radius:    # farther off, mostly another person's track
+            return None
         k = keep[i]
         tid = tracks[k].track_id
         ref = models.get(tid)
