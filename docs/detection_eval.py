@@ -679,6 +679,7 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
     kept_back: list[str] = []       # tracks move_distance kept from a move (labelled)
     birth_near: dict[str, list[float]] = {}     # label -> appearance distances
     doubtful: dict[tuple[str, str], list[float]] = {}   # (moved / kept back, label) -> ...
+    beside_gaps: dict[str, list[float]] = {}    # label -> metres, beside_support's moves
     band_low = AutoDetectionConfig().relocate_margin
     weak_below = AutoDetectionConfig().beside_threshold   # moves split at the default
     for out, rec in pairs:
@@ -756,6 +757,9 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
             kind = words[0] + (' weak' if weak else ' hidden' if 'hidden' in e['action'] else
                                ' beside' if 'beside' in e['action'] else
                                ' before a move' if '(not' in e['action'] else '')
+            if kind == 'move beside':   # how far the moved track was (beside_radius)
+                gap = next(n[1] for n in e['near'] if int(n[0]) == tid)
+                beside_gaps.setdefault(label, []).append(float(gap))
             if words[0] == 'move' and kind == 'move':   # the identity check's moves by score
                 kind += f' (score < {weak_below:g})' if e['score'] < weak_below \
                     else f' (score >= {weak_below:g})'
@@ -778,6 +782,10 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
         print(f'gain in ({band_low:g}, 0], {what}, track had followed the {label} person: '
               f'{len(values)}, appearance distances '
               + ', '.join(f'{v:.3f}' for v in sorted(values)))
+    for label, values in sorted(beside_gaps.items()):
+        print(f'moves beside a track (beside_support), track had followed the {label} person: '
+              f'{len(values)}, metres from the detection '
+              + ', '.join(f'{v:.2f}' for v in sorted(values)))
     print(f'{compared} decisions compared the model of the track to be moved with the lost '
           f"tracks' (reuse_before_moving); those with a lost track within reuse_radius, and "
           f'the far hidden moves (reuse_hidden):')

@@ -219,9 +219,9 @@ class AutoDetectionConfig:
         beside_radius: metres; the track ``beside_support`` moves must be this close to
             the detection (the count of tracks the detection would leave spare still
             runs over ``relocate_radius``). 0.6: on the thirty clear-room runs of seeds
-            0-4 (twenty-sixth session, ``beside_support`` 0.25 within 1 m) the thirteen
+            0-4 (twenty-sixth session, ``beside_support`` 0.25 within 1 m) the twelve
             moves of a track that had followed the detected person were 0.45-0.57 m from
-            the detection, six of the seven onto another person 0.70-0.92 m
+            the detection, five of the six onto another person 0.73-0.92 m
             (docs/detection.md, "Births beside a track, within 0.6 m").
         beside_threshold: smallest detection score (combined log response) for a birth
             within ``relocate_radius`` of a track that the detection did not move: weak
