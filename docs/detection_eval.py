@@ -46,7 +46,9 @@ what the detection became), the appearance distances of the tracks near each bir
 reuse by whether they had followed the detected person, and each track ``move_distance``
 kept from a move (whether it had followed the detected person, its gain and appearance
 distance, what the detection became); the appearance distances of the moves and kept-back
-tracks whose gain lay in the doubtful band of ``move_distance``, by label.
+tracks whose gain lay in the doubtful band of ``move_distance``, by label; and each move
+of the opt-in beside rule (``beside_support``) with how far the track was from the
+detection, by label.
 ``exits`` tells, per release by the exit rule, whether the track's person was still in
 the room afterwards (premature).
 """
@@ -669,6 +671,11 @@ def decision_label(d, frames: np.ndarray, people: list, decision: dict, tid: int
     return 'same' if who == at else 'unmatched' if who is None else 'other'
 
 
+def _spread(values: list[float]) -> str:
+    """'min / quartiles / max' of ``values``, three decimals."""
+    return ' / '.join(f'{v:.3f}' for v in np.percentile(values, [0, 25, 50, 75, 100]))
+
+
 def decisions(pairs: list[tuple[Path, Path]]) -> None:
     total: dict[tuple[str, str], int] = {}
     reuse_distances: dict[str, list[float]] = {}     # label -> appearance distances
@@ -680,6 +687,7 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
     birth_near: dict[str, list[float]] = {}     # label -> appearance distances
     doubtful: dict[tuple[str, str], list[float]] = {}   # (moved / kept back, label) -> ...
     beside_gaps: dict[str, list[float]] = {}    # label -> metres, beside_support's moves
+    beside_lines: list[str] = []    # each of those moves (run, frame, track, label)
     band_low = AutoDetectionConfig().relocate_margin
     weak_below = AutoDetectionConfig().beside_threshold   # moves split at the default
     for out, rec in pairs:
@@ -698,12 +706,13 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
                              if 'unlike' in e else '')
                     rule_lines.append(f"  {out.name} frame {e['frame']}: {e['action']}, score "
                                       f"{e['score']:.2f}{moved}")
+            # the gain of each track the identity check compared (id -> nats)
+            gains = {int(n[0]): n[2] for n in e.get('near', [])}
             if e['kind'] == 'decision' and gt.get(e['frame']) \
-                    and e['score'] >= weak_below and e.get('near'):
+                    and e['score'] >= weak_below and gains:
                 # every move by a gain in the doubtful band (relocate_margin, 0] and every
                 # track move_distance kept back there, with the appearance distance
                 # (the moved track's: 'unlike'; a kept-back one's: 'unalike')
-                gains = {int(n[0]): n[2] for n in e['near']}
                 words = e['action'].split()
                 cands = [(int(t), u, 'kept back') for t, u in e.get('unalike', [])]
                 if words[0] == 'move' and '(' not in e['action'] and 'unlike' in e:
@@ -714,7 +723,6 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
                         doubtful.setdefault((what, label), []).append(float(unlike))
             if e['kind'] == 'decision' and e.get('unalike') and gt.get(e['frame']):
                 # move_distance kept these tracks from a move in the doubtful gain band
-                gains = {int(n[0]): n[2] for n in e.get('near', [])}
                 for tid, unlike in e['unalike']:
                     label = decision_label(d, frames, gt[e['frame']], e, int(tid))
                     kept_back.append(f"  {out.name} frame {e['frame']}: track {tid} ({label}), "
@@ -760,6 +768,8 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
             if kind == 'move beside':   # how far the moved track was (beside_radius)
                 gap = next(n[1] for n in e['near'] if int(n[0]) == tid)
                 beside_gaps.setdefault(label, []).append(float(gap))
+                beside_lines.append(f'  {out.name} frame {f}: track {tid} ({label}), '
+                                    f'{gap:.2f} m, score {e["score"]:.2f}')
             if words[0] == 'move' and kind == 'move':   # the identity check's moves by score
                 kind += f' (score < {weak_below:g})' if e['score'] < weak_below \
                     else f' (score >= {weak_below:g})'
@@ -769,15 +779,11 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
         print(out.name, ', '.join(f'{k} {v}: {n}' for (k, v), n in sorted(counts.items())))
     print('all', ', '.join(f'{k} {v}: {n}' for (k, v), n in sorted(total.items())))
     for label, values in sorted(reuse_distances.items()):
-        q = np.percentile(values, [0, 25, 50, 75, 100])
         print(f'reuse candidates, released track was the {label} person: {len(values)}, '
-              f'appearance distance min / quartiles / max '
-              + ' / '.join(f'{v:.3f}' for v in q))
+              f'appearance distance min / quartiles / max {_spread(values)}')
     for label, values in sorted(birth_near.items()):
-        q = np.percentile(values, [0, 25, 50, 75, 100])
         print(f'tracks near a birth or reuse that had followed the {label} person: '
-              f'{len(values)}, appearance distance min / quartiles / max '
-              + ' / '.join(f'{v:.3f}' for v in q))
+              f'{len(values)}, appearance distance min / quartiles / max {_spread(values)}')
     for (what, label), values in sorted(doubtful.items()):
         print(f'gain in ({band_low:g}, 0], {what}, track had followed the {label} person: '
               f'{len(values)}, appearance distances '
@@ -786,6 +792,8 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
         print(f'moves beside a track (beside_support), track had followed the {label} person: '
               f'{len(values)}, metres from the detection '
               + ', '.join(f'{v:.2f}' for v in sorted(values)))
+    if beside_lines:
+        print('\n'.join(beside_lines))
     print(f'{compared} decisions compared the model of the track to be moved with the lost '
           f"tracks' (reuse_before_moving); those with a lost track within reuse_radius, and "
           f'the far hidden moves (reuse_hidden):')
@@ -858,8 +866,9 @@ def switch_classes(out: Path, rec: Path) -> list[dict]:
     * ``e absent``: p missing from the ground truth in between (a synth artefact).
 
     With each: how far the old track was from p at its last reported frame, how long p
-    went unmatched before the switch, p's walking speed, door (p in the door region), p sitting, nearest other person, and the corner
-    cameras where less than half of p's silhouette is visible (nearer people in front)."""
+    went unmatched before the switch, p's walking speed, door (p in the door region), p
+    sitting, nearest other person, and the corner cameras where less than half of p's
+    silhouette is visible (nearer people in front)."""
     tracks, truth, events, _ = _load(out, rec)
     cal = RoomCalibration.load(rec / 'calibration.yaml')
     d, frames = _matching(tracks, truth)
@@ -939,7 +948,8 @@ def classes(pairs: list[tuple[Path, Path]]) -> None:
         away = [s for s in k if not s['door']]
         print(f"| {kind} | {len(k)} | {sum(s['door'] for s in k)} | "
               f"{sum(s['sitting'] for s in away)} | {sum(s['nearest'] < 1 for s in away)} | "
-              f"{sum(s['occluded'] >= 1 for s in away)} / {sum(s['occluded'] >= 2 for s in away)} |")
+              f"{sum(s['occluded'] >= 1 for s in away)} / "
+              f"{sum(s['occluded'] >= 2 for s in away)} |")
     print(f'| all | {len(rows)} | {sum(s["door"] for s in rows)} | | | |')
     lost = [s for s in rows if s['kind'].startswith('a') and not s['door']]
     if lost:
