@@ -51,6 +51,7 @@ from mbtrack_ros.core import _kernels
 from mbtrack_ros.core.appearance import (
     PersonModel, key_view_stack, quantize, view_weights)
 from mbtrack_ros.core.camera import Camera, RoomCalibration
+from mbtrack_ros.core.detection.features import ForegroundIntegral
 from mbtrack_ros.core.shape import BodyShape, Silhouettes, rasterize
 from mbtrack_ros.core.state import STATE_DIM
 
@@ -212,6 +213,8 @@ class MeasurementModel:
         self.camera_names: list[str] = list(calibration.cameras)
         self._images: dict[str, np.ndarray] = {}
         self._bins: dict[str, np.ndarray] = {}
+        self._foreground: dict[str, ForegroundIntegral] = {}
+        self._coverage_gain = 0.0
         self._pool: ThreadPoolExecutor | None = None
         self._pool_size = 0
         self._workspaces = _Workspaces()
@@ -243,6 +246,32 @@ class MeasurementModel:
             checked[name] = image
         self._images = checked
         self._bins = {}
+        self._foreground = {}
+
+    def set_foreground(self, masks: Mapping[str, np.ndarray], gain: float) -> None:
+        """Take the frame's foreground masks (H, W) bool (003 §4.2) for a coverage term in
+        the ``hjs`` and ``separable`` log-likelihoods: ``gain * f_c(x)`` per camera, with
+        ``f_c`` the foreground fraction of the particle's silhouette (the evidence model of
+        :func:`~mbtrack_ros.core.existence.coverage_log_ratio`, ``p(f | x) ∝ exp(k f)``).
+        The colour likelihood alone lets a track whose person stands still drift onto
+        background that resembles her (docs/detection.md, "Foreground coverage in the
+        particle weights"). Call after :meth:`set_images` (which clears the masks);
+        cameras without an image or mask get no term; ``gain`` 0 disables."""
+        if not (np.isfinite(gain) and gain >= 0):
+            raise LikelihoodError(f'coverage gain must be a finite number >= 0, got {gain}')
+        self._coverage_gain = float(gain)
+        out: dict[str, ForegroundIntegral] = {}
+        if gain > 0:
+            for name, mask in masks.items():
+                cam = self.calibration.cameras.get(name)
+                if cam is None or name not in self._images:
+                    continue
+                mask = np.asarray(mask)
+                if mask.shape != (cam.height, cam.width):
+                    raise LikelihoodError(f'{name}: expected a ({cam.height}, {cam.width}) '
+                                          f'foreground mask, got {mask.shape}')
+                out[name] = ForegroundIntegral(mask)
+        self._foreground = out
 
     @property
     def active_cameras(self) -> list[str]:
@@ -360,6 +389,19 @@ class MeasurementModel:
         out[hidden] = mean[target[hidden]]
         return out
 
+    def _coverage_term(self, cover: np.ndarray, target: np.ndarray, prior: np.ndarray,
+                       n_targets: int) -> np.ndarray:
+        """``gain * f`` per particle (P,) from coverages ``cover`` (NaN: the silhouette is
+        outside the image); a particle outside gets its target's prior-weighted mean term
+        (the camera says nothing about it, as :meth:`_without_hidden`)."""
+        inside = np.isfinite(cover)
+        f = np.where(inside, cover, 0.0)
+        mass = np.bincount(target[inside], weights=prior[inside], minlength=n_targets)
+        total = np.bincount(target[inside], weights=prior[inside] * f[inside],
+                            minlength=n_targets)
+        mean = np.divide(total, mass, out=np.zeros(n_targets), where=mass > 0)
+        return self._coverage_gain * np.where(inside, f, mean[target])
+
     # -- HJS --------------------------------------------------------------------------------
     def _hjs_camera(self, camera: str, states: np.ndarray, target: np.ndarray,
                     prior: np.ndarray, key: np.ndarray, models: Sequence[PersonModel], *,
@@ -448,6 +490,7 @@ class MeasurementModel:
             angles[k, :n_views[k]] = m.view_angles
         cam_loglik = np.empty((len(cams), states.shape[0]))
         cam_visible = np.empty((len(cams), n_targets))
+        cam_cover = np.full((len(cams), states.shape[0]), np.nan)
         shape_args = (chair, *self._profile)
         rest = (int(self.config.subsample), float(self.config.d_occ), bool(separable),
                 2.0 * self.config.sigma ** 2, int(self.config.min_visible_pixels))
@@ -472,6 +515,13 @@ class MeasurementModel:
                 with self._workspaces.get(image.shape[0], image.shape[1], n_targets) as ws:
                     bins = run(*ws)
             self._bins[name] = bins
+            integral = self._foreground.get(name)
+            if integral is not None:   # foreground coverage term (set_foreground)
+                sil = rasterize(self._camera(name), states, BodyShape(chair_height=chair),
+                                heights=heights, widths=widths,
+                                row_step=int(self.config.subsample))
+                cover, _, area = integral.coverage(sil)
+                cam_cover[i] = np.where(area > 0, cover, np.nan)
             return time.perf_counter() - t1
 
         # Longest camera first (by its time in the previous call): the threads take the
@@ -486,6 +536,8 @@ class MeasurementModel:
         loglik = np.zeros(int(starts[-1]))
         visible = np.zeros((n_targets, len(self.camera_names)))
         for i, (c, name) in enumerate(cams):
+            if name in self._foreground:
+                cam_loglik[i] += self._coverage_term(cam_cover[i], target, prior, n_targets)
             loglik += self._without_hidden(name, cam_loglik[i], states, target, prior,
                                            n_targets)
             visible[:, c] = cam_visible[i]

@@ -230,6 +230,9 @@ class AutoDetectionConfig:
             detections beside a track are mostly the fringe of that track's person or a
             gap between people, not a new person (docs/detection.md, "Weak births beside a
             track"); 0 keeps the detector's threshold alone.
+        track_coverage: ``k`` of a foreground-coverage term ``k f_c`` per camera in the
+            tracking filter's particle weights (:meth:`MeasurementModel.set_foreground`;
+            the filter then waits for the frame's foreground). 0 disables.
         birth_exit_depth: metres; a confirmed detection deeper than this inside an exit
             starts or moves no track (its person is in the doorway or beyond). 0.15 m, half
             the exit release margin of before the fifteenth session, where it was tied to
@@ -273,6 +276,7 @@ class AutoDetectionConfig:
     beside_radius: float = 0.6
     beside_threshold: float = 3.0
     birth_exit_depth: float = 0.15
+    track_coverage: float = 0.0
 
     def __post_init__(self) -> None:
         if not self.relocate_radius >= 0 or not np.isfinite(self.relocate_margin):
@@ -294,6 +298,9 @@ class AutoDetectionConfig:
             raise DetectionError('sigma and clutter_distance must be > 0')
         if not self.beside_support >= 0:
             raise DetectionError('beside_support must be >= 0')
+        if not (np.isfinite(self.track_coverage) and self.track_coverage >= 0):
+            raise DetectionError(f'track_coverage must be a finite number >= 0, got '
+                                 f'{self.track_coverage}')
         if not self.beside_radius >= 0:
             raise DetectionError(f'beside_radius must be >= 0, got {self.beside_radius}')
         if not (np.isfinite(self.beside_threshold) and self.beside_threshold >= 0):
@@ -441,6 +448,17 @@ class AutoDetection:
         job = self._executor().submit(self.background.apply, {n: images[n] for n in names},
                                       defer=True)
         self._foreground = (names, job)
+
+    def started_foreground(self) -> dict[str, np.ndarray]:
+        """The foreground masks of the frame set :meth:`start_foreground` started, waiting
+        for them (empty when none was started, a camera is still bootstrapping, or the
+        extraction failed: :meth:`update` then reports that failure)."""
+        if self._foreground is None:
+            return {}
+        try:
+            return dict(self._foreground[1].result())
+        except Exception:  # noqa: BLE001 - update() raises it with its context
+            return {}
 
     def abandon(self) -> None:
         """Wait for a foreground started by :meth:`start_foreground` whose frame set will not
