@@ -563,6 +563,38 @@ def _painted_room_tracker(seed, **detection):
     return calib, bgs, tracker
 
 
+def test_track_coverage_gives_the_filter_this_frame_foreground():
+    """With ``track_coverage`` the filter's coverage term gets the foreground masks that
+    the same frame set's background step produced (joined from the worker before the
+    filter), and the person is still found and tracked."""
+    calib, bgs, tracker = _painted_room_tracker(1, track_coverage=2.0)
+    frames = [paint(calib, bgs, [person(1.5 + 0.05 * k, 2.8, theta=0.0)] if k >= 3 else [],
+                    np.random.default_rng(k)) for k in range(10)]
+    extracted, given = [], []
+    apply, set_foreground = tracker.detection.background.apply, tracker.measurement.set_foreground
+
+    def recording_apply(images, **kwargs):
+        extracted.append(apply(images, **kwargs))
+        return extracted[-1]
+
+    def recording_set_foreground(masks, gain):
+        given.append((masks, gain))
+        set_foreground(masks, gain)
+
+    tracker.detection.background.apply = recording_apply
+    tracker.measurement.set_foreground = recording_set_foreground
+    tracked = []
+    for k, images in enumerate(frames):
+        tracked.append(len(tracker.step(int(round(k * 1e9 / FPS)), images).tracks))
+    assert len(given) == len(extracted) == len(frames)
+    for (masks, gain), fg in zip(given, extracted):
+        assert gain == 2.0 and masks.keys() == fg.keys() and fg
+        for name in fg:
+            np.testing.assert_array_equal(masks[name], fg[name])
+    assert any(extracted[-1][n].any() for n in extracted[-1])   # the person is foreground
+    assert tracked[-1] == 1 and tracked[2] == 0
+
+
 def test_tracker_detects_tracks_and_releases_a_painted_person():
     """End to end with the real tracker: born within 0.5 s, released within 1.5 s."""
     rng = np.random.default_rng(8)

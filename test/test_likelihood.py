@@ -543,3 +543,82 @@ def test_prior_list_equals_target_by_target_normalisation():
         _normalised_prior_list([np.zeros(3), np.ones(3)], parts, False)
     with pytest.raises(LikelihoodError, match='target 1: 2 weights for 3 particles'):
         _normalised_prior_list([np.ones(3), np.ones(2)], parts, False)
+
+
+def _brute_coverage(mm, camera, state, model, mask):
+    """Foreground fraction of one state's rendered silhouette, pixel by pixel (NaN when the
+    silhouette is outside the image)."""
+    body = mm.render_labels(camera, state, model) > 0
+    return float((body & mask).sum() / body.sum()) if body.any() else float('nan')
+
+
+@pytest.mark.parametrize('separable', [False, True])
+def test_coverage_term_adds_gain_times_brute_force_coverage(separable):
+    rng = np.random.default_rng(21)
+    cams = _two_cameras()
+    mm = MeasurementModel(_room(*cams), LikelihoodConfig(min_visible_pixels=1))
+    images = {c.name: _random_image(rng, c.height, c.width) for c in cams}
+    masks = {c.name: rng.random((c.height, c.width)) < 0.4 for c in cams}
+    masks['front'][:, :20] = True              # coverage varies between the particles
+    models = [_random_model(rng, 1.7) for _ in range(2)]
+    particles = [_random_particles(rng, (0.0, 0.0), 5), _random_particles(rng, (0.3, 0.6), 5)]
+    particles[1][0, X] = 50.0                  # outside both views
+    weights = [rng.random(5) + 0.1 for _ in range(2)]
+
+    def evaluate():
+        if separable:
+            return mm.separable(particles, models).loglik
+        return mm.hjs(particles, weights, models).loglik
+
+    mm.set_images(images)
+    plain = evaluate()
+    gain = 1.5
+    mm.set_foreground(masks, gain)
+    with_term = evaluate()
+    for k in range(2):
+        prior = np.full(5, 0.2) if separable else weights[k] / weights[k].sum()
+        term = np.zeros(5)
+        for cam in cams:
+            f = np.array([_brute_coverage(mm, cam.name, s, models[k], masks[cam.name])
+                          for s in particles[k]])
+            inside = np.isfinite(f)
+            # outside the image: the target's prior-weighted mean coverage in that camera
+            f[~inside] = np.sum(prior[inside] * f[inside]) / np.sum(prior[inside])
+            term += gain * f
+        np.testing.assert_allclose(with_term[k] - plain[k], term, atol=1e-9)
+        assert np.ptp(term) > 0.1                  # the term tells the particles apart
+    mm.set_images(images)                          # a new frame clears the masks
+    for a, b in zip(evaluate(), plain):
+        np.testing.assert_allclose(a, b, atol=1e-12)
+
+
+def test_coverage_term_prefers_the_foreground_over_a_look_alike_background():
+    """A person and a painted look-alike of her on the wall behind: colour alone cannot
+    tell them apart, the foreground can (the still person of docs/detection.md's lead)."""
+    cams = _two_cameras()
+    mm = MeasurementModel(_room(*cams), LikelihoodConfig(min_visible_pixels=5))
+    colours = [((230, 190, 160), (200, 30, 30), (30, 30, 200))] * 2
+    models = [_flat_model(colours[0], 1.75)] * 2
+    places = np.zeros((2, 6))
+    places[1, [X, Y]] = (1.2, 1.0)                  # the look-alike, apart from her
+    mm.set_images(_paint(cams, places, models, colours))
+    masks = {c.name: mm.render_labels(c.name, places[0], models[0]) > 0 for c in cams}
+    parts = [places.copy()]                         # one track, a particle on each
+    plain = mm.hjs(parts, [np.ones(2)], models[:1]).loglik[0]
+    assert abs(plain[0] - plain[1]) < 0.5
+    mm.set_foreground(masks, 2.0)
+    scored = mm.hjs(parts, [np.ones(2)], models[:1]).loglik[0]
+    assert scored[0] > scored[1] + 3.0              # 2 cameras x gain 2 x (1 - 0)
+
+
+def test_coverage_masks_and_gain_are_checked():
+    cams = _two_cameras()
+    mm = MeasurementModel(_room(*cams))
+    rng = np.random.default_rng(2)
+    mm.set_images({c.name: _random_image(rng, c.height, c.width) for c in cams})
+    with pytest.raises(LikelihoodError, match='foreground mask'):
+        mm.set_foreground({'front': np.zeros((3, 3), bool)}, 1.0)
+    for gain in (-1.0, float('nan'), float('inf')):
+        with pytest.raises(LikelihoodError, match='coverage gain'):
+            mm.set_foreground({}, gain)
+    mm.set_foreground({'nowhere': np.zeros((3, 3), bool)}, 1.0)   # unknown camera: no term
