@@ -578,7 +578,8 @@ def test_track_coverage_gives_the_filter_this_frame_foreground():
         return extracted[-1]
 
     def recording_set_foreground(masks, gain):
-        given.append((masks, gain))
+        assert callable(masks)          # joined by the filter when it needs them
+        given.append((masks(), gain))
         set_foreground(masks, gain)
 
     tracker.detection.background.apply = recording_apply

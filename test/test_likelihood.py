@@ -622,3 +622,36 @@ def test_coverage_masks_and_gain_are_checked():
         with pytest.raises(LikelihoodError, match='coverage gain'):
             mm.set_foreground({}, gain)
     mm.set_foreground({'nowhere': np.zeros((3, 3), bool)}, 1.0)   # unknown camera: no term
+
+
+def test_coverage_masks_from_a_callable_are_fetched_once_and_give_the_same_term():
+    rng = np.random.default_rng(4)
+    cams = _two_cameras()
+    mm = MeasurementModel(_room(*cams), LikelihoodConfig(threads=2))
+    images = {c.name: _random_image(rng, c.height, c.width) for c in cams}
+    masks = {c.name: rng.random((c.height, c.width)) < 0.5 for c in cams}
+    models = [_random_model(rng, 1.7)]
+    particles = [_random_particles(rng, (0.0, 0.0), 6)]
+    mm.set_images(images)
+    mm.set_foreground(masks, 2.0)
+    direct = mm.hjs(particles, [np.ones(6)], models).loglik[0]
+    calls = []
+
+    def source():
+        calls.append(1)
+        return masks
+
+    mm.set_images(images)
+    mm.set_foreground(source, 2.0)
+    assert calls == []                         # not before a camera needs them
+    np.testing.assert_array_equal(mm.hjs(particles, [np.ones(6)], models).loglik[0], direct)
+    assert calls == [1]                        # once for both camera threads
+    mm.set_images(images)
+    mm.set_foreground(source, 0.0)             # gain 0: never fetched
+    mm.hjs(particles, [np.ones(6)], models)
+    assert calls == [1]
+    bad = {c.name: np.zeros((2, 2), bool) for c in cams}
+    mm.set_images(images)
+    mm.set_foreground(lambda: bad, 1.0)
+    with pytest.raises(LikelihoodError, match='foreground mask'):
+        mm.hjs(particles, [np.ones(6)], models)

@@ -40,7 +40,7 @@ import itertools
 import os
 import threading
 import time
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -213,7 +213,9 @@ class MeasurementModel:
         self.camera_names: list[str] = list(calibration.cameras)
         self._images: dict[str, np.ndarray] = {}
         self._bins: dict[str, np.ndarray] = {}
-        self._foreground: dict[str, ForegroundIntegral] = {}
+        self._foreground: dict[str, ForegroundIntegral] | None = {}   # set_foreground()
+        self._masks_source: Mapping[str, np.ndarray] | Callable[[], Mapping] = {}
+        self._foreground_lock = threading.Lock()
         self._coverage_gain = 0.0
         self._pool: ThreadPoolExecutor | None = None
         self._pool_size = 0
@@ -246,22 +248,40 @@ class MeasurementModel:
             checked[name] = image
         self._images = checked
         self._bins = {}
-        self._foreground = {}
+        self._foreground, self._masks_source, self._coverage_gain = {}, {}, 0.0
 
-    def set_foreground(self, masks: Mapping[str, np.ndarray], gain: float) -> None:
+    def set_foreground(self, masks: Mapping[str, np.ndarray]
+                       | Callable[[], Mapping[str, np.ndarray]], gain: float) -> None:
         """Take the frame's foreground masks (H, W) bool (003 §4.2) for a coverage term in
         the ``hjs`` and ``separable`` log-likelihoods: ``gain * f_c(x)`` per camera, with
         ``f_c`` the foreground fraction of the particle's silhouette (the evidence model of
         :func:`~mbtrack_ros.core.existence.coverage_log_ratio`, ``p(f | x) ∝ exp(k f)``).
         The colour likelihood alone lets a track whose person stands still drift onto
         background that resembles her (docs/detection.md, "Foreground coverage in the
-        particle weights"). Call after :meth:`set_images` (which clears the masks);
-        cameras without an image or mask get no term; ``gain`` 0 disables."""
+        particle weights").
+
+        ``masks`` may be a callable returning them: it is called once, by the first camera
+        thread that has finished its colour update, so masks still being extracted on
+        another thread (the tracker's foreground worker) overlap with that update. Call
+        after :meth:`set_images` (which clears the masks); cameras without an image or
+        mask get no term; ``gain`` 0 disables.
+        """
         if not (np.isfinite(gain) and gain >= 0):
             raise LikelihoodError(f'coverage gain must be a finite number >= 0, got {gain}')
         self._coverage_gain = float(gain)
-        out: dict[str, ForegroundIntegral] = {}
-        if gain > 0:
+        self._foreground = None
+        self._masks_source = masks if gain > 0 else {}
+        if not callable(self._masks_source):
+            self._foreground_integrals()     # a bad mask is refused here, not in a thread
+
+    def _foreground_integrals(self) -> dict[str, ForegroundIntegral]:
+        """The row prefix sums of this frame's masks by camera (built once per frame)."""
+        with self._foreground_lock:
+            if self._foreground is not None:
+                return self._foreground
+            source = self._masks_source
+            masks = source() if callable(source) else source
+            out: dict[str, ForegroundIntegral] = {}
             for name, mask in masks.items():
                 cam = self.calibration.cameras.get(name)
                 if cam is None or name not in self._images:
@@ -271,7 +291,8 @@ class MeasurementModel:
                     raise LikelihoodError(f'{name}: expected a ({cam.height}, {cam.width}) '
                                           f'foreground mask, got {mask.shape}')
                 out[name] = ForegroundIntegral(mask)
-        self._foreground = out
+            self._foreground = out
+            return out
 
     @property
     def active_cameras(self) -> list[str]:
@@ -515,7 +536,8 @@ class MeasurementModel:
                 with self._workspaces.get(image.shape[0], image.shape[1], n_targets) as ws:
                     bins = run(*ws)
             self._bins[name] = bins
-            integral = self._foreground.get(name)
+            integral = (self._foreground_integrals().get(name)
+                        if self._coverage_gain > 0 else None)
             if integral is not None:   # foreground coverage term (set_foreground)
                 sil = rasterize(self._camera(name), states, BodyShape(chair_height=chair),
                                 heights=heights, widths=widths,
@@ -536,7 +558,7 @@ class MeasurementModel:
         loglik = np.zeros(int(starts[-1]))
         visible = np.zeros((n_targets, len(self.camera_names)))
         for i, (c, name) in enumerate(cams):
-            if name in self._foreground:
+            if self._coverage_gain > 0 and name in self._foreground_integrals():
                 cam_loglik[i] += self._coverage_term(cam_cover[i], target, prior, n_targets)
             loglik += self._without_hidden(name, cam_loglik[i], states, target, prior,
                                            n_targets)

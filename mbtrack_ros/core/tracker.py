@@ -459,8 +459,8 @@ class Tracker:
             seen = images if self.detection is None else self.detection.tracking_images(images)
             self.measurement.set_images(seen)
             gain = self.detection.config.track_coverage if detect else 0.0
-            if gain > 0:   # the coverage term waits for the frame's foreground
-                self.measurement.set_foreground(self.detection.started_foreground(), gain)
+            if gain > 0:   # the coverage term joins the frame's foreground when it needs it
+                self.measurement.set_foreground(self.detection.started_foreground, gain)
             t1 = time.perf_counter()
             updates = self.filter.step(dt, self.measurement, seen, self.rng)
             t2 = time.perf_counter()
