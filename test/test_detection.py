@@ -596,6 +596,21 @@ def test_track_coverage_gives_the_filter_this_frame_foreground():
     assert tracked[-1] == 1 and tracked[2] == 0
 
 
+def test_track_coverage_is_checked_and_handed_to_the_pipeline():
+    from mbtrack_ros.core.tracker import TrackerConfig, TrackerError
+
+    assert TrackerConfig(track_coverage=1.5).detection_config().track_coverage == 1.5
+    assert TrackerConfig().detection_config().track_coverage == \
+        AutoDetectionConfig().track_coverage
+    for bad in (-0.1, float('nan'), float('inf')):
+        with pytest.raises(DetectionError, match='track_coverage'):
+            AutoDetectionConfig(track_coverage=bad)
+        with pytest.raises(TrackerError, match='track_coverage'):
+            TrackerConfig(track_coverage=bad)
+    with pytest.raises(TrackerError, match='track_coverage'):
+        TrackerConfig(track_coverage=True)
+
+
 def test_tracker_detects_tracks_and_releases_a_painted_person():
     """End to end with the real tracker: born within 0.5 s, released within 1.5 s."""
     rng = np.random.default_rng(8)

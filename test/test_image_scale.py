@@ -188,6 +188,7 @@ def test_node_defaults_are_the_trackers_defaults():
     left_to_pipeline = {'detection_threshold': pipeline.detector.threshold,
                         'spare_support': pipeline.release.spare_support,
                         'beside_threshold': pipeline.beside_threshold,
+                        'track_coverage': pipeline.track_coverage,
                         'reuse_time': pipeline.reuse_time,
                         'reuse_in_entry_zones': pipeline.reuse_in_entry_zones}
     for key, (field, _) in TRACKER_PARAMETERS.items():

@@ -70,6 +70,9 @@ class TrackerConfig:
         beside_threshold: smallest score of a detection that starts a track within 1 m of
             another track (``AutoDetectionConfig.beside_threshold``; None: its default,
             0: the detector's threshold alone).
+        track_coverage: ``k`` of the foreground-coverage term ``k f_c`` per camera in the
+            particle weights (``AutoDetectionConfig.track_coverage``; None: its default,
+            0: colour alone).
         detection: automatic detection, model acquisition and release of people (003 §4)
             with visibility/existence probabilities (001), see
             :mod:`mbtrack_ros.core.detection.manager`.
@@ -115,6 +118,7 @@ class TrackerConfig:
     release_time: float = 1.0
     detection_threshold: float | None = None
     beside_threshold: float | None = None
+    track_coverage: float | None = None
     spare_support: float | None = None
     reuse_time: float | None = None
     reuse_in_entry_zones: bool | None = None
@@ -163,6 +167,11 @@ class TrackerConfig:
                 and not isinstance(self.beside_threshold, bool)
                 and 0 <= self.beside_threshold < float('inf')):
             bad(f'beside_threshold must be a finite number >= 0, got {self.beside_threshold!r}')
+        if self.track_coverage is not None and not (
+                isinstance(self.track_coverage, (int, float))
+                and not isinstance(self.track_coverage, bool)
+                and 0 <= self.track_coverage < float('inf')):
+            bad(f'track_coverage must be a finite number >= 0, got {self.track_coverage!r}')
         if self.spare_support is not None and not (
                 isinstance(self.spare_support, (int, float)) and 0 <= self.spare_support <= 1):
             bad(f'spare_support must be a number in [0, 1], got {self.spare_support!r}')
@@ -206,6 +215,8 @@ class TrackerConfig:
             config = replace(config, reuse_in_entry_zones=self.reuse_in_entry_zones)
         if self.beside_threshold is not None:
             config = replace(config, beside_threshold=float(self.beside_threshold))
+        if self.track_coverage is not None:
+            config = replace(config, track_coverage=float(self.track_coverage))
         return _pixels_scaled(config, float(self.image_scale))
 
     def filter_config(self) -> FilterConfig:

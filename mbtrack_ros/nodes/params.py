@@ -63,6 +63,9 @@ detection.threshold             double     smallest combined log response of a n
 detection.beside_threshold      double     smallest score of a detection that starts a
                                            track within 1 m of another track; 0 = the
                                            threshold above alone (3.0)
+detection.track_coverage        double     weight k of the foreground coverage f of a
+                                           particle's silhouette, k f per camera, in the
+                                           particle weights; 0 = colour alone (0.0)
 detection.spare_support         double     exclusive support below which a track that
                                            overlaps another one is released as spare;
                                            0 = off (0.25)
@@ -217,6 +220,11 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
                                    'within AutoDetectionConfig.relocate_radius of another '
                                    'track (the fringe of a tracked person is no newcomer); '
                                    '0 = detection.threshold alone', _fr(0.0, 100.0)),
+    'detection.track_coverage': (AutoDetectionConfig().track_coverage, 'weight k of the '
+                                 'foreground coverage f of a particle silhouette, k f per '
+                                 'camera, in the tracking filter particle weights '
+                                 '(AutoDetectionConfig.track_coverage); 0 = colour alone',
+                                 _fr(0.0, 100.0)),
     'detection.spare_support': (ReleaseConfig().spare_support, 'exclusive foreground support '
                                 'below which a track that overlaps another one is released as '
                                 'spare (ReleaseConfig.spare_support); 0 = off',

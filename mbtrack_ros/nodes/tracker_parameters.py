@@ -23,6 +23,7 @@ TRACKER_PARAMETERS: dict[str, tuple[str, type]] = {
     'tracker.use_mrf': ('use_mrf', bool), 'tracker.release_time': ('release_time', float),
     'detection.threshold': ('detection_threshold', float),
     'detection.beside_threshold': ('beside_threshold', float),
+    'detection.track_coverage': ('track_coverage', float),
     'detection.spare_support': ('spare_support', float),
     'detection.reuse_time': ('reuse_time', float),
     'detection.reuse_in_entry_zones': ('reuse_in_entry_zones', bool),
