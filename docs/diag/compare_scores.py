@@ -5,7 +5,7 @@ Usage: compare_scores.py A/scores.json[,A2/scores.json...] B/scores.json[,B2/...
 For the runs (recording, seed) both sides hold (a side may join several suites, e.g. the
 seeds 0-4 and the held-out seeds of one tree): on how many B has fewer / more / as many
 identity switches as A, and higher / lower MOTA, and each run whose switches differ; then
-the totals of each, the switches per tracker seed (all recordings together), and Welch's
+the totals of each (switches, mean MOTA and MOTP, runs within the target), the switches per tracker seed (all recordings together), and Welch's
 t and the Mann-Whitney test of those per-seed totals (scipy).
 """
 import json
@@ -33,7 +33,10 @@ per_seed = {}
 for name, runs in (('A', a), ('B', b)):
     per_seed[name] = [sum(runs[k]['mismatches'] for k in both if k[1] == s) for s in seeds]
     print(f'{name}: {sum(runs[k]["mismatches"] for k in both)} switches, mean MOTA '
-          f'{100 * sum(runs[k]["mota"] for k in both) / len(both):.2f} %; per tracker seed '
+          f'{100 * sum(runs[k]["mota"] for k in both) / len(both):.2f} %, mean MOTP '
+          f'{sum(runs[k]["motp_mm"] for k in both) / len(both):.1f} mm, runs within 0.1 '
+          f'switches per person {sum(runs[k]["switches_per_person"] <= 0.1 for k in both)}'
+          f'; per tracker seed '
           f'{seeds}: {per_seed[name]}')
 if len(seeds) > 1:
     welch = stats.ttest_ind(per_seed['B'], per_seed['A'], equal_var=False)
