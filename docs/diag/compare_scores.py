@@ -5,8 +5,9 @@ Usage: compare_scores.py A/scores.json[,A2/scores.json...] B/scores.json[,B2/...
 For the runs (recording, seed) both sides hold (a side may join several suites, e.g. the
 seeds 0-4 and the held-out seeds of one tree): on how many B has fewer / more / as many
 identity switches as A, and higher / lower MOTA, and each run whose switches differ; then
-the totals of each (switches, mean MOTA and MOTP, runs within the target), the switches per tracker seed (all recordings together), and Welch's
-t and the Mann-Whitney test of those per-seed totals (scipy).
+the totals of each (switches, mean MOTA and MOTP, runs within the target), the switches
+per tracker seed (all recordings together), and Welch's t and the Mann-Whitney test of
+those per-seed totals (scipy).
 """
 import json
 import sys
