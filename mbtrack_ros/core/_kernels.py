@@ -950,7 +950,9 @@ def update_camera(image, bins, states, target, prior, heights, widths, chair, fr
             the visible fraction sum(w*) / unclipped area, clipped to [0, 1].
 
     Returns:
-        bins (H, W) int16, the image's colour bins.
+        bins (H, W) int16, the image's colour bins, and the particles' silhouettes as row
+        spans ``row, x0, x1, part, offsets`` (:class:`~mbtrack_ros.core.shape.Silhouettes`;
+        the coverage term of ``MeasurementModel.set_foreground`` counts on them).
     """
     if bins.shape[0] == 0:
         bins = quantize_rgb(image)
@@ -982,7 +984,7 @@ def update_camera(image, bins, states, target, prior, heights, widths, chair, fr
         f = vis[p] / full_area[p] if full_area[p] > 0 else 0.0
         f = min(max(f, 0.0), 1.0)
         visible[target[p]] += prior[p] * f
-    return bins
+    return bins, row, x0, x1, part, offsets
 
 
 # -- joint rendering (000 Eq. 20-21, 26 with binary masks) ------------------------------------

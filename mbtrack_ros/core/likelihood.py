@@ -51,7 +51,7 @@ from mbtrack_ros.core import _kernels
 from mbtrack_ros.core.appearance import (
     PersonModel, key_view_stack, quantize, view_weights)
 from mbtrack_ros.core.camera import Camera, RoomCalibration
-from mbtrack_ros.core.detection.features import ForegroundIntegral
+from mbtrack_ros.core.detection.features import ForegroundIntegral, Spans
 from mbtrack_ros.core.shape import BodyShape, Silhouettes, rasterize
 from mbtrack_ros.core.state import STATE_DIM
 
@@ -524,25 +524,22 @@ class MeasurementModel:
             cam_args = self._camera_arguments(name)
             image = self._images[name]
 
-            def run(mfg: np.ndarray, bbg: np.ndarray, wmap: np.ndarray) -> np.ndarray:
+            def run(mfg: np.ndarray, bbg: np.ndarray, wmap: np.ndarray) -> tuple:
                 return _kernels.update_camera(
                     image, bins, states, target, prior, heights, widths, *shape_args,
                     angles, n_views, key, *cam_args, *rest, mfg, bbg, wmap, cam_loglik[i],
                     cam_visible[i])
 
             if separable:                               # no image buffers
-                bins = run(_NO_BUFFER, _NO_BUFFER, _NO_BUFFER)
+                bins, *spans = run(_NO_BUFFER, _NO_BUFFER, _NO_BUFFER)
             else:
                 with self._workspaces.get(image.shape[0], image.shape[1], n_targets) as ws:
-                    bins = run(*ws)
+                    bins, *spans = run(*ws)
             self._bins[name] = bins
             integral = (self._foreground_integrals().get(name)
                         if self._coverage_gain > 0 else None)
-            if integral is not None:   # foreground coverage term (set_foreground)
-                sil = rasterize(self._camera(name), states, BodyShape(chair_height=chair),
-                                heights=heights, widths=widths,
-                                row_step=int(self.config.subsample))
-                cover, _, area = integral.coverage(sil)
+            if integral is not None:   # foreground coverage term on the kernel's silhouettes
+                cover, _, area = integral.coverage(Spans(*spans))
                 cam_cover[i] = np.where(area > 0, cover, np.nan)
             return time.perf_counter() - t1
 
