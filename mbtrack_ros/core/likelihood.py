@@ -28,6 +28,11 @@ exit's strip between the floor's edge and the wall is in front of the camera and
 usual (docs/detection.md, "The wall beside the door in the synth; the door-wall cameras
 and the strip in front of the wall").
 
+With automatic detection the frame's foreground masks come too
+(:meth:`MeasurementModel.set_foreground`): each particle then gains ``k f_c`` per camera,
+``f_c`` the foreground fraction of its silhouette, counted on the spans the camera's kernel
+rasterised (docs/detection.md, "Foreground coverage in the particle weights").
+
 How w* enters the foreground term (000 Eq. 33): the image histogram of a part is
 accumulated with per-pixel weight w*(u); the rendered (model) histogram of a part is
 uniform over the part's pixels, so weighting it by w* and normalising gives back the

@@ -65,7 +65,7 @@ detection.beside_threshold      double     smallest score of a detection that st
                                            threshold above alone (3.0)
 detection.track_coverage        double     weight k of the foreground coverage f of a
                                            particle's silhouette, k f per camera, in the
-                                           particle weights; 0 = colour alone (0.0)
+                                           particle weights; 0 = colour alone (2.0)
 detection.spare_support         double     exclusive support below which a track that
                                            overlaps another one is released as spare;
                                            0 = off (0.25)
