@@ -259,8 +259,9 @@ class MeasurementModel:
                        | Callable[[], Mapping[str, np.ndarray]], gain: float) -> None:
         """Take the frame's foreground masks (H, W) bool (003 §4.2) for a coverage term in
         the ``hjs`` and ``separable`` log-likelihoods: ``gain * f_c(x)`` per camera, with
-        ``f_c`` the foreground fraction of the particle's silhouette (the evidence model of
-        :func:`~mbtrack_ros.core.existence.coverage_log_ratio`, ``p(f | x) ∝ exp(k f)``).
+        ``f_c`` the foreground fraction of the particle's silhouette: ``p(f | x) ∝ exp(k f)``,
+        the exponential in f that the existence update's evidence uses
+        (:func:`~mbtrack_ros.core.existence.coverage_log_ratio`).
         The colour likelihood alone lets a track whose person stands still drift onto
         background that resembles her (docs/detection.md, "Foreground coverage in the
         particle weights").
