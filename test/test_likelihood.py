@@ -621,7 +621,13 @@ def test_coverage_masks_and_gain_are_checked():
     for gain in (-1.0, float('nan'), float('inf')):
         with pytest.raises(LikelihoodError, match='coverage gain'):
             mm.set_foreground({}, gain)
+    models = [_random_model(rng, 1.7)]
+    particles = [_random_particles(rng, (0.0, 0.0), 4)]
+    plain = mm.hjs(particles, [np.ones(4)], models).loglik[0]
     mm.set_foreground({'nowhere': np.zeros((3, 3), bool)}, 1.0)   # unknown camera: no term
+    np.testing.assert_array_equal(mm.hjs(particles, [np.ones(4)], models).loglik[0], plain)
+    mm.set_foreground({'front': np.ones((36, 48), bool)}, 1.0)    # full coverage: +1 each
+    np.testing.assert_allclose(mm.hjs(particles, [np.ones(4)], models).loglik[0], plain + 1.0)
 
 
 def test_coverage_masks_from_a_callable_are_fetched_once_and_give_the_same_term():

@@ -270,35 +270,40 @@ class MeasurementModel:
         thread that has finished its colour update, so masks still being extracted on
         another thread (the tracker's foreground worker) overlap with that update. Call
         after :meth:`set_images` (which clears the masks); cameras without an image or
-        mask get no term; ``gain`` 0 disables.
+        mask get no term; ``gain`` 0 disables, and so does a refused call.
         """
         if not (np.isfinite(gain) and gain >= 0):
             raise LikelihoodError(f'coverage gain must be a finite number >= 0, got {gain}')
+        self._foreground, self._masks_source, self._coverage_gain = {}, {}, 0.0
+        if gain == 0:
+            return
+        if callable(masks):
+            self._foreground, self._masks_source = None, masks
+        else:
+            self._foreground = self._integrals(masks)   # a bad mask is refused here
         self._coverage_gain = float(gain)
-        self._foreground = None
-        self._masks_source = masks if gain > 0 else {}
-        if not callable(self._masks_source):
-            self._foreground_integrals()     # a bad mask is refused here, not in a thread
 
     def _foreground_integrals(self) -> dict[str, ForegroundIntegral]:
         """The row prefix sums of this frame's masks by camera (built once per frame)."""
         with self._foreground_lock:
-            if self._foreground is not None:
-                return self._foreground
-            source = self._masks_source
-            masks = source() if callable(source) else source
-            out: dict[str, ForegroundIntegral] = {}
-            for name, mask in masks.items():
-                cam = self.calibration.cameras.get(name)
-                if cam is None or name not in self._images:
-                    continue
-                mask = np.asarray(mask)
-                if mask.shape != (cam.height, cam.width):
-                    raise LikelihoodError(f'{name}: expected a ({cam.height}, {cam.width}) '
-                                          f'foreground mask, got {mask.shape}')
-                out[name] = ForegroundIntegral(mask)
-            self._foreground = out
-            return out
+            if self._foreground is None:
+                self._foreground = self._integrals(self._masks_source())
+            return self._foreground
+
+    def _integrals(self, masks: Mapping[str, np.ndarray]) -> dict[str, ForegroundIntegral]:
+        """Row prefix sums of the masks of the cameras with an image this frame; raises
+        :class:`LikelihoodError` for a mask of the wrong size."""
+        out: dict[str, ForegroundIntegral] = {}
+        for name, mask in masks.items():
+            cam = self.calibration.cameras.get(name)
+            if cam is None or name not in self._images:
+                continue
+            mask = np.asarray(mask)
+            if mask.shape != (cam.height, cam.width):
+                raise LikelihoodError(f'{name}: expected a ({cam.height}, {cam.width}) '
+                                      f'foreground mask, got {mask.shape}')
+            out[name] = ForegroundIntegral(mask)
+        return out
 
     @property
     def active_cameras(self) -> list[str]:
