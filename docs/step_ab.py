@@ -4,16 +4,17 @@ docs/live_measurements.md, "Overlapped steps (h-pipe)").
 Usage: python docs/step_ab.py RECORDING FRAMES OUT.json VARIANT [VARIANT ...]
 (environment SWITCH=seconds sets sys.setswitchinterval, the GIL hand-over interval)
 VARIANT: inline (foreground inside update, as before h-pipe), overlap (foreground on the
-worker during the filter), pipe (overlap + TrackerConfig.pipeline_search), coverage (overlap
-+ AutoDetectionConfig.track_coverage 2, the masks joined once the colour kernels are done),
-coverage_first (the same, the masks joined before the filter starts).
+worker during the filter), pipe (overlap + TrackerConfig.pipeline_search), all three on the
+colour likelihood alone (track_coverage 0, as they were measured); coverage (overlap +
+AutoDetectionConfig.track_coverage 2, the default since the twenty-seventh session, the masks
+joined once the colour kernels are done), coverage_first (the same, the masks joined before
+the filter starts).
 Frames are read per block of 25 sets, then each variant steps the block back to back as the
 node does (step(search=False), [publish], search()); a variant's worker is drained at the
 end of its block (counted in its block wall time). Per frame: pre-publish wall (step start
 to result), post (search()), CPU of the process (all threads).
 """
 import os, sys, time, json
-from dataclasses import replace
 import numpy as np
 from pathlib import Path
 from mbtrack_ros.core.camera import RoomCalibration
@@ -26,12 +27,11 @@ if os.environ.get('SWITCH'):
 room = RoomCalibration.load(rec / 'calibration.yaml')
 trackers = {}
 for v in variants:
-    tr = Tracker(room, TrackerConfig(detection=True, seed=0, pipeline_search=v == 'pipe'),
+    tr = Tracker(room, TrackerConfig(detection=True, seed=0, pipeline_search=v == 'pipe',
+                                     track_coverage=2.0 if v.startswith('coverage') else 0.0),
                  rng=np.random.default_rng(0))
     if v == 'inline':
         tr.detection.start_foreground = lambda images: None
-    if v.startswith('coverage'):
-        tr.detection.config = replace(tr.detection.config, track_coverage=2.0)
     if v == 'coverage_first':
         def first(masks, gain, given=tr.measurement.set_foreground):
             given(masks() if callable(masks) else masks, gain)

@@ -174,6 +174,18 @@ _NO_BUFFER = np.zeros((1, 1, 1))   # workspace argument of the separable evaluat
 _NO_BINS = np.zeros((0, 0), np.int16)   # bins argument of a camera not quantised yet
 
 
+def _with_target_mean(values: np.ndarray, known: np.ndarray, target: np.ndarray,
+                      prior: np.ndarray, n_targets: int) -> np.ndarray:
+    """``values`` (P,) where ``known``, elsewhere the prior-weighted mean of the known values
+    of the particle's target (0 for a target with none): what a camera that says nothing
+    about a particle leaves it, relative to its target's other particles."""
+    mass = np.bincount(target[known], weights=prior[known], minlength=n_targets)
+    total = np.bincount(target[known], weights=prior[known] * values[known],
+                        minlength=n_targets)
+    mean = np.divide(total, mass, out=np.zeros(n_targets), where=mass > 0)
+    return np.where(known, values, mean[target])
+
+
 class _Workspaces:
     """Reusable image buffers (m_fg, b_bg, w*) of :func:`_kernels.hjs_camera_ws`.
 
@@ -412,14 +424,7 @@ class MeasurementModel:
         hidden = self.calibration.exit_hidden(camera, states[:, :2])
         if not hidden.any():
             return loglik
-        seen = ~hidden
-        mass = np.bincount(target[seen], weights=prior[seen], minlength=n_targets)
-        total = np.bincount(target[seen], weights=prior[seen] * loglik[seen],
-                            minlength=n_targets)
-        mean = np.divide(total, mass, out=np.zeros(n_targets), where=mass > 0)
-        out = loglik.copy()
-        out[hidden] = mean[target[hidden]]
-        return out
+        return _with_target_mean(loglik, ~hidden, target, prior, n_targets)
 
     def _coverage_term(self, cover: np.ndarray, target: np.ndarray, prior: np.ndarray,
                        n_targets: int) -> np.ndarray:
@@ -427,12 +432,8 @@ class MeasurementModel:
         outside the image); a particle outside gets its target's prior-weighted mean term
         (the camera says nothing about it, as :meth:`_without_hidden`)."""
         inside = np.isfinite(cover)
-        f = np.where(inside, cover, 0.0)
-        mass = np.bincount(target[inside], weights=prior[inside], minlength=n_targets)
-        total = np.bincount(target[inside], weights=prior[inside] * f[inside],
-                            minlength=n_targets)
-        mean = np.divide(total, mass, out=np.zeros(n_targets), where=mass > 0)
-        return self._coverage_gain * np.where(inside, f, mean[target])
+        return self._coverage_gain * _with_target_mean(np.where(inside, cover, 0.0), inside,
+                                                       target, prior, n_targets)
 
     # -- HJS --------------------------------------------------------------------------------
     def _hjs_camera(self, camera: str, states: np.ndarray, target: np.ndarray,
