@@ -170,7 +170,7 @@ def _inputs(p, model):
 
 def test_rate_zero_changes_nothing():
     alone = person(2.5, 2.0, theta=0.4)
-    before, after, records = _adapt([alone], [alone], [alone[2]], AdaptationConfig())
+    before, after, records = _adapt([alone], [alone], [alone[2]], AdaptationConfig(rate=0.0))
     assert records == []
     np.testing.assert_array_equal(after[0].histograms, before[0].histograms)
 
@@ -211,17 +211,18 @@ def test_bad_adaptation_config_is_refused():
 
 
 @pytest.mark.parametrize('rate, speed, learns', [(0.0, 0.6, False), (0.2, 0.6, True),
-                                                  (0.2, 0.0, False)])
+                                                  (0.2, 0.0, False), (None, 0.6, True)])
 def test_tracker_adapts_only_when_enabled_and_after_walking(rate, speed, learns):
-    """End to end: a person walking (speed m/s) or standing alone; with a rate the
-    tracker's model (the object the filter's likelihood reads) learns once the track has
-    walked ``min_travel`` (a standing one, like a false track on a screen, never does),
-    without a rate it stays as acquired."""
+    """End to end: a person walking (speed m/s) or standing alone; with a rate (None: the
+    default, 0.05) the tracker's model (the object the filter's likelihood reads) learns
+    once the track has walked ``min_travel`` (a standing one, like a false track on a
+    screen, never does), with rate 0 it stays as acquired."""
     rng = np.random.default_rng(8)
     calib = make_room()
     bgs = backgrounds(calib)
     tracker = _detecting_tracker(calib, bgs, seed=1, adaptation_rate=rate)
-    assert tracker.detection.config.adaptation.rate == rate   # TrackerConfig wires it
+    wired = AdaptationConfig().rate if rate is None else rate
+    assert tracker.detection.config.adaptation.rate == wired   # TrackerConfig wires it
     tracker.detection.config = replace(tracker.detection.config, relocate_interval=0.5)
     acquired, actions, learnt = {}, [], {}
     for k in range(45):

@@ -190,7 +190,8 @@ def test_node_defaults_are_the_trackers_defaults():
                         'beside_threshold': pipeline.beside_threshold,
                         'track_coverage': pipeline.track_coverage,
                         'reuse_time': pipeline.reuse_time,
-                        'reuse_in_entry_zones': pipeline.reuse_in_entry_zones}
+                        'reuse_in_entry_zones': pipeline.reuse_in_entry_zones,
+                        'adaptation_rate': pipeline.adaptation.rate}
     for key, (field, _) in TRACKER_PARAMETERS.items():
         owner = config.motion if field.startswith('motion.') else config
         ours = getattr(owner, field.removeprefix('motion.'))

@@ -97,7 +97,8 @@ class TrackerConfig:
             room coordinates whatever the scale.
         adaptation_rate: with detection, blending rate of the slow, occlusion-aware
             appearance-model adaptation of confirmed tracks (``AdaptationConfig.rate``,
-            :mod:`mbtrack_ros.core.detection.adaptation`); 0 = off, the default.
+            :mod:`mbtrack_ros.core.detection.adaptation`; None: its default, 0.05, which
+            docs/detection.md measures in "Appearance adaptation, again"); 0 = off.
     """
 
     algorithm: str = 'hjs'
@@ -126,7 +127,7 @@ class TrackerConfig:
     pipeline_search: bool = False
     detection_every: int = 1
     image_scale: float = 1.0
-    adaptation_rate: float = 0.0
+    adaptation_rate: float | None = None
 
     def __post_init__(self) -> None:
         def bad(msg: str) -> None:
@@ -183,9 +184,10 @@ class TrackerConfig:
                                                                     bool):
             bad(f'reuse_in_entry_zones must be true, false or None, got '
                 f'{self.reuse_in_entry_zones!r}')
-        if isinstance(self.adaptation_rate, bool) or not (
-                isinstance(self.adaptation_rate, (int, float))
-                and 0 <= self.adaptation_rate <= 1):
+        if self.adaptation_rate is not None and (
+                isinstance(self.adaptation_rate, bool) or not (
+                    isinstance(self.adaptation_rate, (int, float))
+                    and 0 <= self.adaptation_rate <= 1)):
             bad(f'adaptation_rate must be a number in [0, 1], got {self.adaptation_rate!r}')
         if isinstance(self.image_scale, bool) or not (
                 isinstance(self.image_scale, (int, float)) and 0 < self.image_scale <= 1):
@@ -196,7 +198,6 @@ class TrackerConfig:
 
     def detection_config(self):
         """The automatic-detection parameters this configuration sets (003 §4)."""
-        from mbtrack_ros.core.detection.adaptation import AdaptationConfig
         from mbtrack_ros.core.detection.detector import DetectorConfig
         from mbtrack_ros.core.detection.manager import AutoDetectionConfig
         from mbtrack_ros.core.detection.release import ReleaseConfig
@@ -206,9 +207,10 @@ class TrackerConfig:
         release = replace(ReleaseConfig(), timeout=float(self.release_time))
         if self.spare_support is not None:
             release = replace(release, spare_support=float(self.spare_support))
-        config = AutoDetectionConfig(detector=detector, release=release, sigma=float(self.sigma),
-                                     adaptation=AdaptationConfig(
-                                         rate=float(self.adaptation_rate)))
+        config = AutoDetectionConfig(detector=detector, release=release, sigma=float(self.sigma))
+        if self.adaptation_rate is not None:
+            config = replace(config, adaptation=replace(config.adaptation,
+                                                        rate=float(self.adaptation_rate)))
         if self.reuse_time is not None:
             config = replace(config, reuse_time=float(self.reuse_time))
         if self.reuse_in_entry_zones is not None:

@@ -81,7 +81,7 @@ detection.every                 int        run the detection pipeline (release, 
                                            see docs/live_measurements.md)
 detection.adaptation_rate       double     blending rate of the slow appearance-model
                                            adaptation of confirmed, unoccluded tracks;
-                                           0 = off (0.0, docs/detection.md)
+                                           0 = off (0.05, docs/detection.md)
 motion.velocity_noise           double     velocity diffusion, m/s per sqrt(s) (0.6)
 motion.position_noise           double     extra position diffusion, m per sqrt(s) (0.15)
 motion.orientation_noise        double     orientation diffusion, rad per sqrt(s) (1.0)
@@ -239,9 +239,10 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
                                        'ends at once (its person is taken to have left)', {}),
     'detection.every': (1, 'run the detection pipeline on every k-th frame set only (speed '
                         'option, TrackerConfig.detection_every)', _ir(1, 30)),
-    'detection.adaptation_rate': (0.0, 'blending rate of the slow appearance-model adaptation '
-                                  'of confirmed, unoccluded tracks '
-                                  '(TrackerConfig.adaptation_rate); 0 = off', _fr(0.0, 1.0)),
+    'detection.adaptation_rate': (AutoDetectionConfig().adaptation.rate, 'blending rate of '
+                                  'the slow appearance-model adaptation of confirmed, '
+                                  'unoccluded tracks (TrackerConfig.adaptation_rate); '
+                                  '0 = off', _fr(0.0, 1.0)),
     'motion.velocity_noise': (_MOTION.velocity_noise, 'velocity diffusion of the motion '
                               'model, m/s per sqrt(s) (000 §VI-A)', _fr(0.0, 10.0)),
     'motion.position_noise': (_MOTION.position_noise, 'extra position diffusion, m per '

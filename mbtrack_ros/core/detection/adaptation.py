@@ -42,8 +42,9 @@ class AdaptationConfig:
     """Parameters of the appearance adaptation.
 
     Attributes:
-        rate: blending rate alpha per accepted observation (0 disables the adaptation, the
-            default; docs/detection.md, "Appearance adaptation").
+        rate: blending rate alpha per accepted observation (0 disables the adaptation;
+            docs/detection.md, "Appearance adaptation" and "Appearance adaptation, again",
+            where 0.05 became the default).
         min_free: fraction of the track's full silhouette that must be inside the image and
             not covered by closer tracks' silhouettes.
         min_visibility: visibility probability ``xi_v`` (001 §3.1) the track needs in the
@@ -61,7 +62,7 @@ class AdaptationConfig:
             2-3 times longer without this).
     """
 
-    rate: float = 0.0
+    rate: float = 0.05
     min_free: float = 0.9
     min_visibility: float = 0.9
     min_existence: float = 0.9

@@ -57,7 +57,7 @@ class AutoDetectionConfig:
     Attributes:
         background, detector, release, acquisition, existence: per-stage parameters.
         adaptation: the slow appearance-model adaptation of confirmed tracks
-            (:mod:`~mbtrack_ros.core.detection.adaptation`; ``rate`` 0, the default, is off).
+            (:mod:`~mbtrack_ros.core.detection.adaptation`; ``rate`` 0 is off).
         sigma: appearance likelihood width (003 Eq. 3), as the tracker's.
         clutter_distance: Bhattacharyya distance whose likelihood is the "not visible"
             clutter likelihood ``p_0`` (001 Eq. 23).
