@@ -626,7 +626,7 @@ def test_coverage_masks_and_gain_are_checked():
     plain = mm.hjs(particles, [np.ones(4)], models).loglik[0]
     mm.set_foreground({'nowhere': np.zeros((3, 3), bool)}, 1.0)   # unknown camera: no term
     np.testing.assert_array_equal(mm.hjs(particles, [np.ones(4)], models).loglik[0], plain)
-    mm.set_foreground({'front': np.ones((36, 48), bool)}, 1.0)    # full coverage: +1 each
+    mm.set_foreground({'front': np.ones((36, 48), bool)}, 1.0)    # front fully covered: +gain
     np.testing.assert_allclose(mm.hjs(particles, [np.ones(4)], models).loglik[0], plain + 1.0)
 
 

@@ -431,9 +431,8 @@ class MeasurementModel:
         """``gain * f`` per particle (P,) from coverages ``cover`` (NaN: the silhouette is
         outside the image); a particle outside gets its target's prior-weighted mean term
         (the camera says nothing about it, as :meth:`_without_hidden`)."""
-        inside = np.isfinite(cover)
-        return self._coverage_gain * _with_target_mean(np.where(inside, cover, 0.0), inside,
-                                                       target, prior, n_targets)
+        return self._coverage_gain * _with_target_mean(cover, np.isfinite(cover), target,
+                                                       prior, n_targets)
 
     # -- HJS --------------------------------------------------------------------------------
     def _hjs_camera(self, camera: str, states: np.ndarray, target: np.ndarray,
