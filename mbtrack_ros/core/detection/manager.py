@@ -97,7 +97,10 @@ class AutoDetectionConfig:
             ten tracks (distances 0.41-0.65, and one at 0.89) and another person for six
             (0.74-0.75, each a leaver's track at the door moved onto the newcomer entering
             beside it, crnc2); with the gate 25 -> 15 switches (docs/detection.md,
-            "Doubtful moves need a look-alike").
+            "Doubtful moves need a look-alike"). 0.65 since the appearance models adapt
+            (``adaptation``): crnc2's door crowd then had a leaver's track moved at
+            distances 0.690-0.699 onto the newcomer (docs/detection.md, "The look-alike
+            gate for adapted models").
         relocate_interval: seconds after a track was born or moved during which such a
             detection does not move it again but is dropped (in a crowd at the door a
             young model explains several people about equally well: the track would hop).
@@ -259,7 +262,7 @@ class AutoDetectionConfig:
     relocate_margin: float = -3.0
     weak_relocate_margin: float = 1.5
     move_support: float = 0.3
-    move_distance: float = 0.7
+    move_distance: float = 0.65
     relocate_interval: float = 2.0
     relocate_hidden: bool = True
     reuse_time: float = 3.0
