@@ -80,7 +80,7 @@ from mbtrack_ros.core.tracker import Tracker, TrackerConfig
 from mbtrack_ros.evaluation.clear_mot import clear_mot
 from mbtrack_ros.recording.bag import RecordingReader
 from mbtrack_ros.recording.csvfiles import (
-    TrackRow, read_ground_truth, read_tracks, write_tracks)
+    CsvFormatError, TrackRow, read_ground_truth, read_tracks, write_tracks)
 
 FPS = 15.0
 FLOOR = (0.3, 0.3, 5.7, 4.7)          # the clear-room walkable floor (calibration.yaml)
@@ -1155,15 +1155,21 @@ def main(argv: list[str] | None = None) -> int:
             return 0
         run(args.rec, args.out, args.seed, args.no_people_cue, release, args.params,
             args.exit_rescue, detection, args.frames)
-    elif args.cmd == 'report':
-        report(args.out, args.rec)
-    else:
-        if len(args.pairs) % 2:
-            p.error(f'{args.cmd} needs OUT REC pairs')
-        {'table': table, 'lag': lag, 'decisions': decisions, 'totals': totals,
-         'spares': spares, 'classes': classes, 'exits': exits,
-         'releases': releases, 'visibility': visibility}[args.cmd](
-            list(zip(args.pairs[::2], args.pairs[1::2])))
+        return 0
+    if args.cmd != 'report' and len(args.pairs) % 2:
+        p.error(f'{args.cmd} needs OUT REC pairs')
+    try:
+        if args.cmd == 'report':
+            report(args.out, args.rec)
+        else:
+            {'table': table, 'lag': lag, 'decisions': decisions, 'totals': totals,
+             'spares': spares, 'classes': classes, 'exits': exits,
+             'releases': releases, 'visibility': visibility}[args.cmd](
+                list(zip(args.pairs[::2], args.pairs[1::2])))
+    except (CsvFormatError, OSError, json.JSONDecodeError) as err:
+        # OUT is not a run directory (a suite's OUT holds them in runs/) or REC no recording
+        print(f'detection_eval {args.cmd}: {err}', file=sys.stderr)
+        return 1
     return 0
 
 

@@ -180,3 +180,17 @@ def test_suite_refuses_bad_recordings_and_run_options_before_rendering(detection
             detection_eval.main(['suite', str(tmp_path / 'o'), *extra])
         assert err.value.code == 2
     assert not (tmp_path / 'o').exists()
+
+
+def test_analysis_of_a_directory_without_a_run_is_a_one_line_error(detection_eval, tmp_path,
+                                                                    capsys):
+    """``classes`` and ``report`` given a suite's OUT instead of OUT/runs/RUN exit 1 with
+    one line naming the missing file (was a traceback)."""
+    rec = tmp_path / 'rec'
+    rec.mkdir()
+    assert detection_eval.main(['classes', str(tmp_path), str(rec)]) == 1
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and 'tracks.csv' in err and err.startswith(
+        'detection_eval classes:')
+    assert detection_eval.main(['report', str(tmp_path), str(rec)]) == 1
+    assert 'tracks.csv' in capsys.readouterr().err
