@@ -1579,24 +1579,16 @@ def test_a_hidden_track_1_2_m_away_is_given_back_its_person_when_she_looks_alike
     assert (np.hypot(mean[0] - 3.2, mean[1] - 2.5) < 0.3) == moved
 
 
-@pytest.mark.parametrize('gate, who, gain, moved', [
-    (None, 'other', -1.0, False), (1.0, 'other', -1.0, True), (None, 'same', -1.0, True),
-    (None, 'other', 1.0, True)])
-def test_a_doubtful_move_needs_the_detection_to_look_like_the_track(
-        monkeypatch, gate, who, gain, moved):
-    """Track 1 follows a person in blue; from frame 40 she is gone and somebody stands 0.75
-    m from the track. The appearance gain is forced into the doubtful band (-1: the
-    track's model explains the detection a little worse than its own estimate). With
-    ``move_distance`` at its default a person dressed differently is born as a new track
-    and track 1 stays, while the blue person herself still takes track 1 (her model
-    matches); with 1 the gain alone decides and track 1 is moved onto the stranger. A
-    positive gain (+1) is not doubtful: the stranger takes track 1 whatever the gate."""
+def _move_or_birth(monkeypatch, who: str, gain: float, **detection):
+    """Track 1 follows a person in blue; from frame 40 she is gone and somebody (``who``:
+    'same', the blue person, or 'other', dressed in yellow) stands 0.75 m from the track,
+    the appearance gain of track 1's model there forced to ``gain``. Returns the tracker,
+    the decisions' actions from frame 40 and the tracks ``move_distance`` kept back."""
     from mbtrack_ros.core.detection.manager import AutoDetection
 
     rng = np.random.default_rng(5)
-    gate = AutoDetectionConfig().move_distance if gate is None else gate
-    calib, bgs, tracker = _painted_room_tracker(4, move_distance=gate, reach_radius=0.0,
-                                                relocate_hidden=False, reuse_hidden=False)
+    calib, bgs, tracker = _painted_room_tracker(4, reach_radius=0.0, relocate_hidden=False,
+                                                reuse_hidden=False, **detection)
     here = person(2.0, 2.5, theta=0.0)
     there = person(2.75, 2.5, theta=0.0, **({} if who == 'same' else {'colours': YELLOW}))
     actions, unalike = [], []
@@ -1609,6 +1601,22 @@ def test_a_doubtful_move_needs_the_detection_to_look_like_the_track(
         if k >= 40:
             actions += [d['action'] for d in tracker.detection.decisions]
             unalike += [d['unalike'] for d in tracker.detection.decisions if 'unalike' in d]
+    return tracker, actions, unalike
+
+
+@pytest.mark.parametrize('gate, who, gain, moved', [
+    (None, 'other', -1.0, False), (1.0, 'other', -1.0, True), (None, 'same', -1.0, True),
+    (None, 'other', 1.0, True)])
+def test_a_doubtful_move_needs_the_detection_to_look_like_the_track(
+        monkeypatch, gate, who, gain, moved):
+    """The scene of :func:`_move_or_birth` with the gain in the doubtful band (-1: the
+    track's model explains the detection a little worse than its own estimate). With
+    ``move_distance`` at its default a person dressed differently is born as a new track
+    and track 1 stays, while the blue person herself still takes track 1 (her model
+    matches); with 1 the gain alone decides and track 1 is moved onto the stranger. A
+    positive gain (+1) is not doubtful: the stranger takes track 1 whatever the gate."""
+    gate = AutoDetectionConfig().move_distance if gate is None else gate
+    tracker, actions, unalike = _move_or_birth(monkeypatch, who, gain, move_distance=gate)
     assert ('move 1' in actions) == moved, actions
     assert ('birth' in actions) == (not moved), actions
     assert bool(unalike) == (gate < 1.0 and who == 'other' and gain <= 0), unalike
@@ -1619,3 +1627,24 @@ def test_a_doubtful_move_needs_the_detection_to_look_like_the_track(
     for bad in (1.5, -0.1, float('nan')):
         with pytest.raises(DetectionError):
             AutoDetectionConfig(move_distance=bad)
+
+
+@pytest.mark.parametrize('who, gain, slack, moved', [
+    ('same', -4.5, None, True), ('other', -4.5, None, False), ('same', -7.0, None, False),
+    ('same', -4.5, 0.0, False)])
+def test_a_look_alike_track_is_moved_by_a_gain_below_the_relocate_margin(
+        monkeypatch, who, gain, slack, moved):
+    """The scene of :func:`_move_or_birth` with a gain below ``relocate_margin`` (-3): the
+    blue person takes track 1 back when the gain is within ``look_alike_slack`` (3) of
+    the margin (she looks like the track); a stranger in yellow is born beside it, and so
+    is she at a gain further down or with no slack."""
+    slack = AutoDetectionConfig().look_alike_slack if slack is None else slack
+    assert AutoDetectionConfig().relocate_margin == -3.0
+    tracker, actions, _ = _move_or_birth(monkeypatch, who, gain, look_alike_slack=slack)
+    assert ('move 1' in actions) == moved, actions
+    assert ('birth' in actions) == (not moved), actions
+    mean = tracker.filter._particles[1 if moved else 2].mean(axis=0)
+    assert np.hypot(mean[0] - 2.75, mean[1] - 2.5) < 0.3, mean
+    for bad in (float('nan'), float('inf'), -0.5):
+        with pytest.raises(DetectionError, match='look_alike_slack'):
+            AutoDetectionConfig(look_alike_slack=bad)
