@@ -890,7 +890,10 @@ class AutoDetection:
         groups (on clear-room both right and wrong moves had gains from -3 to +12 nats per
         camera, docs/detection.md); still, moving instead of a birth lowered the switches on every
         clear-room recording measured, and the interval stops a track hopping through a
-        group. A detection scoring below ``beside_threshold`` needs the stricter
+        group. A gain in ``(relocate_margin, 0]`` moves only a track that looks like the
+        detection (``move_distance``), and such a look-alike may be moved by a gain down to
+        ``look_alike_slack`` below the margin. A detection scoring below
+        ``beside_threshold`` needs the stricter
         ``weak_relocate_margin`` to move a track (about half of such moves with a small
         gain went to another person), and when no track takes it and it has a track
         within ``relocate_radius`` it is not born either: weak detections there are mostly
