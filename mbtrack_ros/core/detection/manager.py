@@ -104,8 +104,8 @@ class AutoDetectionConfig:
         look_alike_slack: nats per side camera below ``relocate_margin`` down to which
             the gain may still move a track that looks like the detection (appearance
             distance at most ``move_distance``): a strong detection only
-            (``beside_threshold``), and not a track the detection would leave
-            ``move_support`` of its exclusive support; 0: off. On the strip along the
+            (``beside_threshold``), and not a track that would keep ``move_support`` or more
+            of its exclusive support beside the detection; 0: off. On the strip along the
             door's wall a track left 0.5-0.95 m behind its person where she turned had
             gains of -3.0 to -5.8 on her detection and a second track was born on her; 3:
             on 150 clear-room runs 15 -> 8 switches, fewer on six runs, more on none
@@ -909,7 +909,7 @@ class AutoDetection:
         margin = cfg.relocate_margin if det.score >= cfg.beside_threshold \
             else max(cfg.relocate_margin, cfg.weak_relocate_margin)
         # a look-alike track may be moved by a lower gain (a strong detection only)
-        look_alike = cfg.relocate_margin - cfg.look_alike_slack \
+        alike_margin = cfg.relocate_margin - cfg.look_alike_slack \
             if det.score >= cfg.beside_threshold else margin
         info = {'xy': (float(det.xy[0]), float(det.xy[1])), 'score': float(det.score)}
         near = []                   # (id, distance, gain, appearance distance) of the
@@ -931,7 +931,7 @@ class AutoDetection:
                 # a gain in the doubtful band (margin, 0]: the appearance must agree too
                 unalike.append((int(tid), round(unlike, 3)))
                 continue
-            if gain > margin or (gain > look_alike and unlike <= cfg.move_distance):
+            if gain > margin or (gain > alike_margin and unlike <= cfg.move_distance):
                 gains.append((k, gain))
         if near:
             info['near'] = near
