@@ -2,6 +2,7 @@
 
     .venv/bin/python docs/diag/look_alike.py runs OUT [OUT ...]   # runs a slack could change
     .venv/bin/python docs/diag/look_alike.py band OUT [OUT ...]   # the probe's support rows
+    .venv/bin/python docs/diag/look_alike.py wider SLACK DISTANCE OUT [OUT ...]
 
 OUT is a ``detection_eval.py suite`` output (OUT/runs/REC_sS, OUT/rec/REC). ``runs`` lists
 each decision of a strong detection (score >= ``beside_threshold``) with a track whose
@@ -11,6 +12,9 @@ change with ``look_alike_slack`` (the tracker is deterministic, and the decision
 the first such one are the same). ``band`` reads the rows that
 ``probe_look_alike_support.patch`` adds to events.json (exclusive support of those tracks
 without and with the detection) and labels each track by the person it had followed.
+``wider`` lists the tracks near births of strong detections that a wider gate (gain within
+SLACK under the margin, appearance distance at most DISTANCE) would add to today's, each
+labelled the same way (whether ``move_support`` would keep it is not known there).
 """
 import json
 import sys
@@ -66,7 +70,42 @@ def band(bases) -> None:
                       f"the {label} person -> {e['action']}")
 
 
+def wider(slack: float, distance: float, bases) -> None:
+    cfg = AutoDetectionConfig()
+    margin = cfg.relocate_margin
+
+    def inside(gain, unlike, s, dist):
+        return margin - s < gain <= margin and unlike <= dist
+
+    labels: dict[str, int] = {}
+    for out, rec in _runs(bases):
+        events = json.loads((out / 'events.json').read_text(encoding='utf-8'))
+        added = [(e, n) for e in events if e['kind'] == 'decision'
+                 and e['score'] >= cfg.beside_threshold
+                 and e['action'].startswith(('birth', 'reuse'))
+                 for n in e.get('near', []) if inside(n[2], n[3], slack, distance)
+                 and not inside(n[2], n[3], cfg.look_alike_slack, cfg.move_distance)]
+        if not added:
+            continue
+        tracks, truth, _, _ = de._load(out, rec)
+        d, frames = de._matching(tracks, truth)
+        gt: dict[int, list] = {}
+        for r in truth:
+            gt.setdefault(r.frame, []).append(r)
+        for e, (tid, metres, gain, unlike) in ((e, n[:4]) for e, n in added):
+            if not gt.get(e['frame']):
+                continue
+            label = de.decision_label(d, frames, gt[e['frame']], e, int(tid))
+            labels[label] = labels.get(label, 0) + 1
+            print(f"{out.name} frame {e['frame']}: track {tid} {metres} m, gain {gain}, "
+                  f"appearance {unlike}, followed the {label} person -> {e['action']}")
+    print(', '.join(f'{k} {v}' for k, v in sorted(labels.items())))
+
+
 if __name__ == '__main__':
-    if len(sys.argv) < 3 or sys.argv[1] not in ('runs', 'band'):
+    if len(sys.argv) >= 5 and sys.argv[1] == 'wider':
+        wider(float(sys.argv[2]), float(sys.argv[3]), sys.argv[4:])
+    elif len(sys.argv) >= 3 and sys.argv[1] in ('runs', 'band'):
+        {'runs': runs, 'band': band}[sys.argv[1]](sys.argv[2:])
+    else:
         sys.exit(__doc__)
-    {'runs': runs, 'band': band}[sys.argv[1]](sys.argv[2:])
