@@ -108,8 +108,9 @@ class AutoDetectionConfig:
             of its exclusive support beside the detection; 0: off. On the strip along the
             door's wall a track left 0.5-0.95 m behind its person where she turned had
             gains of -3.0 to -5.8 on her detection and a second track was born on her; 3:
-            on 150 clear-room runs 15 -> 8 switches, fewer on six runs, more on none
-            (docs/detection.md, "Look-alike tracks lagging at the wall").
+            on 150 clear-room runs 15 -> 8 switches, fewer on six runs, more on none; on
+            thirty fresh runs (tracker seeds 25-29) 7 either way (docs/detection.md,
+            "Look-alike tracks lagging at the wall").
         relocate_interval: seconds after a track was born or moved during which such a
             detection does not move it again but is dropped (in a crowd at the door a
             young model explains several people about equally well: the track would hop).
