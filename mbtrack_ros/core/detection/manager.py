@@ -928,11 +928,12 @@ class AutoDetection:
             gain = self._explains(ref, means[k], state, evidence)
             unlike = likeness[tid] = model_distance(ref, model)
             near.append((int(tid), round(d, 2), round(gain, 3), round(unlike, 3)))
-            if margin < gain <= 0.0 and unlike > cfg.move_distance:
+            looks_alike = unlike <= cfg.move_distance
+            if margin < gain <= 0.0 and not looks_alike:
                 # a gain in the doubtful band (margin, 0]: the appearance must agree too
                 unalike.append((int(tid), round(unlike, 3)))
                 continue
-            if gain > margin or (gain > alike_margin and unlike <= cfg.move_distance):
+            if gain > margin or (looks_alike and gain > alike_margin):
                 gains.append((k, gain))
         if near:
             info['near'] = near
