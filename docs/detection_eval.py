@@ -127,8 +127,8 @@ def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False,
                            'doorway': bool(doorway is not None and doorway[k])})
         return ended
 
-    def logged_duplicates(self, stamp, ids, xy, shown_since=None, prefer=None):
-        ended = duplicates(self, stamp, ids, xy, shown_since, prefer)
+    def logged_duplicates(self, stamp, ids, xy, *args, **kwargs):
+        ended = duplicates(self, stamp, ids, xy, *args, **kwargs)
         events.extend({'kind': 'end', 'frame': frame['index'], 'id': int(t),
                        'reason': 'duplicate'} for t in ended)
         return ended

@@ -99,3 +99,42 @@ def test_the_releaser_ends_a_spare_track_after_the_timeout_only_when_enabled():
         ReleaseConfig(spare_support=1.5)
     with pytest.raises(DetectionError):
         ReleaseConfig(spare_radius=-1.0)
+
+
+def _due_releases(room, people, tracks, own_support: bool) -> dict[int, int]:
+    """Run the releaser's support and duplicate rule over 20 frames of a still scene with
+    tracks 1 and 7 (7 the younger); the frame at which each track was released."""
+    fgs, sils = _scene(room, people, tracks)
+    image = np.zeros((120, 160, 3), np.uint8)
+    evidence = {n: FrameEvidence(image, fg) for n, fg in zip(room.cameras, fgs)}
+    rel = Releaser(room, ReleaseConfig(merge_radius=0.35, merge_time=0.5))
+    ended: dict[int, int] = {}
+    for k in range(20):
+        rel.support(evidence, dict(zip(room.cameras, sils)), _states(tracks),
+                    np.full(len(tracks), SHAPE.height))
+        for tid in rel.duplicates(int(round(k * 1e9 / FPS)), [1, 7], np.array(tracks),
+                                  own_support=rel.exclusive if own_support else None):
+            ended.setdefault(tid, k)
+    return ended
+
+
+def test_two_people_passing_close_are_not_duplicates_while_each_has_support_of_its_own():
+    """Two tracks 0.3 m apart for longer than merge_time: on two people each keeps
+    foreground of its own (exclusive support >= spare_support) and neither is released;
+    on one person the younger one is, as without the support (the rule's first test)."""
+    room = make_room(160, 120, 4)
+    tracks = [(2.5, 2.5), (2.8, 2.5)]
+    due = int(np.ceil(0.5 * FPS))
+    assert _due_releases(room, tracks, tracks, own_support=True) == {}
+    assert _due_releases(room, tracks, tracks, own_support=False) == {7: due}
+    assert _due_releases(room, [(2.5, 2.5)], tracks, own_support=True) == {7: due}
+    # the releaser keeps the exclusive support it judged spare tracks by
+    fgs, sils = _scene(room, tracks, tracks)
+    rel = Releaser(room)
+    image = np.zeros((120, 160, 3), np.uint8)
+    rel.support({n: FrameEvidence(image, fg) for n, fg in zip(room.cameras, fgs)},
+                dict(zip(room.cameras, sils)), _states(tracks), np.full(2, SHAPE.height))
+    assert np.allclose(rel.exclusive, _straightforward_support(fgs, sils, 2))
+    assert np.all(rel.exclusive >= ReleaseConfig().spare_support)
+    with pytest.raises(DetectionError):
+        rel.duplicates(0, [1, 7], np.zeros((2, 2)), own_support=[0.5])

@@ -292,6 +292,7 @@ class Releaser:
         self._since: dict[int, int] = {}
         self._close: dict[tuple[int, int], int] = {}
         self.spare = np.zeros(0, bool)    # tracks of the last support() that were spare
+        self.exclusive = np.zeros(0)      # ... and their exclusive support (NaN: not judged)
         self.doorway = np.zeros(0, bool)  # ... in a doorway, seen but not covered by the
         #                                     door-wall cameras (doorway_timeout applies)
 
@@ -357,11 +358,12 @@ class Releaser:
             # that is spare (a crowd at the door) or fading keeps the ordinary one
             self.doorway = watched & ~held
         self.spare = np.zeros(len(supported), bool)
+        self.exclusive = np.full(len(supported), np.nan)
         side = [n for n in silhouettes if n in evidence
                 and not is_ceiling(self.calibration.cameras[n])]
         if cfg.spare_support > 0 and side and len(supported) > 1:
             cams = [self.calibration.cameras[n] for n in side]
-            self.spare, _ = spare_tracks(
+            self.spare, self.exclusive = spare_tracks(
                 [evidence[n].foreground for n in side], [silhouettes[n] for n in side],
                 cfg.spare_support,
                 [cfg.min_area * c.width * c.height / (320.0 * 240.0) for c in cams],
@@ -412,7 +414,8 @@ class Releaser:
 
     def duplicates(self, stamp_ns: int, ids: Sequence[int], xy: np.ndarray,
                    shown_since: Sequence[int] | None = None,
-                   prefer: Callable[[int, int], int | None] | None = None) -> list[int]:
+                   prefer: Callable[[int, int], int | None] | None = None,
+                   own_support: Sequence[float] | None = None) -> list[int]:
         """Ids of tracks that shadowed another one for ``merge_time`` seconds: of each
         such pair the younger one (larger id), or with ``shown_since`` the one reported
         without a break for the shorter time (later stamp; ties: the larger id). A track
@@ -425,11 +428,19 @@ class Releaser:
                 without a break (its birth, last move or last hidden frame).
             prefer: optional judge of a due pair: called with the two ids, returns the
                 id to keep (the other is released) or None for the rule above.
+            own_support: optional (K,) exclusive support of each track (``self.exclusive``
+                after :meth:`support`): the track a due pair would release is kept while its
+                own support is at least ``spare_support`` (the pair is two people passing
+                close, each explaining foreground the other does not); NaN counts as none.
         """
         cfg = self.config
         xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-        if len(ids) != len(xy) or (shown_since is not None and len(shown_since) != len(ids)):
-            raise DetectionError('ids, positions and shown_since must have the same length')
+        if len(ids) != len(xy) or any(v is not None and len(v) != len(ids)
+                                      for v in (shown_since, own_support)):
+            raise DetectionError('ids, positions, shown_since and own_support must have the '
+                                 'same length')
+        own = {} if own_support is None else \
+            {int(i): float(v) for i, v in zip(ids, own_support)}
         rank = {int(i): (0 if shown_since is None else int(shown_since[k]), int(i))
                 for k, i in enumerate(ids)}
         close = set()
@@ -444,9 +455,11 @@ class Releaser:
             if (int(stamp_ns) - since) / 1e9 >= cfg.merge_time:
                 keep = prefer(*p) if prefer is not None else None
                 if keep in p:           # the judge decided: the other one goes
-                    out.add(p[1] if keep == p[0] else p[0])
+                    gone = p[1] if keep == p[0] else p[0]
                 else:
-                    out.add(max(p, key=rank.__getitem__))
+                    gone = max(p, key=rank.__getitem__)
+                if not own.get(gone, np.nan) >= cfg.spare_support:   # NaN: no support
+                    out.add(gone)
         for p in list(self._close):
             if p[0] in out or p[1] in out:
                 del self._close[p]
