@@ -1149,8 +1149,12 @@ def main(argv: list[str] | None = None) -> int:
                     f'{args.release + args.detection}')
         fields = AutoDetectionConfig.__dataclass_fields__
         for k in detection:
-            if k not in fields or fields[k].type not in ('float', 'int'):
+            if k not in fields or fields[k].type not in ('float', 'int', 'bool'):
                 p.error(f'--detection: {k} is not a scalar AutoDetectionConfig field')
+            if fields[k].type == 'bool':     # a switch: 0 or 1
+                if detection[k] not in (0.0, 1.0):
+                    p.error(f'--detection: {k} is a switch, give 0 or 1, got {detection[k]}')
+                detection[k] = bool(detection[k])
         if args.check_only:   # suite's check of the run options it passes on
             return 0
         run(args.rec, args.out, args.seed, args.no_people_cue, release, args.params,

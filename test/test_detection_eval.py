@@ -105,7 +105,12 @@ def test_run_takes_scalar_detection_fields_and_refuses_others(detection_eval, mo
     detection_eval.main(argv + ['--detection', 'beside_support=0.25',
                                 '--detection', 'exit_rescue=0.5', '--frames', '30'])
     assert seen['args'][-2:] == ({'beside_support': 0.25, 'exit_rescue': 0.5}, 30)
-    for bad in ('no_such_field=1', 'background=1', 'beside_support=high'):
+    # a switch (bool field) takes 0 or 1 and reaches run() as a bool
+    seen.clear()
+    detection_eval.main(argv + ['--detection', 'duplicate_own_support=0'])
+    assert seen['args'][-2] == {'duplicate_own_support': False}
+    for bad in ('no_such_field=1', 'background=1', 'beside_support=high',
+                'duplicate_own_support=0.5'):
         with pytest.raises(SystemExit) as err:
             detection_eval.main(argv + ['--detection', bad])
         assert err.value.code == 2
