@@ -1503,7 +1503,7 @@ def test_reach_counts_foreground_only_where_no_other_track_is():
             AutoDetectionConfig(**bad)
 
 
-@pytest.mark.parametrize('how', ['hidden', 'gain'])
+@pytest.mark.parametrize('how', ['hidden', 'gain', 'young'])
 @pytest.mark.parametrize('rule', [True, False])
 def test_a_lost_track_that_looks_like_the_person_is_reused_before_another_is_moved(
         monkeypatch, how, rule):
@@ -1513,13 +1513,20 @@ def test_a_lost_track_that_looks_like_the_person_is_reused_before_another_is_mov
     Blue comes back 0.75 m from track 2: with ``reuse_before_moving`` she takes her lost
     id back (her model fits her, track 2's is yellow's) and track 2 stays; without it
     track 2 is moved onto her. With ``reuse_distance`` 0 no released id is reused by a
-    birth: the comparison of the two models alone gives blue her id back."""
+    birth: the comparison of the two models alone gives blue her id back. When track 2
+    was placed within ``relocate_interval`` ('young') the move would not happen (the
+    detection is dropped), and neither does the reuse in its place."""
     from mbtrack_ros.core.detection.manager import AutoDetection
 
     rng = np.random.default_rng(5)
     calib, bgs, tracker = _painted_room_tracker(
         4, reuse_before_moving=rule, reach_radius=0.0, reuse_distance=0.0,
         relocate_margin=1e9 if how == 'hidden' else -1e9, move_distance=1.0)
+    if how == 'young':      # the gain's move, onto a track placed moments ago
+        placed = AutoDetection._placed_recently
+        monkeypatch.setattr(AutoDetection, '_placed_recently', lambda self, tid, stamp:
+                            (tid == 2 and released_at is not None)
+                            or placed(self, tid, stamp))
     blue, yellow = person(2.0, 2.5, theta=0.0), person(3.5, 2.5, theta=0.0, colours=YELLOW)
     back = person(2.75, 2.5, theta=0.0)
     released_at, actions = None, []
@@ -1527,7 +1534,7 @@ def test_a_lost_track_that_looks_like_the_person_is_reused_before_another_is_mov
         if released_at is None:
             people = [yellow] if k >= 15 else [blue, yellow]
         else:
-            gone = how == 'gain' and k >= released_at + 2
+            gone = how != 'hidden' and k >= released_at + 2
             people = ([] if k < released_at + 5 else [back]) + ([] if gone else [yellow])
         tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, people, rng))
         actions += [d['action'] for d in tracker.detection.decisions]
@@ -1542,7 +1549,11 @@ def test_a_lost_track_that_looks_like_the_person_is_reused_before_another_is_mov
     on_blue = [t for t in tracker.track_ids if np.hypot(
         *(tracker.filter._particles[t].mean(axis=0)[:2] - back[0][:2])) < 0.3]
     moved = 'move 2 (hidden)' if how == 'hidden' else 'move 2'
-    if rule:
+    if how == 'young':
+        assert 'drop (track 2 placed recently)' in actions, actions
+        assert 'reuse 1 (not 2)' not in actions and moved not in actions, actions
+        assert 1 not in tracker.track_ids
+    elif rule:
         assert 'reuse 1 (not 2)' in actions and moved not in actions, actions
         assert on_blue == [1]
     else:

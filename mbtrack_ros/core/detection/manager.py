@@ -156,7 +156,11 @@ class AutoDetectionConfig:
             between two ids for one detection, so ``reuse_distance`` does not gate it: in
             the seven such decisions there the lost track was the detected person's own,
             0.29-0.65 from her detection (five above ``reuse_distance``), the track that
-            would have moved 0.70-0.78.
+            would have moved 0.70-0.78. Not when that track was born or moved within
+            ``relocate_interval``: its move would not happen (the detection is dropped),
+            and on cr1 a newcomer's 0.4 s old track lagging her gave her detection to a
+            leaver's lost id (docs/detection.md, "No reuse instead of a move that would
+            not happen").
         reuse_hidden: a detection that would start a new track moves instead the nearest
             hidden track (not reported, not born or moved within ``relocate_interval``)
             within ``reuse_radius`` whose model is within ``reuse_distance`` of the
@@ -964,9 +968,12 @@ class AutoDetection:
         if best is None and cfg.relocate_hidden:
             best = self._nearest_hidden(det, tracks, keep, means, models, moved, stamp_ns)
             hidden = best is not None
-        if best is not None and cfg.reuse_before_moving:
+        if best is not None and cfg.reuse_before_moving \
+                and not self._placed_recently(tracks[best[0]].track_id, stamp_ns):
             # a lost track that looks more like the detection than the track about to be
-            # moved takes its id back; that track stays where it is
+            # moved takes its id back; that track stays where it is. Not instead of a
+            # track placed within relocate_interval: that move would not happen (the
+            # detection is dropped below), a young track lags its own person
             tid = tracks[best[0]].track_id
             unlike = likeness.get(tid)
             if unlike is None:          # a hidden track the gain check did not compare
