@@ -101,9 +101,11 @@ def test_the_releaser_ends_a_spare_track_after_the_timeout_only_when_enabled():
         ReleaseConfig(spare_radius=-1.0)
 
 
-def _due_releases(room, people, tracks, own_support: bool) -> dict[int, int]:
+def _due_releases(room, people, tracks, own_support: bool, keep: int | None = None
+                  ) -> dict[int, int]:
     """Run the releaser's support and duplicate rule over 20 frames of a still scene with
-    tracks 1 and 7 (7 the younger); the frame at which each track was released."""
+    tracks 1 and 7 (7 the younger; ``keep``: a judge that keeps that one); the frame at
+    which each track was released."""
     fgs, sils = _scene(room, people, tracks)
     image = np.zeros((120, 160, 3), np.uint8)
     evidence = {n: FrameEvidence(image, fg) for n, fg in zip(room.cameras, fgs)}
@@ -113,7 +115,8 @@ def _due_releases(room, people, tracks, own_support: bool) -> dict[int, int]:
         rel.support(evidence, dict(zip(room.cameras, sils)), _states(tracks),
                     np.full(len(tracks), SHAPE.height))
         for tid in rel.duplicates(int(round(k * 1e9 / FPS)), [1, 7], np.array(tracks),
-                                  own_support=rel.exclusive if own_support else None):
+                                  prefer=None if keep is None else lambda a, b: keep,
+                                  own_support=rel.exclusive_support if own_support else None):
             ended.setdefault(tid, k)
     return ended
 
@@ -128,13 +131,19 @@ def test_two_people_passing_close_are_not_duplicates_while_each_has_support_of_i
     assert _due_releases(room, tracks, tracks, own_support=True) == {}
     assert _due_releases(room, tracks, tracks, own_support=False) == {7: due}
     assert _due_releases(room, [(2.5, 2.5)], tracks, own_support=True) == {7: due}
-    # the releaser keeps the exclusive support it judged spare tracks by
-    fgs, sils = _scene(room, tracks, tracks)
-    rel = Releaser(room)
+    # two tracks on one spot: one of them is spare, yet the pair's support is judged with
+    # both present, so the judge may release either (here the judge picks the older one)
+    on_one = [(2.5, 2.5), (2.5, 2.5)]
+    assert _due_releases(room, [(2.5, 2.5)], on_one, own_support=True, keep=7) == {1: due}
+    # the support the pair is judged by: every track present, none taken out as spare
     image = np.zeros((120, 160, 3), np.uint8)
-    rel.support({n: FrameEvidence(image, fg) for n, fg in zip(room.cameras, fgs)},
-                dict(zip(room.cameras, sils)), _states(tracks), np.full(2, SHAPE.height))
-    assert np.allclose(rel.exclusive, _straightforward_support(fgs, sils, 2))
-    assert np.all(rel.exclusive >= ReleaseConfig().spare_support)
+    for people, expected in ((tracks, True), ([(2.5, 2.5)], False)):
+        fgs, sils = _scene(room, people, tracks)
+        rel = Releaser(room)
+        assert rel.exclusive_support().size == 0             # before any frame
+        rel.support({n: FrameEvidence(image, fg) for n, fg in zip(room.cameras, fgs)},
+                    dict(zip(room.cameras, sils)), _states(tracks), np.full(2, SHAPE.height))
+        assert np.allclose(rel.exclusive_support(), _straightforward_support(fgs, sils, 2))
+        assert (rel.exclusive_support()[1] >= ReleaseConfig().spare_support) == expected
     with pytest.raises(DetectionError):
         rel.duplicates(0, [1, 7], np.zeros((2, 2)), own_support=[0.5])

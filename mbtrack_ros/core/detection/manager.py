@@ -184,7 +184,8 @@ class AutoDetectionConfig:
             to 50 (docs/detection.md, "Duplicates judged by appearance").
         duplicate_own_support: of such a pair, the track to be released is kept while its
             exclusive support (the release's measure of a spare track,
-            :func:`release.spare_tracks`) is at least ``spare_support``: two people passing
+            :func:`release.spare_tracks`, with every track present:
+            :meth:`Releaser.exclusive_support`) is at least ``spare_support``: two people passing
             close at the door each explain foreground the other does not. Of the 25
             duplicate releases on 180 clear-room runs, 10 were of two tracks on two people;
             the released track's support was 0.21-0.61 there, at most 0.19 on the other 15
@@ -673,7 +674,7 @@ class AutoDetection:
                     tracks, means, models, evidence)
                 ended += [i for i in self.releaser.duplicates(
                     stamp_ns, ids, means[:, [X, Y]], shown, judge,
-                    self.releaser.exclusive if cfg.duplicate_own_support else None)
+                    self.releaser.exclusive_support if cfg.duplicate_own_support else None)
                     if i not in ended]
         for tid in ended:
             self.aux.pop(tid, None)
@@ -1229,7 +1230,7 @@ class AutoDetection:
             gain = float(np.mean([f[0] - f[1] for f in fits])) if fits else 0.0
             keep = (a if gain > 0 else b) if abs(gain) > self.config.duplicate_margin \
                 else None
-            own = self.releaser.exclusive        # the releaser's, this frame
+            own = self.releaser.exclusive_support()     # this frame's, all tracks present
             support = [round(float(own[k]), 3) if k < len(own) and np.isfinite(own[k])
                        else None for k in (ka, kb)]
             self.duplicate_checks.append({'ids': (int(a), int(b)), 'gain': round(gain, 3),

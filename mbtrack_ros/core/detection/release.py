@@ -292,7 +292,8 @@ class Releaser:
         self._since: dict[int, int] = {}
         self._close: dict[tuple[int, int], int] = {}
         self.spare = np.zeros(0, bool)    # tracks of the last support() that were spare
-        self.exclusive = np.zeros(0)      # ... and their exclusive support (NaN: not judged)
+        self._side: tuple | None = None   # the last support()'s side-camera inputs
+        self._exclusive: np.ndarray | None = None   # ... their exclusive_support(), cached
         self.doorway = np.zeros(0, bool)  # ... in a doorway, seen but not covered by the
         #                                     door-wall cameras (doorway_timeout applies)
 
@@ -358,19 +359,33 @@ class Releaser:
             # that is spare (a crowd at the door) or fading keeps the ordinary one
             self.doorway = watched & ~held
         self.spare = np.zeros(len(supported), bool)
-        self.exclusive = np.full(len(supported), np.nan)
         side = [n for n in silhouettes if n in evidence
                 and not is_ceiling(self.calibration.cameras[n])]
+        cams = [self.calibration.cameras[n] for n in side]
+        self._side = ([evidence[n].foreground for n in side], [silhouettes[n] for n in side],
+                      [cfg.min_area * c.width * c.height / (320.0 * 240.0) for c in cams],
+                      len(supported))
+        self._exclusive = None
         if cfg.spare_support > 0 and side and len(supported) > 1:
-            cams = [self.calibration.cameras[n] for n in side]
-            self.spare, self.exclusive = spare_tracks(
-                [evidence[n].foreground for n in side], [silhouettes[n] for n in side],
-                cfg.spare_support,
-                [cfg.min_area * c.width * c.height / (320.0 * 240.0) for c in cams],
-                None if states is None else states[:, :2],
+            fgs, sils, least, _ = self._side
+            self.spare, _ = spare_tracks(
+                fgs, sils, cfg.spare_support, least, None if states is None else states[:, :2],
                 cfg.spare_radius if states is not None else np.inf)
             supported = supported & ~self.spare
         return supported, coverage
+
+    def exclusive_support(self) -> np.ndarray:
+        """(K,) exclusive support of the tracks of the last :meth:`support` call, all
+        of them present (none taken out as spare; :func:`spare_tracks` with
+        ``min_support`` 0), side cameras; NaN where no side camera sees a track or before
+        any call. Computed on the first call after each :meth:`support`."""
+        if self._exclusive is None:
+            if self._side is None:
+                return np.zeros(0)
+            fgs, sils, least, k = self._side
+            self._exclusive = spare_tracks(fgs, sils, 0.0, least)[1] if fgs \
+                else np.full(k, np.nan)
+        return self._exclusive
 
     def exited(self, ids: Sequence[int], xy: np.ndarray) -> list[int]:
         """Ids of the tracks whose floor position (K, 2) lies inside an exit more than
@@ -415,7 +430,8 @@ class Releaser:
     def duplicates(self, stamp_ns: int, ids: Sequence[int], xy: np.ndarray,
                    shown_since: Sequence[int] | None = None,
                    prefer: Callable[[int, int], int | None] | None = None,
-                   own_support: Sequence[float] | None = None) -> list[int]:
+                   own_support: Sequence[float] | Callable[[], Sequence[float]] | None
+                   = None) -> list[int]:
         """Ids of tracks that shadowed another one for ``merge_time`` seconds: of each
         such pair the younger one (larger id), or with ``shown_since`` the one reported
         without a break for the shorter time (later stamp; ties: the larger id). A track
@@ -428,19 +444,30 @@ class Releaser:
                 without a break (its birth, last move or last hidden frame).
             prefer: optional judge of a due pair: called with the two ids, returns the
                 id to keep (the other is released) or None for the rule above.
-            own_support: optional (K,) exclusive support of each track (``self.exclusive``
-                after :meth:`support`): the track a due pair would release is kept while its
-                own support is at least ``spare_support`` (the pair is two people passing
-                close, each explaining foreground the other does not); NaN counts as none.
+            own_support: optional (K,) exclusive support of each track, or a function
+                returning it, called only when a pair is due (:meth:`exclusive_support`):
+                the track a due pair would release is kept while its own support is at
+                least ``spare_support`` (the pair is two people passing close, each
+                explaining foreground the other does not); NaN counts as none.
         """
         cfg = self.config
         xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-        if len(ids) != len(xy) or any(v is not None and len(v) != len(ids)
-                                      for v in (shown_since, own_support)):
+        if len(ids) != len(xy) or any(
+                v is not None and not callable(v) and len(v) != len(ids)
+                for v in (shown_since, own_support)):
             raise DetectionError('ids, positions, shown_since and own_support must have the '
                                  'same length')
-        own = {} if own_support is None else \
-            {int(i): float(v) for i, v in zip(ids, own_support)}
+        own: dict[int, float] | None = None
+
+        def own_of(tid: int) -> float:
+            nonlocal own
+            if own is None:
+                values = own_support() if callable(own_support) else own_support
+                if len(values) != len(ids):
+                    raise DetectionError(f'own_support has {len(values)} values for '
+                                         f'{len(ids)} tracks')
+                own = {int(i): float(v) for i, v in zip(ids, values)}
+            return own[int(tid)]
         rank = {int(i): (0 if shown_since is None else int(shown_since[k]), int(i))
                 for k, i in enumerate(ids)}
         close = set()
@@ -458,7 +485,7 @@ class Releaser:
                     gone = p[1] if keep == p[0] else p[0]
                 else:
                     gone = max(p, key=rank.__getitem__)
-                if not own.get(gone, np.nan) >= cfg.spare_support:   # NaN: no support
+                if own_support is None or not own_of(gone) >= cfg.spare_support:  # NaN: none
                     out.add(gone)
         for p in list(self._close):
             if p[0] in out or p[1] in out:
