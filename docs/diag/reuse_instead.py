@@ -1,0 +1,49 @@
+"""The decisions where ``reuse_before_moving`` gave a lost track's id to a detection instead
+of moving another track ("reuse N (not M)" in events.json), each labelled: the person of
+the detection (nearest ground-truth row), the person the lost track N had followed
+before its release, whether M was born or moved within ``relocate_interval`` before
+(docs/detection.md, "No reuse instead of a move that would not happen").
+
+usage: .venv/bin/python docs/diag/reuse_instead.py OUT REC [OUT REC ...]
+"""
+import re
+
+import numpy as np
+
+from _eval import detection_eval, pairs
+from mbtrack_ros.core.detection.manager import AutoDetectionConfig
+
+FPS = detection_eval.FPS
+WITHIN = AutoDetectionConfig().relocate_interval * FPS     # frames
+counts: dict[tuple[bool, bool], int] = {}
+for out, rec in pairs('reuse_instead.py OUT REC [OUT REC ...]'):
+    tracks, truth, events, _ = detection_eval._load(out, rec)
+    detail, frames = detection_eval._matching(tracks, truth)
+    people: dict[int, list] = {}
+    for r in truth:
+        people.setdefault(r.frame, []).append(r)
+    placed: dict[int, list[int]] = {}       # id -> frames it was born or moved at
+    for e in events:
+        if e['kind'] == 'birth':
+            placed.setdefault(e['id'], []).append(e['frame'])
+        elif e['kind'] == 'decision' and e['action'].startswith('move '):
+            placed.setdefault(int(e['action'].split()[1]), []).append(e['frame'])
+    for e in events:
+        m = re.fullmatch(r'reuse (\d+) \(not (\d+)\)', e.get('action', '')) \
+            if e['kind'] == 'decision' else None
+        if m is None:
+            continue
+        lost, spared, f = int(m[1]), int(m[2]), e['frame']
+        recent = any(f - WITHIN < g < f for g in placed.get(spared, []))
+        here = people.get(f, [])
+        at = min(here, key=lambda r: np.hypot(r.x - e['xy'][0], r.y - e['xy'][1])).person_id \
+            if here else None
+        before = detail.person_id[(detail.track_id == lost) & (frames < f)][-15:]
+        had = int(np.bincount(before).argmax()) if before.size else None
+        right = had is not None and had == at
+        counts[recent, right] = counts.get((recent, right), 0) + 1
+        print(f"{out.name} frame {f}: {e['action']}, track {spared} "
+              f"{'placed recently' if recent else 'old'}; detection on person {at}, lost "
+              f"track {lost} had followed {had}: {'right' if right else 'wrong'}")
+for (recent, right), n in sorted(counts.items()):
+    print(f"{'placed recently' if recent else 'old'}, {'right' if right else 'wrong'}: {n}")
