@@ -1659,3 +1659,32 @@ def test_a_look_alike_track_is_moved_by_a_gain_below_the_relocate_margin(
     for bad in (float('nan'), float('inf'), -0.5):
         with pytest.raises(DetectionError, match='look_alike_slack'):
             AutoDetectionConfig(look_alike_slack=bad)
+
+
+def test_of_two_tracks_a_detection_could_move_the_one_that_looks_like_it_is_moved(
+        monkeypatch):
+    """Track 1 follows a person in blue, track 2 one in yellow; from frame 40 both are gone
+    and the blue person stands 0.75 m from each track. Both tracks may be moved there
+    (gains in the doubtful band, ``move_distance`` 1), and track 2's gain is the higher
+    one (-1 against -2; each gain compares the detection with that track's own place).
+    The track whose model is nearer the detection's in appearance is moved: track 1."""
+    from mbtrack_ros.core.detection.manager import AutoDetection
+
+    rng = np.random.default_rng(5)
+    calib, bgs, tracker = _painted_room_tracker(4, reach_radius=0.0, relocate_hidden=False,
+                                                reuse_hidden=False, move_distance=1.0)
+    blue, yellow = person(2.0, 2.5, theta=0.0), person(3.5, 2.5, theta=0.0, colours=YELLOW)
+    there = person(2.75, 2.5, theta=0.0)
+    actions, near = [], []
+    for k in range(52):
+        if k == 40:
+            assert tracker.track_ids == [1, 2]
+            monkeypatch.setattr(AutoDetection, '_explains',
+                                lambda self, ref, track, *a: -2.0 if track[0] < 2.75 else -1.0)
+        tracker.step(int(round(k * 1e9 / FPS)),
+                     paint(calib, bgs, [blue, yellow] if k < 40 else [there], rng))
+        if k >= 40:
+            actions += [d['action'] for d in tracker.detection.decisions]
+            near += [d['near'] for d in tracker.detection.decisions if 'near' in d]
+    assert any(len(n) == 2 for n in near), near         # both tracks were compared
+    assert 'move 1' in actions and 'move 2' not in actions, actions

@@ -908,9 +908,10 @@ class AutoDetection:
         clear-room recording measured, and the interval stops a track hopping through a
         group. A gain in ``(relocate_margin, 0]`` moves only a track that looks like the
         detection (``move_distance``), and such a look-alike may be moved by a gain down to
-        ``look_alike_slack`` below the margin. A detection scoring below
-        ``beside_threshold`` needs the stricter
-        ``weak_relocate_margin`` to move a track (about half of such moves with a small
+        ``look_alike_slack`` below the margin. Of several tracks the gain would move, the
+        one whose model is nearest the detection's in appearance is. A detection scoring
+        below ``beside_threshold`` needs the stricter ``weak_relocate_margin`` to move a
+        track (about half of such moves with a small
         gain went to another person), and when no track takes it and it has a track
         within ``relocate_radius`` it is not born either: weak detections there are mostly
         the fringe of that track's person or a gap between people. Before a track is
@@ -964,7 +965,11 @@ class AutoDetection:
             left = {k: float(with_det[j]) for j, k in enumerate(keep)}
             info['support'] = [(int(tracks[k].track_id), round(left[k], 3)) for k, _ in gains]
             gains = [(k, g) for k, g in gains if not left[k] >= cfg.move_support]
-        best = max(gains, key=lambda kg: kg[1]) if gains else None
+        # of several movable tracks, the one whose model is nearest the detection's: each
+        # gain is measured against that track's own place (a track drifted off its person
+        # gains most), the appearance distance against one reference for all
+        best = min(gains, key=lambda kg: likeness[tracks[kg[0]].track_id]) if gains \
+            else None
         hidden = False
         if best is None and cfg.relocate_hidden:
             best = self._nearest_hidden(det, tracks, keep, means, models, moved, stamp_ns)
