@@ -1,7 +1,6 @@
 """The move decisions ("move N" in events.json, not hidden or beside) where two or more
-tracks passed the gates of ``AutoDetection._identify`` (the gain against
-``relocate_margin``, the look-alike band of ``move_distance`` and ``look_alike_slack``,
-``move_support``), each candidate labelled by whose person it had followed (same as the
+tracks passed the gates of ``AutoDetection._identify`` (``AutoDetectionConfig.gain_gate``
+and ``move_support``), each candidate labelled by whose person it had followed (same as the
 detection's, other, unmatched); which one the largest gain and which one the nearest
 model would move (docs/detection.md, "Of several movable tracks, the look-alike").
 
@@ -15,21 +14,12 @@ CFG = AutoDetectionConfig()
 
 def candidates(e: dict) -> list[tuple[int, float, float]]:
     """(id, gain, appearance distance) of the tracks the decision's gates let the gain
-    move, from its ``near`` and ``support`` rows."""
-    strong = e['score'] >= CFG.beside_threshold
-    margin = CFG.relocate_margin if strong \
-        else max(CFG.relocate_margin, CFG.weak_relocate_margin)
-    alike = CFG.relocate_margin - CFG.look_alike_slack if strong else margin
+    move (``AutoDetectionConfig.gain_gate``, then ``move_support``), from its ``near``
+    and ``support`` rows."""
     support = {int(t): s for t, s in e.get('support', [])}
-    out = []
-    for tid, _, gain, unlike in e.get('near', []):
-        looks_alike = unlike <= CFG.move_distance
-        if margin < gain <= 0.0 and not looks_alike:
-            continue
-        if (gain > margin or (looks_alike and gain > alike)) \
-                and not support.get(tid, 0.0) >= CFG.move_support:
-            out.append((int(tid), gain, unlike))
-    return out
+    return [(int(tid), gain, unlike) for tid, _, gain, unlike in e.get('near', [])
+            if CFG.gain_gate(e['score'], gain, unlike) == 'move'
+            and not support.get(tid, 0.0) >= CFG.move_support]
 
 
 total = 0

@@ -38,8 +38,7 @@ for out, rec in pairs('reuse_instead.py OUT REC [OUT REC ...]'):
         here = people.get(f, [])
         at = min(here, key=lambda r: np.hypot(r.x - e['xy'][0], r.y - e['xy'][1])).person_id \
             if here else None
-        before = detail.person_id[(detail.track_id == lost) & (frames < f)][-15:]
-        had = int(np.bincount(before).argmax()) if before.size else None
+        had = detection_eval._followed(detail, frames, lost, f)   # released < 3 s before
         right = had is not None and had == at
         counts[recent, right] = counts.get((recent, right), 0) + 1
         print(f"{out.name} frame {f}: {e['action']}, track {spared} "

@@ -309,6 +309,23 @@ class AutoDetectionConfig:
     birth_exit_depth: float = 0.15
     track_coverage: float = 2.0
 
+    def gain_gate(self, score: float, gain: float, unlike: float) -> str | None:
+        """Whether the appearance gain (003 Eq. 3, nats per side camera) lets a detection
+        of ``score`` move a track whose model is ``unlike`` (appearance distance) from the
+        detection's: 'move'; 'unlike' when the gain is in the doubtful band (margin, 0]
+        and the track does not look like the detection (``move_distance`` keeps it back);
+        None when the gain is too low. The margin is ``relocate_margin``, the stricter
+        ``weak_relocate_margin`` below ``beside_threshold``; a strong detection may move
+        a look-alike ``look_alike_slack`` below it (:meth:`AutoDetection._identify`)."""
+        strong = score >= self.beside_threshold
+        margin = self.relocate_margin if strong \
+            else max(self.relocate_margin, self.weak_relocate_margin)
+        alike_margin = self.relocate_margin - self.look_alike_slack if strong else margin
+        looks_alike = unlike <= self.move_distance
+        if margin < gain <= 0.0 and not looks_alike:
+            return 'unlike'
+        return 'move' if gain > margin or (looks_alike and gain > alike_margin) else None
+
     def __post_init__(self) -> None:
         if not self.relocate_radius >= 0 or not np.isfinite(self.relocate_margin):
             raise DetectionError('relocate_radius must be >= 0 and relocate_margin finite')
@@ -922,12 +939,6 @@ class AutoDetection:
         """
         cfg = self.config
         state = det.state.copy()
-        # Eq. 3 gain needed to move a track: stricter for a weak detection
-        margin = cfg.relocate_margin if det.score >= cfg.beside_threshold \
-            else max(cfg.relocate_margin, cfg.weak_relocate_margin)
-        # a look-alike track may be moved by a lower gain (a strong detection only)
-        alike_margin = cfg.relocate_margin - cfg.look_alike_slack \
-            if det.score >= cfg.beside_threshold else margin
         info = {'xy': (float(det.xy[0]), float(det.xy[1])), 'score': float(det.score)}
         near = []                   # (id, distance, gain, appearance distance) of the
         #                             tracks the check compared
@@ -944,12 +955,10 @@ class AutoDetection:
             gain = self._explains(ref, means[k], state, evidence)
             unlike = likeness[tid] = model_distance(ref, model)
             near.append((int(tid), round(d, 2), round(gain, 3), round(unlike, 3)))
-            looks_alike = unlike <= cfg.move_distance
-            if margin < gain <= 0.0 and not looks_alike:
-                # a gain in the doubtful band (margin, 0]: the appearance must agree too
+            gate = cfg.gain_gate(det.score, gain, unlike)
+            if gate == 'unlike':
                 unalike.append((int(tid), round(unlike, 3)))
-                continue
-            if gain > margin or (looks_alike and gain > alike_margin):
+            elif gate == 'move':
                 gains.append((k, gain))
         if near:
             info['near'] = near
