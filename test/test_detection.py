@@ -1688,3 +1688,36 @@ def test_of_two_tracks_a_detection_could_move_the_one_that_looks_like_it_is_move
             near += [d['near'] for d in tracker.detection.decisions if 'near' in d]
     assert any(len(n) == 2 for n in near), near         # both tracks were compared
     assert 'move 1' in actions and 'move 2' not in actions, actions
+
+
+@pytest.mark.parametrize('rule, who, born', [(True, 'same', False), (False, 'same', True),
+                                             (True, 'other', True)])
+def test_no_birth_beside_a_young_track_that_looks_like_the_detection(
+        monkeypatch, rule, who, born):
+    """Track 1 follows a person in blue; from frame 40 it counts as placed moments ago
+    (``relocate_interval``) and somebody stands 0.75 m from it, its gain there too low to
+    move it. A look-alike ('same': blue) is taken for track 1's own person, whom a young
+    track lags: with ``young_look_alike`` her detection is dropped, without it a second
+    track is born. Somebody dressed in yellow ('other') is born either way."""
+    from mbtrack_ros.core.detection.manager import AutoDetection
+
+    rng = np.random.default_rng(5)
+    calib, bgs, tracker = _painted_room_tracker(4, young_look_alike=rule, reach_radius=0.0,
+                                                relocate_hidden=False, reuse_hidden=False)
+    here = person(2.0, 2.5, theta=0.0)
+    there = person(2.75, 2.5, theta=0.0, **({} if who == 'same' else {'colours': YELLOW}))
+    placed = AutoDetection._placed_recently
+    actions = []
+    for k in range(52):
+        if k == 40:
+            assert tracker.track_ids == [1]
+            monkeypatch.setattr(AutoDetection, '_explains', lambda self, *a: -10.0)
+            monkeypatch.setattr(AutoDetection, '_placed_recently', lambda self, tid, stamp:
+                                tid == 1 or placed(self, tid, stamp))
+        tracker.step(int(round(k * 1e9 / FPS)),
+                     paint(calib, bgs, [here] + ([there] if k >= 40 else []), rng))
+        if k >= 40:
+            actions += [d['action'] for d in tracker.detection.decisions]
+    assert ('birth' in actions) == born, actions
+    assert ('drop (young look-alike 1)' in actions) == (not born), actions
+    assert len(tracker.track_ids) == (2 if born else 1), tracker.track_ids
