@@ -295,6 +295,22 @@ def test_confirmed_detection_gets_the_walking_velocity_and_direction():
     assert abs(np.angle(np.exp(1j * (d.state[4] - expected)))) < 0.4
 
 
+@pytest.mark.parametrize('xs, speed', [((4.45, 4.8, 4.75), None), ((4.45, 4.5, 4.55), 0.75)])
+def test_a_detection_whose_places_jumped_gets_no_velocity(xs, speed):
+    """Confirming places 0.3 m apart in two frames (2.25 m/s, above ``max_speed``) are a
+    jump between places, not a walk: velocity and orientation stay as found. A walk of
+    0.05 m per frame gives its velocity (15 frames/s) and direction."""
+    det = Detection(state=np.array([xs[-1], 4.7, 0.0, 0.0, 1.0, 0.0]), height=1.7,
+                    width=0.5, score=4.0,
+                    history=[(int(round(k * 1e9 / FPS)), x, 4.7) for k, x in enumerate(xs)])
+    Detector(make_room(), DetectorConfig())._velocity(det)
+    if speed is None:
+        assert det.state[2:5].tolist() == [0.0, 0.0, 1.0]
+    else:
+        assert det.state[2:4] == pytest.approx([speed, 0.0], abs=1e-6)
+        assert det.state[4] == pytest.approx(0.0)
+
+
 def test_detector_excludes_tracked_neighbourhood():
     rng = np.random.default_rng(3)
     calib = make_room()

@@ -98,8 +98,11 @@ class DetectorConfig:
         min_motion: fraction of recently moving pixels of the silhouette (in every side
             camera that sees it, in one of the confirming frames) to confirm a detection.
         min_speed, max_speed: m/s; a confirmed detection faster than ``min_speed`` over
-            its confirming frames gets its walking direction as body orientation; its
-            velocity is clipped to ``max_speed``.
+            its confirming frames gets its walking direction as body orientation; one
+            faster than ``max_speed`` gets no velocity: its places jumped (a neighbour,
+            the fringe of a group), nobody walked there (a clipped velocity sent a
+            relocated track off at 2 m/s the wrong way on cr1, docs/detection.md, "No
+            velocity from a detection that jumped").
         edge_min_pixels, edge_neighbourhood: edge validation of the contour feature,
             pixels (:meth:`EdgeMap.from_image`: smallest edge component, foreground
             neighbourhood searched).
@@ -617,8 +620,10 @@ class Detector:
         v = (tc[:, None] * (h[:, 1:] - h[:, 1:].mean(axis=0))).sum(axis=0) / (tc ** 2).sum()
         speed = float(np.hypot(*v))
         if speed > self.config.max_speed:
-            v *= self.config.max_speed / speed
-            speed = self.config.max_speed
+            # faster than anybody walks: the detection jumped between places (a neighbour,
+            # the fringe of a group), not a walk; no velocity rather than one in the
+            # direction of the jump
+            return
         det.state[[VX, VY]] = v
         if speed >= self.config.min_speed:
             det.state[THETA] = float(np.arctan2(v[1], v[0]))

@@ -948,7 +948,8 @@ class AutoDetection:
         """
         cfg = self.config
         state = det.state.copy()
-        info = {'xy': (float(det.xy[0]), float(det.xy[1])), 'score': float(det.score)}
+        info = {'xy': (float(det.xy[0]), float(det.xy[1])), 'score': float(det.score),
+                'v': (round(float(det.state[VX]), 2), round(float(det.state[VY]), 2))}
         near = []                   # (id, distance, gain, appearance distance) of the
         #                             tracks the check compared
         gains = []                  # (index, gain) of the tracks the gain would move
