@@ -78,7 +78,7 @@ def test_a_bootstrap_ghost_is_no_support_of_a_track():
 
 def _lagging(monkeypatch, beside_support, lag=0.42, frames=14, tracked=36, until='decision',
              beside_threshold=0.0, decisions=None, relocate_margin=1e9,
-             weak_relocate_margin=1e9):
+             weak_relocate_margin=1e9, young_look_alike=True):
     """A person walking at 0.3 m/s along y = 2.6 m, tracked as track 1 for ``tracked``
     frames (36: longer than ``relocate_interval``); then, before each step (until the first
     decision, or always with ``until=None``), track 1
@@ -91,7 +91,7 @@ def _lagging(monkeypatch, beside_support, lag=0.42, frames=14, tracked=36, until
     room its existence falls, and a hidden track is the other rule's,
     ``relocate_hidden``). ``beside_threshold`` 0: any detection beside it may be born.
     Returns the tracker and the decisions' actions (the whole records are appended to
-    ``decisions`` when given)."""
+    ``decisions`` when given); ``young_look_alike``: the config's switch."""
     monkeypatch.setattr(AutoDetection, 'reported', lambda self, tid: True)
     rng = np.random.default_rng(3)
     calib = make_room(ceiling=False)
@@ -101,7 +101,8 @@ def _lagging(monkeypatch, beside_support, lag=0.42, frames=14, tracked=36, until
     det.config = replace(det.config, reach_radius=0.0, relocate_margin=relocate_margin,
                          weak_relocate_margin=weak_relocate_margin, relocate_hidden=False,
                          beside_support=beside_support,
-                         beside_threshold=beside_threshold)
+                         beside_threshold=beside_threshold,
+                         young_look_alike=young_look_alike)
 
     def walker(k):
         return [person(2.0 + 0.02 * k, 2.6, theta=0.0)]
@@ -135,11 +136,15 @@ def test_a_young_track_lagging_since_its_birth_is_moved_once(monkeypatch):
     """A track 0.5 s old (born, never moved) that lags its person is moved by their
     detection (a track left on its person's bootstrap place); moved, it is not moved again
     within ``relocate_interval`` (it would hop through a group): the next detection beside
-    it while it is kept lagging is born instead."""
-    tracker, actions = _lagging(monkeypatch, 0.25, tracked=8, frames=30, until=None)
-    beside = [a for a in actions if a.endswith('(beside)')]
-    assert beside == ['move 1 (beside)'], actions
-    assert actions.index('move 1 (beside)') < actions.index('birth'), actions
+    it while it is kept lagging is dropped (``young_look_alike``: the young track's own
+    person), or born without that rule."""
+    for young_rule, after in ((True, 'drop (young look-alike 1)'), (False, 'birth')):
+        tracker, actions = _lagging(monkeypatch, 0.25, tracked=8, frames=30, until=None,
+                                    young_look_alike=young_rule)
+        beside = [a for a in actions if a.endswith('(beside)')]
+        assert beside == ['move 1 (beside)'], actions
+        assert actions.index('move 1 (beside)') < actions.index(after), actions
+        assert 'birth' not in actions or not young_rule, actions
 
 
 def test_a_newcomer_beside_a_tracked_person_is_born():

@@ -146,7 +146,8 @@ def test_a_spare_track_that_the_door_wall_cameras_cover_keeps_the_ordinary_timeo
 @pytest.mark.parametrize('band', [0.0, ReleaseConfig().doorway_band])
 def test_the_track_of_a_person_who_walked_out_ends_sooner_with_the_doorway_rule(band):
     """test_exits' clip of one person walking out (seed 4, corner cameras only): the track
-    stays behind at the door. The plain support timeout ended it 1.13 s after the person
+    stays behind at the door (sent off by the velocity fitted to its detection's jumped
+    places, which the detector now drops: ``max_speed`` raised here). The plain support timeout ended it 1.13 s after the person
     crossed the wall (their last ground-truth row), the doorway rule 0.40 s after (tracker
     seeds 1-5; on seed 0 the person got a second track on the way in, ended 1.00 and 0.87
     s after; ``docs/diag/walk_out.py --no-ceiling --reach-radius 0 --paper-motion
@@ -171,6 +172,11 @@ def test_the_track_of_a_person_who_walked_out_ends_sooner_with_the_doorway_rule(
         tracker = Tracker(synth.calibration, TrackerConfig(
             detection=True, seed=seed, motion=MotionConfig(orientation_follows_velocity=True)))
         tracker.detection.config = replace(tracker.detection.config, reach_radius=0.0)
+        # the person's detection is confirmed at places 0.3 m apart (4.35 -> 4.65 m): its
+        # fitted 2.4 m/s, which the detector no longer gives, sends the track off so
+        # that it stays behind at the door; given here as before (max_speed raised)
+        tracker.detection.detector.config = replace(tracker.detection.detector.config,
+                                                    max_speed=10.0)
         config = replace(tracker.detection.releaser.config, doorway_band=band)
         tracker.detection.releaser = Releaser(synth.calibration, config)
         last_truth = ended = None
