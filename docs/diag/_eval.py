@@ -39,3 +39,20 @@ def tracked_frames(rec: Path, seed: int, last: int, **config) -> Iterator[tuple]
             yield fs, result, tracker
             if fs.index >= last:
                 return
+
+
+def run_context(out: Path, rec: Path) -> tuple:
+    """(events, matching detail, its frames, ground-truth rows by frame, id -> frames the
+    track was born or moved at) of one ``run`` output against its recording."""
+    tracks, truth, events, _ = detection_eval._load(out, rec)
+    detail, frames = detection_eval._matching(tracks, truth)
+    people: dict[int, list] = {}
+    for r in truth:
+        people.setdefault(r.frame, []).append(r)
+    placed: dict[int, list[int]] = {}
+    for e in events:
+        if e['kind'] == 'birth':
+            placed.setdefault(e['id'], []).append(e['frame'])
+        elif e['kind'] == 'decision' and e['action'].startswith('move '):
+            placed.setdefault(int(e['action'].split()[1]), []).append(e['frame'])
+    return events, detail, frames, people, placed

@@ -10,24 +10,14 @@ import re
 
 import numpy as np
 
-from _eval import detection_eval, pairs
+from _eval import detection_eval, pairs, run_context
 from mbtrack_ros.core.detection.manager import AutoDetectionConfig
 
 FPS = detection_eval.FPS
 WITHIN = AutoDetectionConfig().relocate_interval * FPS     # frames
 counts: dict[tuple[bool, bool], int] = {}
 for out, rec in pairs('reuse_instead.py OUT REC [OUT REC ...]'):
-    tracks, truth, events, _ = detection_eval._load(out, rec)
-    detail, frames = detection_eval._matching(tracks, truth)
-    people: dict[int, list] = {}
-    for r in truth:
-        people.setdefault(r.frame, []).append(r)
-    placed: dict[int, list[int]] = {}       # id -> frames it was born or moved at
-    for e in events:
-        if e['kind'] == 'birth':
-            placed.setdefault(e['id'], []).append(e['frame'])
-        elif e['kind'] == 'decision' and e['action'].startswith('move '):
-            placed.setdefault(int(e['action'].split()[1]), []).append(e['frame'])
+    events, detail, frames, people, placed = run_context(out, rec)
     for e in events:
         m = re.fullmatch(r'reuse (\d+) \(not (\d+)\)', e.get('action', '')) \
             if e['kind'] == 'decision' else None

@@ -8,7 +8,7 @@ usage: .venv/bin/python docs/diag/young_births.py OUT REC [OUT REC ...]
 """
 import numpy as np
 
-from _eval import detection_eval, pairs
+from _eval import detection_eval, pairs, run_context
 from mbtrack_ros.core.detection.manager import AutoDetectionConfig
 
 FPS = detection_eval.FPS
@@ -25,19 +25,8 @@ def followed_after(detail, frames: np.ndarray, tid: int | None, f: int) -> int |
 
 counts: dict[tuple[str, str], int] = {}
 for out, rec in pairs('young_births.py OUT REC [OUT REC ...]'):
-    tracks, truth, events, _ = detection_eval._load(out, rec)
-    detail, frames = detection_eval._matching(tracks, truth)
-    people: dict[int, list] = {}
-    for r in truth:
-        people.setdefault(r.frame, []).append(r)
-    placed: dict[int, list[int]] = {}       # id -> frames it was born or moved at
-    born_at: dict[int, int] = {}            # frame -> id born there
-    for e in events:
-        if e['kind'] == 'birth':
-            placed.setdefault(e['id'], []).append(e['frame'])
-            born_at[e['frame']] = e['id']
-        elif e['kind'] == 'decision' and e['action'].startswith('move '):
-            placed.setdefault(int(e['action'].split()[1]), []).append(e['frame'])
+    events, detail, frames, people, placed = run_context(out, rec)
+    born_at = {e['frame']: e['id'] for e in events if e['kind'] == 'birth'}  # frame -> id
     for e in events:
         action = e.get('action', '') if e['kind'] == 'decision' else ''
         if not (action == 'birth' or action.startswith('drop (young')):
