@@ -147,7 +147,8 @@ def test_a_spare_track_that_the_door_wall_cameras_cover_keeps_the_ordinary_timeo
 def test_the_track_of_a_person_who_walked_out_ends_sooner_with_the_doorway_rule(band):
     """test_exits' clip of one person walking out (seed 4, corner cameras only): the track
     stays behind at the door (sent off by the velocity fitted to its detection's jumped
-    places, which the detector now drops: ``max_speed`` raised here). The plain support timeout ended it 1.13 s after the person
+    places, which the detector now drops: ``max_speed`` raised here). The plain support
+    timeout ended it 1.13 s after the person
     crossed the wall (their last ground-truth row), the doorway rule 0.40 s after (tracker
     seeds 1-5; on seed 0 the person got a second track on the way in, ended 1.00 and 0.87
     s after; ``docs/diag/walk_out.py --no-ceiling --reach-radius 0 --paper-motion
