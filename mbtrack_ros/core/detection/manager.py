@@ -944,7 +944,9 @@ class AutoDetection:
         moved (by the gain or hidden), a lost track whose model is nearer the detection's
         takes its id back instead (``reuse_before_moving``); before a birth, a released
         track and then a hidden one within ``reuse_radius`` that look alike are given
-        back their person (``reuse_time``, ``reuse_hidden``).
+        back their person (``reuse_time``, ``reuse_hidden``); a detection that would still
+        be born beside a look-alike track born or moved within ``relocate_interval`` is
+        dropped (``young_look_alike``).
         """
         cfg = self.config
         state = det.state.copy()
@@ -1028,12 +1030,12 @@ class AutoDetection:
                                             stamp_ns, radius=cfg.reuse_radius, like=model)
                 hidden = far = best is not None
             if best is None and reused is None and cfg.young_look_alike:
-                young = [n[0] for n in near
+                young = [(n[1], n[0]) for n in near
                          if n[3] <= cfg.move_distance and self._placed_recently(n[0], stamp_ns)]
                 if young:
                     # a track born or moved moments ago lags its person: the detection
                     # beside it that looks like it is that person, not a newcomer
-                    info['action'] = f'drop (young look-alike {young[0]})'
+                    info['action'] = f'drop (young look-alike {min(young)[1]})'
                     self.decisions.append(info)
                     return None
             if best is None:
