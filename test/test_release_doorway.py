@@ -173,9 +173,9 @@ def test_the_track_of_a_person_who_walked_out_ends_sooner_with_the_doorway_rule(
         tracker = Tracker(synth.calibration, TrackerConfig(
             detection=True, seed=seed, motion=MotionConfig(orientation_follows_velocity=True)))
         tracker.detection.config = replace(tracker.detection.config, reach_radius=0.0)
-        # the person's detection is confirmed at places 0.3 m apart (4.35 -> 4.65 m): its
-        # fitted 2.4 m/s, which the detector no longer gives, sends the track off so
-        # that it stays behind at the door; given here as before (max_speed raised)
+        # the person's detection is confirmed at places that jumped: the velocity fitted to
+        # them, which the detector no longer gives (above max_speed), sends the track off
+        # so that it stays behind at the door; given here as before (max_speed raised)
         tracker.detection.detector.config = replace(tracker.detection.detector.config,
                                                     max_speed=10.0)
         config = replace(tracker.detection.releaser.config, doorway_band=band)

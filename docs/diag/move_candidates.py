@@ -6,7 +6,7 @@ model would move (docs/detection.md, "Of several movable tracks, the look-alike"
 
 usage: .venv/bin/python docs/diag/move_candidates.py OUT REC [OUT REC ...]
 """
-from _eval import detection_eval, pairs
+from _eval import detection_eval, pairs, run_context
 from mbtrack_ros.core.detection.manager import AutoDetectionConfig
 
 CFG = AutoDetectionConfig()
@@ -24,16 +24,12 @@ def candidates(e: dict) -> list[tuple[int, float, float]]:
 
 total = 0
 for out, rec in pairs('move_candidates.py OUT REC [OUT REC ...]'):
-    tracks, truth, events, _ = detection_eval._load(out, rec)
+    events, detail, frames, people, _ = run_context(out, rec)
     rows = [(e, c) for e in events if e['kind'] == 'decision'
             and e['action'].startswith('move ') and '(' not in e['action']
             for c in [candidates(e)] if len(c) >= 2]
     if not rows:
         continue
-    detail, frames = detection_eval._matching(tracks, truth)
-    people: dict[int, list] = {}
-    for r in truth:
-        people.setdefault(r.frame, []).append(r)
     for e, cands in rows:
         total += 1
         here = people.get(e['frame'])

@@ -47,7 +47,7 @@ for out, rec in pairs('young_births.py OUT REC [OUT REC ...]'):
                      'new track on a person of its own' if action == 'birth' and new != young
                      else 'dropped beside the young track of another person'
                      if action != 'birth' else 'new track on the young track\'s person')
-            alike = 'look-alike' if unlike <= CONFIG.move_distance else 'unlike'
+            alike = 'look-alike' if CONFIG.looks_alike(unlike) else 'unlike'
             counts[alike, label] = counts.get((alike, label), 0) + 1
             print(f"{out.name} frame {f}: {action}, track {tid} {dist:.2f} m, placed "
                   f"{min(age) / FPS:.2f} s before, appearance {unlike:.3f}; detection on "

@@ -318,6 +318,11 @@ class AutoDetectionConfig:
     birth_exit_depth: float = 0.15
     track_coverage: float = 2.0
 
+    def looks_alike(self, unlike: float) -> bool:
+        """Whether a track whose model is ``unlike`` (appearance distance) from a
+        detection's looks like it (``move_distance``)."""
+        return unlike <= self.move_distance
+
     def gain_gate(self, score: float, gain: float, unlike: float) -> str | None:
         """Whether the appearance gain (003 Eq. 3, nats per side camera) lets a detection
         of ``score`` move a track whose model is ``unlike`` (appearance distance) from the
@@ -330,7 +335,7 @@ class AutoDetectionConfig:
         margin = self.relocate_margin if strong \
             else max(self.relocate_margin, self.weak_relocate_margin)
         alike_margin = self.relocate_margin - self.look_alike_slack if strong else margin
-        looks_alike = unlike <= self.move_distance
+        looks_alike = self.looks_alike(unlike)
         if margin < gain <= 0.0 and not looks_alike:
             return 'unlike'
         return 'move' if gain > margin or (looks_alike and gain > alike_margin) else None
@@ -954,7 +959,7 @@ class AutoDetection:
                 'v': (round(float(det.state[VX]), 2), round(float(det.state[VY]), 2))}
         near = []                   # (id, distance, gain, appearance distance) of the
         #                             tracks the check compared
-        gains = []                  # (index, gain) of the tracks the gain would move
+        movable = []                # indices of the tracks the gain would move
         unalike = []                # (id, distance) of those move_distance kept back
         likeness = {}               # id -> appearance distance to the detection, once each
         for k in keep:
@@ -971,26 +976,26 @@ class AutoDetection:
             if gate == 'unlike':
                 unalike.append((int(tid), round(unlike, 3)))
             elif gate == 'move':
-                gains.append((k, gain))
+                movable.append(k)
         if near:
             info['near'] = near
         if unalike:
             info['unalike'] = unalike
         support = None              # _exclusive_support, computed once per detection
-        if gains:
+        if movable:
             # exclusive support with the detection as one more track: a track that keeps
             # move_support of it stands on a person of its own, the detection is another
             support = self._exclusive_support(det, model, tracks, keep, means, models,
                                               evidence)
             with_det = support[1]
             left = {k: float(with_det[j]) for j, k in enumerate(keep)}
-            info['support'] = [(int(tracks[k].track_id), round(left[k], 3)) for k, _ in gains]
-            gains = [(k, g) for k, g in gains if not left[k] >= cfg.move_support]
+            info['support'] = [(int(tracks[k].track_id), round(left[k], 3)) for k in movable]
+            movable = [k for k in movable if not left[k] >= cfg.move_support]
         # of several movable tracks, the one whose model is nearest the detection's: each
         # gain is measured against that track's own place (a track drifted off its person
         # gains most), the appearance distance against one reference for all
-        best = min(gains, key=lambda kg: likeness[tracks[kg[0]].track_id]) if gains \
-            else None
+        best = min(((k, likeness[tracks[k].track_id]) for k in movable),
+                   key=lambda kd: kd[1], default=None)
         hidden = False
         if best is None and cfg.relocate_hidden:
             best = self._nearest_hidden(det, tracks, keep, means, models, moved, stamp_ns)
@@ -1031,7 +1036,7 @@ class AutoDetection:
                 hidden = far = best is not None
             if best is None and reused is None and cfg.young_look_alike:
                 young = [(n[1], n[0]) for n in near
-                         if n[3] <= cfg.move_distance and self._placed_recently(n[0], stamp_ns)]
+                         if cfg.looks_alike(n[3]) and self._placed_recently(n[0], stamp_ns)]
                 if young:
                     # a track born or moved moments ago lags its person: the detection
                     # beside it that looks like it is that person, not a newcomer
