@@ -756,13 +756,17 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
                 continue
             f = e['frame']
             weak = e['action'].startswith('drop (weak beside')
+            young = e['action'].startswith('drop (young look-alike')
             if weak:    # beside_threshold's drop: labelled by the nearest track compared
                 tid = int(min(e['near'], key=lambda n: n[1])[0])
+            elif young:     # young_look_alike's drop names the young track
+                tid = int(words[-1].rstrip(')'))
             else:
                 tid = int(words[1] if words[0] != 'drop'
                           else e['action'].split('track ')[1].split()[0])
             label = decision_label(d, frames, gt[f], e, tid)
-            kind = words[0] + (' weak' if weak else ' hidden' if 'hidden' in e['action'] else
+            kind = words[0] + (' weak' if weak else ' young' if young else
+                               ' hidden' if 'hidden' in e['action'] else
                                ' beside' if 'beside' in e['action'] else
                                ' before a move' if '(not' in e['action'] else '')
             if kind == 'move beside':   # how far the moved track was (beside_radius)
