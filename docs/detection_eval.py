@@ -80,7 +80,7 @@ from mbtrack_ros.core.tracker import Tracker, TrackerConfig
 from mbtrack_ros.evaluation.clear_mot import clear_mot
 from mbtrack_ros.recording.bag import RecordingReader
 from mbtrack_ros.recording.csvfiles import (
-    CsvFormatError, TrackRow, read_ground_truth, read_tracks, write_tracks)
+    CsvFormatError, GroundTruthRow, TrackRow, read_ground_truth, read_tracks, write_tracks)
 
 FPS = 15.0
 FLOOR = (0.3, 0.3, 5.7, 4.7)          # the clear-room walkable floor (calibration.yaml)
@@ -660,13 +660,17 @@ def _followed(d, frames: np.ndarray, tid: int, f: int) -> int | None:
     return None if not before.size else int(np.bincount(before).argmax())
 
 
+def nearest_row(people: list[GroundTruthRow], xy) -> GroundTruthRow:
+    """The ground-truth row of ``people`` (one frame's) nearest the floor point ``xy``."""
+    return min(people, key=lambda r: np.hypot(r.x - xy[0], r.y - xy[1]))
+
+
 def decision_label(d, frames: np.ndarray, people: list, decision: dict, tid: int) -> str:
     """Whether a detection decision about track ``tid`` concerned the person that track had
     followed: 'same', 'other' or 'unmatched' (the track followed nobody). ``people`` are
     the ground-truth rows of the decision's frame; the detection's person is the one
     nearest its floor point."""
-    x, y = decision['xy']
-    at = min(people, key=lambda r: np.hypot(r.x - x, r.y - y)).person_id
+    at = nearest_row(people, decision['xy']).person_id
     who = _followed(d, frames, tid, decision['frame'])
     return 'same' if who == at else 'unmatched' if who is None else 'other'
 

@@ -9,7 +9,7 @@ usage: .venv/bin/python docs/diag/birth_velocity.py OUT REC [OUT REC ...]
 """
 import numpy as np
 
-from _eval import pairs, run_context
+from _eval import detection_eval, pairs, run_context
 
 FACTORS = (0.0, 0.25, 0.5, 0.6, 0.65, 0.7, 0.75, 0.8, 0.85, 0.9, 1.0, 1.25)
 HALF = 3                                 # frames either side of the decision
@@ -25,7 +25,7 @@ for out, rec in pairs('birth_velocity.py OUT REC [OUT REC ...]'):
         here = people.get(f, [])
         if not here:
             continue
-        near = min(here, key=lambda r: np.hypot(r.x - xy[0], r.y - xy[1]))
+        near = detection_eval.nearest_row(here, xy)
         if np.hypot(near.x - xy[0], near.y - xy[1]) > 0.5:
             continue
         ends = [next((r for r in people.get(g, []) if r.person_id == near.person_id), None)

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from _eval import tracked_frames
+from mbtrack_ros.core.detection.detector import fitted_velocity
 from mbtrack_ros.core.detection.manager import AutoDetection
 from mbtrack_ros.core.state import VX, VY, X, Y
 
@@ -26,11 +27,8 @@ frame = [0]
 def logged(self, det, *args, **kwargs):
     """``_identify`` with the detection's places and velocity printed."""
     birth = identify(self, det, *args, **kwargs)
-    if frame[0] >= first and len(det.history) >= 2:
-        h = np.asarray(det.history, dtype=np.float64)
-        t = (h[:, 0] - h[0, 0]) / 1e9
-        tc = t - t.mean()
-        fit = (tc[:, None] * (h[:, 1:] - h[:, 1:].mean(axis=0))).sum(axis=0) / (tc ** 2).sum()
+    fit = fitted_velocity(det.history)
+    if frame[0] >= first and fit is not None:
         places = ', '.join(f'({x:.2f}, {y:.2f})' for _, x, y in det.history)
         print(f'frame {frame[0]}: detection at {places}, fitted {np.hypot(*fit):.2f} m/s, '
               f'given ({det.state[VX]:.2f}, {det.state[VY]:.2f}) -> '

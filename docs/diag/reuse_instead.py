@@ -8,8 +8,6 @@ usage: .venv/bin/python docs/diag/reuse_instead.py OUT REC [OUT REC ...]
 """
 import re
 
-import numpy as np
-
 from _eval import detection_eval, pairs, run_context
 from mbtrack_ros.core.detection.manager import AutoDetectionConfig
 
@@ -26,8 +24,7 @@ for out, rec in pairs('reuse_instead.py OUT REC [OUT REC ...]'):
         lost, spared, f = int(m[1]), int(m[2]), e['frame']
         recent = any(f - WITHIN < g < f for g in placed.get(spared, []))
         here = people.get(f, [])
-        at = min(here, key=lambda r: np.hypot(r.x - e['xy'][0], r.y - e['xy'][1])).person_id \
-            if here else None
+        at = detection_eval.nearest_row(here, e['xy']).person_id if here else None
         had = detection_eval._followed(detail, frames, lost, f)   # released < 3 s before
         right = had is not None and had == at
         counts[recent, right] = counts.get((recent, right), 0) + 1

@@ -34,7 +34,7 @@ for out, rec in pairs('young_births.py OUT REC [OUT REC ...]'):
         f, here = e['frame'], people.get(e['frame'], [])
         if not here:
             continue
-        at = min(here, key=lambda r: np.hypot(r.x - e['xy'][0], r.y - e['xy'][1])).person_id
+        at = detection_eval.nearest_row(here, e['xy']).person_id
         new = followed_after(detail, frames, born_at.get(f) if action == 'birth' else None,
                              f + 1)
         for tid, dist, _, unlike in (n for n in e.get('near', []) if len(n) > 3):

@@ -163,6 +163,19 @@ class DetectorConfig:
             raise DetectionError('min_views, confirm_frames and max_candidates must be >= 1')
 
 
+def fitted_velocity(history: Sequence[tuple[int, float, float]]) -> np.ndarray | None:
+    """Least-squares floor velocity (vx, vy), m/s, of ``(stamp_ns, x, y)`` places; None
+    for fewer than two places or no time between them."""
+    if len(history) < 2:
+        return None
+    h = np.asarray(history, dtype=np.float64)
+    t = (h[:, 0] - h[0, 0]) / 1e9
+    if np.ptp(t) <= 0:
+        return None
+    tc = t - t.mean()
+    return (tc[:, None] * (h[:, 1:] - h[:, 1:].mean(axis=0))).sum(axis=0) / (tc ** 2).sum()
+
+
 @dataclass
 class Detection:
     """One detected person.
@@ -610,14 +623,9 @@ class Detector:
 
     def _velocity(self, det: Detection) -> None:
         """Least-squares floor velocity over the confirming frames -> state vx, vy, theta."""
-        if len(det.history) < 2:
+        v = fitted_velocity(det.history)
+        if v is None:
             return
-        h = np.asarray(det.history, dtype=np.float64)
-        t = (h[:, 0] - h[0, 0]) / 1e9
-        if np.ptp(t) <= 0:
-            return
-        tc = t - t.mean()
-        v = (tc[:, None] * (h[:, 1:] - h[:, 1:].mean(axis=0))).sum(axis=0) / (tc ** 2).sum()
         speed = float(np.hypot(*v))
         if speed > self.config.max_speed:
             # faster than anybody walks: the detection jumped between places (a neighbour,
