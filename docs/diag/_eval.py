@@ -56,3 +56,25 @@ def run_context(out: Path, rec: Path) -> tuple:
         elif e['kind'] == 'decision' and e['action'].startswith('move '):
             placed.setdefault(int(e['action'].split()[1]), []).append(e['frame'])
     return events, detail, frames, people, placed
+
+
+def person_velocity(people: dict[int, list], frame: int, xy, *, half: int = 3,
+                    within: float = 0.5):
+    """(vx, vy), m/s, of the person nearest the floor point ``xy`` at ``frame`` (within
+    ``within`` metres), over the ``half`` frames either side of it; None when nobody is
+    that near or the person is not seen at both ends. ``people``: ground-truth rows by
+    frame (:func:`run_context`)."""
+    import numpy as np
+
+    here = people.get(frame, [])
+    if not here:
+        return None
+    near = detection_eval.nearest_row(here, xy)
+    if np.hypot(near.x - xy[0], near.y - xy[1]) > within:
+        return None
+    ends = [next((r for r in people.get(g, []) if r.person_id == near.person_id), None)
+            for g in (frame - half, frame + half)]
+    if None in ends:
+        return None
+    dt = (ends[1].stamp_ns - ends[0].stamp_ns) / 1e9
+    return ((ends[1].x - ends[0].x) / dt, (ends[1].y - ends[0].y) / dt)

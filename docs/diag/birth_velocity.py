@@ -9,7 +9,7 @@ usage: .venv/bin/python docs/diag/birth_velocity.py OUT REC [OUT REC ...]
 """
 import numpy as np
 
-from _eval import detection_eval, pairs, run_context
+from _eval import pairs, person_velocity, run_context
 
 FACTORS = (0.0, 0.25, 0.5, 0.6, 0.65, 0.7, 0.75, 0.8, 0.85, 0.9, 1.0, 1.25)
 HALF = 3                                 # frames either side of the decision
@@ -21,20 +21,10 @@ for out, rec in pairs('birth_velocity.py OUT REC [OUT REC ...]'):
         if e['kind'] != 'decision' or 'v' not in e \
                 or not e['action'].startswith(('birth', 'move', 'reuse')):
             continue
-        f, xy = e['frame'], np.asarray(e['xy'])
-        here = people.get(f, [])
-        if not here:
-            continue
-        near = detection_eval.nearest_row(here, xy)
-        if np.hypot(near.x - xy[0], near.y - xy[1]) > 0.5:
-            continue
-        ends = [next((r for r in people.get(g, []) if r.person_id == near.person_id), None)
-                for g in (f - HALF, f + HALF)]
-        if None in ends:
-            continue
-        dt = (ends[1].stamp_ns - ends[0].stamp_ns) / 1e9
-        given.append(e['v'])
-        truth.append(((ends[1].x - ends[0].x) / dt, (ends[1].y - ends[0].y) / dt))
+        walk = person_velocity(people, e['frame'], e['xy'], half=HALF)
+        if walk is not None:
+            given.append(e['v'])
+            truth.append(walk)
 if not given:
     raise SystemExit('no birth, move or reuse row with a velocity near a person')
 given, truth = np.asarray(given), np.asarray(truth)
