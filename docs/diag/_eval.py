@@ -6,6 +6,8 @@ import sys
 from collections.abc import Iterator
 from pathlib import Path
 
+import numpy as np
+
 _spec = importlib.util.spec_from_file_location(
     'detection_eval', Path(__file__).resolve().parents[1] / 'detection_eval.py')
 detection_eval = importlib.util.module_from_spec(_spec)
@@ -64,8 +66,6 @@ def person_velocity(people: dict[int, list], frame: int, xy, *, half: int = 3,
     ``within`` metres), over the ``half`` frames either side of it; None when nobody is
     that near or the person is not seen at both ends. ``people``: ground-truth rows by
     frame (:func:`run_context`)."""
-    import numpy as np
-
     here = people.get(frame, [])
     if not here:
         return None

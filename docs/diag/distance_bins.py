@@ -21,30 +21,37 @@ from pathlib import Path
 
 import numpy as np
 
+from scipy.stats import mannwhitneyu
+
 from _eval import detection_eval, run_context
-from mbtrack_ros.core import appearance
+from mbtrack_ros.core.appearance import model_distance as fine_distance
 from mbtrack_ros.core.detection import manager
 from mbtrack_ros.recording.bag import RecordingReader
 
 
+class _Coarse:
+    """A model's key views as 64 bins: its part histograms (V, 3, 512) summed in 2 x 2 x 2
+    blocks of the RGB cube (bin ``r * 64 + g * 8 + b``, 3 bits each), held in the first
+    64 of 512 bins (the others empty), so that ``model_distance`` itself compares them."""
+
+    def __init__(self, model) -> None:
+        h = model.completed_histograms()
+        self._hists = np.zeros_like(h)
+        self._hists[..., :64] = h.reshape(*h.shape[:2], 4, 2, 4, 2, 4, 2).sum(
+            axis=(3, 5, 7)).reshape(*h.shape[:2], 64)
+
+    def completed_histograms(self) -> np.ndarray:
+        return self._hists
+
+
 def coarse_distance(a, b) -> float:
-    """``model_distance`` on 64 bins: the view-averaged part histograms (3, 512) summed in
-    2 x 2 x 2 blocks of the RGB cube (bin ``r * 64 + g * 8 + b``, 3 bits each)."""
-    ha, hb = a.completed_histograms(), b.completed_histograms()
-    if not len(ha) or not len(hb):
-        return 1.0
-    sums = [h.mean(axis=0).reshape(3, 4, 2, 4, 2, 4, 2).sum(axis=(2, 4, 6)).reshape(3, 64)
-            for h in (ha, hb)]
-    ma, mb = (appearance._normalise(s) for s in sums)
-    both = (ma.sum(axis=1) > 0) & (mb.sum(axis=1) > 0)
-    if not both.any():
-        return 1.0
-    return float(np.sqrt(appearance.bhattacharyya_distance_sq(ma[both], mb[both])).mean())
+    """``appearance.model_distance`` on 64 bins (:class:`_Coarse`)."""
+    return fine_distance(_Coarse(a), _Coarse(b))
 
 
 def run(rec: Path, seed: int, out: Path) -> None:
     rows, frame = [], {'index': -1}
-    read, fine = RecordingReader.frames, manager.model_distance
+    read = RecordingReader.frames
 
     def counted(self, *args, **kwargs):
         for fs in read(self, *args, **kwargs):
@@ -52,24 +59,27 @@ def run(rec: Path, seed: int, out: Path) -> None:
             yield fs
 
     def logged(a, b):
-        d = fine(a, b)
+        d = fine_distance(a, b)
         rows.append((frame['index'], round(d, 3), round(coarse_distance(a, b), 3)))
         return d
 
     RecordingReader.frames, manager.model_distance = counted, logged
-    detection_eval.run(rec, out, seed)
+    try:
+        detection_eval.run(rec, out, seed)
+    finally:
+        RecordingReader.frames, manager.model_distance = read, fine_distance
     (out / 'distances.json').write_text(json.dumps(rows), encoding='utf-8')
 
 
 def auc(same: np.ndarray, other: np.ndarray) -> float:
-    """P(a same-person distance < another person's), ties counted half."""
-    s, o = same[:, None], other[None, :]
-    return float(((s < o).sum() + 0.5 * (s == o).sum()) / (s.size * o.size))
+    """P(a same-person value < another person's), ties counted half: the Mann-Whitney U of
+    ``other`` against ``same`` over the number of pairs."""
+    return float(mannwhitneyu(other, same).statistic / (same.size * other.size))
 
 
 def report(args: list[str]) -> None:
     pairs = list(zip(map(Path, args[::2]), map(Path, args[1::2])))
-    by_label: dict[str, list[tuple[float, float]]] = {'same': [], 'other': []}
+    by_label: dict[str, list[tuple[float, float, float]]] = {'same': [], 'other': []}
     for out, rec in pairs:
         dist_file = out / 'distances.json'
         if not dist_file.exists():
@@ -91,10 +101,11 @@ def report(args: list[str]) -> None:
         raise SystemExit('need comparisons of both labels')
     print(f'{len(same)} comparisons with the track of the detected person, {len(other)} '
           f'with another person\'s')
-    print('| bins | same: quartiles | other: quartiles | AUC | other <= same p10 / p25 / '
+    print('| cue | same: quartiles | other: quartiles | AUC | other <= same p10 / p25 / '
           'p50 |')
     print('| --- | --- | --- | --- | --- |')
-    for col, name in ((0, '512'), (1, '64'), (2, 'minus the gain')):
+    for col, name in ((0, 'distance, 512 bins'), (1, 'distance, 64 bins'),
+                      (2, 'minus the gain')):
         s, o = same[:, col], other[:, col]
         q = ' / '.join(f'{v:.3f}' for v in np.percentile(s, [25, 50, 75]))
         r = ' / '.join(f'{v:.3f}' for v in np.percentile(o, [25, 50, 75]))
