@@ -834,16 +834,29 @@ def test_bench_detection_reports_times_and_tracks_five_people_without_births():
     assert summary['pipeline_4cams_fps'] > 0
 
 
-def test_a_track_moved_or_born_recently_is_not_moved_again_and_no_twin_is_born():
+@pytest.mark.parametrize('again_gain', [float('inf'), None])
+def test_a_track_moved_or_born_recently_is_not_moved_again_and_no_twin_is_born(again_gain):
     """Within ``relocate_interval`` of a track's birth a detection that its model explains
-    is dropped: neither a move (a young model in a group would hop) nor a second birth."""
-    tracker, step = _drifted_walker(8)                # drift 0.5 s after the birth
+    is dropped: neither a move (a young model in a group would hop) nor a second birth -
+    unless the gain is above ``move_again_gain`` (the default): then the young track is
+    moved onto its person, once."""
+    from dataclasses import replace
+
+    def before_drift(tracker):
+        if again_gain is not None:
+            tracker.detection.config = replace(tracker.detection.config,
+                                               move_again_gain=again_gain)
+    tracker, step = _drifted_walker(8, before_drift)  # drift 0.5 s after the birth
     actions = []
     for k in range(8, 20):
         actions += step(k)[1]
     assert tracker.track_ids == [1]
-    assert any(a.startswith('drop') for a in actions)
-    assert not any(a.startswith('move') or a == 'birth' for a in actions)
+    assert 'birth' not in actions
+    moves = [a for a in actions if a.startswith('move')]
+    if again_gain == float('inf'):
+        assert moves == [] and any(a.startswith('drop') for a in actions), actions
+    else:                       # back on its person: no detection beside it after
+        assert moves == ['move 1 (again)'], actions
 
 
 def test_deferred_search_gives_the_same_tracks_as_the_full_step():
@@ -1675,6 +1688,43 @@ def test_a_look_alike_track_is_moved_by_a_gain_below_the_relocate_margin(
     for bad in (float('nan'), float('inf'), -0.5):
         with pytest.raises(DetectionError, match='look_alike_slack'):
             AutoDetectionConfig(look_alike_slack=bad)
+
+
+@pytest.mark.parametrize('again_gain, gain, actions_wanted', [
+    (4.0, 6.0, ['move 1', 'move 1 (again)', 'drop (track 1 placed recently)']),
+    (4.0, 3.0, ['move 1', 'drop (track 1 placed recently)']),
+    (float('inf'), 6.0, ['move 1', 'drop (track 1 placed recently)'])])
+def test_a_track_placed_moments_ago_is_moved_again_by_a_strong_gain_once(
+        monkeypatch, again_gain, gain, actions_wanted):
+    """Track 1 follows a person in blue at (2, 2.5); she stands at (2.75, 2.5) from frame
+    40, back at (2, 2.5) from frame 50 and at (2.75, 2.5) again from frame 60, the gain of
+    track 1's model forced to ``gain``. Her first detection moves track 1; the next comes
+    within ``relocate_interval`` of that move and is dropped, unless the gain is above
+    ``move_again_gain``: then track 1 is moved again and follows her back, once - the
+    third detection, within the interval of a move made that way, is dropped."""
+    from mbtrack_ros.core.detection.manager import AutoDetection
+
+    rng = np.random.default_rng(5)
+    calib, bgs, tracker = _painted_room_tracker(4, reach_radius=0.0, relocate_hidden=False,
+                                                reuse_hidden=False,
+                                                move_again_gain=again_gain)
+    here, there = person(2.0, 2.5, theta=0.0), person(2.75, 2.5, theta=0.0)
+    actions = []
+    for k in range(70):
+        if k == 40:
+            assert tracker.track_ids == [1]
+            monkeypatch.setattr(AutoDetection, '_explains', lambda self, *a: gain)
+        who = here if k < 40 or 50 <= k < 60 else there
+        tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, [who], rng))
+        actions += [d['action'] for d in tracker.detection.decisions if k >= 40]
+    # each action once, in this order (a person detected again on the next frames
+    # gives the same action again: repeats dropped)
+    seen = [a for i, a in enumerate(actions) if a not in actions[:i]]
+    assert seen == actions_wanted, actions
+    assert tracker.track_ids == [1]
+    for bad in (float('nan'), float('-inf')):
+        with pytest.raises(DetectionError, match='move_again_gain'):
+            AutoDetectionConfig(move_again_gain=bad)
 
 
 def test_of_two_tracks_a_detection_could_move_the_one_that_looks_like_it_is_moved(
