@@ -772,6 +772,7 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
             kind = words[0] + (' weak' if weak else ' young' if young else
                                ' hidden' if 'hidden' in e['action'] else
                                ' beside' if 'beside' in e['action'] else
+                               ' again' if '(again)' in e['action'] else
                                ' before a move' if '(not' in e['action'] else '')
             if kind == 'move beside':   # how far the moved track was (beside_radius)
                 gap = next(n[1] for n in e['near'] if int(n[0]) == tid)
