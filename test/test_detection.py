@@ -1700,8 +1700,9 @@ def test_a_track_placed_moments_ago_is_moved_again_by_a_strong_gain_once(
     40, back at (2, 2.5) from frame 50 and at (2.75, 2.5) again from frame 60, the gain of
     track 1's model forced to ``gain``. Her first detection moves track 1; the next comes
     within ``relocate_interval`` of that move and is dropped, unless the gain is above
-    ``move_again_gain``: then track 1 is moved again and follows her back, once - the
-    third detection, within the interval of a move made that way, is dropped."""
+    ``move_again_gain``: then track 1 is moved again, once - the third detection, within
+    the interval of a move made that way, is dropped. (The actions are what is asserted:
+    alone in the room she is followed back either way.)"""
     from mbtrack_ros.core.detection.manager import AutoDetection
 
     rng = np.random.default_rng(5)
