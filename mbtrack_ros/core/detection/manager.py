@@ -980,6 +980,7 @@ class AutoDetection:
         movable = []                # indices of the tracks the gain would move
         unalike = []                # (id, distance) of those move_distance kept back
         likeness = {}               # id -> appearance distance to the detection, once each
+        gains = {}                  # id -> appearance gain (nats per side camera), unrounded
         for k in keep:
             tid = tracks[k].track_id
             d = float(np.hypot(*(means[k, [X, Y]] - det.xy)))
@@ -987,7 +988,7 @@ class AutoDetection:
             if d > cfg.relocate_radius or ref is None or tid in moved \
                     or not ref.view_angles.size:
                 continue
-            gain = self._explains(ref, means[k], state, evidence)
+            gain = gains[tid] = self._explains(ref, means[k], state, evidence)
             unlike = likeness[tid] = model_distance(ref, model)
             near.append((int(tid), round(d, 2), round(gain, 3), round(unlike, 3)))
             gate = cfg.gain_gate(det.score, gain, unlike)
@@ -1068,8 +1069,7 @@ class AutoDetection:
         tid = tracks[best[0]].track_id
         again = False
         if not (hidden or beside) and self._placed_recently(tid, stamp_ns):
-            gain = next(n[2] for n in near if n[0] == tid)
-            again = gain > cfg.move_again_gain \
+            again = gains[tid] > cfg.move_again_gain \
                 and self._moved_again.get(tid) != self._placed.get(tid)
             if not again:
                 info['action'] = f'drop (track {tid} placed recently)'
