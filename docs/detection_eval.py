@@ -702,7 +702,7 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
             gt.setdefault(r.frame, []).append(r)
         counts: dict[tuple[str, str], int] = {}
         for e in events:
-            if e['kind'] == 'decision' and ('unlike' in e or '(hidden, far)' in e['action']):
+            if e['kind'] == 'decision' and ('unlike' in e or 'far)' in e['action']):
                 compared += 'unlike' in e
                 if e.get('reuse') or 'unlike' not in e:
                     moved = (f", track {e['unlike'][0]}'s model {e['unlike'][1]:.3f}, lost "
@@ -771,6 +771,7 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
             label = decision_label(d, frames, gt[f], e, tid)
             kind = words[0] + (' weak' if weak else ' young' if young else
                                ' hidden' if 'hidden' in e['action'] else
+                               ' doubtful' if '(doubtful' in e['action'] else
                                ' beside' if 'beside' in e['action'] else
                                ' again' if '(again)' in e['action'] else
                                ' before a move' if '(not' in e['action'] else '')
@@ -805,7 +806,7 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
         print('\n'.join(beside_lines))
     print(f'{compared} decisions compared the model of the track to be moved with the lost '
           f"tracks' (reuse_before_moving); those with a lost track within reuse_radius, and "
-          f'the far hidden moves (reuse_hidden):')
+          f'the far hidden and doubtful moves (reuse_hidden, reuse_doubtful):')
     print('\n'.join(rule_lines))
     if kept_back:
         print(f'{len(kept_back)} tracks kept from a move by move_distance (label: the person '

@@ -1619,6 +1619,38 @@ def test_a_hidden_track_1_2_m_away_is_given_back_its_person_when_she_looks_alike
     assert (np.hypot(mean[0] - 3.2, mean[1] - 2.5) < 0.3) == moved
 
 
+@pytest.mark.parametrize('doubtful, who, moved', [(0.9, 'same', True), (0.0, 'same', False),
+                                                  (0.9, 'other', False)])
+def test_a_reported_track_of_doubtful_existence_is_given_back_its_person_like_a_hidden_one(
+        doubtful, who, moved):
+    """As above, but track 1 stays reported (``report_hidden``) while its existence falls
+    once she has stepped 1.2 m away. With ``reuse_doubtful`` 0.9 it counts as hidden and
+    her detection moves it there ("doubtful, far"); with 0 a reported track is never taken
+    (a new track is born), nor is it for a person dressed differently."""
+    rng = np.random.default_rng(5)
+    calib, bgs, tracker = _painted_room_tracker(4, report_hidden=True, reach_radius=0.0,
+                                                reuse_doubtful=doubtful)
+    here = person(2.0, 2.5, theta=0.0)
+    there = person(3.2, 2.5, theta=0.0, **({} if who == 'same' else {'colours': YELLOW}))
+    actions, existence = [], []
+    for k in range(52):
+        if k == 40:
+            assert tracker.track_ids == [1]
+        tracker.step(int(round(k * 1e9 / FPS)),
+                     paint(calib, bgs, [here if k < 40 else there], rng))
+        if k >= 40:
+            actions += [d['action'] for d in tracker.detection.decisions]
+            existence.append(tracker.detection.aux[1].existence)
+    assert min(existence) < 0.5         # not reported without report_hidden
+    assert ('move 1 (doubtful, far)' in actions) == moved, actions
+    assert ('birth' in actions) == (not moved), actions
+    mean = tracker.filter._particles[1].mean(axis=0)
+    assert (np.hypot(mean[0] - 3.2, mean[1] - 2.5) < 0.3) == moved
+    for bad in (float('nan'), -0.1, 1.5):
+        with pytest.raises(DetectionError, match='reuse_doubtful'):
+            AutoDetectionConfig(reuse_doubtful=bad)
+
+
 def _move_or_birth(monkeypatch, who: str, gain: float, **detection):
     """Track 1 follows a person in blue; from frame 40 she is gone and somebody (``who``:
     'same', the blue person, or 'other', dressed in yellow) stands 0.75 m from the track,

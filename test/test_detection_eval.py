@@ -165,17 +165,21 @@ def test_suite_renders_runs_scores_and_resumes(detection_eval, tmp_path, capsys)
     assert [c[:2] for c in shares['1.0']] == [c[:2] for c in shares['0.0']]
     (run_dir / 'visibility.csv').write_text('\n'.join(vis) + '\n')
     # 'decisions' names each drop by the track it concerned, young_look_alike's too, and
-    # counts move_again_gain's moves apart
+    # counts move_again_gain's and reuse_doubtful's moves apart
     events = (run_dir / 'events.json').read_text()
     tid = next(iter(shown))[1]
     young = {'kind': 'decision', 'frame': 20, 'xy': [3.0, 2.5], 'score': 4.0,
              'near': [[tid, 0.6, -1.0, 0.5]], 'action': f'drop (young look-alike {tid})'}
     again = dict(young, frame=21, near=[[tid, 0.6, 5.0, 0.3]], action=f'move {tid} (again)')
-    (run_dir / 'events.json').write_text(json.dumps(json.loads(events) + [young, again]))
+    doubtful = dict(young, frame=22, near=[], action=f'move {tid} (doubtful, far)')
+    (run_dir / 'events.json').write_text(json.dumps(json.loads(events)
+                                                    + [young, again, doubtful]))
     detection_eval.decisions([(run_dir, rec)])
     printed = capsys.readouterr().out
     assert re.search(r'^all .*drop young (same|other|unmatched): 1\b', printed, re.M)
     assert re.search(r'^all .*move again (same|other|unmatched): 1\b', printed, re.M)
+    assert re.search(r'^all .*move doubtful (same|other|unmatched): 1\b', printed, re.M)
+    assert re.search(rf'frame 22: move {tid} \(doubtful, far\)', printed)
     (run_dir / 'events.json').write_text(events)
     stamp = (run_dir / 'tracks.csv').stat().st_mtime_ns
     assert detection_eval.main(['suite', str(out), '--seeds', '0', '--recordings', 'crnc1',

@@ -179,6 +179,15 @@ class AutoDetectionConfig:
             turned back into the room left her track hidden 0.8 m behind her, more than
             1 m from her detection, and was born again under a new id (docs/detection.md,
             "Hidden tracks as far as lost ones").
+        reuse_doubtful: a reported track whose existence is below this counts as hidden
+            for ``reuse_hidden`` (logged "move N (doubtful, far)"); 0 disables. On crnc3 a
+            hidden track 1.05 m behind its person was shown again (existence 0.61) in the
+            frame her detection came, and she was born again beside it; of the births on
+            182 clear-room runs with a reported track within ``reuse_radius``, the 4 with
+            such a track below 0.9 had it on her own person once, on another three times
+            (appearance distances 0.70-0.72, over ``reuse_distance``), the 72 with one
+            from 0.9 to 0.999 never on her own (docs/detection.md, "A track shown again
+            moments ago").
         duplicate_by_reporting: of two tracks on one person (release ``merge_radius``,
             ``merge_time``) release the one reported without a break for the shorter time
             (born, moved or hidden later) instead of the younger one.
@@ -313,6 +322,7 @@ class AutoDetectionConfig:
     reuse_in_entry_zones: bool = True
     reuse_before_moving: bool = True
     reuse_hidden: bool = True
+    reuse_doubtful: float = 0.9
     duplicate_by_reporting: bool = True
     duplicate_margin: float = 8.0
     duplicate_own_support: bool = True
@@ -373,6 +383,8 @@ class AutoDetectionConfig:
                 and 0 <= self.reuse_distance <= 1):
             raise DetectionError('reuse_time and reuse_radius must be >= 0, reuse_distance '
                                  'in [0, 1]')
+        if not 0.0 <= self.reuse_doubtful <= 1.0:
+            raise DetectionError(f'reuse_doubtful must be in [0, 1], got {self.reuse_doubtful}')
         if not self.sigma > 0 or not self.clutter_distance > 0:
             raise DetectionError('sigma and clutter_distance must be > 0')
         if not self.beside_support >= 0:
@@ -1044,15 +1056,18 @@ class AutoDetection:
             info['action'] = 'drop (weak beside a track)'
             self.decisions.append(info)
             return None
-        far = False
+        far = doubtful = False
         if best is None:
             reused = self._reusable(det, model, models, info)
             if reused is None and cfg.reuse_hidden:
                 # a hidden track within reuse_radius that looks like the detection is
-                # given back its person like a lost one
+                # given back its person like a lost one; so is one reported with a
+                # doubtful existence (shown again moments ago, or fading)
                 best = self._nearest_hidden(det, tracks, keep, means, models, moved,
-                                            stamp_ns, radius=cfg.reuse_radius, like=model)
+                                            stamp_ns, radius=cfg.reuse_radius, like=model,
+                                            doubtful=cfg.reuse_doubtful)
                 hidden = far = best is not None
+                doubtful = hidden and self.reported(tracks[best[0]].track_id)
             if best is None and reused is None and cfg.young_look_alike:
                 young = [(n[1], n[0]) for n in near
                          if cfg.looks_alike(n[3]) and self._placed_recently(n[0], stamp_ns)]
@@ -1076,7 +1091,9 @@ class AutoDetection:
                 self.decisions.append(info)
                 return None
             self._moved_again[tid] = int(stamp_ns)
-        info['action'] = f'move {tid}' + (' (hidden, far)' if far else ' (hidden)' if hidden
+        info['action'] = f'move {tid}' + (' (doubtful, far)' if doubtful
+                                          else ' (hidden, far)' if far
+                                          else ' (hidden)' if hidden
                                           else ' (beside)' if beside
                                           else ' (again)' if again else '')
         self.decisions.append(info)
@@ -1096,18 +1113,21 @@ class AutoDetection:
     def _nearest_hidden(self, det: Detection, tracks: Sequence[TrackEstimate],
                         keep: Sequence[int], means: np.ndarray,
                         models: Mapping[int, PersonModel], moved: set[int], stamp_ns: int,
-                        radius: float | None = None, like: PersonModel | None = None
-                        ) -> tuple[int, float] | None:
+                        radius: float | None = None, like: PersonModel | None = None,
+                        doubtful: float = 0.0) -> tuple[int, float] | None:
         """(index, distance) of the nearest unreported track within ``radius`` (default
         ``relocate_radius``) of the detection (a track whose existence fell below the
-        report threshold), or None; with ``like`` only a track whose model is within
-        ``reuse_distance`` of that model (``reuse_hidden``). Not a track born or moved
-        within ``relocate_interval``: hidden again so soon, its model does not explain the
-        person there."""
+        report threshold; or, reported, below ``doubtful``), or None; with ``like`` only a
+        track whose model is within ``reuse_distance`` of that model (``reuse_hidden``).
+        Not a track born or moved within ``relocate_interval``: hidden again so soon, its
+        model does not explain the person there."""
         best = None
         for k in keep:
             tid = tracks[k].track_id
-            if tid in moved or tid not in models or self.reported(tid):
+            if tid in moved or tid not in models:
+                continue
+            aux = self.aux.get(tid)
+            if self.reported(tid) and not (aux is not None and aux.existence < doubtful):
                 continue
             if self._placed_recently(tid, stamp_ns):
                 continue
