@@ -707,7 +707,9 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
                 if e.get('reuse') or 'unlike' not in e:
                     moved = (f", track {e['unlike'][0]}'s model {e['unlike'][1]:.3f}, lost "
                              + ', '.join(f'{t} ({m:.2f} m, {u:.3f})' for t, m, u in e['reuse'])
-                             if 'unlike' in e else '')
+                             if 'unlike' in e else
+                             ', {:.2f} m, appearance distance {:.3f}, existence {:.3f}'.format(
+                                 *e['far'][1:]) if 'far' in e else '')
                     rule_lines.append(f"  {out.name} frame {e['frame']}: {e['action']}, score "
                                       f"{e['score']:.2f}{moved}")
             # the gain of each track the identity check compared (id -> nats)

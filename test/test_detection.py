@@ -1632,7 +1632,7 @@ def test_a_reported_track_of_doubtful_existence_is_given_back_its_person_like_a_
                                                 reuse_doubtful=doubtful)
     here = person(2.0, 2.5, theta=0.0)
     there = person(3.2, 2.5, theta=0.0, **({} if who == 'same' else {'colours': YELLOW}))
-    actions, existence = [], []
+    actions, existence, far = [], [], []
     for k in range(52):
         if k == 40:
             assert tracker.track_ids == [1]
@@ -1640,9 +1640,13 @@ def test_a_reported_track_of_doubtful_existence_is_given_back_its_person_like_a_
                      paint(calib, bgs, [here if k < 40 else there], rng))
         if k >= 40:
             actions += [d['action'] for d in tracker.detection.decisions]
+            far += [d['far'] for d in tracker.detection.decisions if 'far' in d]
             existence.append(tracker.detection.aux[1].existence)
     assert min(existence) < 0.5         # not reported without report_hidden
     assert ('move 1 (doubtful, far)' in actions) == moved, actions
+    if moved:   # logged: the track, its distance, appearance distance and existence
+        (tid, metres, unlike, exists), = far
+        assert tid == 1 and 1.0 < metres < 1.5 and unlike <= 0.55 and exists < 0.9
     assert ('birth' in actions) == (not moved), actions
     mean = tracker.filter._particles[1].mean(axis=0)
     assert (np.hypot(mean[0] - 3.2, mean[1] - 2.5) < 0.3) == moved

@@ -171,7 +171,8 @@ def test_suite_renders_runs_scores_and_resumes(detection_eval, tmp_path, capsys)
     young = {'kind': 'decision', 'frame': 20, 'xy': [3.0, 2.5], 'score': 4.0,
              'near': [[tid, 0.6, -1.0, 0.5]], 'action': f'drop (young look-alike {tid})'}
     again = dict(young, frame=21, near=[[tid, 0.6, 5.0, 0.3]], action=f'move {tid} (again)')
-    doubtful = dict(young, frame=22, near=[], action=f'move {tid} (doubtful, far)')
+    doubtful = dict(young, frame=22, near=[], action=f'move {tid} (doubtful, far)',
+                    far=[tid, 1.05, 0.365, 0.609])
     (run_dir / 'events.json').write_text(json.dumps(json.loads(events)
                                                     + [young, again, doubtful]))
     detection_eval.decisions([(run_dir, rec)])
@@ -179,7 +180,8 @@ def test_suite_renders_runs_scores_and_resumes(detection_eval, tmp_path, capsys)
     assert re.search(r'^all .*drop young (same|other|unmatched): 1\b', printed, re.M)
     assert re.search(r'^all .*move again (same|other|unmatched): 1\b', printed, re.M)
     assert re.search(r'^all .*move doubtful (same|other|unmatched): 1\b', printed, re.M)
-    assert re.search(rf'frame 22: move {tid} \(doubtful, far\)', printed)
+    assert re.search(rf'frame 22: move {tid} \(doubtful, far\), score 4.00, 1.05 m, '
+                     r'appearance distance 0.365, existence 0.609$', printed, re.M)
     (run_dir / 'events.json').write_text(events)
     stamp = (run_dir / 'tracks.csv').stat().st_mtime_ns
     assert detection_eval.main(['suite', str(out), '--seeds', '0', '--recordings', 'crnc1',
