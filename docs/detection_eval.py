@@ -675,6 +675,22 @@ def decision_label(d, frames: np.ndarray, people: list, decision: dict, tid: int
     return 'same' if who == at else 'unmatched' if who is None else 'other'
 
 
+def decision_track(decision: dict) -> int | None:
+    """The track a detection decision of events.json concerned: the one it moved, gave
+    back its id or was dropped for (a weak detection's: the nearest track compared); None
+    for a birth."""
+    words = decision['action'].split()
+    if words[0] in ('move', 'reuse'):
+        return int(words[1])
+    if decision['action'].startswith('drop (weak beside'):
+        return int(min(decision['near'], key=lambda n: n[1])[0])
+    if decision['action'].startswith('drop (young look-alike'):
+        return int(words[-1].rstrip(')'))
+    if words[0] == 'drop':          # 'drop (track N placed recently)'
+        return int(decision['action'].split('track ')[1].split()[0])
+    return None
+
+
 def _spread(values: list[float]) -> str:
     """'min / quartiles / max' of ``values``, three decimals."""
     return ' / '.join(f'{v:.3f}' for v in np.percentile(values, [0, 25, 50, 75, 100]))
@@ -763,13 +779,7 @@ def decisions(pairs: list[tuple[Path, Path]]) -> None:
             f = e['frame']
             weak = e['action'].startswith('drop (weak beside')
             young = e['action'].startswith('drop (young look-alike')
-            if weak:    # beside_threshold's drop: labelled by the nearest track compared
-                tid = int(min(e['near'], key=lambda n: n[1])[0])
-            elif young:     # young_look_alike's drop names the young track
-                tid = int(words[-1].rstrip(')'))
-            else:
-                tid = int(words[1] if words[0] != 'drop'
-                          else e['action'].split('track ')[1].split()[0])
+            tid = decision_track(e)
             label = decision_label(d, frames, gt[f], e, tid)
             kind = words[0] + (' weak' if weak else ' young' if young else
                                ' hidden' if 'hidden' in e['action'] else

@@ -22,7 +22,7 @@ for out, rec in pairs('placed_drops.py OUT REC [OUT REC ...]'):
         if not (again or action.endswith('placed recently)')) or not people.get(e['frame']):
             continue
         f = e['frame']
-        tid = int(action.split()[1 if again else 2])
+        tid = detection_eval.decision_track(e)
         _, dist, gain, unlike = next(n for n in e['near'] if n[0] == tid)
         before = [f - g for g in placed.get(tid, []) if g < f]
         label = detection_eval.decision_label(detail, frames, people[f], e, tid)
