@@ -89,7 +89,8 @@ def _lagging(monkeypatch, beside_support, lag=0.42, frames=14, tracked=36, until
     reach is off, and it stays reported (on the
     recordings such tracks had existence 0.99-1.0 when the birth came; in this painted
     room its existence falls, and a hidden track is the other rule's,
-    ``relocate_hidden``). ``beside_threshold`` 0: any detection beside it may be born.
+    ``relocate_hidden``; so is a reported one of doubtful existence, ``reuse_doubtful``,
+    off here). ``beside_threshold`` 0: any detection beside it may be born.
     Returns the tracker and the decisions' actions (the whole records are appended to
     ``decisions`` when given); ``young_look_alike``: the config's switch."""
     monkeypatch.setattr(AutoDetection, 'reported', lambda self, tid: True)
@@ -100,7 +101,7 @@ def _lagging(monkeypatch, beside_support, lag=0.42, frames=14, tracked=36, until
     det = tracker.detection
     det.config = replace(det.config, reach_radius=0.0, relocate_margin=relocate_margin,
                          weak_relocate_margin=weak_relocate_margin, relocate_hidden=False,
-                         beside_support=beside_support,
+                         reuse_doubtful=0.0, beside_support=beside_support,
                          beside_threshold=beside_threshold,
                          young_look_alike=young_look_alike)
 
