@@ -184,9 +184,11 @@ class AutoDetectionConfig:
             hidden track 1.05 m behind its person was shown again (existence 0.61) in the
             frame her detection came, and she was born again beside it. On 201 clear-room
             runs, of the reported tracks within ``reuse_radius`` of a birth, the 4 below
-            0.9 were on her once, on others three times (appearance distances 0.70-0.72,
-            over ``reuse_distance``); the 72 from 0.9 to 0.999 never on her
-            (docs/detection.md, "A track shown again moments ago").
+            0.9 had followed the detected person once, others three times (appearance
+            distances 0.70-0.72, over ``reuse_distance``); the 72 from 0.9 to 0.999 never
+            the detected person (docs/detection.md, "A track shown again moments ago").
+            With ``report_hidden`` every hidden track is reported, so this level is what
+            lets ``reuse_hidden`` take them.
         duplicate_by_reporting: of two tracks on one person (release ``merge_radius``,
             ``merge_time``) release the one reported without a break for the shorter time
             (born, moved or hidden later) instead of the younger one.
@@ -978,7 +980,8 @@ class AutoDetection:
         moved (by the gain or hidden), a lost track whose model is nearer the detection's
         takes its id back instead (``reuse_before_moving``); before a birth, a released
         track and then a hidden one within ``reuse_radius`` that look alike are given
-        back their person (``reuse_time``, ``reuse_hidden``); a detection that would still
+        back their person (``reuse_time``, ``reuse_hidden``; a reported track of doubtful
+        existence counts as hidden, ``reuse_doubtful``); a detection that would still
         be born beside a look-alike track born or moved within ``relocate_interval`` is
         dropped (``young_look_alike``).
         """
