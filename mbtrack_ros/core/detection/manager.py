@@ -1066,15 +1066,15 @@ class AutoDetection:
                 # given back its person like a lost one; so is one reported with a
                 # doubtful existence (shown again moments ago, or fading)
                 best = self._nearest_hidden(det, tracks, keep, means, models, moved,
-                                            stamp_ns, radius=cfg.reuse_radius, like=model,
-                                            doubtful=cfg.reuse_doubtful)
+                                            stamp_ns, radius=cfg.reuse_radius,
+                                            like=(model, likeness),
+                                            below_existence=cfg.reuse_doubtful)
                 hidden = far = best is not None
                 if far:
                     tid = tracks[best[0]].track_id
                     doubtful = self.reported(tid)
                     # (id, metres, appearance distance, existence) of the track moved
-                    info['far'] = (int(tid), round(best[1], 2),
-                                   round(model_distance(models[tid], model), 3),
+                    info['far'] = (int(tid), round(best[1], 2), round(likeness[tid], 3),
                                    round(float(self.aux[tid].existence), 3))
             if best is None and reused is None and cfg.young_look_alike:
                 young = [(n[1], n[0]) for n in near
@@ -1121,30 +1121,36 @@ class AutoDetection:
     def _nearest_hidden(self, det: Detection, tracks: Sequence[TrackEstimate],
                         keep: Sequence[int], means: np.ndarray,
                         models: Mapping[int, PersonModel], moved: set[int], stamp_ns: int,
-                        radius: float | None = None, like: PersonModel | None = None,
-                        doubtful: float = 0.0) -> tuple[int, float] | None:
+                        radius: float | None = None,
+                        like: tuple[PersonModel, dict[int, float]] | None = None,
+                        below_existence: float = 0.0) -> tuple[int, float] | None:
         """(index, distance) of the nearest unreported track within ``radius`` (default
         ``relocate_radius``) of the detection (a track whose existence fell below the
-        report threshold; or, reported, below ``doubtful``), or None; with ``like`` only a
-        track whose model is within ``reuse_distance`` of that model (``reuse_hidden``).
-        Not a track born or moved within ``relocate_interval``: hidden again so soon, its
-        model does not explain the person there."""
+        report threshold; or, reported, below ``below_existence``), or None; with ``like``
+        (the detection's model, and the cache of appearance distances to it by track id,
+        filled here) only a track whose model is within ``reuse_distance`` of that model
+        (``reuse_hidden``). Not a track born or moved within ``relocate_interval``: hidden
+        again so soon, its model does not explain the person there."""
         best = None
         for k in keep:
             tid = tracks[k].track_id
             if tid in moved or tid not in models:
                 continue
             aux = self.aux.get(tid)
-            if self.reported(tid) and not (aux is not None and aux.existence < doubtful):
+            if self.reported(tid) \
+                    and not (aux is not None and aux.existence < below_existence):
                 continue
             if self._placed_recently(tid, stamp_ns):
                 continue
             d = float(np.hypot(*(means[k, [X, Y]] - det.xy)))
             if d > (self.config.relocate_radius if radius is None else radius):
                 continue
-            if like is not None and model_distance(models[tid], like) \
-                    > self.config.reuse_distance:
-                continue
+            if like is not None:
+                model, likeness = like
+                if tid not in likeness:
+                    likeness[tid] = model_distance(models[tid], model)
+                if likeness[tid] > self.config.reuse_distance:
+                    continue
             if best is None or d < best[1]:
                 best = (k, d)
         return best
