@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
+from mbtrack_ros.recording.csvfiles import read_ground_truth
+
 _spec = importlib.util.spec_from_file_location(
     'detection_eval', Path(__file__).resolve().parents[1] / 'detection_eval.py')
 detection_eval = importlib.util.module_from_spec(_spec)
@@ -46,7 +48,12 @@ def tracked_frames(rec: Path, seed: int, last: int, **config) -> Iterator[tuple]
 def run_context(out: Path, rec: Path) -> tuple:
     """(events, matching detail, its frames, ground-truth rows by frame, id -> frames the
     track was born or moved at) of one ``run`` output against its recording."""
-    tracks, truth, events, _ = detection_eval._load(out, rec)
+    return context(*detection_eval._load(out, rec)[:3])
+
+
+def context(tracks: list, truth: list, events: list) -> tuple:
+    """:func:`run_context` of a run already loaded (``detection_eval._load``'s first three
+    values), for a diag that needs the tracks too."""
     detail, frames = detection_eval._matching(tracks, truth)
     people: dict[int, list] = {}
     for r in truth:
@@ -58,6 +65,14 @@ def run_context(out: Path, rec: Path) -> tuple:
         elif e['kind'] == 'decision' and e['action'].startswith('move '):
             placed.setdefault(int(e['action'].split()[1]), []).append(e['frame'])
     return events, detail, frames, people, placed
+
+
+def places(rec: Path) -> dict[int, dict[int, np.ndarray]]:
+    """Ground-truth floor places (x, y) by frame and person id of a recording."""
+    out: dict[int, dict[int, np.ndarray]] = {}
+    for r in read_ground_truth(rec / 'ground_truth.csv'):
+        out.setdefault(r.frame, {})[r.person_id] = np.array([r.x, r.y])
+    return out
 
 
 def person_velocity(people: dict[int, list], frame: int, xy, *, half: int = 3,

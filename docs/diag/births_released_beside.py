@@ -18,13 +18,16 @@ WINDOW = float(sys.argv.pop(1)) * detection_eval.FPS     # frames
 counts: dict[str, int] = {}
 for out, rec in pairs(USAGE):
     events, detail, frames, people, _ = run_context(out, rec)
-    ends = {e['id']: e for e in events if e['kind'] == 'end'}
+    ends: dict[int, list] = {}          # an id reused after its release ends again
+    for e in events:
+        if e['kind'] == 'end':
+            ends.setdefault(e['id'], []).append(e)
     for e in events:
         if e['kind'] != 'decision' or e['action'] != 'birth' or not people.get(e['frame']):
             continue
         f = e['frame']
         for row in e.get('near', []):
-            end = ends.get(int(row[0]))
+            end = next((x for x in ends.get(int(row[0]), []) if x['frame'] >= f), None)
             if end is None or end['reason'] not in ('spare', 'duplicate') \
                     or not f <= end['frame'] <= f + WINDOW:
                 continue

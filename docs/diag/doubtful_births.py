@@ -11,7 +11,7 @@ usage: .venv/bin/python docs/diag/doubtful_births.py LEVEL OUT REC [OUT REC ...]
 import sys
 
 import numpy as np
-from _eval import detection_eval, pairs, run_context
+from _eval import context, detection_eval, pairs
 
 from mbtrack_ros.core.detection.manager import AutoDetectionConfig
 
@@ -24,9 +24,10 @@ BAND = AutoDetectionConfig().reuse_doubtful     # counts split at the default le
 
 counts: dict[tuple[str, str], int] = {}
 for out, rec in pairs(USAGE):
-    events, detail, frames, people, _ = run_context(out, rec)
+    tracks, truth, events, _ = detection_eval._load(out, rec)     # loaded once
+    events, detail, frames, people, _ = context(tracks, truth, events)
     shown: dict[int, list] = {}
-    for t in detection_eval._load(out, rec)[0]:
+    for t in tracks:
         shown.setdefault(t.frame, []).append(t)
     for e in events:
         action = e.get('action', '') if e['kind'] == 'decision' else ''

@@ -7,13 +7,12 @@ pixel of scores 0, the best score (``single_target_loglik``). Steps the tracker 
 
 usage: .venv/bin/python docs/diag/edge_loglik.py REC SEED TRACK PERSON FRAME[,FRAME...]
 """
-import csv
 import sys
 from pathlib import Path
 
 import numpy as np
 
-from _eval import tracked_frames
+from _eval import places, tracked_frames
 from mbtrack_ros.core.appearance import relative_angle, single_target_loglik
 from mbtrack_ros.core.detection import release
 from mbtrack_ros.core.detection.features import span_coverage
@@ -24,10 +23,7 @@ if len(sys.argv) != 6:
     sys.exit('usage: edge_loglik.py REC SEED TRACK PERSON FRAME[,FRAME...]')
 rec, seed, tid, pid = Path(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4])
 frames = sorted(int(f) for f in sys.argv[5].split(','))
-people: dict[int, dict[int, np.ndarray]] = {}
-for r in csv.DictReader(open(rec / 'ground_truth.csv')):
-    people.setdefault(int(r['frame']), {})[int(r['person_id'])] = np.array(
-        [float(r['x']), float(r['y'])])
+people = places(rec)
 evidence = {}
 support = release.Releaser.support
 

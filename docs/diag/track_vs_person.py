@@ -5,21 +5,17 @@ the tracker as ``detection_eval.py run`` does (same seed).
 
 usage: .venv/bin/python docs/diag/track_vs_person.py REC SEED TRACK PERSON FIRST LAST
 """
-import csv
 import sys
 from pathlib import Path
 
 import numpy as np
 
-from _eval import tracked_frames
+from _eval import places, tracked_frames
 
 if len(sys.argv) != 7:
     sys.exit('usage: track_vs_person.py REC SEED TRACK PERSON FIRST LAST')
 rec, seed, tid, pid, first, last = (Path(sys.argv[1]), *map(int, sys.argv[2:]))
-people: dict[int, dict[int, np.ndarray]] = {}
-for r in csv.DictReader(open(rec / 'ground_truth.csv')):
-    people.setdefault(int(r['frame']), {})[int(r['person_id'])] = np.array(
-        [float(r['x']), float(r['y'])])
+people = places(rec)
 known: set[int] = set()         # tracks alive at FIRST (other than TRACK): not shown
 for fs, result, _ in tracked_frames(rec, seed, last):
     here = people.get(fs.index, {})
