@@ -24,8 +24,12 @@ EXIT_N = (4.0, 5.0, 5.0, 6.5)                # beyond the north edge
 EXIT_W = (-1.0, 2.0, 0.0, 3.0)               # beyond the west edge
 
 
-def _bounce(p: float, v: float, lo: float, hi: float) -> tuple[float, float]:
-    """Reflection at the walls lo, hi one bounce at a time (the plain reference)."""
+def _bounce(p: float, v: float, lo: float, hi: float,
+            stop: bool) -> tuple[float, float]:
+    """Reflection at the walls lo, hi one bounce at a time (the plain reference); with
+    ``stop`` (``MotionConfig.wall_stops``) a position outside loses its velocity."""
+    if stop and (p < lo or p > hi):
+        v = 0.0
     while p < lo or p > hi:
         p, v = (2 * lo - p, -v) if p < lo else (2 * hi - p, -v)
     return p, v
@@ -35,7 +39,8 @@ def _inside(x: float, y: float, rect) -> bool:
     return rect[0] <= x <= rect[2] and rect[1] <= y <= rect[3]
 
 
-def _reference_walk(start: np.ndarray, moved: np.ndarray, floor, exits) -> np.ndarray:
+def _reference_walk(start: np.ndarray, moved: np.ndarray, floor, exits,
+                    stop: bool) -> np.ndarray:
     """Positions (and velocities) after the move, particle by particle: kept when they land
     in the floor or an exit, else reflected in the rectangle they started from."""
     out = moved.copy()
@@ -44,15 +49,16 @@ def _reference_walk(start: np.ndarray, moved: np.ndarray, floor, exits) -> np.nd
         if any(_inside(x, y, r) for r in (floor, *exits)):
             continue
         home = next((r for r in (floor, *exits) if _inside(*start[i, :2], r)), floor)
-        out[i, 0], out[i, 2] = _bounce(x, out[i, 2], home[0], home[2])
-        out[i, 1], out[i, 3] = _bounce(y, out[i, 3], home[1], home[3])
+        out[i, 0], out[i, 2] = _bounce(x, out[i, 2], home[0], home[2], stop)
+        out[i, 1], out[i, 3] = _bounce(y, out[i, 3], home[1], home[3], stop)
     return out
 
 
 @pytest.mark.parametrize('seed', range(4))
 def test_reflection_in_floor_and_exits_equals_the_plain_reference(seed):
     """Noise-free constant-velocity moves (so the move itself is known) from the floor,
-    from the exits and from outside every rectangle, with steps up to several metres."""
+    from the exits and from outside every rectangle, with steps up to several metres;
+    even seeds with a stopping wall (the default), odd ones with bounces."""
     rng = np.random.default_rng(seed)
     n = 6000
     p = np.zeros((n, 6))
@@ -63,12 +69,13 @@ def test_reflection_in_floor_and_exits_equals_the_plain_reference(seed):
         p[m, 0] = rng.uniform(r[0], r[2], m.sum())
         p[m, 1] = rng.uniform(r[1], r[3], m.sum())
     p[:, 2:4] = rng.normal(0.0, 1.5, (n, 2)) * rng.choice([0.3, 1.0, 4.0], (n, 1))
+    stop = seed % 2 == 0
     cfg = MotionConfig(velocity_noise=0.0, position_noise=0.0, orientation_noise=0.0,
-                       sit_flip_rate=0.0, max_speed=100.0)
+                       sit_flip_rate=0.0, max_speed=100.0, wall_stops=stop)
     out = predict(p, 1.0, cfg, rng, floor=FLOOR, exits=(EXIT_N, EXIT_W))
     free = p.copy()
     free[:, :2] += free[:, 2:4]
-    expected = _reference_walk(p, free, FLOOR, (EXIT_N, EXIT_W))
+    expected = _reference_walk(p, free, FLOOR, (EXIT_N, EXIT_W), stop)
     np.testing.assert_allclose(out[:, :2], expected[:, :2], rtol=0, atol=1e-9)
     np.testing.assert_array_equal(out[:, 2:4], expected[:, 2:4])
     inside = [any(_inside(x, y, r) for r in (FLOOR, EXIT_N, EXIT_W)) for x, y in out[:, :2]]

@@ -134,12 +134,41 @@ def test_floor_reflection():
     rng = np.random.default_rng(4)
     p = np.array([[0.5, 0.5, 1.0, -3.0, 0.0, 0.0]])
     cfg = MotionConfig(velocity_noise=0.0, position_noise=0.0, orientation_noise=0.0,
-                       sit_flip_rate=0.0, max_speed=10.0)
+                       sit_flip_rate=0.0, max_speed=10.0, wall_stops=False)
     out = predict(p, 1.0, cfg, rng, floor=(0.0, 0.0, 2.0, 2.0))
     # x: 0.5 + 1 = 1.5 inside; y: 0.5 - 3 bounces off 0 then 2 -> 1.5, moving down again
     np.testing.assert_allclose(out[0, :4], [1.5, 1.5, 1.0, -3.0])
     out = predict(p, 0.5, cfg, rng, floor=(0.0, 0.0, 2.0, 2.0))
     np.testing.assert_allclose(out[0, :4], [1.0, 1.0, 1.0, 3.0])  # one bounce off y = 0
+    # wall_stops (the default): the same positions, the velocity into the wall is gone and
+    # the velocity along it is kept
+    stops = replace(cfg, wall_stops=True)
+    assert MotionConfig().wall_stops
+    out = predict(p, 0.5, stops, rng, floor=(0.0, 0.0, 2.0, 2.0))
+    np.testing.assert_allclose(out[0, :4], [1.0, 1.0, 1.0, 0.0])
+    inside = predict(p, 0.1, stops, rng, floor=(0.0, 0.0, 2.0, 2.0))
+    np.testing.assert_allclose(inside[0, :4], [0.6, 0.2, 1.0, -3.0])  # no wall: unchanged
+
+
+def test_a_stopping_wall_gives_particles_on_it_no_speed_away_from_it():
+    """A cloud on the wall y = 0 walking along it, one 1/15 s step with velocity noise:
+    the positions are reflected alike, but with bounces the particles that crossed the
+    wall leave with the speed they came at, and the cloud's mean velocity points away from
+    the wall twice as fast as with a stopping wall, where they only keep their speed along
+    it (the drift off a wall of docs/detection.md, "A camera that sees little of a target
+    says nothing about it; a wall stops a particle")."""
+    floor = (0.0, 0.0, 6.0, 5.0)
+    out = {}
+    for stops in (False, True):
+        p = np.zeros((4000, 6))
+        p[:, 0], p[:, 2] = 1.0, 0.7
+        out[stops] = predict(p, 1 / 15, MotionConfig(position_noise=0.0, wall_stops=stops),
+                             np.random.default_rng(8), floor=floor)
+    np.testing.assert_array_equal(out[True][:, :3], out[False][:, :3])
+    crossed = out[True][:, 3] != out[False][:, 3]
+    assert 0.4 < crossed.mean() < 0.6                        # about half crossed the wall
+    assert np.all(out[True][crossed, 3] == 0.0) and np.all(out[False][crossed, 3] > 0.0)
+    assert np.mean(out[True][:, 3]) < 0.6 * np.mean(out[False][:, 3])
 
 
 def _predict_numpy(particles, dt, config, rng, floor=None):
@@ -174,8 +203,11 @@ def _predict_numpy(particles, dt, config, rng, floor=None):
             width = hi - lo
             q = np.mod(p - lo, 2.0 * width)
             q = np.where(q > width, 2.0 * width - q, q)
-            odd = (np.mod(np.floor((p - lo) / width), 2.0) == 1.0) & ((p < lo) | (p > hi))
-            v[odd] *= -1.0
+            if config.wall_stops:
+                v[(p < lo) | (p > hi)] = 0.0
+            else:
+                odd = (np.mod(np.floor((p - lo) / width), 2.0) == 1.0) & ((p < lo) | (p > hi))
+                v[odd] *= -1.0
             out[:, axis] = lo + q
     return out
 
@@ -194,7 +226,8 @@ def test_predict_equals_numpy_version(seed):
                            sit_flip_rate=float(rng.choice([0.0, 0.05, 20.0])),
                            max_speed=float(rng.choice([0.5, 3.0])),
                            velocity_damping=float(rng.choice([0.0, 0.7])),
-                           orientation_follows_velocity=bool(trial % 2))
+                           orientation_follows_velocity=bool(trial % 2),
+                           wall_stops=bool(trial % 4 < 2))
         n = int(rng.integers(1, 120))
         p = np.zeros((n, 6))
         p[:, :2] = rng.uniform(-4.0, 4.0, (n, 2))

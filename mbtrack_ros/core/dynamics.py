@@ -21,11 +21,16 @@ Over a time step ``dt`` (seconds, from image stamps) every particle row
   projection), the uncoupled one 0.68-0.70 m/s (docs/detection.md, "Orientation apart
   from velocity");
 * sitting label: flips with probability ``1 - exp(-sit_flip_rate * dt)``;
-* the floor bounds of the room reflect positions (and the velocity component) back inside;
-  with exits (rectangles beyond a door that share a piece of the floor's border,
-  ``RoomCalibration.exits``) the walkable region is the floor and the exits: a particle that
-  lands in any of them stays, one that lands outside all of them is reflected in the
-  rectangle it started from (the floor when it started outside every rectangle).
+* the floor bounds of the room reflect positions back inside; the velocity component
+  into the wall is set to 0 (``wall_stops``: a person walks up to a wall and stays there;
+  a bounce would send the particles that touched the wall away from it at the speed they
+  came, and the cloud of a person walking along a wall drifts off it, docs/detection.md,
+  "A camera that sees little of a target says nothing about it; a wall stops a
+  particle"), or flipped without ``wall_stops``; with exits (rectangles
+  beyond a door that share a piece of the floor's border, ``RoomCalibration.exits``) the
+  walkable region is the floor and the exits: a particle that lands in any of them stays,
+  one that lands outside all of them is reflected in the rectangle it started from (the
+  floor when it started outside every rectangle).
 
 With all noises zero the model is exact constant-velocity motion.
 """
@@ -66,6 +71,8 @@ class MotionConfig:
         orientation_follows_velocity: a particle faster than ``orientation_speed`` faces its
             walking direction (000 §VI); off: the orientation is a random walk of its own
             (module docstring).
+        wall_stops: a particle reflected at the floor's border (or its exit's) loses the
+            velocity component into it; off: that component changes sign (a bounce).
     """
 
     velocity_noise: float = 0.6
@@ -76,6 +83,7 @@ class MotionConfig:
     max_speed: float = 3.0
     velocity_damping: float = 0.0
     orientation_follows_velocity: bool = False
+    wall_stops: bool = True
 
     def __post_init__(self) -> None:
         for name in ('velocity_noise', 'position_noise', 'orientation_noise',
@@ -93,14 +101,17 @@ _NO_REGIONS = np.zeros((0, 4))
 
 
 @njit(cache=True, nogil=True)
-def _reflect(p, v, lo, hi):
-    """Reflect a position into [lo, hi], flipping the velocity sign on an odd number of
-    bounces."""
+def _reflect(p, v, lo, hi, stop):
+    """Reflect a position into [lo, hi]; a position outside sets the velocity to 0 with
+    ``stop``, else flips its sign on an odd number of bounces."""
     width = hi - lo
     q = np.mod(p - lo, 2.0 * width)         # fold into one period of length 2*width
     if q > width:
         q = 2.0 * width - q
-    if np.mod(np.floor((p - lo) / width), 2.0) == 1.0 and (p < lo or p > hi):
+    if stop:
+        if p < lo or p > hi:
+            v = 0.0
+    elif np.mod(np.floor((p - lo) / width), 2.0) == 1.0 and (p < lo or p > hi):
         v = v * -1.0
     return lo + q, v
 
@@ -116,11 +127,12 @@ def _region_of(x, y, regions):
 
 @njit(cache=True, nogil=True)
 def _move(out, dt, decay, dv, max_speed, dp, turn, orientation_speed, dtheta, flip_u,
-          flip_p, regions):
+          flip_p, regions, stop):
     """The motion model on particles out (N, 6) in place, with the random draws made by
     :func:`predict` (empty arrays: that noise is off); one pass per particle, each
     operation the one of the former numpy version (bit-identical results). regions
-    (R, 4): none (R = 0), the floor (R = 1) or the floor followed by the exits."""
+    (R, 4): none (R = 0), the floor (R = 1) or the floor followed by the exits; stop:
+    ``MotionConfig.wall_stops``."""
     for i in range(out.shape[0]):
         home = 0
         if regions.shape[0] > 1:
@@ -153,8 +165,8 @@ def _move(out, dt, decay, dv, max_speed, dp, turn, orientation_speed, dtheta, fl
                 out[i, SIT] = 1.0 - out[i, SIT]
         if regions.shape[0] == 1 or (regions.shape[0] > 1
                                      and _region_of(x, y, regions) < 0):
-            x, vx = _reflect(x, vx, regions[home, 0], regions[home, 2])
-            y, vy = _reflect(y, vy, regions[home, 1], regions[home, 3])
+            x, vx = _reflect(x, vx, regions[home, 0], regions[home, 2], stop)
+            y, vy = _reflect(y, vy, regions[home, 1], regions[home, 3], stop)
         out[i, X] = x
         out[i, Y] = y
         out[i, VX] = vx
@@ -271,4 +283,5 @@ def move_particles(out: np.ndarray, dt: float, config: MotionConfig,
     facing_speed = (float(config.orientation_speed) if config.orientation_follows_velocity
                     else math.inf)
     _move(out, float(dt), decay, dv, float(config.max_speed), dp, bool(dt > 0),
-          facing_speed, dtheta, flip_u, flip_p, _regions(floor, exits))
+          facing_speed, dtheta, flip_u, flip_p, _regions(floor, exits),
+          bool(config.wall_stops))
