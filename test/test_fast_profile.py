@@ -30,6 +30,17 @@ def test_subsample_is_validated_and_reaches_the_likelihood():
     assert Tracker(calibration, TrackerConfig()).measurement.config.subsample == 1
 
 
+def test_min_inside_share_is_validated_and_reaches_the_likelihood():
+    calibration = make_room()
+    for bad in (-0.1, 1.5, True, 'half'):
+        with pytest.raises(TrackerError, match='min_inside_share'):
+            TrackerConfig(min_inside_share=bad)
+    tracker = Tracker(calibration, TrackerConfig(min_inside_share=0.3))
+    assert tracker.measurement.config.min_inside_share == 0.3
+    assert Tracker(calibration, TrackerConfig()).measurement.config.min_inside_share == 0.5
+    assert TrackerConfig.from_dict({'motion': {'wall_stops': False}}).motion.wall_stops is False
+
+
 def test_replay_options_beat_the_params_file(tmp_path):
     import argparse
 

@@ -133,34 +133,52 @@ def test_hjs_incremental_equals_brute_force(n_targets, n_particles, seed, zeros)
     assert np.any(dbg.bc > 0)
 
 
-def test_hjs_loglik_combines_fc_bc_and_is_neutral_out_of_view():
+def test_hjs_loglik_combines_fc_bc_and_a_camera_says_nothing_of_what_it_does_not_see():
+    """000 Eq. 19 from fc and bc. A particle the camera does not see gets the prior-weighted
+    mean of its target's seen particles (0, the best score, would draw tracks out of the
+    view); a target the camera sees less than ``min_inside_share`` of gets 0 on every
+    particle (brute force per target)."""
     rng = np.random.default_rng(5)
     cam = _camera('cam', (0.0, -3.5, 1.2))
     mm = MeasurementModel(_room(cam), LikelihoodConfig(sigma=0.1, d_occ=D_OCC,
                                                        min_visible_pixels=1))
     mm.set_images({'cam': _random_image(rng, cam.height, cam.width)})
-    models = [_random_model(rng, 1.7) for _ in range(2)]
-    particles = [_random_particles(rng, (0.0, 0.0), 4), _random_particles(rng, (0.2, 0.5), 4)]
-    particles[1][[0, -1], X] = 50.0                          # far outside the view
-    weights = [np.ones(4), np.ones(4)]
+    models = [_random_model(rng, 1.7) for _ in range(3)]
+    particles = [_random_particles(rng, (0.0, 0.0), 4), _random_particles(rng, (0.2, 0.5), 4),
+                 _random_particles(rng, (-0.2, 0.3), 4)]
+    particles[1][0, X] = 50.0                                # far outside the view
+    particles[2][:3, X] = 50.0                               # mostly outside: says nothing
+    weights = [np.ones(4), np.array([1.0, 2.0, 1.0, 1.0]), np.ones(4)]
     res = mm.hjs(particles, weights, models)
     dbg = mm.hjs_debug('cam', particles, weights, models)
-    expect = -(dbg.fc + dbg.bc) / (2 * 0.1 ** 2)
-    expect[dbg.silhouettes.area == 0] = 0.0
+    raw = -(dbg.fc + dbg.bc) / (2 * 0.1 ** 2)
+    sil = dbg.silhouettes
+    seen = sil.area > 0
+    assert seen.tolist() == [True] * 4 + [False] + [True] * 3 + [False] * 3 + [True]
+    expect = raw.copy()
+    for k in range(3):
+        sel = dbg.target == k
+        share = np.sum(dbg.prior[sel] * np.where(seen[sel], sil.area[sel] / sil.full_area[sel],
+                                                 0.0))
+        mean = np.sum((dbg.prior * raw)[sel & seen]) / np.sum(dbg.prior[sel & seen])
+        expect[sel & ~seen] = mean
+        if share < mm.config.min_inside_share:
+            expect[sel] = 0.0
     np.testing.assert_allclose(np.concatenate(res.loglik), expect, atol=1e-12)
-    assert res.loglik[1][0] == 0.0 and res.loglik[1][-1] == 0.0
+    assert res.loglik[1][0] < 0.0 and res.loglik[1][0] < np.max(res.loglik[1][1:])
+    assert np.all(res.loglik[2] == 0.0) and np.all(res.loglik[0] < 0.0)
     assert np.all(dbg.w_star[dbg.silhouettes.area == 0] == 0.0)
-    assert res.visible_fraction.shape == (2, 1)
+    assert res.visible_fraction.shape == (3, 1)
     assert np.all((res.visible_fraction >= 0) & (res.visible_fraction <= 1))
     # visible fraction: prior-weighted mean of sum(w*) / silhouette area (0 out of view)
     sil = dbg.silhouettes
     frac = np.where(sil.full_area > 0, dbg.visible / np.maximum(sil.full_area, 1), 0.0)
-    for k in range(2):
+    for k in range(3):
         sel = dbg.target == k
         assert res.visible_fraction[k, 0] == pytest.approx(np.sum(dbg.prior[sel] * frac[sel]))
     assert res.visible_fraction.min() < 0.99                 # the overlap is seen
     # an empty particle set is allowed and yields an empty result
-    empty = mm.hjs([particles[0], np.zeros((0, 6))], [weights[0], np.zeros(0)], models)
+    empty = mm.hjs([particles[0], np.zeros((0, 6))], [weights[0], np.zeros(0)], models[:2])
     assert empty.loglik[1].shape == (0,)
 
 
@@ -428,7 +446,8 @@ def test_reused_workspaces_equal_fresh_ones_and_are_left_zero():
 def _stagewise(mm: MeasurementModel, particles, weights, models, separable: bool):
     """The update as separate steps (the path before the one-call camera update):
     Python rasterisation, key-view weights, a stable argsort, hjs_camera with fresh
-    buffers, then 000 Eq. 19, the neutral cameras and the visible fractions in numpy."""
+    buffers, then 000 Eq. 19, what the camera says of targets it sees little of (target by
+    target) and the visible fractions in numpy."""
     from mbtrack_ros.core import _kernels
     from mbtrack_ros.core.appearance import key_view_stack, view_weights
     states = np.concatenate(particles)
@@ -448,7 +467,16 @@ def _stagewise(mm: MeasurementModel, particles, weights, models, separable: bool
             wa, len(models), cfg.d_occ, separable, np.zeros(0),
             np.zeros(len(states) + 1, np.int64))
         one = -(fc + bc) / (2.0 * cfg.sigma ** 2)
-        one[(sil.area <= 0) | (sil.area * sil.row_step < cfg.min_visible_pixels)] = 0.0
+        seen = (sil.area > 0) & (sil.area * sil.row_step >= cfg.min_visible_pixels)
+        for k in range(len(models)):                 # what the camera says of each target
+            sel = target == k
+            share = np.sum(prior[sel] * np.where(seen[sel], np.minimum(
+                sil.area[sel] / np.maximum(sil.full_area[sel], 1), 1.0), 0.0)) / prior[sel].sum()
+            if share < cfg.min_inside_share:
+                one[sel] = 0.0
+            elif np.any(sel & ~seen):
+                one[sel & ~seen] = (np.sum((prior * one)[sel & seen])
+                                    / np.sum(prior[sel & seen]) if np.any(sel & seen) else 0.0)
         loglik += one
         frac = np.where(sil.full_area > 0, vis / np.maximum(sil.full_area, 1), 0.0)
         visible[:, c] = np.bincount(target, weights=prior * np.clip(frac, 0, 1),

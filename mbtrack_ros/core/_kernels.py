@@ -926,7 +926,7 @@ def hjs_camera(bins, row, x0, x1, part, offsets, area, bbox, order, target, prio
 def update_camera(image, bins, states, target, prior, heights, widths, chair, frac, half,
                   parts, hip, view_angles, n_views, key, r2, t2, rot, t, kmat, dist, centre,
                   focal, row_step, d_occ, separable, two_sigma_sq, min_visible, mfg, bbg,
-                  wmap, loglik, visible):
+                  wmap, loglik, visible, inside):
     """One camera's whole share of ``MeasurementModel.hjs`` / ``separable`` in one call
     without the GIL: the image's colour bins (:func:`quantize_rgb`, when ``bins`` is given
     empty (0, 0)), the silhouettes (:func:`silhouettes`), the key views of each particle
@@ -948,6 +948,9 @@ def update_camera(image, bins, states, target, prior, heights, widths, chair, fr
         loglik (P,): receives -(fc + bc) / (2 sigma^2) (000 Eq. 19), 0 where neutral.
         visible (K,): receives per target the prior-weighted mean over its particles of
             the visible fraction sum(w*) / unclipped area, clipped to [0, 1].
+        inside (P,): receives the share of each silhouette inside the image (area over
+            unclipped area), 0 where neutral (``MeasurementModel._seen_by`` decides what
+            the camera says about such particles).
 
     Returns:
         bins (H, W) int16, the image's colour bins, and the particles' silhouettes as row
@@ -979,8 +982,10 @@ def update_camera(image, bins, states, target, prior, heights, widths, chair, fr
         # the exponent of 000 Eq. 19 is negative; Algorithm 1 as printed lost the minus sign
         if area[p] <= 0 or area[p] * row_step < min_visible:
             loglik[p] = 0.0
+            inside[p] = 0.0
         else:
             loglik[p] = -(fc[p] + bc[p]) / two_sigma_sq
+            inside[p] = min(area[p] / full_area[p], 1.0) if full_area[p] > 0 else 1.0
         f = vis[p] / full_area[p] if full_area[p] > 0 else 0.0
         f = min(max(f, 0.0), 1.0)
         visible[target[p]] += prior[p] * f

@@ -18,15 +18,22 @@ one call of :func:`_kernels.update_camera` (quantising, silhouettes, key views, 
 and the camera's log-likelihoods), which holds no GIL, so the camera threads run in
 parallel without waiting for each other's Python.
 
-Log-likelihoods are ``-D^2 / (2 sigma^2)`` (000 Eq. 19) summed over cameras; a camera that
-sees fewer than ``min_visible_pixels`` of a silhouette adds 0. With exits in the calibration
-(rectangles beyond a door), a camera on the door's wall cannot see a particle in the exit
-once it is level with the camera or beyond (past the wall): that particle gets the mean of
-its target's other particles in that camera (``MeasurementModel._without_hidden``), else
-the wall would pull every track back from the doorway (docs/detection.md, "Exits"). The
-exit's strip between the floor's edge and the wall is in front of the camera and scored as
-usual (docs/detection.md, "The wall beside the door in the synth; the door-wall cameras
-and the strip in front of the wall").
+Log-likelihoods are ``-D^2 / (2 sigma^2)`` (000 Eq. 19) summed over cameras. Where a camera
+sees little of a target it says nothing about it (``MeasurementModel._seen_by``): when the
+target's silhouettes are on average (prior-weighted) less than ``min_inside_share`` inside
+the image, the camera adds 0 to all its particles; otherwise a particle the camera sees
+fewer than ``min_visible_pixels`` of gets the prior-weighted mean of the target's seen
+particles there. An unseen silhouette would otherwise score 0, the best score any camera
+gives: a track beside a camera was drawn into the part of the floor the camera does not
+see, away from the places it sees in part (docs/detection.md, "A camera that sees little
+of a target says nothing about it; a wall stops a particle"). With exits in the
+calibration (rectangles beyond a door), a camera on the door's wall cannot see a particle
+in the exit once it is level with the camera or beyond (past the wall): that particle gets
+the mean of its target's other particles in that camera
+(``MeasurementModel._without_hidden``), else the wall would pull every track back from the
+doorway (docs/detection.md, "Exits"). The exit's strip between the floor's edge and the
+wall is in front of the camera and scored as usual (docs/detection.md, "The wall beside
+the door in the synth; the door-wall cameras and the strip in front of the wall").
 
 With automatic detection the frame's foreground masks come too
 (:meth:`MeasurementModel.set_foreground`): each particle then gains ``k f_c`` per camera,
@@ -75,7 +82,11 @@ class LikelihoodConfig:
     Attributes:
         sigma: width of 000 Eq. 19 / 003 Eq. 3.
         d_occ: occlusion penalty of 000 Eq. 26 (000 §VI-B uses sigma 0.1, d_occ 0.15).
-        min_visible_pixels: a camera seeing fewer pixels of a silhouette is neutral.
+        min_visible_pixels: a camera seeing fewer pixels of a silhouette does not see it
+            (the particle gets its target's mean there, module docstring).
+        min_inside_share: a camera seeing less of a target's silhouettes inside its image
+            (prior-weighted mean of the share of each inside) says nothing about the target
+            (adds 0 to each of its particles; 0: never).
         subsample: use every k-th image row of the silhouettes (speed option).
         threads: cameras evaluated in parallel threads (0: one per CPU core, 1: serial).
     """
@@ -83,6 +94,7 @@ class LikelihoodConfig:
     sigma: float = 0.12
     d_occ: float = 0.15
     min_visible_pixels: int = 20
+    min_inside_share: float = 0.5
     subsample: int = 1
     threads: int = 0
 
@@ -91,6 +103,9 @@ class LikelihoodConfig:
             raise LikelihoodError(f'sigma must be positive, got {self.sigma}')
         if not (self.d_occ >= 0 and np.isfinite(self.d_occ)):
             raise LikelihoodError(f'd_occ must be >= 0, got {self.d_occ}')
+        if not 0 <= self.min_inside_share <= 1:
+            raise LikelihoodError(f'min_inside_share must be in [0, 1], got '
+                                  f'{self.min_inside_share}')
         if int(self.subsample) < 1:
             raise LikelihoodError(f'subsample must be >= 1, got {self.subsample}')
         if int(self.threads) < 0:
@@ -426,6 +441,21 @@ class MeasurementModel:
             return loglik
         return _with_target_mean(loglik, ~hidden, target, prior, n_targets)
 
+    def _seen_by(self, loglik: np.ndarray, inside: np.ndarray, target: np.ndarray,
+                 prior: np.ndarray, n_targets: int) -> np.ndarray:
+        """A camera's log-likelihoods (P,) where it sees enough of a target: 0 for every
+        particle of a target whose silhouettes are less than ``min_inside_share`` inside
+        the image on average (``inside`` (P,): each one's share, 0 for one not seen,
+        weighted by ``prior``); elsewhere a particle not seen gets the prior-weighted mean
+        of its target's seen ones (module docstring)."""
+        seen = inside > 0
+        out = loglik if seen.all() else _with_target_mean(loglik, seen, target, prior,
+                                                           n_targets)
+        mass = np.bincount(target, weights=prior, minlength=n_targets)
+        share = np.divide(np.bincount(target, weights=prior * inside, minlength=n_targets),
+                          mass, out=np.zeros(n_targets), where=mass > 0)
+        return np.where(share[target] < self.config.min_inside_share, 0.0, out)
+
     def _coverage_term(self, cover: np.ndarray, target: np.ndarray, prior: np.ndarray,
                        n_targets: int) -> np.ndarray:
         """``gain * f`` per particle (P,) from coverages ``cover`` (NaN: the silhouette is
@@ -522,6 +552,7 @@ class MeasurementModel:
             angles[k, :n_views[k]] = m.view_angles
         cam_loglik = np.empty((len(cams), states.shape[0]))
         cam_visible = np.empty((len(cams), n_targets))
+        cam_inside = np.empty((len(cams), states.shape[0]))
         cam_cover = np.full((len(cams), states.shape[0]), np.nan)
         shape_args = (chair, *self._profile)
         rest = (int(self.config.subsample), float(self.config.d_occ), bool(separable),
@@ -539,7 +570,7 @@ class MeasurementModel:
                 return _kernels.update_camera(
                     image, bins, states, target, prior, heights, widths, *shape_args,
                     angles, n_views, key, *cam_args, *rest, mfg, bbg, wmap, cam_loglik[i],
-                    cam_visible[i])
+                    cam_visible[i], cam_inside[i])
 
             if separable:                               # no image buffers
                 bins, *spans = run(_NO_BUFFER, _NO_BUFFER, _NO_BUFFER)
@@ -568,6 +599,8 @@ class MeasurementModel:
         for i, (c, name) in enumerate(cams):
             if self._coverage_gain > 0 and name in self._foreground_integrals():
                 cam_loglik[i] += self._coverage_term(cam_cover[i], target, prior, n_targets)
+            cam_loglik[i] = self._seen_by(cam_loglik[i], cam_inside[i], target, prior,
+                                          n_targets)
             loglik += self._without_hidden(name, cam_loglik[i], states, target, prior,
                                            n_targets)
             visible[:, c] = cam_visible[i]

@@ -42,6 +42,11 @@ class TrackerConfig:
         joint_particles: joint particles of the joint filter (000 §VI-B: 10^4).
         sigma: likelihood width sigma (000 Eq. 19).
         d_occ: occlusion penalty d_occ (000 Eq. 26).
+        min_inside_share: a camera that sees less of a target's silhouettes inside its
+            image (on average over its particles) says nothing about the target
+            (``LikelihoodConfig.min_inside_share``; docs/detection.md, "A camera that sees
+            little of a target says nothing about it; a wall stops a particle"); 0: only
+            the particles it does not see at all get their target's mean there.
         mrf_radius: spatial-exclusion radius, metres. 000 §VI-A uses 0.4; people who stand
             or walk side by side are 0.42-0.5 m apart centre to centre, and at 0.4 the prior
             pushed their tracks apart and off them (30 clear-room runs with automatic
@@ -106,6 +111,7 @@ class TrackerConfig:
     joint_particles: int = 10_000
     sigma: float = 0.12
     d_occ: float = 0.15
+    min_inside_share: float = 0.5
     mrf_radius: float = 0.3
     mrf_epsilon: float = 1e-3
     use_mrf: bool = True
@@ -140,6 +146,9 @@ class TrackerConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
                 bad(f'{name} must be an integer >= 1, got {value!r}')
+        share = self.min_inside_share
+        if isinstance(share, bool) or not (isinstance(share, (int, float)) and 0 <= share <= 1):
+            bad(f'min_inside_share must be a number in [0, 1], got {share!r}')
         for name in ('sigma', 'theta_bp'):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and np.isfinite(value) and value > 0):
@@ -309,7 +318,8 @@ class Tracker:
         if measurement is None:
             from mbtrack_ros.core.likelihood import LikelihoodConfig, MeasurementModel
             likelihood = LikelihoodConfig(sigma=self.config.sigma, d_occ=self.config.d_occ,
-                                          subsample=int(self.config.subsample))
+                                          subsample=int(self.config.subsample),
+                                          min_inside_share=float(self.config.min_inside_share))
             if scale != 1.0:  # an area: scales with the square
                 likelihood = replace(likelihood, min_visible_pixels=max(1, _length(
                     likelihood.min_visible_pixels, scale * scale)))

@@ -50,6 +50,9 @@ tracker.image_scale             double     the tracker works on the images resiz
 tracker.joint_particles         int        joint-filter particles (10000)
 tracker.sigma                   double     likelihood width, 000 Eq. 19 (0.12)
 tracker.d_occ                   double     occlusion penalty, 000 Eq. 26 (0.15)
+tracker.min_inside_share        double     a camera that sees less of a target inside its
+                                           image says nothing about it (0.5,
+                                           docs/detection.md)
 tracker.mrf_radius              double     exclusion radius, m (0.3; 000 §VI-A: 0.4)
 tracker.use_mrf                 bool       spatial-exclusion MRF prior (true)
 tracker.seed                    int        random seed, -1 = fresh entropy (-1)
@@ -90,6 +93,8 @@ motion.orientation_follows_velocity
                                 bool       a walking body faces its direction of motion,
                                            as in 000 §VI (false: the orientation is a
                                            random walk of its own, docs/detection.md)
+motion.wall_stops               bool       a particle reaching the floor's border loses its
+                                           velocity into it (true; false: it bounces)
 ==============================  =========  =================================================
 """
 from __future__ import annotations
@@ -205,6 +210,9 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
     'tracker.joint_particles': (10_000, 'joint-filter particles', _ir(1, 1_000_000)),
     'tracker.sigma': (0.12, 'likelihood width sigma (000 Eq. 19)', _fr(1e-4, 10.0)),
     'tracker.d_occ': (0.15, 'occlusion penalty d_occ (000 Eq. 26)', _fr(0.0, 10.0)),
+    'tracker.min_inside_share': (0.5, 'a camera that sees less of a target\'s silhouettes '
+                                 'inside its image says nothing about the target '
+                                 '(TrackerConfig.min_inside_share)', _fr(0.0, 1.0)),
     'tracker.mrf_radius': (0.3, 'spatial exclusion radius, m (000 §VI-A: 0.4)',
                            _fr(0.0, 5.0)),
     'tracker.use_mrf': (True, 'apply the spatial-exclusion MRF prior', {}),
@@ -254,6 +262,8 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
     'motion.orientation_follows_velocity': (
         _MOTION.orientation_follows_velocity, 'a walking body faces its direction of motion '
         '(000 §VI); false: the orientation is a random walk of its own', {}),
+    'motion.wall_stops': (_MOTION.wall_stops, 'a particle reaching the floor\'s border loses '
+                          'its velocity into it; false: it bounces back', {}),
 }
 
 

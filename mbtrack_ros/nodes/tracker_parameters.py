@@ -20,6 +20,7 @@ TRACKER_PARAMETERS: dict[str, tuple[str, type]] = {
     'tracker.joint_particles': ('joint_particles', int), 'tracker.subsample': ('subsample', int),
     'tracker.pipeline_search': ('pipeline_search', bool), 'tracker.sigma': ('sigma', float),
     'tracker.d_occ': ('d_occ', float), 'tracker.mrf_radius': ('mrf_radius', float),
+    'tracker.min_inside_share': ('min_inside_share', float),
     'tracker.use_mrf': ('use_mrf', bool), 'tracker.release_time': ('release_time', float),
     'detection.threshold': ('detection_threshold', float),
     'detection.beside_threshold': ('beside_threshold', float),
@@ -35,6 +36,7 @@ TRACKER_PARAMETERS: dict[str, tuple[str, type]] = {
     'motion.orientation_noise': ('motion.orientation_noise', float),
     'motion.max_speed': ('motion.max_speed', float),
     'motion.orientation_follows_velocity': ('motion.orientation_follows_velocity', bool),
+    'motion.wall_stops': ('motion.wall_stops', bool),
 }
 
 
