@@ -985,7 +985,7 @@ def update_camera(image, bins, states, target, prior, heights, widths, chair, fr
             inside[p] = 0.0
         else:
             loglik[p] = -(fc[p] + bc[p]) / two_sigma_sq
-            inside[p] = min(area[p] / full_area[p], 1.0) if full_area[p] > 0 else 1.0
+            inside[p] = min(area[p] / full_area[p], 1.0)      # full_area >= area > 0
         f = vis[p] / full_area[p] if full_area[p] > 0 else 0.0
         f = min(max(f, 0.0), 1.0)
         visible[target[p]] += prior[p] * f
