@@ -315,6 +315,41 @@ def test_no_birth_deeper_into_an_exit_than_the_birth_depth():
     assert [round(b.state[1] - edge, 3) for b in births] == [0.1, round(0.45 * margin, 3)]
 
 
+
+def test_a_track_back_from_an_exit_loses_a_duplicate_pair_to_one_that_stayed():
+    """A track whose estimate is inside an exit counts as reported since then (its person
+    may have left there): back in the room beside an older track of somebody who stayed,
+    the duplicate rule releases it, not the other one (with plain ages it would be kept)."""
+    from mbtrack_ros.core.detection.manager import AutoDetection
+    from mbtrack_ros.core.state import TrackEstimate
+
+    calib = make_calibration(default_room(), width=160, height=120)
+    auto = AutoDetection(calib)
+    edge = calib.floor[3]
+    for tid in (1, 2):
+        auto.register(tid, 0)
+        auto.aux[tid].existence = 1.0                       # both reported throughout
+
+    def note(stamp: int, y1: float) -> None:
+        means = np.array([[4.65, y1, 0, 0, 0, 0], [4.65, edge - 0.6, 0, 0, 0, 0]])
+        tracks = [TrackEstimate(i, means[k], np.eye(4), 1.75) for k, i in enumerate((1, 2))]
+        auto._note_reporting(stamp, tracks, means, [], {})
+
+    note(10, edge - 0.2)                                    # in the room: nothing changes
+    assert auto._shown_since == {1: 0, 2: 0}
+    note(20, edge + 0.1)                                    # track 1 steps into the exit
+    note(30, edge - 0.5)                                    # and comes back
+    assert auto._shown_since == {1: 20, 2: 0}
+    rel = auto.releaser
+    shown = [auto._shown_since[1], auto._shown_since[2]]
+    xy = np.array([[4.65, edge - 0.55], [4.65, edge - 0.6]])
+    step = int(rel.config.merge_time * 1e9)
+    assert rel.duplicates(0, [1, 2], xy, shown) == []
+    assert rel.duplicates(step, [1, 2], xy, shown) == [1]
+    ages = Releaser(calib, rel.config)                      # without the exit's stamp
+    assert ages.duplicates(0, [1, 2], xy, [0, 0]) == []
+    assert ages.duplicates(step, [1, 2], xy, [0, 0]) == [2]
+
 def test_distance_to_rect_equals_the_nearest_of_dense_boundary_points():
     """``distance_to_rect`` (used by ``exit_depth``) against brute force: 0 inside, else the
     distance to the nearest of 4000 points on the rectangle's border (within 2 mm)."""

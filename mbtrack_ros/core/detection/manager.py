@@ -191,7 +191,12 @@ class AutoDetectionConfig:
             lets ``reuse_hidden`` take them.
         duplicate_by_reporting: of two tracks on one person (release ``merge_radius``,
             ``merge_time``) release the one reported without a break for the shorter time
-            (born, moved or hidden later) instead of the younger one.
+            (born, moved, hidden or inside an exit later) instead of the younger one. A
+            track whose estimate was in an exit may have lost its person there: back in
+            the room beside the track of somebody who stayed, it is the one to go (crnc2,
+            tracker seed 76: a leaver's track that came back from the doorway outranked
+            the track of the person it took over; docs/detection.md, "A leaver's track
+            back from the doorway").
         duplicate_margin: of two such tracks keep the one whose appearance model explains
             the image where they are better, when its mean log-likelihood per side camera
             (003 Eq. 3, both models at the pair's midpoint) is higher by more than this
@@ -475,7 +480,7 @@ class AutoDetection:
         # released id -> (stamp, floor xy, its appearance model) for reuse_time
         self._released: dict[int, tuple[int, np.ndarray, PersonModel | None]] = {}
         self._lost_ended: list[int] = []  # released ids whose reuse_time passed unreused
-        self._shown_since: dict[int, int] = {}  # id -> birth, move or last hidden stamp
+        self._shown_since: dict[int, int] = {}  # id -> birth, move, last hidden or exit stamp
         self._rescued: dict[int, int] = {}  # id -> stamp of its last exit rescue
         self.exit_checks: list[dict] = []  # per frame: the exit rescue's view of each exit
         self.duplicate_checks: list[dict] = []  # per frame: the duplicate judge's calls
@@ -1253,11 +1258,14 @@ class AutoDetection:
                         means: np.ndarray, ended: Sequence[int],
                         models: Mapping[int, PersonModel]) -> None:
         """After a frame's release: where the released tracks were (``reuse_time``) and
-        the tracks not reported now (reported without a break since, for the duplicate
-        rule)."""
+        the tracks not reported now or inside an exit (reported without a break since,
+        for the duplicate rule)."""
         self._remember_released(stamp_ns, tracks, means, ended, models)
-        for t in tracks:
-            if t.track_id not in ended and not self.reported(t.track_id):
+        depth = self.calibration.exit_depth(means[:, [X, Y]]) if len(tracks) \
+            else np.zeros(0)
+        for k, t in enumerate(tracks):
+            if t.track_id not in ended and (not self.reported(t.track_id)
+                                            or depth[k] > 0.0):
                 self._shown_since[t.track_id] = int(stamp_ns)
 
     def _remember_released(self, stamp_ns: int, tracks: Sequence[TrackEstimate],
