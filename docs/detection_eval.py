@@ -116,11 +116,12 @@ def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False,
                        'reason': 'exit'} for t in ended)
         return ended
 
-    def logged_update(self, stamp, ids, supported, existence=None, doorway=None):
-        ended = update(self, stamp, ids, supported, existence, doorway)
+    def logged_update(self, stamp, ids, supported, existence=None, doorway=None, spare=None):
+        ended = update(self, stamp, ids, supported, existence, doorway, spare)
+        flags = self.spare if spare is None else spare      # aligned with ids when given
         for tid in ended:
             k = list(ids).index(tid)
-            spare = k < len(self.spare) and self.spare[k]
+            spare = k < len(flags) and flags[k]
             events.append({'kind': 'end', 'frame': frame['index'], 'id': int(tid),
                            'reason': 'spare' if spare else 'support' if not supported[k]
                            else 'existence',

@@ -477,6 +477,36 @@ def test_release_after_the_configured_time():
         rel.update(0, [1], [True, False])
 
 
+
+def test_a_supported_frame_or_two_does_not_restart_a_spare_tracks_release_time():
+    """A track spare during its unsupported time keeps that time through supported frames
+    until they last recover_time: spare on most frames with one or two supported ones in
+    between, it ends; unsupported but never spare (a person the foreground loses now and
+    then), or with recover_time 0, every supported frame restarts it; a track supported
+    long enough is kept. Marks per frame: s spare, - unsupported, + supported."""
+    calib = make_room()
+
+    def ends(pattern: str, recover: float) -> int | None:
+        rel = Releaser(calib, ReleaseConfig(timeout=1.0, recover_time=recover))
+        for k, mark in enumerate(pattern):
+            if rel.update(int(round(k * 1e9 / FPS)), [1], [mark == '+'],
+                          spare=[mark == 's']):
+                return k
+        return None
+
+    blips = 's' * 12 + '++' + 's' * 12 + '+' + 's' * 12      # 0.8 s spare, 0.13 s good, ...
+    assert ends(blips, 0.2) == 15                        # 1 s after the first spare frame
+    assert ends(blips, 0.0) is None                       # each blip restarted it before
+    assert ends(blips.replace('s', '-'), 0.2) is None     # not spare: the former rule
+    assert ends('-' * 5 + 's' + '-' * 6 + '++' + '-' * 5, 0.2) == 15   # one spare frame
+    recovered = 's' * 12 + '++++' + 's' * 12               # 4 good frames: 0.2 s in a row
+    assert ends(recovered, 0.2) is None
+    assert ends('s' * 20, 0.2) == 15
+    with pytest.raises(DetectionError, match='recover_time'):
+        ReleaseConfig(recover_time=-0.1)
+    with pytest.raises(DetectionError, match='spare'):
+        Releaser(calib).update(0, [1, 2], [True, True], spare=[False])
+
 def test_blob_coverage_supports_a_person_right_below_the_ceiling_camera():
     calib = make_room()
     cam = calib.cameras['cam4']

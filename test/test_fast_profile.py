@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 
+import numpy as np
 import pytest
 
 os.environ.setdefault('ROS_DOMAIN_ID', str(100 + os.getpid() % 100))
@@ -15,6 +16,7 @@ from rclpy.context import Context  # noqa: E402
 from conftest import REPO, make_room  # noqa: E402
 from mbtrack_ros.core.tracker import Tracker, TrackerConfig, TrackerError  # noqa: E402
 from mbtrack_ros.core.dynamics import MotionConfig  # noqa: E402
+from mbtrack_ros.nodes.tracker_parameters import tracker_config_values  # noqa: E402
 
 FAST = REPO / 'config' / 'clear_room_fast.yaml'
 OFFLINE = REPO / 'config' / 'clear_room_offline.yaml'
@@ -40,6 +42,19 @@ def test_min_inside_share_is_validated_and_reaches_the_likelihood():
     assert Tracker(calibration, TrackerConfig()).measurement.config.min_inside_share == 0.5
     assert TrackerConfig.from_dict({'motion': {'wall_stops': False}}).motion.wall_stops is False
 
+
+
+def test_release_recover_time_is_validated_and_reaches_the_releaser():
+    calibration = make_room()
+    for bad in (-0.1, np.inf, True, '0.2'):
+        with pytest.raises(TrackerError, match='release_recover_time'):
+            TrackerConfig(release_recover_time=bad)
+    config = TrackerConfig(detection=True, release_recover_time=0.5)
+    assert Tracker(calibration, config).detection.releaser.config.recover_time == 0.5
+    default = Tracker(calibration, TrackerConfig(detection=True))
+    assert default.detection.releaser.config.recover_time == 0.2
+    params = tracker_config_values({'tracker.release_recover_time': 0.0})
+    assert TrackerConfig.from_dict(params).release_recover_time == 0.0
 
 def test_replay_options_beat_the_params_file(tmp_path):
     import argparse

@@ -187,6 +187,7 @@ def test_node_defaults_are_the_trackers_defaults():
     pipeline = config.detection_config()
     left_to_pipeline = {'detection_threshold': pipeline.detector.threshold,
                         'spare_support': pipeline.release.spare_support,
+                        'release_recover_time': pipeline.release.recover_time,
                         'beside_threshold': pipeline.beside_threshold,
                         'track_coverage': pipeline.track_coverage,
                         'reuse_time': pipeline.reuse_time,

@@ -44,7 +44,7 @@ def main(rec: Path, out: Path, seed: int) -> None:
         now['ids'], now['xy'] = list(ids), np.asarray(xy).copy()
         return exited(self, ids, xy)
 
-    def logged_update(self, stamp, ids, supported, existence=None, doorway=None):
+    def logged_update(self, stamp, ids, supported, existence=None, doorway=None, spare=None):
         ex = dict(zip(ids, existence if existence is not None else [np.nan] * len(ids)))
         for k, tid in enumerate(now.get('ids', [])):
             exc = now.get('exclusive')
@@ -54,7 +54,7 @@ def main(rec: Path, out: Path, seed: int) -> None:
                         f"{exc[k] if exc is not None and k < len(exc) else np.nan:.4f}"
                         + ''.join(f',{v:.4f}' for v in (now['coverage'][k]
                                   if now['coverage'] is not None else [])))
-        return update(self, stamp, ids, supported, existence, doorway)
+        return update(self, stamp, ids, supported, existence, doorway, spare)
 
     release_module.spare_tracks = logged_spare
     release_module.Releaser.support = logged_support

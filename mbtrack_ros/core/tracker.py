@@ -62,6 +62,9 @@ class TrackerConfig:
         init_velocity_spread: m/s, spread of a new track's velocities.
         seed: seed of the default random generator (None = fresh entropy).
         release_time: s without foreground support before a track is released (003 §4.3).
+        release_recover_time: s of support in a row after which the unsupported time of a
+            track that was spare in it starts again (``ReleaseConfig.recover_time``; None:
+            its default, 0: one supported frame).
         spare_support: exclusive support below which a track overlapping another one is
             spare and released like an unsupported one (``ReleaseConfig.spare_support``;
             None: its default, 0: off).
@@ -123,6 +126,7 @@ class TrackerConfig:
     seed: int | None = None
     detection: bool = False
     release_time: float = 1.0
+    release_recover_time: float | None = None
     detection_threshold: float | None = None
     beside_threshold: float | None = None
     track_coverage: float | None = None
@@ -168,6 +172,12 @@ class TrackerConfig:
                 and self.release_time > 0):
             bad(f'release_time must be a finite number of seconds > 0, '
                 f'got {self.release_time!r}')
+        if self.release_recover_time is not None and not (
+                isinstance(self.release_recover_time, (int, float))
+                and not isinstance(self.release_recover_time, bool)
+                and 0 <= self.release_recover_time < np.inf):
+            bad(f'release_recover_time must be a finite number of seconds >= 0, '
+                f'got {self.release_recover_time!r}')
         if self.detection_threshold is not None and not (
                 isinstance(self.detection_threshold, (int, float))
                 and np.isfinite(self.detection_threshold)):
@@ -216,6 +226,8 @@ class TrackerConfig:
         release = replace(ReleaseConfig(), timeout=float(self.release_time))
         if self.spare_support is not None:
             release = replace(release, spare_support=float(self.spare_support))
+        if self.release_recover_time is not None:
+            release = replace(release, recover_time=float(self.release_recover_time))
         config = AutoDetectionConfig(detector=detector, release=release, sigma=float(self.sigma))
         if self.adaptation_rate is not None:
             config = replace(config, adaptation=replace(config.adaptation,

@@ -58,6 +58,9 @@ tracker.use_mrf                 bool       spatial-exclusion MRF prior (true)
 tracker.seed                    int        random seed, -1 = fresh entropy (-1)
 tracker.release_time            double     s without foreground support before a track is
                                            released, 003 §4.3 (1.0)
+tracker.release_recover_time    double     s of support in a row after which that time
+                                           starts again for a track that was spare in it;
+                                           0 = one supported frame (0.2)
 detection.enabled               bool       automatic detection, model acquisition and release
                                            inside the tracker step; off with
                                            init_ground_truth (true)
@@ -219,6 +222,11 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
     'tracker.seed': (-1, 'random seed; -1 = fresh entropy', _ir(-1, 2 ** 31 - 1)),
     'tracker.release_time': (1.0, 's without foreground support before a track is released '
                              '(003 §4.3)', _fr(0.01, 3600.0)),
+    'tracker.release_recover_time': (ReleaseConfig().recover_time, 's of foreground support '
+                                     'in a row after which the unsupported time of a track '
+                                     'that was spare in it starts again '
+                                     '(ReleaseConfig.recover_time); 0 = one supported frame',
+                                     _fr(0.0, 60.0)),
     'detection.enabled': (True, 'automatic detection, acquisition and release of people '
                           '(TrackerConfig.detection); off when init_ground_truth is set', {}),
     'detection.threshold': (1.0, 'smallest combined log response of a new detection',

@@ -22,6 +22,7 @@ TRACKER_PARAMETERS: dict[str, tuple[str, type]] = {
     'tracker.d_occ': ('d_occ', float), 'tracker.mrf_radius': ('mrf_radius', float),
     'tracker.min_inside_share': ('min_inside_share', float),
     'tracker.use_mrf': ('use_mrf', bool), 'tracker.release_time': ('release_time', float),
+    'tracker.release_recover_time': ('release_recover_time', float),
     'detection.threshold': ('detection_threshold', float),
     'detection.beside_threshold': ('beside_threshold', float),
     'detection.track_coverage': ('track_coverage', float),

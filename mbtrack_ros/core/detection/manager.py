@@ -729,10 +729,11 @@ class AutoDetection:
                     ended += self.releaser.update(stamp_ns, [ids[k] for k in keep],
                                                   supported[keep],
                                                   [existence[k] for k in keep],
-                                                  self.releaser.doorway[keep])
+                                                  self.releaser.doorway[keep],
+                                                  self.releaser.spare[keep])
                 else:
                     ended = self.releaser.update(stamp_ns, ids, supported, existence,
-                                                 self.releaser.doorway)
+                                                 self.releaser.doorway, self.releaser.spare)
                 shown = [self._shown_since.get(i, 0) if cfg.duplicate_by_reporting else 0
                          for i in ids]
                 judge = None if np.isinf(cfg.duplicate_margin) else self._duplicate_judge(

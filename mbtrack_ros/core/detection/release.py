@@ -17,7 +17,9 @@ and whose exclusive support is below ``spare_support`` is *spare* in that frame 
 explains no foreground that the others do not) and counts as unsupported; of several
 such tracks the one with the least exclusive support is taken first and the others are
 judged again without it, so that of two tracks on one person one survives (see
-:func:`spare_tracks`).
+:func:`spare_tracks`). In a crowd such a track is supported now and then for a frame or
+two; once it has been spare, only ``recover_time`` of support in a row restarts its
+unsupported time.
 
 **Exits.** When the calibration has exits (rectangles beyond a door, see
 ``RoomCalibration.exits``) a track whose estimate is inside one and more than
@@ -245,6 +247,14 @@ class ReleaseConfig:
             docstring, "Doorways"); 0 disables. ``doorway_timeout``: seconds after which
             such a track ends when the door-wall cameras see it and find no foreground on
             it (instead of ``timeout``).
+        recover_time: seconds a track that was spare during its unsupported time must be
+            supported in a row before that time starts again from zero (one supported
+            frame does for others; 0: for all). A track that lost its person in a crowd is
+            spare most of the time with a supported frame or two in between (crnc2,
+            tracker seed 69: spare on 28 of the 32 frames after it left the doorway, at
+            most 13 in a row), which kept it alive to take over somebody else
+            (docs/detection.md, "A leaver's track back from the doorway; a supported frame
+            or two does not save a spare track").
     """
 
     timeout: float = 1.0
@@ -260,6 +270,7 @@ class ReleaseConfig:
     exit_margin: float = 0.6
     doorway_band: float = 0.5
     doorway_timeout: float = 0.5
+    recover_time: float = 0.2
 
     def __post_init__(self) -> None:
         if not self.timeout >= 0:
@@ -272,6 +283,8 @@ class ReleaseConfig:
         if not (np.isfinite(self.exit_margin) and self.exit_margin >= 0):
             raise DetectionError(f'exit_margin must be a finite number >= 0, got '
                                  f'{self.exit_margin}')
+        if not self.recover_time >= 0:
+            raise DetectionError(f'recover_time must be >= 0, got {self.recover_time}')
         if not self.doorway_timeout >= 0:
             raise DetectionError(f'doorway_timeout must be >= 0, got {self.doorway_timeout}')
         if not (np.isfinite(self.doorway_band) and self.doorway_band >= 0):
@@ -290,6 +303,8 @@ class Releaser:
         self.deciding = ceiling if (ceiling and self.config.use_ceiling) \
             else [n for n in calibration.cameras if n not in ceiling] or ceiling
         self._since: dict[int, int] = {}
+        self._good_since: dict[int, int] = {}   # supported again since (recover_time)
+        self._spare_run: set[int] = set()       # spare on a frame of their unsupported time
         self._close: dict[tuple[int, int], int] = {}
         self.spare = np.zeros(0, bool)    # tracks of the last support() that were spare
         self._side: tuple | None = None   # the last support()'s side-camera inputs
@@ -398,28 +413,41 @@ class Releaser:
 
     def update(self, stamp_ns: int, ids: Sequence[int], supported: Sequence[bool],
                existence: Sequence[float] | None = None,
-               doorway: Sequence[bool] | None = None) -> list[int]:
+               doorway: Sequence[bool] | None = None,
+               spare: Sequence[bool] | None = None) -> list[int]:
         """Record one frame's support; returns the ids to release now. A track flagged in
         ``doorway`` (``self.doorway`` of :meth:`support`) is released after
-        ``doorway_timeout`` instead of ``timeout``."""
+        ``doorway_timeout`` instead of ``timeout``. A track flagged in ``spare``
+        (``self.spare``) on a frame of its unsupported time keeps that time through
+        supported frames until they last ``recover_time``; otherwise one supported frame
+        restarts it."""
         cfg = self.config
         if len(supported) != len(ids) or any(v is not None and len(v) != len(ids)
-                                             for v in (existence, doorway)):
-            raise DetectionError('ids, supported, existence and doorway must have the same '
-                                 'length')
+                                             for v in (existence, doorway, spare)):
+            raise DetectionError('ids, supported, existence, doorway and spare must have the '
+                                 'same length')
         ended = []
         live = set(int(i) for i in ids)
         for tid in list(self._since):
             if tid not in live:
                 del self._since[tid]
+        self._good_since = {t: s for t, s in self._good_since.items() if t in live}
+        self._spare_run &= live
         for k, tid in enumerate(ids):
             tid = int(tid)
             bad = not bool(supported[k])
             if existence is not None and existence[k] < cfg.existence_threshold:
                 bad = True
             if not bad:
-                self._since.pop(tid, None)
+                good = self._good_since.setdefault(tid, int(stamp_ns))
+                if tid not in self._spare_run \
+                        or (int(stamp_ns) - good) / 1e9 >= cfg.recover_time:
+                    self._since.pop(tid, None)
+                    self._spare_run.discard(tid)
                 continue
+            self._good_since.pop(tid, None)
+            if spare is not None and spare[k]:
+                self._spare_run.add(tid)
             since = self._since.setdefault(tid, int(stamp_ns))
             timeout = cfg.doorway_timeout if doorway is not None and doorway[k] else cfg.timeout
             if (int(stamp_ns) - since) / 1e9 >= timeout:
@@ -494,3 +522,5 @@ class Releaser:
 
     def forget(self, track_id: int) -> None:
         self._since.pop(int(track_id), None)
+        self._good_since.pop(int(track_id), None)
+        self._spare_run.discard(int(track_id))
