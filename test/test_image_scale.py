@@ -5,6 +5,7 @@ half size stays within a few centimetres of full size."""
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -174,6 +175,24 @@ def test_half_size_tracks_within_a_few_centimetres_of_full_size():
     err_half = np.array([np.linalg.norm(half[k] - gt[k]) for k in keys])
     assert np.median(apart) < 0.06
     assert err_half.mean() < err_full.mean() + 0.03
+
+
+def test_every_node_parameter_is_in_the_ros_interface_table():
+    """docs/ros_interface.md lists each parameter the node declares, with its default."""
+    pytest.importorskip('rclpy')
+    from mbtrack_ros.nodes.params import GLOBAL_PARAMETERS
+
+    text = (Path(__file__).resolve().parents[1] / 'docs' / 'ros_interface.md').read_text(
+        encoding='utf-8')
+    rows = {line.split('|')[1].strip().strip('`'): line.split('|')[3].strip()
+            for line in text.splitlines() if line.startswith('| `')}
+    for name, (default, _, _) in GLOBAL_PARAMETERS.items():
+        assert name in rows, name
+        shown = rows[name].strip('`')
+        if isinstance(default, bool):
+            assert shown == str(default).lower(), name
+        elif isinstance(default, (int, float)):
+            assert float(shown) == default, name
 
 
 def test_node_defaults_are_the_trackers_defaults():
