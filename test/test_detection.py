@@ -502,8 +502,9 @@ def test_a_supported_frame_or_two_does_not_restart_a_spare_tracks_release_time()
     recovered = 's' * 12 + '++++' + 's' * 12               # 4 good frames: 0.2 s in a row
     assert ends(recovered, 0.2) is None
     assert ends('s' * 20, 0.2) == 15
-    with pytest.raises(DetectionError, match='recover_time'):
-        ReleaseConfig(recover_time=-0.1)
+    for bad in (-0.1, np.inf, np.nan):
+        with pytest.raises(DetectionError, match='recover_time'):
+            ReleaseConfig(recover_time=bad)
     with pytest.raises(DetectionError, match='spare'):
         Releaser(calib).update(0, [1, 2], [True, True], spare=[False])
 

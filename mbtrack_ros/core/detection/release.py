@@ -283,8 +283,9 @@ class ReleaseConfig:
         if not (np.isfinite(self.exit_margin) and self.exit_margin >= 0):
             raise DetectionError(f'exit_margin must be a finite number >= 0, got '
                                  f'{self.exit_margin}')
-        if not self.recover_time >= 0:
-            raise DetectionError(f'recover_time must be >= 0, got {self.recover_time}')
+        if not (np.isfinite(self.recover_time) and self.recover_time >= 0):
+            raise DetectionError(f'recover_time must be a finite number >= 0, got '
+                                 f'{self.recover_time}')
         if not self.doorway_timeout >= 0:
             raise DetectionError(f'doorway_timeout must be >= 0, got {self.doorway_timeout}')
         if not (np.isfinite(self.doorway_band) and self.doorway_band >= 0):
