@@ -121,9 +121,9 @@ def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False,
         flags = self.spare if spare is None else spare      # aligned with ids when given
         for tid in ended:
             k = list(ids).index(tid)
-            spare = k < len(flags) and flags[k]
+            was_spare = k < len(flags) and flags[k]
             events.append({'kind': 'end', 'frame': frame['index'], 'id': int(tid),
-                           'reason': 'spare' if spare else 'support' if not supported[k]
+                           'reason': 'spare' if was_spare else 'support' if not supported[k]
                            else 'existence',
                            'doorway': bool(doorway is not None and doorway[k])})
         return ended

@@ -315,7 +315,6 @@ def test_no_birth_deeper_into_an_exit_than_the_birth_depth():
     assert [round(b.state[1] - edge, 3) for b in births] == [0.1, round(0.45 * margin, 3)]
 
 
-
 def test_a_track_back_from_an_exit_loses_a_duplicate_pair_to_one_that_stayed():
     """A track whose estimate is inside an exit counts as reported since then (its person
     may have left there): back in the room beside an older track of somebody who stayed,
@@ -349,6 +348,7 @@ def test_a_track_back_from_an_exit_loses_a_duplicate_pair_to_one_that_stayed():
     ages = Releaser(calib, rel.config)                      # without the exit's stamp
     assert ages.duplicates(0, [1, 2], xy, [0, 0]) == []
     assert ages.duplicates(step, [1, 2], xy, [0, 0]) == [2]
+
 
 def test_distance_to_rect_equals_the_nearest_of_dense_boundary_points():
     """``distance_to_rect`` (used by ``exit_depth``) against brute force: 0 inside, else the

@@ -304,8 +304,8 @@ class Releaser:
         self.deciding = ceiling if (ceiling and self.config.use_ceiling) \
             else [n for n in calibration.cameras if n not in ceiling] or ceiling
         self._since: dict[int, int] = {}
-        self._good_since: dict[int, int] = {}   # supported again since (recover_time)
         self._spare_run: set[int] = set()       # spare on a frame of their unsupported time
+        self._good_since: dict[int, int] = {}   # ... of those, supported again since
         self._close: dict[tuple[int, int], int] = {}
         self.spare = np.zeros(0, bool)    # tracks of the last support() that were spare
         self._side: tuple | None = None   # the last support()'s side-camera inputs
@@ -440,11 +440,13 @@ class Releaser:
             if existence is not None and existence[k] < cfg.existence_threshold:
                 bad = True
             if not bad:
-                good = self._good_since.setdefault(tid, int(stamp_ns))
-                if tid not in self._spare_run \
-                        or (int(stamp_ns) - good) / 1e9 >= cfg.recover_time:
-                    self._since.pop(tid, None)
-                    self._spare_run.discard(tid)
+                if tid in self._spare_run:   # spare in this unsupported time: hold it
+                    good = self._good_since.setdefault(tid, int(stamp_ns))
+                    if (int(stamp_ns) - good) / 1e9 < cfg.recover_time:
+                        continue
+                self._since.pop(tid, None)
+                self._spare_run.discard(tid)
+                self._good_since.pop(tid, None)
                 continue
             self._good_since.pop(tid, None)
             if spare is not None and spare[k]:
