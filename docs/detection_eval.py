@@ -1170,6 +1170,9 @@ def main(argv: list[str] | None = None) -> int:
         except ValueError:
             p.error(f'--release and --detection need FIELD=NUMBER, got '
                     f'{args.release + args.detection}')
+        for k in release:
+            if k not in release_module.ReleaseConfig.__dataclass_fields__ or k == 'use_ceiling':
+                p.error(f'--release: {k} is not a numeric ReleaseConfig field')
         fields = AutoDetectionConfig.__dataclass_fields__
         for k in detection:
             if k not in fields or fields[k].type not in ('float', 'int', 'bool'):

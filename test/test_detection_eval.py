@@ -114,6 +114,15 @@ def test_run_takes_scalar_detection_fields_and_refuses_others(detection_eval, mo
         with pytest.raises(SystemExit) as err:
             detection_eval.main(argv + ['--detection', bad])
         assert err.value.code == 2
+    # --release takes numeric ReleaseConfig fields (the thirty-ninth session's rule off:
+    # recover_time=0) and refuses the others the same way
+    seen.clear()
+    detection_eval.main(argv + ['--release', 'recover_time=0'])
+    assert seen['args'][4] == {'recover_time': 0.0}
+    for bad in ('no_such_field=1', 'use_ceiling=0'):
+        with pytest.raises(SystemExit) as err:
+            detection_eval.main(argv + ['--release', bad])
+        assert err.value.code == 2
 
 
 def test_suite_recording_names_map_to_synth_arguments(detection_eval):
