@@ -43,6 +43,17 @@ def test_min_inside_share_is_validated_and_reaches_the_likelihood():
     assert TrackerConfig.from_dict({'motion': {'wall_stops': False}}).motion.wall_stops is False
 
 
+def test_tracker_defaults_are_the_built_configs_own_defaults():
+    """TrackerConfig repeats some defaults of the configs it builds (sigma, d_occ,
+    min_inside_share, the release times); a default tracker builds each of them equal to
+    that config's own default, so changing one place alone fails here."""
+    from mbtrack_ros.core.detection.manager import AutoDetectionConfig
+    from mbtrack_ros.core.likelihood import LikelihoodConfig
+
+    assert Tracker(make_room(), TrackerConfig()).measurement.config == LikelihoodConfig()
+    assert TrackerConfig().detection_config() == AutoDetectionConfig()
+
+
 
 def test_release_recover_time_is_validated_and_reaches_the_releaser():
     calibration = make_room()
