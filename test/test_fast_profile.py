@@ -54,7 +54,6 @@ def test_tracker_defaults_are_the_built_configs_own_defaults():
     assert TrackerConfig().detection_config() == AutoDetectionConfig()
 
 
-
 def test_release_recover_time_is_validated_and_reaches_the_releaser():
     calibration = make_room()
     for bad in (-0.1, np.inf, True, '0.2'):
