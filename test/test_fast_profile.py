@@ -32,20 +32,27 @@ def test_subsample_is_validated_and_reaches_the_likelihood():
     assert Tracker(calibration, TrackerConfig()).measurement.config.subsample == 1
 
 
-def test_min_inside_share_is_validated_and_reaches_the_likelihood():
+@pytest.mark.parametrize('name,default', [('min_inside_share', 0.5),
+                                          ('min_visible_share', 0.1)])
+def test_camera_share_thresholds_are_validated_and_reach_the_likelihood(name, default):
+    from mbtrack_ros.core.likelihood import LikelihoodConfig, LikelihoodError
+
     calibration = make_room()
     for bad in (-0.1, 1.5, True, 'half'):
-        with pytest.raises(TrackerError, match='min_inside_share'):
-            TrackerConfig(min_inside_share=bad)
-    tracker = Tracker(calibration, TrackerConfig(min_inside_share=0.3))
-    assert tracker.measurement.config.min_inside_share == 0.3
-    assert Tracker(calibration, TrackerConfig()).measurement.config.min_inside_share == 0.5
+        with pytest.raises(TrackerError, match=name):
+            TrackerConfig(**{name: bad})
+    for bad in (-0.1, 1.5):
+        with pytest.raises(LikelihoodError, match=name):
+            LikelihoodConfig(**{name: bad})
+    tracker = Tracker(calibration, TrackerConfig(**{name: 0.3}))
+    assert getattr(tracker.measurement.config, name) == 0.3
+    assert getattr(Tracker(calibration, TrackerConfig()).measurement.config, name) == default
     assert TrackerConfig.from_dict({'motion': {'wall_stops': False}}).motion.wall_stops is False
 
 
 def test_tracker_defaults_are_the_built_configs_own_defaults():
     """TrackerConfig repeats some defaults of the configs it builds (sigma, d_occ,
-    min_inside_share, the release times); a default tracker builds each of them equal to
+    min_inside_share, min_visible_share, the release times); a default tracker builds each of them equal to
     that config's own default, so changing one place alone fails here."""
     from mbtrack_ros.core.detection.manager import AutoDetectionConfig
     from mbtrack_ros.core.likelihood import LikelihoodConfig

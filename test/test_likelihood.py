@@ -162,7 +162,8 @@ def test_hjs_loglik_combines_fc_bc_and_a_camera_says_nothing_of_what_it_does_not
                                                  0.0))
         mean = np.sum((dbg.prior * raw)[sel & seen]) / np.sum(dbg.prior[sel & seen])
         expect[sel & ~seen] = mean
-        if share < mm.config.min_inside_share:
+        if (share < mm.config.min_inside_share
+                or res.visible_fraction[k, 0] < mm.config.min_visible_share):
             expect[sel] = 0.0
     np.testing.assert_allclose(np.concatenate(res.loglik), expect, atol=1e-12)
     assert res.loglik[1][0] < 0.0 and res.loglik[1][0] < np.max(res.loglik[1][1:])
@@ -180,6 +181,52 @@ def test_hjs_loglik_combines_fc_bc_and_a_camera_says_nothing_of_what_it_does_not
     # an empty particle set is allowed and yields an empty result
     empty = mm.hjs([particles[0], np.zeros((0, 6))], [weights[0], np.zeros(0)], models[:2])
     assert empty.loglik[1].shape == (0,)
+
+
+def test_a_camera_in_which_a_target_is_hidden_says_nothing_about_it():
+    """A target the camera hides behind a nearer one (prior-expected visible fraction
+    below ``min_visible_share``) gets 0 on every particle from that camera: the occlusion
+    penalty and the nearer target's background term would otherwise still rank its places
+    (docs/detection.md, "A camera in which a target is hidden says nothing about it").
+    The other targets' scores do not change, and with the threshold at 0 the hidden
+    target gets the plain Eq. 19 scores of ``hjs_debug``."""
+    rng = np.random.default_rng(11)
+    cam = _camera('cam', (0.0, -3.5, 1.2))
+    image = _random_image(rng, cam.height, cam.width)
+    models = [_random_model(rng, 1.7) for _ in range(3)]
+
+    def near(centre, n=5):
+        p = np.zeros((n, 6))
+        p[:, X] = centre[0] + rng.uniform(-0.03, 0.03, n)
+        p[:, Y] = centre[1] + rng.uniform(-0.03, 0.03, n)
+        p[:, THETA] = rng.uniform(-np.pi, np.pi, n)
+        return p
+
+    # target 0 in front, target 1 straight behind it, target 2 half behind it
+    particles = [near((0.0, -0.5)), near((0.0, 1.5)), near((0.25, 1.5))]
+    weights = [rng.random(5) + 0.1 for _ in range(3)]
+    results = {}
+    for share in (0.0, 0.1):
+        mm = MeasurementModel(_room(cam), LikelihoodConfig(
+            sigma=0.1, d_occ=D_OCC, min_visible_pixels=1, min_visible_share=share))
+        mm.set_images({'cam': image})
+        results[share] = (mm.hjs(particles, weights, models),
+                          mm.hjs_debug('cam', particles, weights, models))
+    quiet, _ = results[0.1]
+    scored, dbg = results[0.0]
+    visible = quiet.visible_fraction[:, 0]
+    assert visible[1] < 0.1 <= visible[2] < 0.9 and visible[0] > 0.99   # the case is real
+    np.testing.assert_array_equal(quiet.visible_fraction, scored.visible_fraction)
+    raw = -(dbg.fc + dbg.bc) / (2 * 0.1 ** 2)
+    for k in range(3):
+        sel = dbg.target == k
+        np.testing.assert_allclose(scored.loglik[k], raw[sel], atol=1e-12)
+        if k == 1:
+            assert np.all(quiet.loglik[k] == 0.0)
+            assert np.all(scored.loglik[k] < 0.0) and np.ptp(scored.loglik[k]) > 0
+        else:
+            np.testing.assert_array_equal(quiet.loglik[k], scored.loglik[k])
+            assert np.all(quiet.loglik[k] < 0.0)
 
 
 def test_hjs_without_overlap_equals_separable():
@@ -468,19 +515,19 @@ def _stagewise(mm: MeasurementModel, particles, weights, models, separable: bool
             np.zeros(len(states) + 1, np.int64))
         one = -(fc + bc) / (2.0 * cfg.sigma ** 2)
         seen = (sil.area > 0) & (sil.area * sil.row_step >= cfg.min_visible_pixels)
+        frac = np.where(sil.full_area > 0, vis / np.maximum(sil.full_area, 1), 0.0)
+        visible[:, c] = np.bincount(target, weights=prior * np.clip(frac, 0, 1),
+                                    minlength=len(models))
         for k in range(len(models)):                 # what the camera says of each target
             sel = target == k
             share = np.sum(prior[sel] * np.where(seen[sel], np.minimum(
                 sil.area[sel] / np.maximum(sil.full_area[sel], 1), 1.0), 0.0)) / prior[sel].sum()
-            if share < cfg.min_inside_share:
+            if share < cfg.min_inside_share or visible[k, c] < cfg.min_visible_share:
                 one[sel] = 0.0
             elif np.any(sel & ~seen):
                 one[sel & ~seen] = (np.sum((prior * one)[sel & seen])
                                     / np.sum(prior[sel & seen]) if np.any(sel & seen) else 0.0)
         loglik += one
-        frac = np.where(sil.full_area > 0, vis / np.maximum(sil.full_area, 1), 0.0)
-        visible[:, c] = np.bincount(target, weights=prior * np.clip(frac, 0, 1),
-                                    minlength=len(models))
     return loglik, visible
 
 

@@ -21,12 +21,18 @@ parallel without waiting for each other's Python.
 Log-likelihoods are ``-D^2 / (2 sigma^2)`` (000 Eq. 19) summed over cameras. Where a camera
 sees little of a target it says nothing about it (``MeasurementModel._seen_by``): when the
 target's silhouettes are on average (prior-weighted) less than ``min_inside_share`` inside
-the image, the camera adds 0 to all its particles; otherwise a particle the camera sees
-fewer than ``min_visible_pixels`` of gets the prior-weighted mean of the target's seen
-particles there. An unseen silhouette would otherwise score 0, the best score any camera
+the image, or when it hides the target behind nearer ones (the prior-expected visible
+fraction sum(w*) / area is below ``min_visible_share``), the camera adds 0 to all its
+particles; otherwise a particle the camera sees fewer than ``min_visible_pixels`` of gets
+the prior-weighted mean of the target's seen particles there. An unseen silhouette would otherwise score 0, the best score any camera
 gives: a track beside a camera was drawn into the part of the floor the camera does not
 see, away from the places it sees in part (docs/detection.md, "A camera that sees little
-of a target says nothing about it; a wall stops a particle"). With exits in the
+of a target says nothing about it; a wall stops a particle"). A camera that sees a few
+pixels of a hidden target still scores its places by the occlusion penalty and the
+background term of the targets in front (Eq. 26, Eq. 40), which differ by several nats
+between places it cannot tell apart: that pulled the track of a person no camera saw into
+the crowd (docs/detection.md, "A camera in which a target is hidden says nothing about
+it"). With exits in the
 calibration (rectangles beyond a door), a camera on the door's wall cannot see a particle
 in the exit once it is level with the camera or beyond (past the wall): that particle gets
 the mean of its target's other particles in that camera
@@ -87,6 +93,10 @@ class LikelihoodConfig:
         min_inside_share: a camera seeing less of a target's silhouettes inside its image
             (prior-weighted mean of the share of each inside) says nothing about the target
             (adds 0 to each of its particles; 0: never).
+        min_visible_share: a camera in which a target's prior-expected visible fraction
+            (sum(w*) / silhouette area, ``LikelihoodResult.visible_fraction``) is below this
+            says nothing about the target: it is hidden there (0: never; in the separable
+            update w* = 1 and the fraction is the share inside the image).
         subsample: use every k-th image row of the silhouettes (speed option).
         threads: cameras evaluated in parallel threads (0: one per CPU core, 1: serial).
     """
@@ -95,6 +105,7 @@ class LikelihoodConfig:
     d_occ: float = 0.15
     min_visible_pixels: int = 20
     min_inside_share: float = 0.5
+    min_visible_share: float = 0.1
     subsample: int = 1
     threads: int = 0
 
@@ -106,6 +117,9 @@ class LikelihoodConfig:
         if not 0 <= self.min_inside_share <= 1:
             raise LikelihoodError(f'min_inside_share must be in [0, 1], got '
                                   f'{self.min_inside_share}')
+        if not 0 <= self.min_visible_share <= 1:
+            raise LikelihoodError(f'min_visible_share must be in [0, 1], got '
+                                  f'{self.min_visible_share}')
         if int(self.subsample) < 1:
             raise LikelihoodError(f'subsample must be >= 1, got {self.subsample}')
         if int(self.threads) < 0:
@@ -441,20 +455,24 @@ class MeasurementModel:
             return loglik
         return _with_target_mean(loglik, ~hidden, target, prior, n_targets)
 
-    def _seen_by(self, loglik: np.ndarray, inside: np.ndarray, target: np.ndarray,
-                 prior: np.ndarray, n_targets: int) -> np.ndarray:
+    def _seen_by(self, loglik: np.ndarray, inside: np.ndarray, visible: np.ndarray,
+                 target: np.ndarray, prior: np.ndarray, n_targets: int) -> np.ndarray:
         """A camera's log-likelihoods (P,) where it sees enough of a target: 0 for every
         particle of a target whose silhouettes are less than ``min_inside_share`` inside
         the image on average (``inside`` (P,): each one's share, 0 for one not seen,
-        weighted by ``prior``); elsewhere a particle not seen gets the prior-weighted mean
-        of its target's seen ones (module docstring)."""
+        weighted by ``prior``) or whose expected visible fraction ``visible`` (K,) is
+        below ``min_visible_share`` (hidden behind nearer targets); elsewhere a particle
+        not seen gets the prior-weighted mean of its target's seen ones (module
+        docstring)."""
         seen = inside > 0
         out = loglik if seen.all() else _with_target_mean(loglik, seen, target, prior,
                                                            n_targets)
         mass = np.bincount(target, weights=prior, minlength=n_targets)
         share = np.divide(np.bincount(target, weights=prior * inside, minlength=n_targets),
                           mass, out=np.zeros(n_targets), where=mass > 0)
-        return np.where(share[target] < self.config.min_inside_share, 0.0, out)
+        quiet = ((share < self.config.min_inside_share)
+                 | (visible < self.config.min_visible_share))
+        return np.where(quiet[target], 0.0, out)
 
     def _coverage_term(self, cover: np.ndarray, target: np.ndarray, prior: np.ndarray,
                        n_targets: int) -> np.ndarray:
@@ -599,8 +617,8 @@ class MeasurementModel:
         for i, (c, name) in enumerate(cams):
             if self._coverage_gain > 0 and name in self._foreground_integrals():
                 cam_loglik[i] += self._coverage_term(cam_cover[i], target, prior, n_targets)
-            cam_loglik[i] = self._seen_by(cam_loglik[i], cam_inside[i], target, prior,
-                                          n_targets)
+            cam_loglik[i] = self._seen_by(cam_loglik[i], cam_inside[i], cam_visible[i],
+                                          target, prior, n_targets)
             loglik += self._without_hidden(name, cam_loglik[i], states, target, prior,
                                            n_targets)
             visible[:, c] = cam_visible[i]

@@ -47,6 +47,10 @@ class TrackerConfig:
             (``LikelihoodConfig.min_inside_share``; docs/detection.md, "A camera that sees
             little of a target says nothing about it; a wall stops a particle"); 0: only
             the particles it does not see at all get their target's mean there.
+        min_visible_share: a camera in which a target is hidden (its prior-expected
+            visible fraction sum(w*) / area below this) says nothing about the target
+            (``LikelihoodConfig.min_visible_share``; docs/detection.md, "A camera in which a
+            target is hidden says nothing about it"); 0: never.
         mrf_radius: spatial-exclusion radius, metres. 000 §VI-A uses 0.4; people who stand
             or walk side by side are 0.42-0.5 m apart centre to centre, and at 0.4 the prior
             pushed their tracks apart and off them (30 clear-room runs with automatic
@@ -115,6 +119,7 @@ class TrackerConfig:
     sigma: float = 0.12
     d_occ: float = 0.15
     min_inside_share: float = 0.5
+    min_visible_share: float = 0.1
     mrf_radius: float = 0.3
     mrf_epsilon: float = 1e-3
     use_mrf: bool = True
@@ -150,9 +155,11 @@ class TrackerConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
                 bad(f'{name} must be an integer >= 1, got {value!r}')
-        share = self.min_inside_share
-        if isinstance(share, bool) or not (isinstance(share, (int, float)) and 0 <= share <= 1):
-            bad(f'min_inside_share must be a number in [0, 1], got {share!r}')
+        for name in ('min_inside_share', 'min_visible_share'):
+            share = getattr(self, name)
+            if isinstance(share, bool) or not (isinstance(share, (int, float))
+                                               and 0 <= share <= 1):
+                bad(f'{name} must be a number in [0, 1], got {share!r}')
         for name in ('sigma', 'theta_bp'):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and np.isfinite(value) and value > 0):
@@ -331,7 +338,9 @@ class Tracker:
             from mbtrack_ros.core.likelihood import LikelihoodConfig, MeasurementModel
             likelihood = LikelihoodConfig(sigma=self.config.sigma, d_occ=self.config.d_occ,
                                           subsample=int(self.config.subsample),
-                                          min_inside_share=float(self.config.min_inside_share))
+                                          min_inside_share=float(self.config.min_inside_share),
+                                          min_visible_share=float(
+                                              self.config.min_visible_share))
             if scale != 1.0:  # an area: scales with the square
                 likelihood = replace(likelihood, min_visible_pixels=max(1, _length(
                     likelihood.min_visible_pixels, scale * scale)))

@@ -53,6 +53,9 @@ tracker.d_occ                   double     occlusion penalty, 000 Eq. 26 (0.15)
 tracker.min_inside_share        double     a camera that sees less of a target inside its
                                            image says nothing about it (0.5,
                                            docs/detection.md)
+tracker.min_visible_share       double     a camera in which a target is hidden behind
+                                           others (expected visible fraction below this)
+                                           says nothing about it (0.1, docs/detection.md)
 tracker.mrf_radius              double     exclusion radius, m (0.3; 000 §VI-A: 0.4)
 tracker.use_mrf                 bool       spatial-exclusion MRF prior (true)
 tracker.seed                    int        random seed, -1 = fresh entropy (-1)
@@ -216,6 +219,9 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
     'tracker.min_inside_share': (0.5, 'a camera that sees less of a target\'s silhouettes '
                                  'inside its image says nothing about the target '
                                  '(TrackerConfig.min_inside_share)', _fr(0.0, 1.0)),
+    'tracker.min_visible_share': (0.1, 'a camera in which a target is hidden behind others '
+                                  '(expected visible fraction below this) says nothing about '
+                                  'it (TrackerConfig.min_visible_share)', _fr(0.0, 1.0)),
     'tracker.mrf_radius': (0.3, 'spatial exclusion radius, m (000 §VI-A: 0.4)',
                            _fr(0.0, 5.0)),
     'tracker.use_mrf': (True, 'apply the spatial-exclusion MRF prior', {}),

@@ -21,6 +21,7 @@ TRACKER_PARAMETERS: dict[str, tuple[str, type]] = {
     'tracker.pipeline_search': ('pipeline_search', bool), 'tracker.sigma': ('sigma', float),
     'tracker.d_occ': ('d_occ', float), 'tracker.mrf_radius': ('mrf_radius', float),
     'tracker.min_inside_share': ('min_inside_share', float),
+    'tracker.min_visible_share': ('min_visible_share', float),
     'tracker.use_mrf': ('use_mrf', bool), 'tracker.release_time': ('release_time', float),
     'tracker.release_recover_time': ('release_recover_time', float),
     'detection.threshold': ('detection_threshold', float),
