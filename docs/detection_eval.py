@@ -1112,6 +1112,25 @@ def plot_scores(scores: list[dict], path: Path) -> None:
     fig.savefig(path)
 
 
+def _scalar_fields(option: str, config: type, values: dict[str, float]) -> dict:
+    """``values`` (field -> number from FIELD=VALUE) as the scalar fields of dataclass
+    ``config`` take them: a number for a float field, a whole number for an int field, 0 or
+    1 for a switch (bool field); ValueError naming ``option`` for any other field or
+    value (nested configs, tuples, unknown names)."""
+    fields = config.__dataclass_fields__
+    out: dict = {}
+    for k, v in values.items():
+        kind = fields[k].type if k in fields else None
+        if kind not in ('float', 'int', 'bool'):
+            raise ValueError(f'{option}: {k} is not a scalar {config.__name__} field')
+        if kind == 'bool' and v not in (0.0, 1.0):
+            raise ValueError(f'{option}: {k} is a switch, give 0 or 1, got {v:g}')
+        if kind == 'int' and v != int(v):
+            raise ValueError(f'{option}: {k} is a whole number, got {v:g}')
+        out[k] = bool(v) if kind == 'bool' else int(v) if kind == 'int' else v
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest='cmd', required=True)
@@ -1132,12 +1151,13 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument('--params', type=Path, default=None, metavar='NODE.yaml',
                    help='tracker settings of a tracker_node parameter file (config/*.yaml)')
     r.add_argument('--release', action='append', default=[], metavar='FIELD=VALUE',
-                   help='override a ReleaseConfig field (repeatable), e.g. spare_support=0')
+                   help='override a scalar ReleaseConfig field (repeatable; a switch takes '
+                        '0 or 1), e.g. spare_support=0')
     r.add_argument('--exit-rescue', type=float, default=None, metavar='COVERAGE',
                    help='AutoDetectionConfig.exit_rescue (h-reid; 0 = off, the default)')
     r.add_argument('--detection', action='append', default=[], metavar='FIELD=VALUE',
-                   help='override a scalar AutoDetectionConfig field (repeatable), e.g. '
-                        'beside_support=0.25')
+                   help='override a scalar AutoDetectionConfig field (repeatable; a switch '
+                        'takes 0 or 1), e.g. beside_support=0.25')
     r.add_argument('--frames', type=int, default=None, metavar='N',
                    help='only the first N frame sets (a quick look; the other commands '
                         'read the whole ground truth)')
@@ -1170,17 +1190,11 @@ def main(argv: list[str] | None = None) -> int:
         except ValueError:
             p.error(f'--release and --detection need FIELD=NUMBER, got '
                     f'{args.release + args.detection}')
-        for k in release:
-            if k not in release_module.ReleaseConfig.__dataclass_fields__ or k == 'use_ceiling':
-                p.error(f'--release: {k} is not a numeric ReleaseConfig field')
-        fields = AutoDetectionConfig.__dataclass_fields__
-        for k in detection:
-            if k not in fields or fields[k].type not in ('float', 'int', 'bool'):
-                p.error(f'--detection: {k} is not a scalar AutoDetectionConfig field')
-            if fields[k].type == 'bool':     # a switch: 0 or 1
-                if detection[k] not in (0.0, 1.0):
-                    p.error(f'--detection: {k} is a switch, give 0 or 1, got {detection[k]}')
-                detection[k] = bool(detection[k])
+        try:
+            release = _scalar_fields('--release', release_module.ReleaseConfig, release)
+            detection = _scalar_fields('--detection', AutoDetectionConfig, detection)
+        except ValueError as err:
+            p.error(str(err))
         if args.check_only:   # suite's check of the run options it passes on
             return 0
         run(args.rec, args.out, args.seed, args.no_people_cue, release, args.params,

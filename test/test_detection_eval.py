@@ -114,12 +114,15 @@ def test_run_takes_scalar_detection_fields_and_refuses_others(detection_eval, mo
         with pytest.raises(SystemExit) as err:
             detection_eval.main(argv + ['--detection', bad])
         assert err.value.code == 2
-    # --release takes numeric ReleaseConfig fields (the thirty-ninth session's rule off:
-    # recover_time=0) and refuses the others the same way
+    # --release takes the scalar ReleaseConfig fields the same way (the thirty-ninth
+    # session's rule off: recover_time=0; the ceiling camera off: use_ceiling=0; min_area
+    # a whole number) and refuses the others
     seen.clear()
-    detection_eval.main(argv + ['--release', 'recover_time=0'])
-    assert seen['args'][4] == {'recover_time': 0.0}
-    for bad in ('no_such_field=1', 'use_ceiling=0'):
+    detection_eval.main(argv + ['--release', 'recover_time=0', '--release', 'use_ceiling=0',
+                                '--release', 'min_area=40'])
+    assert seen['args'][4] == {'recover_time': 0.0, 'use_ceiling': False, 'min_area': 40}
+    assert type(seen['args'][4]['min_area']) is int
+    for bad in ('no_such_field=1', 'use_ceiling=0.5', 'min_area=2.5', 'timeout=soon'):
         with pytest.raises(SystemExit) as err:
             detection_eval.main(argv + ['--release', bad])
         assert err.value.code == 2
