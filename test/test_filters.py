@@ -333,6 +333,28 @@ def test_filters_follow_moving_targets(cls):
     assert set(filt.step(0.1, GaussianMeasurement([truth(2.1)[1]]), {}, rng)) == {8}
 
 
+@pytest.mark.parametrize('cls', [HJSFilter, SeparableFilter])
+def test_cloud_is_a_copy_of_what_the_next_step_starts_from(cls):
+    """``cloud`` gives a track's posterior particles and log-weights of the last step (the
+    update's particles and weights) and its model; changing the copy changes nothing."""
+    rng = np.random.default_rng(9)
+    filt = cls(FilterConfig(particles=50), floor=(-5.0, -5.0, 5.0, 5.0), camera_names=['cam0'])
+    model = object()
+    filt.add(4, model, np.r_[0.0, 0.0, 0.3, 0.0, 0.0, 0.0], rng)
+    update = filt.step(0.1, GaussianMeasurement([np.array([0.05, 0.0])]), {}, rng)[4]
+    particles, logw, got = filt.cloud(4)
+    np.testing.assert_array_equal(particles, update.particles)
+    np.testing.assert_allclose(np.exp(logw), update.weights, rtol=1e-12)
+    assert got is model
+    particles[:] = 99.0
+    logw[:] = 0.0
+    again, logw_again, _ = filt.cloud(4)
+    np.testing.assert_array_equal(again, update.particles)
+    np.testing.assert_allclose(np.exp(logw_again), update.weights, rtol=1e-12)
+    with pytest.raises(FilterError, match='no track 5'):
+        filt.cloud(5)
+
+
 class _WrongViewMeasurement(GaussianMeasurement):
     """Stand-in for an appearance model whose key views were annotated with the wrong body
     orientation: besides the Gaussian around the true position, a particle scores

@@ -1,6 +1,7 @@
 """Shared by the diagnostics: the ``detection_eval.py`` module and the OUT REC pairs of a
 command line (for those that read ``run`` outputs), and the tracker stepped over a
-recording as ``run`` steps it (for those that look inside it)."""
+recording as ``run`` steps it with its tracks' particle clouds (for those that look inside
+it)."""
 import importlib.util
 import sys
 from collections.abc import Iterator
@@ -43,6 +44,31 @@ def tracked_frames(rec: Path, seed: int, last: int, **config) -> Iterator[tuple]
             yield fs, result, tracker
             if fs.index >= last:
                 return
+
+
+def weighted_cloud(tracker, track_id: int) -> tuple:
+    """A track's particles (N, 6), normalised weights (N,) and appearance model as the
+    tracker's next step starts from them (``filter.cloud``; HJS and separable filters)."""
+    particles, logw, model = tracker.filter.cloud(track_id)
+    w = np.exp(logw - logw.max())
+    return particles, w / w.sum(), model
+
+
+def with_track_replaced(tracker, track_id: int, states: np.ndarray) -> tuple:
+    """(clouds, log-weights, models, k): every live track's cloud as the next step starts
+    from it, in the filter's order, with track ``track_id``'s (index k) replaced by
+    ``states`` (M, 6) of equal weight, to score places for that track with the tracker's
+    own measurement model (``hjs`` with ``log_weights=True``)."""
+    ids = tracker.filter.track_ids()
+    clouds, logw, models = [], [], []
+    for i in ids:
+        particles, lw, model = tracker.filter.cloud(i)
+        if i == track_id:
+            particles, lw = states, np.full(len(states), -np.log(len(states)))
+        clouds.append(particles)
+        logw.append(lw)
+        models.append(model)
+    return clouds, logw, models, ids.index(track_id)
 
 
 def run_context(out: Path, rec: Path) -> tuple:

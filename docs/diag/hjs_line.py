@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from _eval import places, tracked_frames
+from _eval import places, tracked_frames, with_track_replaced
 from mbtrack_ros.core.state import X, Y
 
 if len(sys.argv) not in (6, 7):
@@ -28,16 +28,12 @@ for fs, result, tracker in tracked_frames(rec, seed, frames[-1]):
         continue
     track = next(t for t in result.tracks if t.track_id == tid)
     person = people[fs.index][pid]
-    flt, mm = tracker.filter, tracker.measurement
-    ids = flt.track_ids()
+    mm = tracker.measurement
     line = np.repeat(track.mean[None].astype(np.float64), len(steps), 0)
     line[:, X] = track.mean[X] + steps * (person[0] - track.mean[X])
     line[:, Y] = track.mean[Y] + steps * (person[1] - track.mean[Y])
-    clouds = [line if i == tid else flt._particles[i] for i in ids]
-    logw = [np.full(len(steps), -np.log(len(steps))) if i == tid else flt._logw[i]
-            for i in ids]
-    models = [flt._models[i] for i in ids]
-    k = ids.index(tid)
+    clouds, logw, models, k = with_track_replaced(tracker, tid, line)
+    ids = tracker.filter.track_ids()
     zero = int(np.argmin(np.abs(steps)))
     print(f'frame {fs.index}: track {tid} at ({track.mean[X]:.2f}, {track.mean[Y]:.2f}), '
           f'person {pid} at ({person[0]:.2f}, {person[1]:.2f}); steps {steps.round(2)}; '

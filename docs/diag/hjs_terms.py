@@ -4,8 +4,8 @@ track's mean otherwise), the other tracks keep their clouds and weights, and for
 camera the foreground term fc (000 Eq. 33 with Eq. 26), the background term bc (Eq. 40)
 and the visible mass sum(w*) of each place are printed (``MeasurementModel.hjs_debug``),
 then the tracker's summed log-likelihood against the first place. Steps the tracker as
-``detection_eval.py run`` does (same seed); reads the filter's private clouds as
-``hjs_line.py`` does.
+``detection_eval.py run`` does (same seed); the clouds as ``hjs_line.py`` builds them
+(``_eval.with_track_replaced``).
 
 usage: .venv/bin/python docs/diag/hjs_terms.py REC SEED TRACK FRAME X Y0 Y1 [N]
 """
@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from _eval import tracked_frames
+from _eval import tracked_frames, with_track_replaced
 from mbtrack_ros.core.state import X, Y
 
 if len(sys.argv) not in (8, 9):
@@ -26,16 +26,12 @@ ys = np.linspace(float(sys.argv[6]), float(sys.argv[7]), int(sys.argv[8]) if len
 for fs, result, tracker in tracked_frames(rec, seed, frame):
     if fs.index != frame:
         continue
-    flt, mm = tracker.filter, tracker.measurement
-    ids = flt.track_ids()
+    mm = tracker.measurement
     track = next(t for t in result.tracks if t.track_id == tid)
     line = np.repeat(track.mean[None].astype(np.float64), len(ys), 0)
     line[:, X], line[:, Y] = x, ys
-    clouds = [line if i == tid else flt._particles[i] for i in ids]
-    logw = [np.full(len(ys), -np.log(len(ys))) if i == tid else flt._logw[i] for i in ids]
+    clouds, logw, models, k = with_track_replaced(tracker, tid, line)
     weights = [np.exp(w - w.max()) for w in logw]
-    models = [flt._models[i] for i in ids]
-    k = ids.index(tid)
     print(f'frame {frame}: track {tid} at ({track.mean[X]:.2f}, {track.mean[Y]:.2f}); '
           f'places x {x:.2f}, y {np.round(ys, 2)}')
     for name in mm.camera_names:

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _eval import tracked_frames  # noqa: E402
+from _eval import tracked_frames, weighted_cloud  # noqa: E402
 
 from mbtrack_ros.core.state import SIT, VX, VY, X, Y  # noqa: E402
 
@@ -26,12 +26,9 @@ gt = {}
 for r in csv.DictReader(open(rec / 'ground_truth.csv')):
     gt[int(r['frame']), int(r['person_id'])] = (float(r['x']), float(r['y']), r['sitting'])
 for fs, _, tracker in tracked_frames(rec, seed, last):
-    particles = tracker.filter._particles.get(tid)
-    if fs.index < first or particles is None or (fs.index, pid) not in gt:
+    if fs.index < first or tid not in tracker.filter.track_ids() or (fs.index, pid) not in gt:
         continue
-    logw = tracker.filter._logw[tid]
-    w = np.exp(logw - logw.max())
-    w /= w.sum()
+    particles, w, _ = weighted_cloud(tracker, tid)
     gx, gy, sitting = gt[fs.index, pid]
     d = np.hypot(particles[:, X] - gx, particles[:, Y] - gy)
     mean = w @ particles

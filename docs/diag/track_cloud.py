@@ -1,8 +1,8 @@
 """Per frame from FIRST to LAST, each named track's model size (height, width), its
 estimate, the weighted spread of its particles in y, their weighted mean velocity and its
 existence, beside the ground-truth places of the people with the same ids. Steps the
-tracker as ``detection_eval.py run`` does (same seed); reads the filter's private clouds
-as ``hjs_line.py`` does.
+tracker as ``detection_eval.py run`` does (same seed); the clouds from
+``_eval.weighted_cloud``.
 
 usage: .venv/bin/python docs/diag/track_cloud.py REC SEED TRACK[,TRACK...] FIRST LAST
 """
@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from _eval import places, tracked_frames
+from _eval import places, tracked_frames, weighted_cloud
 from mbtrack_ros.core.state import VX, VY, X, Y
 
 if len(sys.argv) != 6:
@@ -29,12 +29,9 @@ for fs, result, tracker in tracked_frames(rec, seed, last):
         tid = track.track_id
         if tid not in tids or tid not in flt.track_ids():
             continue
-        cloud, logw = flt._particles[tid], flt._logw[tid]
-        w = np.exp(logw - logw.max())
-        w /= w.sum()
+        cloud, w, model = weighted_cloud(tracker, tid)
         y_mean = float(w @ cloud[:, Y])
         y_spread = float(np.sqrt(w @ (cloud[:, Y] - y_mean) ** 2))
-        model = flt._models[tid]
         person = (f'person ({here[tid][0]:.2f}, {here[tid][1]:.2f})' if tid in here
                   else 'person -')
         print(f'{fs.index} track {tid}: h {model.height:.2f} w {model.width:.2f}, '

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _eval import tracked_frames  # noqa: E402
+from _eval import tracked_frames, weighted_cloud  # noqa: E402
 
 from mbtrack_ros.core.state import THETA, VX, VY, X, Y  # noqa: E402
 
@@ -35,10 +35,8 @@ for fs, _, tracker in tracked_frames(rec, seed, last, **config):
     f = fs.index
     if f < first or f not in gt or f - 3 not in gt:
         continue
-    for tid, p in tracker.filter._particles.items():
-        lw = tracker.filter._logw[tid]
-        w = np.exp(lw - lw.max())
-        w /= w.sum()
+    for tid in tracker.filter.track_ids():
+        p, w, _ = weighted_cloud(tracker, tid)
         m = w @ p
         theta = np.arctan2(w @ np.sin(p[:, THETA]), w @ np.cos(p[:, THETA]))
         pid, (gx, gy) = min(gt[f].items(),

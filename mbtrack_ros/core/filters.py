@@ -242,6 +242,15 @@ class _MarginalParticleFilter:
     def track_ids(self) -> list[int]:
         return list(self._particles)
 
+    def cloud(self, track_id: int) -> tuple[np.ndarray, np.ndarray, PersonModel]:
+        """A track's particles (N, 6), normalised log-weights (N,) and appearance model as
+        the next :meth:`step` starts from them (copies of the arrays; for diagnostics that
+        score a track's surroundings with the filter's own clouds)."""
+        if track_id not in self._particles:
+            raise FilterError(f'no track {track_id}')
+        return (self._particles[track_id].copy(), self._logw[track_id].copy(),
+                self._models[track_id])
+
     def reset(self) -> None:
         self._particles.clear()
         self._logw.clear()
