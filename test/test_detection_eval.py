@@ -1,24 +1,18 @@
 """The "fully visible in two cameras" clock of docs/detection_eval.py (issue #4 entering)."""
-import importlib.util
 import json
 import re
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from conftest import load_script
 from mbtrack_ros.recording.csvfiles import GroundTruthRow
 from mbtrack_ros.synth.room import default_room, make_calibration
-
-_SCRIPT = Path(__file__).resolve().parents[1] / 'docs' / 'detection_eval.py'
 
 
 @pytest.fixture(scope='module')
 def detection_eval():
-    spec = importlib.util.spec_from_file_location('detection_eval', _SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script('docs/detection_eval.py', 'detection_eval')
 
 
 @pytest.fixture(scope='module')

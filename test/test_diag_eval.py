@@ -1,24 +1,18 @@
 """The diagnostics' shared helpers (docs/diag/_eval.py) that read the tracker's clouds."""
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
+from conftest import load_script
 from mbtrack_ros.core.filters import FilterConfig, HJSFilter
-
-_EVAL = Path(__file__).resolve().parents[1] / 'docs' / 'diag' / '_eval.py'
 
 
 @pytest.fixture(scope='module')
 def diag_eval():
-    spec = importlib.util.spec_from_file_location('diag_eval', _EVAL)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script('docs/diag/_eval.py', 'diag_eval')
 
 
 def test_clouds_with_one_track_replaced_by_places(diag_eval):
