@@ -98,6 +98,34 @@ def test_experiments_keep_the_papers_exclusion_radius(recording, tmp_path, monke
     capsys.readouterr()
 
 
+def test_experiments_take_a_node_parameter_file_under_their_own_settings(
+        recording, tmp_path, monkeypatch, capsys):
+    """``--params`` hands a tracker_node file to every replay (its min_visible_share and
+    d_occ here); the options experiments sets itself (d_occ, the paper's radius) win; a
+    bad file is one error line before any replay."""
+    from mbtrack_ros.commands import replay
+
+    params = tmp_path / 'p.yaml'
+    params.write_text('tracker_node:\n  ros__parameters:\n    tracker:\n'
+                      '      min_visible_share: 0.0\n      d_occ: 0.4\n')
+    seen = []
+    original = replay._config
+    monkeypatch.setattr(replay, '_config', lambda args: seen.append(original(args)) or seen[-1])
+    out = tmp_path / 'exp'
+    assert main(['experiments', str(recording), '--out', str(out), '--runs', 'hjs:20',
+                 '--max-frames', '2', '--params', str(params)]) == 0
+    assert [(c.min_visible_share, c.d_occ, c.mrf_radius) for c in seen] == [(0.0, 0.15, 0.4)]
+    assert json.loads((out / 'results.json').read_text())['runs'][0]['params'] == str(params)
+    assert str(params) in (out / 'results.md').read_text()
+    capsys.readouterr()
+    params.write_text('tracker_node:\n  ros__parameters:\n    tracker:\n      no_such: 1\n')
+    seen.clear()
+    assert main(['experiments', str(recording), '--out', str(out), '--runs', 'hjs:20',
+                 '--params', str(params)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and 'no_such' in err[0] and not seen
+
+
 def test_experiments_bad_run_is_one_line_error(recording, tmp_path, capsys):
     code = main(['experiments', str(recording), '--out', str(tmp_path / 'e'),
                  '--runs', 'pdaf:many'])

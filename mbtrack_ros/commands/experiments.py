@@ -54,6 +54,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument('--d-occ', type=float, default=0.15, help='occlusion penalty d_occ')
     parser.add_argument('--sigma', type=float, default=0.12, help='likelihood width sigma')
     parser.add_argument('--tag', default='', help='suffix of the PNG names')
+    parser.add_argument('--params', type=Path, default=None, metavar='NODE.yaml',
+                        help='tracker settings of a tracker_node parameter file '
+                             '(config/*.yaml, as mbtrack replay --params) under the ones this '
+                             'command sets: d_occ, sigma, the paper\'s MRF radius and motion')
     return parser
 
 
@@ -74,7 +78,8 @@ def _parse_runs(text: str) -> list[tuple[str, int]]:
 
 
 def _replay(recording: Path, out: Path, alg: str, n: int, seed: int, max_frames: int | None,
-            *, mrf: bool = True, d_occ: float = 0.15, sigma: float = 0.12) -> dict:
+            *, mrf: bool = True, d_occ: float = 0.15, sigma: float = 0.12,
+            params: Path | None = None) -> dict:
     from mbtrack_ros.cli import main
     from mbtrack_ros.evaluation.clear_mot import clear_mot
     from mbtrack_ros.evaluation.posterior import posterior_mass
@@ -86,6 +91,7 @@ def _replay(recording: Path, out: Path, alg: str, n: int, seed: int, max_frames:
             '--algorithm', alg, '--seed', str(seed), '--d-occ', str(d_occ),
             '--sigma', str(sigma), '--mrf-radius', str(PAPER_MRF_RADIUS), '--paper-motion']
     argv += ['--save-particles'] if particles else []
+    argv += ['--params', str(params)] if params is not None else []
     argv += ['--joint-particles', str(n)] if alg == 'joint' else ['--particles', str(n)]
     if not mrf:
         argv.append('--no-mrf')
@@ -110,7 +116,9 @@ def _replay(recording: Path, out: Path, alg: str, n: int, seed: int, max_frames:
         at_025 = at_05 = float('nan')
         curve = None
     return {'recording': recording.name, 'algorithm': alg, 'particles': n, 'seed': seed,
-            'mrf': mrf, 'd_occ': d_occ, 'sigma': sigma, 'exit_code': code, 'frames': frames,
+            'mrf': mrf, 'd_occ': d_occ, 'sigma': sigma,
+            'params': None if params is None else str(params), 'exit_code': code,
+            'frames': frames,
             'wall_s': wall,
             'frames_per_s': frames / max(wall, 1e-9), 'mota': result.mota,
             'motp_mm': result.motp_mm, 'miss_rate': result.miss_rate,
@@ -159,6 +167,13 @@ def run(args: argparse.Namespace) -> int:
             return _error(f'{rec} is not a recording directory made by mbtrack synth')
     if not args.recordings and args.ablation is None:
         return _error('nothing to do: give recordings and/or --ablation')
+    if args.params is not None:
+        from mbtrack_ros.commands.replay import tracker_values_from_params
+        from mbtrack_ros.core.tracker import TrackerError
+        try:    # a bad file is one error here, not one failed replay per run
+            tracker_values_from_params(args.params)
+        except (TrackerError, OSError) as err:
+            return _error(f'--params: {err}')
     out = Path(args.out)
     img = Path(args.img) if args.img is not None else out
     out.mkdir(parents=True, exist_ok=True)
@@ -167,7 +182,7 @@ def run(args: argparse.Namespace) -> int:
 
     rows: list[dict] = []
     summary: list[dict] = []
-    lik = {'d_occ': args.d_occ, 'sigma': args.sigma}
+    lik = {'d_occ': args.d_occ, 'sigma': args.sigma, 'params': args.params}
     for rec in args.recordings:
         curves = {}
         for alg, n in runs:
@@ -199,8 +214,9 @@ def run(args: argparse.Namespace) -> int:
                 print(f'{_PROG}: ablation {args.ablation.name} {tag}', file=sys.stderr)
                 ablation.append(_replay(args.ablation, out / 'ablation' / tag, 'hjs', 100,
                                         seed, args.max_frames, mrf=mrf, **lik))
-    lines = [f'd_occ = {args.d_occ}, sigma = {args.sigma}, seeds {args.run_seeds}; '
-             'mean +- standard deviation over seeds', '',
+    lines = [f'd_occ = {args.d_occ}, sigma = {args.sigma}, seeds {args.run_seeds}'
+             + (f', parameters of {args.params}' if args.params is not None else '')
+             + '; mean +- standard deviation over seeds', '',
              '| recording | run | frames/s | MOTA | MOTP | miss | ID switches | '
              'mass@0.25m | mass@0.5m |',
              '| --- | --- |' + ' ---: |' * 7]
