@@ -24,16 +24,16 @@ target's silhouettes are on average (prior-weighted) less than ``min_inside_shar
 the image, or when it hides the target behind nearer ones (the prior-expected visible
 fraction sum(w*) / area is below ``min_visible_share``), the camera adds 0 to all its
 particles; otherwise a particle the camera sees fewer than ``min_visible_pixels`` of gets
-the prior-weighted mean of the target's seen particles there. An unseen silhouette would otherwise score 0, the best score any camera
-gives: a track beside a camera was drawn into the part of the floor the camera does not
-see, away from the places it sees in part (docs/detection.md, "A camera that sees little
-of a target says nothing about it; a wall stops a particle"). A camera that sees a few
-pixels of a hidden target still scores its places by the occlusion penalty and the
-background term of the targets in front (Eq. 26, Eq. 40), which differ by several nats
-between places it cannot tell apart: that pulled the track of a person no camera saw into
-the crowd (docs/detection.md, "A camera in which a target is hidden says nothing about
-it"). With exits in the
-calibration (rectangles beyond a door), a camera on the door's wall cannot see a particle
+the prior-weighted mean of the target's seen particles there. An unseen silhouette would
+otherwise score 0, the best score any camera gives: a track beside a camera was drawn into
+the part of the floor the camera does not see, away from the places it sees in part
+(docs/detection.md, "A camera that sees little of a target says nothing about it; a wall
+stops a particle"). A camera that sees a few pixels of a hidden target still scores its
+places by the occlusion penalty and the background term of the targets in front (Eq. 26,
+Eq. 40), which differ by several nats between places it cannot tell apart: that pulled
+the track of a person no camera saw into the crowd (docs/detection.md, "A camera in which
+a target is hidden says nothing about it"). With exits in the calibration (rectangles
+beyond a door), a camera on the door's wall cannot see a particle
 in the exit once it is level with the camera or beyond (past the wall): that particle gets
 the mean of its target's other particles in that camera
 (``MeasurementModel._without_hidden``), else the wall would pull every track back from the
