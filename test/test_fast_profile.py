@@ -47,13 +47,16 @@ def test_camera_share_thresholds_are_validated_and_reach_the_likelihood(name, de
     tracker = Tracker(calibration, TrackerConfig(**{name: 0.3}))
     assert getattr(tracker.measurement.config, name) == 0.3
     assert getattr(Tracker(calibration, TrackerConfig()).measurement.config, name) == default
+
+
+def test_motion_values_of_a_dict_reach_the_motion_config():
     assert TrackerConfig.from_dict({'motion': {'wall_stops': False}}).motion.wall_stops is False
 
 
 def test_tracker_defaults_are_the_built_configs_own_defaults():
     """TrackerConfig repeats some defaults of the configs it builds (sigma, d_occ,
-    min_inside_share, min_visible_share, the release times); a default tracker builds each of them equal to
-    that config's own default, so changing one place alone fails here."""
+    min_inside_share, min_visible_share, the release times); a default tracker builds each
+    of them equal to that config's own default, so changing one place alone fails here."""
     from mbtrack_ros.core.detection.manager import AutoDetectionConfig
     from mbtrack_ros.core.likelihood import LikelihoodConfig
 
