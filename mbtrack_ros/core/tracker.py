@@ -222,6 +222,16 @@ class TrackerConfig:
                                       or not isinstance(self.seed, (int, np.integer))):
             bad(f'seed must be an integer or None, got {self.seed!r}')
 
+    def likelihood_config(self):
+        """The likelihood parameters this configuration sets (000 Eq. 19, 26; the cameras
+        that say nothing about a target), at full image size."""
+        from mbtrack_ros.core.likelihood import LikelihoodConfig
+
+        return LikelihoodConfig(sigma=float(self.sigma), d_occ=float(self.d_occ),
+                                subsample=int(self.subsample),
+                                min_inside_share=float(self.min_inside_share),
+                                min_visible_share=float(self.min_visible_share))
+
     def detection_config(self):
         """The automatic-detection parameters this configuration sets (003 §4)."""
         from mbtrack_ros.core.detection.detector import DetectorConfig
@@ -335,12 +345,8 @@ class Tracker:
         except FilterError as err:
             raise TrackerError(str(err)) from err
         if measurement is None:
-            from mbtrack_ros.core.likelihood import LikelihoodConfig, MeasurementModel
-            likelihood = LikelihoodConfig(sigma=self.config.sigma, d_occ=self.config.d_occ,
-                                          subsample=int(self.config.subsample),
-                                          min_inside_share=float(self.config.min_inside_share),
-                                          min_visible_share=float(
-                                              self.config.min_visible_share))
+            from mbtrack_ros.core.likelihood import MeasurementModel
+            likelihood = self.config.likelihood_config()
             if scale != 1.0:  # an area: scales with the square
                 likelihood = replace(likelihood, min_visible_pixels=max(1, _length(
                     likelihood.min_visible_pixels, scale * scale)))
