@@ -6,8 +6,8 @@ For the runs (recording, seed) both sides hold (a side may join several suites, 
 seeds 0-4 and the held-out seeds of one tree): on how many B has fewer / more / as many
 identity switches as A, and higher / lower MOTA, and each run whose switches differ; then
 the totals of each (switches, mean MOTA and MOTP, runs within the target), the switches
-per tracker seed (all recordings together), and Welch's t and the Mann-Whitney test of
-those per-seed totals (scipy).
+per tracker seed (all recordings together), on how many seeds B has fewer / more, and
+Welch's t and the Mann-Whitney test of those per-seed totals (scipy).
 """
 import json
 import sys
@@ -43,6 +43,10 @@ for name, runs in (('A', a), ('B', b)):
           f'{sum(met(runs[k]["switches_per_person"]) for k in both)}'
           f'; per tracker seed '
           f'{seeds}: {per_seed[name]}')
+fell = sum(b_ < a_ for a_, b_ in zip(per_seed['A'], per_seed['B']))
+rose = sum(b_ > a_ for a_, b_ in zip(per_seed['A'], per_seed['B']))
+print(f'per tracker seed, B against A: fewer switches on {fell} of {len(seeds)} seeds, '
+      f'more on {rose}')
 if len(seeds) > 1:
     welch = stats.ttest_ind(per_seed['B'], per_seed['A'], equal_var=False)
     ranks = stats.mannwhitneyu(per_seed['B'], per_seed['A'])
