@@ -49,10 +49,25 @@ def test_quick_evaluate_writes_a_table_and_plots_per_benchmark(tmp_path, capsys)
     real = {r['clip']: r for r in raw['real_clip']}
     assert real['started_off']['ids'] == 1
 
+    # --report-only writes the same tables from results.json; --fill quotes them in a page
+    before = {b.name: (out / f'{b.name}.md').read_text() for b in BENCHMARKS}
+    for b in BENCHMARKS:
+        (out / f'{b.name}.md').unlink()
+    page = tmp_path / 'page.md'
+    page.write_text('intro\n<!-- results: clear_room -->\nold\n<!-- /results -->\nend\n')
+    assert main(['evaluate', '--quick', '--report-only', '--out', str(out),
+                 '--fill', str(page)]) == 0, capsys.readouterr().err
+    assert {b.name: (out / f'{b.name}.md').read_text() for b in BENCHMARKS} == before
+    filled = page.read_text()
+    assert 'old' not in filled and filled.startswith('intro\n') and filled.endswith('end\n')
+    assert '| `clear-room --seed 200` |' in filled
+    assert '`mbtrack evaluate --quick --only clear_room`' in filled
+
 
 @pytest.mark.parametrize('argv,message', [
     (['--only', 'nope'], "unknown benchmark 'nope'"),
     (['--jobs', '0'], '--jobs must be at least 1'),
+    (['--report-only'], 'results.json'),
 ])
 def test_bad_options_are_one_line_errors(tmp_path, capsys, argv, message):
     assert main(['evaluate', '--out', str(tmp_path), *argv]) == 2

@@ -212,6 +212,7 @@ def _clear_room_report(results: list[dict], out: Path) -> Report:
     picture = next((r['picture'] for r in results if r.get('picture')), None)
     if picture:
         shutil.copyfile(picture, out / 'clear_room_views.png')
+    if (out / 'clear_room_views.png').exists():   # kept by --report-only
         plots.append('clear_room_views.png')
     return Report('\n'.join(lines), tuple(plots))
 

@@ -5,19 +5,23 @@ with ``--only``): their jobs in a pool of ``--jobs`` worker processes with a pro
 then the exclusive ones (timings) alone. Each benchmark writes ``OUT/NAME.md`` (a heading,
 what was run, the table, the command that regenerates it) and its PNG plots; ``OUT/
 results.json`` keeps every job's raw result. ``--quick`` runs a reduced version of every
-benchmark (seconds, for CI); its numbers are not the published ones.
+benchmark (seconds, for CI); its numbers are not the published ones. ``--report-only``
+writes the tables and plots again from ``OUT/results.json`` without running anything, and
+``--fill FILE.md`` copies each table into the ``<!-- results: NAME -->`` block of a page
+(the README and docs/evaluation.md quote the tables that way, never by hand).
 """
 from __future__ import annotations
 
 import argparse
 import json
+import re
 import shutil
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-__all__ = ['add_parser', 'run']
+__all__ = ['add_parser', 'run', 'table_of']
 
 _PROG = 'mbtrack evaluate'
 
@@ -41,6 +45,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument('--work', type=Path, default=None, metavar='DIR',
                         help='keep the recordings and replays here (default: a temporary '
                              'directory, removed at the end)')
+    parser.add_argument('--report-only', action='store_true',
+                        help='run nothing: write the tables and plots again from '
+                             'OUT/results.json')
+    parser.add_argument('--fill', action='append', default=[], type=Path, metavar='FILE.md',
+                        help='also copy each table into the block between '
+                             '"<!-- results: NAME -->" and "<!-- /results -->" of this markdown '
+                             'file (repeatable; e.g. README.md, docs/evaluation.md)')
     parser.add_argument('--list', action='store_true', help='list the benchmarks and exit')
     return parser
 
@@ -73,31 +84,68 @@ def run(args: argparse.Namespace) -> int:
         args.out.mkdir(parents=True, exist_ok=True)
     except OSError as err:
         return _error(f'cannot create {args.out}: {err.strerror or err}')
-    work = args.work or Path(tempfile.mkdtemp(prefix='mbtrack-evaluate-'))
-    started = time.perf_counter()
-    try:
-        results = _run_jobs(chosen, args.quick, args.jobs, work)
-        raw = {}
-        for bench in chosen:   # before the work directory goes: reports may copy from it
-            _write_report(args, bench, results[bench.name])
-            raw[bench.name] = [{k: v for k, v in r.items() if k != 'picture'}
-                               for r in results[bench.name]]
-    except RuntimeError as err:
-        return _error_run(str(err))
-    finally:
-        if args.work is None:
-            shutil.rmtree(work, ignore_errors=True)
     path = args.out / 'results.json'
     old = {}
-    if path.exists():   # keep the benchmarks not run this time
+    if path.exists():   # the benchmarks not run this time keep their results
         try:
             old = json.loads(path.read_text(encoding='utf-8'))
-        except (OSError, ValueError):
-            old = {}
-    path.write_text(json.dumps({**old, **raw}, indent=1) + '\n', encoding='utf-8')
+        except (OSError, ValueError) as err:
+            if args.report_only:
+                return _error(f'cannot read {path}: {err}')
+    started = time.perf_counter()
+    if args.report_only:
+        missing = [b.name for b in chosen if b.name not in old]
+        if missing:
+            return _error(f'{path} has no results of {", ".join(missing)}')
+        for bench in chosen:
+            _write_report(args, bench, old[bench.name])
+    else:
+        work = args.work or Path(tempfile.mkdtemp(prefix='mbtrack-evaluate-'))
+        try:
+            results = _run_jobs(chosen, args.quick, args.jobs, work)
+            for bench in chosen:   # before the work directory goes: reports copy from it
+                _write_report(args, bench, results[bench.name])
+                old[bench.name] = [{k: v for k, v in r.items() if k != 'picture'}
+                                   for r in results[bench.name]]
+        except RuntimeError as err:
+            return _error_run(str(err))
+        finally:
+            if args.work is None:
+                shutil.rmtree(work, ignore_errors=True)
+        path.write_text(json.dumps(old, indent=1) + '\n', encoding='utf-8')
+    for target in args.fill:
+        try:
+            _fill(target, args.out)
+        except (OSError, ValueError) as err:
+            return _error(f'--fill {target}: {err}')
     print(f'{_PROG}: {len(chosen)} benchmark(s) in {time.perf_counter() - started:.0f} s; '
           f'tables and plots in {args.out}/', file=sys.stderr)
     return 0
+
+
+_BLOCK = re.compile(r'(<!-- results: (\w+) -->\n)(.*?)(<!-- /results -->)', re.S)
+
+
+def table_of(markdown: str) -> str:
+    """The table of a results page (its ``|`` lines) and the line that regenerates it."""
+    lines = markdown.splitlines()
+    table = [line for line in lines if line.startswith('|')]
+    command = [line for line in lines if line.startswith('Regenerate:')]
+    return '\n'.join(table + [''] + command)
+
+
+def _fill(target: Path, out: Path) -> None:
+    """Replace each ``<!-- results: NAME -->`` block of ``target`` by the table of
+    ``out/NAME.md``."""
+    text = target.read_text(encoding='utf-8')
+
+    def block(m: re.Match) -> str:
+        page = out / f'{m.group(2)}.md'
+        if not page.exists():
+            raise ValueError(f'no {page} for the block "{m.group(2)}"')
+        return f'{m.group(1)}{table_of(page.read_text(encoding="utf-8"))}\n{m.group(4)}'
+
+    target.write_text(_BLOCK.sub(block, text), encoding='utf-8')
 
 
 def _write_report(args: argparse.Namespace, bench, results: list[dict]) -> None:
