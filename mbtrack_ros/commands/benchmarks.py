@@ -439,9 +439,10 @@ def _real_report(results: list[dict], out: Path) -> Report:
     for r in results:
         e = np.array([np.nan if v is None else v for v in r['errors']], np.float64)
         tracked = e[np.isfinite(e)]
+        median = 100 * float(np.median(tracked)) if tracked.size else math.nan
+        first = r['first_tracked'] if r['first_tracked'] is not None else '-'
         lines.append(f'| {what.get(r["clip"], r["clip"])} | {r["frames"]} | {r["ids"]} | '
-                     f'{r["first_tracked"] if r["first_tracked"] is not None else "-"} | '
-                     f'{_num(100 * float(np.median(tracked)) if tracked.size else math.nan, 0, " cm")} | '
+                     f'{first} | {_num(median, 0, " cm")} | '
                      f'{int(np.sum(tracked <= 0.20))} / {tracked.size} |')
         ax.plot(np.arange(e.size), 100 * e, marker='o', ms=3, label=r['clip'])
     ax.axhline(20, color='grey', lw=0.8, ls='--')
