@@ -163,11 +163,11 @@ def _clear_room_run(job: Job, workdir: Path) -> dict:
               **_scores(out / 'tracks.csv', rec / 'ground_truth.csv', job.name),
               'frames_per_s': p['frames'] / wall}
     if p.get('picture'):
-        result['picture'] = str(_views_picture(rec, out / 'tracks.csv', workdir / 'views.png'))
+        result['picture'] = str(_views_picture(rec, out / 'tracks.csv', workdir / 'views.jpg'))
     return result
 
 
-def _views_picture(rec: Path, tracks_csv: Path, png: Path) -> Path:
+def _views_picture(rec: Path, tracks_csv: Path, image: Path) -> Path:
     """All camera views of the frame with the most people, tracks over the ground truth."""
     from mbtrack_ros.recording.csvfiles import read_ground_truth, read_tracks
     from mbtrack_ros.synth.preview import contact_sheet
@@ -177,7 +177,7 @@ def _views_picture(rec: Path, tracks_csv: Path, png: Path) -> Path:
     stamp = next(r.stamp_ns for r in truth if r.frame == frame)
     drawn = [(r.track_id, r.x, r.y, 1.75) for r in read_tracks(tracks_csv)
              if r.stamp_ns == stamp]
-    return contact_sheet(rec, frame, png, tracks=drawn)
+    return contact_sheet(rec, frame, image, tracks=drawn)
 
 
 def _clear_room_report(results: list[dict], out: Path) -> Report:
@@ -211,9 +211,9 @@ def _clear_room_report(results: list[dict], out: Path) -> Report:
     plots = ['clear_room.png']
     picture = next((r['picture'] for r in results if r.get('picture')), None)
     if picture:
-        shutil.copyfile(picture, out / 'clear_room_views.png')
-    if (out / 'clear_room_views.png').exists():   # kept by --report-only
-        plots.append('clear_room_views.png')
+        shutil.copyfile(picture, out / 'clear_room_views.jpg')
+    if (out / 'clear_room_views.jpg').exists():   # kept by --report-only
+        plots.append('clear_room_views.jpg')
     return Report('\n'.join(lines), tuple(plots))
 
 

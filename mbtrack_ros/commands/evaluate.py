@@ -127,11 +127,15 @@ _BLOCK = re.compile(r'(<!-- results: (\w+) -->\n)(.*?)(<!-- /results -->)', re.S
 
 
 def table_of(markdown: str) -> str:
-    """The table of a results page (its ``|`` lines) and the line that regenerates it."""
+    """The table of a results page (its ``|`` lines, after the note that precedes them if
+    the page has one) and the line that regenerates it."""
     lines = markdown.splitlines()
+    start = next((i for i, line in enumerate(lines) if line.startswith('|')), len(lines))
+    # page: title, blank, description, blank, [note, blank,] table
+    note = lines[start - 2:start - 1] if start >= 6 and not lines[start - 1] else []
     table = [line for line in lines if line.startswith('|')]
     command = [line for line in lines if line.startswith('Regenerate:')]
-    return '\n'.join(table + [''] + command)
+    return '\n'.join(note + ([''] if note else []) + table + [''] + command)
 
 
 def _fill(target: Path, out: Path) -> None:
