@@ -22,6 +22,8 @@ import urllib.request
 import venv
 from pathlib import Path
 
+from mbtrack_ros.interfaces_build import ensure_interfaces
+
 ROOT = Path(__file__).resolve().parent.parent
 VENV = Path(os.environ.get('MBTRACK_VENV', ROOT / '.venv'))
 STAMP = VENV / '.mbtrack-installed'
@@ -93,6 +95,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         python = ensure_venv()
         ensure_installed(python)
+        ensure_interfaces(python, VENV)
     except (OSError, subprocess.CalledProcessError, StopIteration) as err:
         _say(f'setting up the environment failed: {err}')
         return 1
