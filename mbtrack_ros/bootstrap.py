@@ -7,7 +7,8 @@ Run from a checkout on a machine with nothing but Python >= 3.11::
 
 It creates (or reuses) ``.venv`` beside ``setup.py``, installs the package with everything it
 needs from the package index (ROS 2 Jazzy wheels included), and reinstalls only when
-``setup.py`` changed. Debian and Ubuntu ship Python without ``ensurepip`` unless
+``setup.py`` changed; then builds the interface packages of ``interfaces/`` that the
+environment lacks (:mod:`mbtrack_ros.interfaces_build`). Debian and Ubuntu ship Python without ``ensurepip`` unless
 ``python3-venv`` is installed; then pip itself is fetched from the package index.
 """
 from __future__ import annotations
