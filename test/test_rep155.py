@@ -275,3 +275,48 @@ def test_replay_output_bag_holds_the_standard_outputs(recording, tmp_path):
                 assert schema.name == wanted[channel.topic] and schema.encoding == 'ros2msg'
                 mcap_counts[channel.topic] = mcap_counts.get(channel.topic, 0) + 1
     assert mcap_counts == {t: counts[t] for t in wanted}
+
+
+def _topics(node) -> set[str]:
+    return {name for name, _ in node.get_publisher_names_and_types_by_node(
+        node.get_name(), node.get_namespace())}
+
+
+def test_outputs_switch_by_parameter_and_without_their_packages(recording, monkeypatch):
+    """outputs.* turn each output off; a missing message package turns its output off
+    (one warning) and the node still publishes the rest."""
+    from rclpy.context import Context
+
+    from mbtrack_ros.core.state import FrameResult, TrackEstimate
+    from mbtrack_ros.nodes import people_outputs
+    from mbtrack_ros.nodes.tracker_node import TrackerNode
+    from mbtrack_ros.recording.sync import FrameSet
+
+    standard = {'/humans/persons/tracked', '/tracker_node/detections', '/tf'}
+    context = Context()
+    rclpy.init(context=context)
+    try:
+        args = ['--ros-args', '-p', f'calibration_file:={recording / "calibration.yaml"}',
+                '-p', 'warm_up:=false', '-p', 'detection.enabled:=false']
+        node = TrackerNode(cli_args=args, context=context, step_thread=False)
+        assert _topics(node) >= standard
+        node.destroy_node()
+        node = TrackerNode(cli_args=args + ['-p', 'outputs.persons:=false', '-p',
+                                            'outputs.tf:=false'],
+                           context=context, step_thread=False)
+        assert _topics(node) & standard == {'/tracker_node/detections'}
+        node.destroy_node()
+        monkeypatch.setattr(people_outputs, 'message_types',
+                            lambda: {'persons': False, 'detections': True, 'tf': False})
+        node = TrackerNode(cli_args=args, context=context, step_thread=False)
+        assert node.people_outputs.builder.missing == ['persons', 'tf']
+        assert _topics(node) & standard == {'/tracker_node/detections'}
+        track = TrackEstimate(1, np.array([2.0, 2.0, 0, 0, 0, 0]), np.eye(4), 1.7,
+                              visibility={'cam0': 1.0})
+        frame = node.people_outputs.publish(FrameResult(1, [track]))
+        assert frame.tracked is None and frame.tf is None
+        assert [d.id for d in frame.detections.detections] == ['1']
+        node.publish(FrameResult(2, [track]), FrameSet(0, 2, {}, {}, ()))  # the rest goes out
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
