@@ -91,8 +91,8 @@ def _importable(python: Path, names: list[str]) -> set[str]:
     return set(_run_python(python, code, *names).split())
 
 
-def _build_one(package: str, python: Path, venv: Path, build_root: Path,
-               env: dict[str, str], defines: list[str]) -> None:
+def _build_one(package: str, build_root: Path, env: dict[str, str],
+               defines: list[str]) -> None:
     """Configure, build and install one package into ``venv``; output in ``build.log``."""
     build = build_root / package
     build.mkdir(parents=True, exist_ok=True)
@@ -170,7 +170,7 @@ def _ensure(python: Path, venv: Path, *, pip_quiet: bool) -> list[str]:
             f'-DMBTRACK_PYTHON_INCLUDE={include}',
             f'-DMBTRACK_NUMPY_INCLUDE={numpy_include}']
         for package in wanted:
-            _build_one(package, python, venv, venv / BUILD_DIR_NAME, env, defines)
+            _build_one(package, venv / BUILD_DIR_NAME, env, defines)
     except (OSError, subprocess.CalledProcessError, RuntimeError) as err:
         # not tried again until the definitions change (a build costs minutes)
         stamp.write_text(json.dumps({'digest': digest, 'built': wanted,

@@ -46,7 +46,7 @@ PERSON_PREFIX = 'mbtrack_'
 HIDDEN_CONFIDENCE_CAP = 0.99
 #: eye height / stature of adults (anthropometric tables: ~0.93): the person frame's height
 HEAD_HEIGHT_SHARE = 0.93
-#: output -> (package, message types it needs, topic kind)
+#: output -> (message package, the message types of it the output needs)
 OUTPUT_PACKAGES = {
     'persons': ('hri_msgs', ('hri_msgs/msg/IdsList',)),
     'detections': ('vision_msgs', (
@@ -312,9 +312,3 @@ class PeopleOutputs:
         if frame.tf is not None and frame.tf.transforms:
             self.pub_tf.publish(frame.tf)
         return frame
-
-    def destroy(self) -> None:
-        for pubs in self._person_pubs.values():
-            for pub in pubs:
-                self.node.destroy_publisher(pub)
-        self._person_pubs.clear()
