@@ -212,6 +212,7 @@ def test_rep155_consumer_follows_the_tracks(recording, tmp_path):
         log.close()
         rclpy.try_shutdown(context=context)
     output = (tmp_path / 'tracker.log').read_text()
+    assert 'Traceback' not in output and 'dropped' not in output, output
 
     clouds = dict(reference.clouds)
     tracked = dict(consumer.tracked)
