@@ -7,11 +7,12 @@ Run from a checkout on a machine with nothing but Python >= 3.11::
 
 It creates (or reuses) ``.venv`` beside ``setup.py``, installs the package with everything it
 needs from the package index (ROS 2 Jazzy wheels included), and reinstalls only when
-``setup.py`` changed. Packages come from the index pip is configured with (``pip.conf``,
-``PIP_INDEX_URL``); no address is written here. Debian and Ubuntu ship Python without
-``ensurepip`` unless ``python3-venv`` is installed: then the system's own pip (if any)
-downloads pip for the environment, and without either the bootstrap says which package to
-install.
+``setup.py`` changed; then builds the interface packages of ``interfaces/`` that the
+environment lacks (:mod:`mbtrack_ros.interfaces_build`). Packages come from the index pip is
+configured with (``pip.conf``, ``PIP_INDEX_URL``); no address is written here. Debian and
+Ubuntu ship Python without ``ensurepip`` unless ``python3-venv`` is installed: then the
+system's own pip (if any) downloads pip for the environment, and without either the
+bootstrap says which package to install.
 """
 from __future__ import annotations
 
@@ -22,6 +23,8 @@ import sys
 import tempfile
 import venv
 from pathlib import Path
+
+from mbtrack_ros.interfaces_build import ensure_interfaces
 
 ROOT = Path(__file__).resolve().parent.parent
 VENV = Path(os.environ.get('MBTRACK_VENV', ROOT / '.venv'))
@@ -102,6 +105,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         python = ensure_venv()
         ensure_installed(python)
+        ensure_interfaces(python, VENV)
     except SetupError as err:
         _say(str(err))
         return 2

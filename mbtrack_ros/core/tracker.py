@@ -522,7 +522,8 @@ class Tracker:
                 track_id=tid, mean=u.mean, covariance=u.covariance,
                 height=self._heights.get(tid, float('nan')),
                 visible_fraction=dict(u.visible_fraction), existence=1.0,
-                particles=u.particles, weights=u.weights))
+                particles=u.particles, weights=u.weights,
+                width=float(getattr(self._models.get(tid), 'width', 0.5))))
         timings = {'prepare': t1 - t0}
         timings.update(self.filter.timings)
         timings['filter'] = t2 - t1

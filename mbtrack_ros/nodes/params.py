@@ -35,6 +35,13 @@ executor                        string     ``events`` (rclpy EventsExecutor, def
 warm_up                         bool       run the pipeline on a few synthetic frames at
                                            start so the first real frames pay no kernel
                                            loading (true)
+outputs.persons                 bool       REP-155 persons: /humans/persons/tracked and
+                                           per person location_confidence, anonymous
+                                           (true; needs hri_msgs)
+outputs.detections              bool       ~/detections vision_msgs/Detection3DArray
+                                           (true; needs vision_msgs)
+outputs.tf                      bool       person_<id> frames on /tf (true; needs
+                                           tf2_msgs)
 tracker.algorithm               string     hjs | separable | joint | registered baseline
 tracker.particles               int        particles per target (100)
 tracker.subsample               int        likelihood on every k-th image row, 1-8 (1; a
@@ -159,6 +166,9 @@ class NodeParams:
     executor: str = 'events'
     warm_up: bool = True
     qos_depth: int = 10
+    outputs_persons: bool = True
+    outputs_detections: bool = True
+    outputs_tf: bool = True
 
     @property
     def camera_names(self) -> list[str]:
@@ -200,6 +210,12 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
                  'are dispatched; the tracker step has its own thread', {}),
     'warm_up': (True, 'run the tracker on a few synthetic frames at start (loads every '
                 'compiled kernel before the first real frame)', {}),
+    'outputs.persons': (True, 'REP-155 persons: /humans/persons/tracked, per person '
+                        'location_confidence and anonymous (needs hri_msgs)', {}),
+    'outputs.detections': (True, '~/detections as vision_msgs/Detection3DArray (needs '
+                           'vision_msgs)', {}),
+    'outputs.tf': (True, 'a person_<id> frame per track on /tf under the output frame '
+                   '(needs tf2_msgs)', {}),
     'tracker.algorithm': ('hjs', 'hjs | separable | joint | a registered baseline', {}),
     'tracker.particles': (100, 'particles per target (000 §VI)', _ir(1, 100_000)),
     'tracker.subsample': (1, 'likelihood on every k-th image row (speed option)', _ir(1, 8)),
@@ -369,7 +385,9 @@ def declare_and_read(node: Node) -> tuple[NodeParams, RoomCalibration]:
         diagnostics_period_ns=int(round(v['diagnostics_period'] * 1e9)),
         init_ground_truth=gt, output_bag=str(v['output_bag']),
         max_pending_sets=int(v['max_pending_sets']), executor=executor,
-        warm_up=bool(v['warm_up']), qos_depth=int(v['qos_depth']))
+        warm_up=bool(v['warm_up']), qos_depth=int(v['qos_depth']),
+        outputs_persons=bool(v['outputs.persons']),
+        outputs_detections=bool(v['outputs.detections']), outputs_tf=bool(v['outputs.tf']))
     return params, calibration
 
 

@@ -4,8 +4,10 @@ Inputs (``qos_profile_sensor_data``): one image topic per camera (``sensor_msgs/
 ``sensor_msgs/CompressedImage``), optional ``sensor_msgs/CameraInfo`` per camera.
 Outputs (reliable, stamped with the frame set's time, frame ``output_frame_id``):
 ``~/people`` (PoseArray), ``~/tracks`` (PointCloud2), ``~/markers`` (MarkerArray),
-``~/debug/<camera>/occlusion`` (Image, only computed when subscribed or enabled) and
-``/diagnostics`` (DiagnosticArray). See :mod:`mbtrack_ros.nodes.params` for parameters and
+``~/debug/<camera>/occlusion`` (Image, only computed when subscribed or enabled),
+``/diagnostics`` (DiagnosticArray), and the standard people outputs of
+:mod:`mbtrack_ros.nodes.people_outputs` (REP-155 ``/humans/persons/...``,
+``~/detections``, ``/tf``). See :mod:`mbtrack_ros.nodes.params` for parameters and
 :mod:`mbtrack_ros.nodes.messages` for the message layouts.
 
 Threading: image callbacks only convert the image and hand it to the
@@ -51,6 +53,7 @@ from mbtrack_ros.nodes.conversions import (
     ImageConversionError, compressed_to_rgb, image_to_rgb, rgb_to_image, stamp_to_ns)
 from mbtrack_ros.nodes.debug import occlusion_layers
 from mbtrack_ros.nodes.params import NodeParams, ParamsError, declare_and_read
+from mbtrack_ros.nodes.people_outputs import PeopleFrameBuilder, PeopleOutputs
 from mbtrack_ros.nodes.transport import use_large_shm_segment
 from mbtrack_ros.recording.csvfiles import CsvFormatError, GroundTruthRow, read_ground_truth
 from mbtrack_ros.recording.sync import FrameSet, FrameSetSynchronizer
@@ -203,13 +206,21 @@ class TrackerNode(Node):
                 self.get_logger().warning(
                     'no unoccluded key view in the ground truth for person(s) '
                     f'{self._ground_truth.unplanned}: they will not be tracked')
+        people = PeopleFrameBuilder(p.output_frame_id, persons=p.outputs_persons,
+                                    detections=p.outputs_detections, tf=p.outputs_tf)
+        if people.missing:
+            self.get_logger().warning(
+                f'output(s) {", ".join(people.missing)} off: their message packages '
+                '(hri_msgs, vision_msgs, tf2_msgs) are not installed (python3 -m '
+                'mbtrack_ros.bootstrap builds them into its environment)')
         self._output_bag = None
         if p.output_bag:
             from mbtrack_ros.nodes.output_bag import OutputBagError, OutputBagWriter
             try:
                 self._output_bag = OutputBagWriter(p.output_bag, self.calibration,
                                                    p.camera_names,
-                                                   frame_id=p.output_frame_id)
+                                                   frame_id=p.output_frame_id,
+                                                   people=any(people.enabled.values()))
             except OutputBagError as err:
                 raise ParamsError(f'output_bag: {err}') from err
 
@@ -222,6 +233,7 @@ class TrackerNode(Node):
                                               output_qos)
         self.pub_debug = {c: self.create_publisher(Image, f'~/debug/{c}/occlusion', output_qos)
                           for c in p.camera_names}
+        self.people_outputs = PeopleOutputs(self, people, output_qos)
         # inputs: cheap callbacks, one mutually exclusive group per camera (frames of one
         # camera stay in order under a multi-threaded executor)
         self._subs = []
@@ -444,6 +456,7 @@ class TrackerNode(Node):
         self.pub_people.publish(people)
         self.pub_tracks.publish(cloud)
         self.pub_markers.publish(markers)
+        standard = self.people_outputs.publish(result)
         debug = {}
         for cam, pub in self.pub_debug.items():
             if cam in fs.images and (self.params.debug_images
@@ -458,7 +471,7 @@ class TrackerNode(Node):
             self._last_diag = result.stamp_ns
         if self._output_bag is not None:
             self._output_bag.write(result, people=people, cloud=cloud, markers=markers,
-                                   diagnostics=diag, debug=debug)
+                                   diagnostics=diag, debug=debug, standard=standard)
 
     def debug_image(self, camera: str, rgb: np.ndarray, result: FrameResult) -> Image:
         """``~/debug/<camera>/occlusion``: occlusion maps and silhouettes (000 Fig. 4)."""
