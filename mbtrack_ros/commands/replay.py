@@ -33,12 +33,13 @@ import numpy as np
 import yaml
 
 from mbtrack_ros.commands.output_writer import BackgroundWriter, output_bag_writer
-from mbtrack_ros.core.camera import CalibrationError, RoomCalibration
+from mbtrack_ros.core.camera import CalibrationError, RoomCalibration, yaml_error_line
 from mbtrack_ros.core.filters import FilterError
 from mbtrack_ros.core.initiation import InitiationError, initial_tracks, plan_key_views
 from mbtrack_ros.core.likelihood import LikelihoodError
 from mbtrack_ros.core.tracker import Tracker, TrackerConfig, TrackerError
 from mbtrack_ros.recording.bag import BagError, FrameSet, RecordingReader, prefetched
+from mbtrack_ros.recording.calibration_io import load_calibration
 from mbtrack_ros.recording.csvfiles import (
     CsvFormatError, GroundTruthRow, TrackRow, read_ground_truth, write_tracks)
 
@@ -135,7 +136,8 @@ def _resolve_inputs(args: argparse.Namespace) -> tuple[Path, RoomCalibration]:
             raise _UserError(f'{bag} is not a recording directory with calibration.yaml; '
                              'give the room calibration with --config ROOM.yaml')
     try:
-        calibration = RoomCalibration.load(config)
+        calibration = load_calibration(config, 'room', warn=lambda line: print(
+            f'{_PROG}: warning: {line}', file=sys.stderr))
     except CalibrationError as err:
         raise _UserError(str(err)) from err
     return bag, calibration
@@ -150,14 +152,23 @@ def tracker_values_from_params(path: Path) -> dict:
     from mbtrack_ros.nodes.tracker_parameters import (  # no rclpy
         TRACKER_PARAMETERS, tracker_config_values)
     try:
-        doc = yaml.safe_load(Path(path).read_text())
+        doc = yaml.safe_load(Path(path).read_text(encoding='utf-8'))
         params = doc['tracker_node']['ros__parameters']
-    except (OSError, yaml.YAMLError, KeyError, TypeError) as err:
-        raise TrackerError(f'{path}: not a tracker_node parameter file ({err})') from err
-    flat: dict = {}
-    for section in ('tracker', 'detection', 'motion'):
-        for key, value in (params.get(section) or {}).items():
-            flat[f'{section}.{key}'] = value
+        flat: dict = {}
+        for section in ('tracker', 'detection', 'motion'):
+            for key, value in (params.get(section) or {}).items():
+                flat[f'{section}.{key}'] = value
+    except UnicodeDecodeError as err:
+        raise TrackerError(f'{path}: not a text file (not UTF-8 at byte {err.start})') \
+            from err
+    except OSError as err:
+        raise TrackerError(f'cannot read {path}: {err.strerror or err}') from err
+    except yaml.YAMLError as err:
+        raise TrackerError(f'{path}: not valid YAML: {yaml_error_line(err)}') from err
+    except (KeyError, TypeError, AttributeError) as err:
+        raise TrackerError(f'{path}: not a tracker_node parameter file (expected '
+                           f'tracker_node: ros__parameters: ..., {type(err).__name__} '
+                           f'{err})') from err
     unknown = sorted(k for k in flat if k.startswith(('tracker.', 'motion.'))
                      and k != 'tracker.seed' and k not in TRACKER_PARAMETERS)
     if unknown:

@@ -120,6 +120,7 @@ from mbtrack_ros.core.detection.manager import AutoDetectionConfig
 from mbtrack_ros.core.detection.release import ReleaseConfig
 from mbtrack_ros.core.tracker import TrackerConfig, TrackerError
 from mbtrack_ros.nodes.tracker_parameters import TRACKER_PARAMETERS, tracker_config_values
+from mbtrack_ros.recording.calibration_io import load_calibration
 
 __all__ = ['EXECUTORS', 'RELIABILITIES', 'TRACKER_PARAMETERS', 'TRANSPORTS', 'CameraInput',
            'NodeParams', 'ParamsError', 'declare_and_read']
@@ -310,10 +311,13 @@ def declare_and_read(node: Node) -> tuple[NodeParams, RoomCalibration]:
         raise ParamsError('parameter calibration_file is required')
     if not Path(calib_file).is_file():
         raise ParamsError(f'calibration_file {calib_file!r} does not exist')
+    calibration_warnings: list[str] = []
     try:
-        calibration = RoomCalibration.load(calib_file)
+        calibration = load_calibration(calib_file, 'room', warn=calibration_warnings.append)
     except CalibrationError as err:
         raise ParamsError(str(err)) from err
+    for line in calibration_warnings:
+        node.get_logger().warning(line)
     names = [str(c) for c in v['cameras'] if str(c)] or calibration.names
     try:
         calibration = calibration.subset(names)
