@@ -175,3 +175,245 @@ def test_d17_camera_blind_to_the_floor_warns_and_all_blind_refused(tmp_path, cap
                                   '-p', 'warm_up:=false'], context=ctx)
     finally:
         rclpy.try_shutdown(context=ctx)
+
+
+# -- D10: particle caps ---------------------------------------------------------------------------
+
+@pytest.mark.parametrize('option, value, needle', [
+    ('--particles', '10000000', 'particles must be at most 100000'),
+    ('--joint-particles', '100000000', 'joint_particles must be at most 1000000'),
+])
+def test_d10_particles_capped_in_replay(tmp_path, capsys, calib_doc, option, value, needle):
+    path = _write(tmp_path, calib_doc)
+    assert _replay_with(tmp_path, path, option, value) == 2
+    assert needle in _one_error_line(capsys)
+
+
+# -- D11: CSV integers beyond 64 bits ----------------------------------------------------------
+
+_HUGE = str(2 ** 64 + 5)
+
+
+def _truth_csv(path, stamp='1000', pid='1'):
+    path.write_text('stamp_ns,frame,person_id,x,y,z_head,sitting,visible_cameras\n'
+                    f'{stamp},0,{pid},1.0,1.0,1.7,0,cam0\n')
+    return path
+
+
+def _tracks_csv(path, stamp='1000', tid='1'):
+    path.write_text(f'stamp_ns,frame,track_id,x,y\n{stamp},0,{tid},1.0,1.0\n')
+    return path
+
+
+@pytest.mark.parametrize('which', ['stamp', 'id'])
+def test_d11_huge_csv_integers_are_one_line_errors(tmp_path, capsys, calib_doc, which):
+    from mbtrack_ros.recording.csvfiles import CsvFormatError, read_ground_truth
+    stamp = _HUGE if which == 'stamp' else '1000'
+    ident = _HUGE if which == 'id' else '1'
+    bad_truth = _truth_csv(tmp_path / 'bad_gt.csv', stamp, ident)
+    bad_tracks = _tracks_csv(tmp_path / 'bad_tracks.csv', stamp, ident)
+    truth = _truth_csv(tmp_path / 'gt.csv')
+    tracks = _tracks_csv(tmp_path / 'tracks.csv')
+    with pytest.raises(CsvFormatError, match='64-bit'):  # the node's init_ground_truth
+        read_ground_truth(bad_truth)
+    assert main(['eval', str(bad_tracks), str(truth), '--no-plots']) == 2
+    assert '64-bit' in _one_error_line(capsys, 'mbtrack eval')
+    assert main(['eval', str(tracks), str(bad_truth), '--no-plots']) == 2
+    assert '64-bit' in _one_error_line(capsys, 'mbtrack eval')
+    path = _write(tmp_path, calib_doc)
+    assert _replay_with(tmp_path, path, '--eval', str(bad_truth)) == 2
+    assert '64-bit' in _one_error_line(capsys)
+
+
+# -- D13: an output path that is a directory --------------------------------------------------------
+
+def test_d13_tracks_csv_directory_is_one_line_error(tmp_path, capsys, calib_doc):
+    path = _write(tmp_path, calib_doc)
+    (tmp_path / 'o' / 'tracks.csv').mkdir(parents=True)
+    assert _replay_with(tmp_path, path) == 2
+    assert 'tracks.csv exists and is not a file' in _one_error_line(capsys)
+
+
+# -- D4, D12, D15 and undecodable images: replay integrity -------------------------------------
+
+@pytest.fixture(scope='module')
+def recording(tmp_path_factory):
+    out = tmp_path_factory.mktemp('rec') / 'seq'
+    assert main(['synth', 'lanz-seq1-short', str(out), '--frames', '24', '--width', '160',
+                 '--height', '120']) == 0
+    return out
+
+
+def _rewrite(recording, dst, plan):
+    """A copy of ``recording`` whose bag holds the frames ``plan(frame sets)`` returns:
+    (stamp, {camera: rgb or a bad-encoding marker}) pairs, written in that order."""
+    import shutil
+
+    from mbtrack_ros.recording.bag import (
+        IMAGE, RecordingReader, RecordingWriter, _header, _T, typestore)
+    shutil.copytree(recording, dst, ignore=shutil.ignore_patterns('bag'))
+    calib = RoomCalibration.load(recording / 'calibration.yaml')
+    with RecordingReader(recording) as reader:
+        sets = [(fs.stamp_ns, dict(fs.images)) for fs in reader.frames()]
+    with RecordingWriter(dst / 'bag', calib) as writer:
+        for stamp, images in plan(sets):
+            good = {c: im for c, im in images.items() if im is not None}
+            if good:
+                writer.write_frame(stamp, good)
+            for cam in [c for c, im in images.items() if im is None]:
+                c = calib.cameras[cam]
+                msg = _T[IMAGE](header=_header(stamp, c.frame_id), height=c.height,
+                                width=c.width, encoding='yuv422', is_bigendian=0,
+                                step=c.width * 2,
+                                data=np.zeros(c.width * c.height * 2, np.uint8))
+                writer._writer.write(writer._image_conn[cam], stamp,
+                                     typestore.serialize_cdr(msg, IMAGE))
+    return dst
+
+
+def _replay(rec, out, *extra):
+    gt = rec / 'ground_truth.csv'
+    return main(['replay', str(rec), '--out', str(out), '--init-from', str(gt),
+                 '--particles', '20', *extra])
+
+
+def test_d4_repeated_stamps_never_processed_twice(recording, tmp_path, capsys):
+    from mbtrack_ros.recording.csvfiles import read_tracks
+
+    def doubled(sets):
+        out = []
+        for stamp, images in sets:
+            out += [(stamp, images), (stamp, images)]  # every image message twice
+        out += [(sets[3][0], sets[3][1])]  # a jump back onto an earlier stamp
+        return out
+
+    rec = _rewrite(recording, tmp_path / 'rec', doubled)
+    gt = rec / 'ground_truth.csv'
+    assert _replay(rec, tmp_path / 'out', '--eval', str(gt)) == 0
+    captured = capsys.readouterr()
+    rows = read_tracks(tmp_path / 'out' / 'tracks.csv')
+    keys = [(r.stamp_ns, r.track_id) for r in rows]
+    assert len(keys) == len(set(keys))  # no duplicate (stamp, track) rows
+    assert len({r.stamp_ns for r in rows}) == 24
+    assert 'MOTA' in captured.out
+    assert 'dropped 25 frame set(s) whose stamp was not later' in captured.err
+    assert ' 24 frames,' in captured.err
+
+
+def test_undecodable_images_counted_in_summary_and_tracks_mcap(recording, tmp_path, capsys):
+    def broken(sets):
+        return [(s, {c: (None if k in (2, 5, 9) else im) for c, im in images.items()})
+                for k, (s, images) in enumerate(sets)]
+
+    rec = _rewrite(recording, tmp_path / 'rec', broken)
+    assert _replay(rec, tmp_path / 'out') == 0
+    err = capsys.readouterr().err
+    assert 'dropped 3 undecodable image(s)' in err and 'yuv422' in err
+    from rosbags.highlevel import AnyReader
+
+    from mbtrack_ros.recording.bag import typestore
+    with AnyReader([tmp_path / 'out' / 'tracks.mcap'], default_typestore=typestore) as bag:
+        conns = [c for c in bag.connections if c.topic == '/diagnostics']
+        last = None
+        for conn, _, raw in bag.messages(connections=conns):
+            last = bag.deserialize(raw, conn.msgtype)
+    values = {kv.key: kv.value for kv in last.status[0].values}
+    assert values['dropped images (bad)'] == '3'
+
+
+def _damage_chunk(rec, dst, rel=44, fill=b'\0'):
+    """``rec`` copied to ``dst`` with 200 bytes of its last MCAP chunk's header
+    overwritten (a zeroed CRC and record length: the reader skips the chunk)."""
+    import shutil
+
+    from mcap.reader import make_reader
+    shutil.copytree(rec, dst)
+    mcap = next((dst / 'bag').glob('*.mcap'))
+    data = bytearray(mcap.read_bytes())
+    with mcap.open('rb') as handle:
+        chunks = make_reader(handle).get_summary().chunk_indexes
+    start = chunks[-1].chunk_start_offset + rel
+    data[start:start + 200] = fill * 200
+    mcap.write_bytes(bytes(data))
+    return dst
+
+
+def test_d12_damaged_chunk_reported_with_the_lost_frame_sets(recording, tmp_path, capsys):
+    from mcap.reader import make_reader
+
+    mcap = next((recording / 'bag').glob('*.mcap'))
+    with mcap.open('rb') as handle:
+        if len(make_reader(handle).get_summary().chunk_indexes) < 2:
+            pytest.fail('the test recording needs two chunks')
+    rec = _damage_chunk(recording, tmp_path / 'rec')
+    assert _replay(rec, tmp_path / 'out') == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    line = [e for e in err if 'error' in e]
+    assert len(line) == 1 and 'damaged bag' in line[0] and 'unreadable' in line[0]
+    assert 'frame set' in line[0] and 'Traceback' not in '\n'.join(err)
+
+
+def test_d15_mutated_bags_raise_bag_error_only(recording, tmp_path):
+    """camera_infos() and ground_truth() on byte-mutated bags: a result or BagError."""
+    import shutil
+
+    from mbtrack_ros.recording.bag import BagError, RecordingReader
+    mcap = next((recording / 'bag').glob('*.mcap'))
+    original = mcap.read_bytes()
+    rng = np.random.default_rng(55)
+    dst = tmp_path / 'rec'
+    shutil.copytree(recording, dst)
+    target = next((dst / 'bag').glob('*.mcap'))
+    outcomes = set()
+    for _ in range(30):
+        data = bytearray(original)
+        for at in rng.integers(0, len(data), size=rng.integers(1, 40)):
+            data[at] = int(rng.integers(0, 256))
+        target.write_bytes(bytes(data))
+        try:
+            with RecordingReader(dst) as reader:
+                reader.camera_infos()
+                reader.ground_truth()
+            outcomes.add('ok')
+        except BagError:
+            outcomes.add('error')
+    assert outcomes <= {'ok', 'error'}
+    # messages whose CDR is garbage (rosbags raises SerdeError deserialising them)
+    from mbtrack_ros.recording.bag import (
+        GROUND_TRUTH_TOPIC, POINT_CLOUD, RecordingWriter)
+    calib = RoomCalibration.load(recording / 'calibration.yaml')
+    garbage = b'\x00\x01\x00\x00' + bytes([0xff] * 12)
+    with RecordingWriter(tmp_path / 'garbage', calib) as writer:
+        cam = calib.names[0]
+        writer._writer.write(writer._info_conn[cam], 1, garbage)
+        conn = writer._writer.add_connection(GROUND_TRUTH_TOPIC, POINT_CLOUD,
+                                             typestore=writer_typestore())
+        writer._writer.write(conn, 1, garbage)
+    with RecordingReader(tmp_path / 'garbage') as reader:
+        with pytest.raises(BagError, match='cannot deserialise'):
+            reader.camera_infos()
+        with pytest.raises(BagError, match='cannot deserialise'):
+            reader.ground_truth()
+
+
+def writer_typestore():
+    from mbtrack_ros.recording.bag import typestore
+    return typestore
+
+
+def test_bag_player_plays_a_truncated_bag_up_to_the_damage(recording, tmp_path, capsys):
+    import re
+    import shutil
+
+    from mbtrack_ros.nodes import bag_player
+    damaged = tmp_path / 'rec'
+    shutil.copytree(recording, damaged)
+    mcap = next((damaged / 'bag').glob('*.mcap'))
+    data = mcap.read_bytes()
+    mcap.write_bytes(data[: int(len(data) * 0.75)])  # cut the file: last chunk damaged
+    code = bag_player.main(['bag_player', '--ros-args', '-p', f'bag:={damaged}',
+                            '-p', 'rate:=100.0', '-p', 'start_delay:=0.0'])
+    err = capsys.readouterr().err
+    assert code == 1, err
+    played = re.search(r'bag_player: error: .* is damaged; played (\d+) messages', err)
+    assert played and 0 < int(played.group(1)) < 72, err

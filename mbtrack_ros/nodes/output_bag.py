@@ -130,6 +130,12 @@ class OutputBagWriter:
             self._put(self._debug_conn[cam], stamp, image)
         self.frames_written += 1
 
+    def write_diagnostics(self, stamp_ns: int, values: dict) -> None:
+        """Write a ``/diagnostics`` message of a :class:`messages.DiagnosticsSnapshot` with
+        these field values (the counts of an offline replay)."""
+        self._put(self._conn['diagnostics'], stamp_ns, messages.diagnostics_message(
+            stamp_ns, messages.DiagnosticsSnapshot(**values)))
+
     def write_markers(self, stamp_ns: int, markers) -> None:
         """Write an extra MarkerArray (e.g. DELETEALL after a reset)."""
         self._put(self._conn['markers'], stamp_ns, markers)

@@ -118,7 +118,8 @@ from mbtrack_ros.core.camera import CalibrationError, RoomCalibration
 from mbtrack_ros.core.dynamics import MotionConfig
 from mbtrack_ros.core.detection.manager import AutoDetectionConfig
 from mbtrack_ros.core.detection.release import ReleaseConfig
-from mbtrack_ros.core.tracker import TrackerConfig, TrackerError
+from mbtrack_ros.core.tracker import (
+    MAX_JOINT_PARTICLES, MAX_PARTICLES, TrackerConfig, TrackerError)
 from mbtrack_ros.nodes.tracker_parameters import TRACKER_PARAMETERS, tracker_config_values
 from mbtrack_ros.recording.calibration_io import load_calibration
 
@@ -206,7 +207,7 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
     'warm_up': (True, 'run the tracker on a few synthetic frames at start (loads every '
                 'compiled kernel before the first real frame)', {}),
     'tracker.algorithm': ('hjs', 'hjs | separable | joint | a registered baseline', {}),
-    'tracker.particles': (100, 'particles per target (000 §VI)', _ir(1, 100_000)),
+    'tracker.particles': (100, 'particles per target (000 §VI)', _ir(1, MAX_PARTICLES)),
     'tracker.subsample': (1, 'likelihood on every k-th image row (speed option)', _ir(1, 8)),
     'tracker.pipeline_search': (False, 'search frame t for new people on a worker thread '
                                 'while frame t+1 is filtered (TrackerConfig.pipeline_search)',
@@ -214,7 +215,8 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
     'tracker.image_scale': (1.0, 'the tracker works on the images resized by this factor '
                             'in (0, 1] (speed option, TrackerConfig.image_scale)',
                             _fr(0.0, 1.0)),
-    'tracker.joint_particles': (10_000, 'joint-filter particles', _ir(1, 1_000_000)),
+    'tracker.joint_particles': (10_000, 'joint-filter particles',
+                                _ir(1, MAX_JOINT_PARTICLES)),
     'tracker.sigma': (0.12, 'likelihood width sigma (000 Eq. 19)', _fr(1e-4, 10.0)),
     'tracker.d_occ': (0.15, 'occlusion penalty d_occ (000 Eq. 26)', _fr(0.0, 10.0)),
     'tracker.min_inside_share': (0.5, 'a camera that sees less of a target\'s silhouettes '
