@@ -11,9 +11,12 @@ import yaml
 
 from conftest import make_room
 from mbtrack_ros.cli import main
-from mbtrack_ros.core.camera import (
-    MAX_FLOOR_SIDE, CalibrationError, Camera, RoomCalibration, look_at)
-from mbtrack_ros.recording.calibration_io import load_calibration
+from mbtrack_ros.core.camera import CalibrationError, Camera, RoomCalibration, look_at
+
+
+def load_calibration(*args, **kwargs):
+    from mbtrack_ros.recording.calibration_io import load_calibration as load
+    return load(*args, **kwargs)
 
 
 def _one_error_line(capsys, prog: str = 'mbtrack replay') -> str:
@@ -80,7 +83,7 @@ def _mutate(doc: dict, where: str, value) -> dict:
 @pytest.mark.parametrize('where, value, needle', [
     ('image_width', 'abc', 'camera cam0: image_width'),
     ('image_width', 1e9, 'camera cam0: image_width'),
-    ('image_width', 10 ** 400, 'camera cam0: image_width'),
+    pytest.param('image_width', 10 ** 400, 'camera cam0: image_width', id='image_width-huge'),
     ('distortion_coefficients', ['a', 'b', 0, 0, 0], 'camera cam0: distortion_coefficients'),
     ('distortion_coefficients', 'text', 'camera cam0: distortion_coefficients'),
     ('entry_zones', [['a', 0, 1, 1]], 'entry_zones[0]'),
@@ -101,6 +104,7 @@ def test_d2_wrong_types_and_ranges_are_one_line_errors(tmp_path, capsys, calib_d
 
 
 def test_d2_floor_side_is_capped():
+    from mbtrack_ros.core.camera import MAX_FLOOR_SIDE
     room = make_room()
     with pytest.raises(CalibrationError, match='largest floor side'):
         RoomCalibration(room.cameras, (0.0, 0.0, MAX_FLOOR_SIDE + 1.0, 5.0))
@@ -417,3 +421,219 @@ def test_bag_player_plays_a_truncated_bag_up_to_the_damage(recording, tmp_path, 
     assert code == 1, err
     played = re.search(r'bag_player: error: .* is damaged; played (\d+) messages', err)
     assert played and 0 < int(played.group(1)) < 72, err
+
+
+# -- the node: D4, D5, D6, D7, D8, D16 ----------------------------------------------------------
+
+@pytest.fixture
+def node_context():
+    os.environ.setdefault('ROS_DOMAIN_ID', str(100 + os.getpid() % 100))
+    import rclpy
+    from rclpy.context import Context
+    ctx = Context()
+    rclpy.init(context=ctx)
+    yield ctx
+    rclpy.try_shutdown(context=ctx)
+
+
+def _node(ctx, tmp_path, *params, step_thread=False):
+    from mbtrack_ros.nodes.tracker_node import TrackerNode
+    path = tmp_path / 'room.yaml'
+    make_room().save(path)
+    args = ['--ros-args', '-p', f'calibration_file:={path}', '-p', 'warm_up:=false',
+            '-p', 'detection.enabled:=false']
+    for p in params:
+        args += ['-p', p]
+    return TrackerNode(cli_args=args, context=ctx, step_thread=step_thread)
+
+
+def _raw(rgb, stamp, frame_id='cam0_optical_frame'):
+    from mbtrack_ros.nodes.conversions import rgb_to_image
+    from mbtrack_ros.nodes.messages import make_header
+    return rgb_to_image(rgb, make_header(stamp, frame_id))
+
+
+def _compressed(data: bytes, stamp, fmt='png', frame_id='cam0_optical_frame'):
+    from sensor_msgs.msg import CompressedImage
+
+    from mbtrack_ros.nodes.messages import make_header
+    msg = CompressedImage(format=fmt)
+    msg.header = make_header(stamp, frame_id)
+    msg.data = data
+    return msg
+
+
+def _png_header(width: int, height: int) -> bytes:
+    """A PNG signature and IHDR chunk declaring ``width`` x ``height``, then junk."""
+    import struct
+    import zlib
+    ihdr = struct.pack('>IIBBBBB', width, height, 8, 2, 0, 0, 0)
+    chunk = b'IHDR' + ihdr
+    return (b'\x89PNG\r\n\x1a\n' + struct.pack('>I', len(ihdr)) + chunk
+            + struct.pack('>I', zlib.crc32(chunk)) + bytes(196_000))
+
+
+class _Logger:
+    def __init__(self):
+        self.lines = []
+
+    def warning(self, text, **_):
+        self.lines.append(text)
+
+    warn = warning
+
+    def info(self, text, **_):
+        pass
+
+    error = info
+
+
+def test_d8_oversized_compressed_image_refused_before_decoding(node_context, tmp_path,
+                                                                monkeypatch):
+    import time
+
+    from mbtrack_ros.recording import images
+    node = _node(node_context, tmp_path, 'rescale_images:=true')
+    decoded = []
+    real = images.cv2.imdecode
+    monkeypatch.setattr(images.cv2, 'imdecode',
+                        lambda *a, **k: decoded.append(1) or real(*a, **k))
+    try:
+        t0 = time.perf_counter()
+        for k in range(15):
+            node._on_image('cam0', _compressed(_png_header(8192, 8192), 10 ** 9 + k))
+        spent = time.perf_counter() - t0
+        assert decoded == [] and node._dropped == 15
+        assert spent < 1.0  # 15 messages, no decode: milliseconds
+        # a PNG of the calibrated size is still decoded
+        from mbtrack_ros.recording.images import encode_compressed
+        _, data = encode_compressed(np.zeros((120, 160, 3), np.uint8), 'png')
+        node._on_image('cam0', _compressed(data, 2 * 10 ** 9))
+        assert decoded == [1] and node._dropped == 15
+    finally:
+        node.destroy_node()
+
+
+def test_d5_each_bad_image_cause_logged_once_per_camera(node_context, tmp_path):
+    from mbtrack_ros.recording.images import encode_compressed
+    node = _node(node_context, tmp_path)
+    logger = _Logger()
+    node.get_logger = lambda: logger
+    good = np.zeros((120, 160, 3), np.uint8)
+    t = 10 ** 9
+
+    def raw(**fields):
+        msg = _raw(good, t)
+        for key, value in fields.items():
+            setattr(msg, key, value)
+        return msg
+
+    _, jpeg = encode_compressed(good, 'jpeg')
+    _, small_png = encode_compressed(np.zeros((60, 80, 3), np.uint8), 'png')
+    bad = [
+        raw(encoding='yuv422'),                                   # encoding
+        raw(height=0),                                            # empty
+        raw(width=9000),                                          # too-large
+        raw(width=80, step=240),                                  # size-mismatch
+        raw(step=10),                                             # step
+        raw(data=bytes(10)),                                      # data-length
+        _compressed(jpeg, t, fmt='tiff'),                         # format
+        _compressed(b'', t),                                      # no-data
+        _compressed(b'\x00' * 64, t),                             # no-header
+        _compressed(_png_header(160, 120)[:200], t),              # undecodable
+        raw(header=_raw(good, t, 'elsewhere').header),            # frame-id
+        raw(header=_raw(good, 0).header),                         # stamp
+    ]
+    assert node._dropped == 0
+    for _ in range(3):  # repeated: still one line per cause
+        for msg in bad:
+            node._on_image('cam0', msg)
+    node._on_image('cam0', _compressed(small_png, t))  # size-mismatch again, compressed
+    assert node._dropped == 3 * len(bad) + 1
+    causes = [line.split('(')[1].split(')')[0] for line in logger.lines]
+    assert len(logger.lines) == len(bad), logger.lines
+    assert len(set(causes)) == len(bad)
+    assert all(line.startswith('cam0: dropping image') for line in logger.lines)
+    node._on_image('cam1', raw(encoding='yuv422', header=_raw(good, t,
+                                                              'cam1_optical_frame').header))
+    assert len(logger.lines) == len(bad) + 1  # another camera, same cause: logged
+
+
+def test_d6_unexpected_frame_id_dropped_and_counted(node_context, tmp_path):
+    node = _node(node_context, tmp_path)
+    try:
+        rgb = np.zeros((120, 160, 3), np.uint8)
+        node._on_image('cam0', _raw(rgb, 10 ** 9, 'cam1_optical_frame'))
+        assert node._dropped == 1 and sum(node.sync.pending.values()) == 0
+        node._on_image('cam0', _raw(rgb, 10 ** 9))
+        assert node._dropped == 1 and sum(node.sync.pending.values()) == 1
+        from mbtrack_ros.core.state import FrameResult
+        assert node.snapshot(FrameResult(stamp_ns=0)).bad_images == 1
+    finally:
+        node.destroy_node()
+
+
+def test_d7_diagnostics_published_while_no_frame_set_forms(node_context, tmp_path):
+    import time
+    node = _node(node_context, tmp_path, 'diagnostics_period:=0.2', step_thread=True)
+    sent = []
+    publish = node.pub_diag.publish
+    node.pub_diag.publish = lambda msg: sent.append(msg) or publish(msg)
+    try:
+        rgb = np.zeros((120, 160, 3), np.uint8)
+        bad = _raw(rgb, 10 ** 9)
+        bad.encoding = 'yuv422'
+        deadline = time.monotonic() + 1.5
+        k = 0
+        while time.monotonic() < deadline:
+            node._on_image('cam0', bad)
+            node._on_image('cam1', _raw(rgb, 0, 'cam1_optical_frame'))  # stamp 0
+            k += 2
+            time.sleep(0.02)
+        time.sleep(0.3)
+        assert len(sent) >= 3  # ~every 0.2 s of wall-clock time, no frame set formed
+        values = {kv.key: kv.value for kv in sent[-1].status[0].values}
+        assert int(values['dropped images (bad)']) == k
+        reasons = [m.status[0].message for m in sent]
+        assert any('refused as bad' in r for r in reasons), reasons
+        assert 'no images received' in reasons[-1]  # after the feeding stopped
+        from diagnostic_msgs.msg import DiagnosticStatus
+        assert all(m.status[0].level == DiagnosticStatus.WARN for m in sent)
+    finally:
+        node.destroy_node()
+
+
+def test_d16_rate_window_bounded_under_repeated_stamps(node_context, tmp_path):
+    from mbtrack_ros.nodes.tracker_node import RATE_WINDOW_MAX
+    node = _node(node_context, tmp_path)
+    try:
+        rgb = np.zeros((120, 160, 3), np.uint8)
+        msg = _raw(rgb, 10 ** 9)
+        for _ in range(3 * RATE_WINDOW_MAX):
+            node._on_image('cam0', msg)  # cam1 silent: no frame set forms
+        assert len(node._rate_window['cam0']) <= RATE_WINDOW_MAX
+        assert sum(node.sync.pending.values()) <= node.sync.max_queue
+    finally:
+        node.destroy_node()
+
+
+def test_d4_node_drops_a_frame_set_with_the_last_processed_stamp(node_context, tmp_path):
+    from mbtrack_ros.recording.sync import FrameSet
+    node = _node(node_context, tmp_path)
+    seen = []
+    process = node.process
+    node.process = lambda fs: seen.append(fs.stamp_ns) or process(fs)
+    try:
+        rgb = np.zeros((120, 160, 3), np.uint8)
+        images = {'cam0': rgb, 'cam1': rgb}
+        stamps = {'cam0': 10 ** 9, 'cam1': 10 ** 9}
+        with node._lock:
+            node._pending.extend([FrameSet(0, 10 ** 9, images, stamps),
+                                  FrameSet(1, 10 ** 9, images, stamps)])
+        node.process_pending()
+        assert seen == [10 ** 9]
+        from mbtrack_ros.core.state import FrameResult
+        snap = node.snapshot(FrameResult(stamp_ns=0))
+        assert snap.dropped_sets_repeated == 1
+    finally:
+        node.destroy_node()

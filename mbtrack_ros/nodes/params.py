@@ -21,10 +21,12 @@ sync.slop                       double     largest stamp spread in a frame set, 
 sync.timeout                    double     wait for a late camera, message time, s (0.2)
 output_frame_id                 string     frame of all outputs ('' = calibration frame)
 rescale_images                  bool       resize images whose size differs from the
-                                           calibration instead of dropping them (false)
+                                           calibration (up to 4 times larger per side)
+                                           instead of dropping them (false)
 debug_images                    bool       always publish ``~/debug/<cam>/occlusion``
                                            (default false: only when subscribed)
-diagnostics_period              double     seconds of message time between /diagnostics (1.0)
+diagnostics_period              double     seconds of message time between /diagnostics (1.0);
+                                           of wall-clock time while no frame set forms
 init_ground_truth               string     ground-truth CSV to start/end tracks from ('')
 output_bag                      string     also write every output to this MCAP bag ('')
 max_pending_sets                int        frame sets queued for the tracker; the oldest
