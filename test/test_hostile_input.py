@@ -637,3 +637,40 @@ def test_d4_node_drops_a_frame_set_with_the_last_processed_stamp(node_context, t
         assert snap.dropped_sets_repeated == 1
     finally:
         node.destroy_node()
+
+
+# -- D9: the Fast DDS profile file ------------------------------------------------------------
+
+def test_d9_fastdds_profile_created_safely(tmp_path, monkeypatch):
+    import stat
+
+    from mbtrack_ros.nodes import transport
+    monkeypatch.setattr('tempfile.tempdir', str(tmp_path))
+    monkeypatch.setattr(transport, '_written', None, raising=False)
+    uid, pid = os.getuid(), os.getpid()
+    # another user's file at the old predictable name, with the expected content
+    planted = tmp_path / f'mbtrack_fastdds_{uid}.xml'
+    planted.write_text(transport.fastdds_profile())
+    # and a symbolic link at the old predictable temporary name
+    victim = tmp_path / 'victim.txt'
+    victim.write_text('precious')
+    (tmp_path / f'mbtrack_fastdds_{uid}.{pid}.tmp').symlink_to(victim)
+    planted.unlink()
+    (tmp_path / f'mbtrack_fastdds_{uid}.xml').symlink_to(victim)
+    env = {}
+    path = transport.use_large_shm_segment(env)
+    assert victim.read_text() == 'precious'  # no link followed, nothing overwritten
+    assert path is not None and env['FASTRTPS_DEFAULT_PROFILES_FILE'] == str(path)
+    assert path.parent.parent == tmp_path and path.parent.name != tmp_path.name
+    info = path.lstat()
+    assert stat.S_ISREG(info.st_mode) and info.st_uid == uid
+    assert stat.S_IMODE(info.st_mode) == 0o600
+    assert stat.S_IMODE(path.parent.lstat().st_mode) == 0o700
+    assert path.read_text() == transport.fastdds_profile()
+    # a second call in this process reuses its own file; a replaced file is not trusted
+    assert transport.use_large_shm_segment({}) == path
+    path.unlink()
+    path.symlink_to(victim)
+    again = transport.use_large_shm_segment({})
+    assert again != path and again.read_text() == transport.fastdds_profile()
+    assert victim.read_text() == 'precious'
