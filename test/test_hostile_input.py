@@ -674,3 +674,39 @@ def test_d9_fastdds_profile_created_safely(tmp_path, monkeypatch):
     again = transport.use_large_shm_segment({})
     assert again != path and again.read_text() == transport.fastdds_profile()
     assert victim.read_text() == 'precious'
+
+
+def test_d8_replay_refuses_oversized_images_before_decoding(recording, tmp_path, capsys,
+                                                             monkeypatch):
+    """The replay's reader checks each image's declared size against the calibration (at
+    most MAX_RESCALE times larger per side) before decoding: a small PNG declaring
+    8192x8192 is counted as undecodable, never decoded."""
+    import shutil
+
+    from mbtrack_ros.recording import images
+    from mbtrack_ros.recording.bag import COMPRESSED, RecordingReader, RecordingWriter, \
+        _header, _T, typestore
+    dst = tmp_path / 'rec'
+    shutil.copytree(recording, dst, ignore=shutil.ignore_patterns('bag'))
+    calib = RoomCalibration.load(recording / 'calibration.yaml')
+    with RecordingReader(recording) as reader:
+        sets = [(fs.stamp_ns, dict(fs.images)) for fs in reader.frames()]
+    cam = calib.names[0]
+    with RecordingWriter(dst / 'bag', calib, compressed=True) as writer:
+        for k, (stamp, imgs) in enumerate(sets):
+            if k in (4, 7):
+                msg = _T[COMPRESSED](header=_header(stamp, calib.cameras[cam].frame_id),
+                                     format='png', data=np.frombuffer(
+                                         _png_header(8192, 8192), np.uint8))
+                writer._writer.write(writer._image_conn[cam], stamp,
+                                     typestore.serialize_cdr(msg, COMPRESSED))
+            else:
+                writer.write_frame(stamp, imgs)
+    big = []
+    real = images.cv2.imdecode
+    monkeypatch.setattr(images.cv2, 'imdecode', lambda buf, *a: big.append(buf.size > 150_000)
+                        or real(buf, *a))
+    assert _replay(dst, tmp_path / 'out') == 0
+    err = capsys.readouterr().err
+    assert 'dropped 2 undecodable image(s)' in err and 'more than 4 times' in err
+    assert not any(big)

@@ -435,6 +435,9 @@ def run(args: argparse.Namespace) -> int:
                              '(no metadata.yaml)')
         try:
             with RecordingReader(bag) as reader:  # opened once (~0.15 s an opening)
+                # bounded work per image: at most MAX_RESCALE times the calibrated size
+                reader.limit_image_sizes({n: (c.width, c.height)
+                                          for n, c in calibration.cameras.items()})
                 first: dict[str, np.ndarray] = {}
                 try:
                     for fs in reader.frames():

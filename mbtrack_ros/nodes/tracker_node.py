@@ -62,6 +62,7 @@ from mbtrack_ros.nodes.debug import occlusion_layers
 from mbtrack_ros.nodes.params import NodeParams, ParamsError, declare_and_read
 from mbtrack_ros.nodes.transport import use_large_shm_segment
 from mbtrack_ros.recording.csvfiles import CsvFormatError, GroundTruthRow, read_ground_truth
+from mbtrack_ros.recording.images import MAX_RESCALE
 from mbtrack_ros.recording.sync import FrameSet, FrameSetSynchronizer
 
 __all__ = ['GroundTruthInitializer', 'TrackerNode', 'main', 'make_executor', 'spin']
@@ -71,7 +72,7 @@ RATE_WINDOW_NS = 1_000_000_000  # input rates in /diagnostics: the last second o
 RATE_WINDOW_MAX = 1024  # stamps kept per camera for the rate (bounded under any input)
 #: with ``rescale_images``, an image may be at most this many times the calibrated size on
 #: a side (checked on the declared size, before decoding)
-RESCALE_MAX = 4.0
+RESCALE_MAX = MAX_RESCALE
 
 
 class GroundTruthInitializer:

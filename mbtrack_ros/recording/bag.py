@@ -36,7 +36,7 @@ from rosbags.typesys import Stores, get_typestore
 from mbtrack_ros.core.camera import RoomCalibration
 from mbtrack_ros.recording.csvfiles import GroundTruthRow
 from mbtrack_ros.recording.images import (
-    ImageConversionError, decode_compressed, decode_raw, encode_compressed)
+    MAX_RESCALE, ImageConversionError, decode_compressed, decode_raw, encode_compressed)
 
 __all__ = [
     'GROUND_TRUTH_TOPIC', 'BagError', 'FrameSet', 'RecordingReader', 'RecordingWriter',
@@ -260,6 +260,17 @@ class RecordingReader:
         self._reader: AnyReader | None = None
         self._mcap_files: list[Path] = []
         self._damaged: str | None = None
+        self._sizes: dict[str, tuple[int, int]] = {}  # camera -> calibrated (width, height)
+        self._max_scale = 1.0
+
+    def limit_image_sizes(self, sizes: dict[str, tuple[int, int]], *,
+                          max_scale: float = MAX_RESCALE) -> None:
+        """Refuse, before decoding, images of camera ``c`` whose declared size (raw header,
+        PNG/JPEG header) is more than ``max_scale`` times ``sizes[c]`` = (width, height) on
+        a side (``max_scale`` 1: exactly that size): bounded work per message; they are
+        listed in ``FrameSet.errors``."""
+        self._sizes = {str(c): (int(w), int(h)) for c, (w, h) in sizes.items()}
+        self._max_scale = float(max_scale)
 
     def __enter__(self) -> RecordingReader:
         try:
@@ -344,12 +355,14 @@ class RecordingReader:
         """Why the bag could only be read up to a damaged part, or None if it is intact."""
         return self._damaged
 
-    def _decode(self, msgtype: str, raw: bytes) -> tuple[int, np.ndarray]:
+    def _decode(self, msgtype: str, raw: bytes, camera: str = '') -> tuple[int, np.ndarray]:
         msg = typestore.deserialize_cdr(raw, msgtype)
+        limit = dict(expected=self._sizes.get(camera), max_scale=self._max_scale)
         if msgtype == IMAGE:
-            image = decode_raw(msg.encoding, msg.height, msg.width, msg.step, msg.data)
+            image = decode_raw(msg.encoding, msg.height, msg.width, msg.step, msg.data,
+                               **limit)
         else:
-            image = decode_compressed(msg.format, msg.data)
+            image = decode_compressed(msg.format, msg.data, **limit)
         return _stamp_ns(msg.header), image
 
     def frames(self) -> Iterator[FrameSet]:
@@ -390,7 +403,7 @@ class RecordingReader:
             cam = self._by_topic[topic]
             read[topic] = read.get(topic, 0) + 1
             try:
-                stamp, image = self._decode(msgtype, raw)
+                stamp, image = self._decode(msgtype, raw, cam)
                 error = None
             except ImageConversionError as err:
                 stamp, image, error = None, None, str(err)

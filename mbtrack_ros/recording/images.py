@@ -21,7 +21,8 @@ import cv2
 import numpy as np
 
 __all__ = [
-    'CAUSES', 'CHANNELS', 'MAX_SIDE', 'ImageConversionError', 'compressed_size',
+    'CAUSES', 'CHANNELS', 'MAX_RESCALE', 'MAX_SIDE', 'ImageConversionError',
+    'compressed_size',
     'decode_compressed', 'decode_raw', 'encode_compressed', 'encode_raw',
 ]
 
@@ -29,6 +30,9 @@ __all__ = [
 CHANNELS = {'rgb8': 3, 'bgr8': 3, 'mono8': 1, 'rgba8': 4, 'bgra8': 4}
 #: largest accepted image side, pixels (refused before allocating)
 MAX_SIDE = 8192
+#: where images may be resized to the calibration (node ``rescale_images``, ``mbtrack
+#: replay``), the most times larger than the calibrated size they may be on a side
+MAX_RESCALE = 4.0
 
 
 #: the ``cause`` of an :class:`ImageConversionError` (logs are throttled per cause)
