@@ -499,9 +499,10 @@ def test_d8_oversized_compressed_image_refused_before_decoding(node_context, tmp
     monkeypatch.setattr(images.cv2, 'imdecode',
                         lambda *a, **k: decoded.append(1) or real(*a, **k))
     try:
+        msgs = [_compressed(_png_header(8192, 8192), 10 ** 9 + k) for k in range(15)]
         t0 = time.perf_counter()
-        for k in range(15):
-            node._on_image('cam0', _compressed(_png_header(8192, 8192), 10 ** 9 + k))
+        for msg in msgs:
+            node._on_image('cam0', msg)
         spent = time.perf_counter() - t0
         assert decoded == [] and node._dropped == 15
         assert spent < 1.0  # 15 messages, no decode: milliseconds
@@ -590,7 +591,10 @@ def test_d7_diagnostics_published_while_no_frame_set_forms(node_context, tmp_pat
             node._on_image('cam1', _raw(rgb, 0, 'cam1_optical_frame'))  # stamp 0
             k += 2
             time.sleep(0.02)
-        time.sleep(0.3)
+        deadline = time.monotonic() + 5.0  # after the feeding: 'no images received'
+        while time.monotonic() < deadline and not (
+                sent and 'no images received' in sent[-1].status[0].message):
+            time.sleep(0.05)
         assert len(sent) >= 3  # ~every 0.2 s of wall-clock time, no frame set formed
         values = {kv.key: kv.value for kv in sent[-1].status[0].values}
         assert int(values['dropped images (bad)']) == k
