@@ -714,3 +714,12 @@ def test_d8_replay_refuses_oversized_images_before_decoding(recording, tmp_path,
     err = capsys.readouterr().err
     assert 'dropped 2 undecodable image(s)' in err and 'more than 4 times' in err
     assert not any(big)
+
+
+def test_bag_player_reports_a_skipped_chunk(recording, tmp_path, capsys):
+    from mbtrack_ros.nodes import bag_player
+    rec = _damage_chunk(recording, tmp_path / 'rec')
+    code = bag_player.main(['bag_player', '--ros-args', '-p', f'bag:={rec}',
+                            '-p', 'rate:=100.0', '-p', 'start_delay:=0.0'])
+    err = capsys.readouterr().err
+    assert code == 1 and 'messages unreadable' in err, err

@@ -195,12 +195,20 @@ class BagPlayer(Node):
         else:
             source = ((topic, stamp, raw)
                       for topic, _, stamp, raw in stream_mcap(self._mcap_files, topics))
+        played = 0
         try:
-            yield from source
+            for item in source:
+                played += 1
+                yield item
         except Exception as err:  # damaged chunk, truncated file ...
             self.damaged = f'{type(err).__name__}: {str(err)[:200]}'
             self.get_logger().error(f'bag {self.bag} is damaged after {self.published} '
                                     f'messages: {self.damaged}')
+            return
+        declared = sum(getattr(c, 'msgcount', 0) for c in self._conns)
+        if self._reader is not None and played < declared:  # a chunk the reader skipped
+            self.damaged = f'{declared - played} of its {declared} messages unreadable'
+            self.get_logger().error(f'bag {self.bag} is damaged: {self.damaged}')
 
     def _play_once(self) -> bool:
         """One pass through the bag; False when stopped before the end."""
