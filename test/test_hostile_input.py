@@ -229,7 +229,7 @@ def test_d11_huge_csv_integers_are_one_line_errors(tmp_path, capsys, calib_doc, 
     assert '64-bit' in _one_error_line(capsys)
 
 
-# -- D13: an output path that is a directory --------------------------------------------------------
+# -- D13: an output path that is a directory ----------------------------------------------
 
 def test_d13_tracks_csv_directory_is_one_line_error(tmp_path, capsys, calib_doc):
     path = _write(tmp_path, calib_doc)

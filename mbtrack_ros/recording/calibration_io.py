@@ -38,7 +38,7 @@ import numpy as np
 import yaml
 
 from mbtrack_ros.core.camera import (
-    CalibrationError, Camera, RoomCalibration, check_floor_views)
+    CalibrationError, Camera, RoomCalibration, check_floor_views, yaml_error_line)
 
 __all__ = [
     'FORMATS', 'UP_AXES', 'CalibrationError', 'Intrinsics', 'default_floor',
@@ -229,7 +229,9 @@ def _load_document(path: Path) -> Any:
             return tomllib.loads(text)
         return yaml.safe_load(text)
     except (json.JSONDecodeError, tomllib.TOMLDecodeError, yaml.YAMLError, cv2.error) as err:
-        first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+        first = (yaml_error_line(err) if isinstance(err, yaml.YAMLError)
+                 else str(err).strip().splitlines()[0] if str(err).strip()
+                 else type(err).__name__)
         raise CalibrationError(
             f'{path}: not a readable {suffix or "YAML"} file ({first})') from err
 
@@ -358,7 +360,7 @@ def read_camera_info(path: str | Path) -> Intrinsics:
     try:
         doc = yaml.safe_load(text)
     except yaml.YAMLError as err:
-        raise CalibrationError(f'{path}: not valid YAML ({str(err).splitlines()[0]})') from err
+        raise CalibrationError(f'{path}: not valid YAML ({yaml_error_line(err)})') from err
     if not isinstance(doc, Mapping):
         raise CalibrationError(f'{path}: not a camera_info YAML (expected a mapping)')
     missing = [k for k in ('image_width', 'image_height', 'camera_matrix') if k not in doc]
