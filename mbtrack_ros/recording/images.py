@@ -33,6 +33,8 @@ MAX_SIDE = 8192
 #: where images may be resized to the calibration (node ``rescale_images``, ``mbtrack
 #: replay``), the most times larger than the calibrated size they may be on a side
 MAX_RESCALE = 4.0
+# JPEG segments (markers, fill bytes) read looking for the frame header: real files have ~10
+_MAX_SEGMENTS = 1024
 
 
 #: the ``cause`` of an :class:`ImageConversionError` (logs are throttled per cause)
@@ -199,33 +201,34 @@ def decode_compressed(fmt: str, data, *, expected: tuple[int, int] | None = None
 
 def _peek_size(buf: np.ndarray) -> tuple[int | None, int | None]:
     """Declared (width, height) from a PNG IHDR or JPEG SOF header, without decoding: the
-    JPEG segments before the frame header are skipped by their lengths (O(segments))."""
+    JPEG segments before the frame header are skipped by their lengths (at most
+    ``_MAX_SEGMENTS`` of them: bounded work for any payload)."""
     if buf.size >= 24 and buf[:8].tobytes() == b'\x89PNG\r\n\x1a\n' \
             and buf[12:16].tobytes() == b'IHDR':
         head = buf[:24].tobytes()
         return int.from_bytes(head[16:20], 'big'), int.from_bytes(head[20:24], 'big')
-    if buf.size >= 4 and buf[0] == 0xFF and buf[1] == 0xD8:
-        i, n = 2, buf.size
-        while i + 9 < n:
-            if buf[i] != 0xFF:
-                return None, None  # not at a marker: damaged header
-            marker = int(buf[i + 1])
-            if marker == 0xFF:
-                i += 1  # fill byte
-                continue
-            if marker in (0xD8, 0x01) or 0xD0 <= marker <= 0xD7:
-                i += 2
-                continue
-            if marker in (0xD9, 0xDA):  # end of image or start of scan before any SOF
-                return None, None
-            length = (int(buf[i + 2]) << 8) | int(buf[i + 3])
-            if 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):
-                h = (int(buf[i + 5]) << 8) | int(buf[i + 6])
-                w = (int(buf[i + 7]) << 8) | int(buf[i + 8])
-                return w, h
-            if length < 2:
-                return None, None
-            i += 2 + length
+    if buf.size < 4 or buf[0] != 0xFF or buf[1] != 0xD8:
+        return None, None
+    data = buf.tobytes()
+    i, n = 2, len(data)
+    for _ in range(_MAX_SEGMENTS):
+        if i + 9 >= n or data[i] != 0xFF:
+            return None, None  # the end, or not at a marker: damaged header
+        marker = data[i + 1]
+        if marker == 0xFF:
+            i += 1  # fill byte
+            continue
+        if marker in (0xD8, 0x01) or 0xD0 <= marker <= 0xD7:
+            i += 2
+            continue
+        if marker in (0xD9, 0xDA):  # end of image or start of scan before any SOF
+            return None, None
+        length = (data[i + 2] << 8) | data[i + 3]
+        if 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):
+            return (data[i + 7] << 8) | data[i + 8], (data[i + 5] << 8) | data[i + 6]
+        if length < 2:
+            return None, None
+        i += 2 + length
     return None, None
 
 
