@@ -169,7 +169,8 @@ def tracker_values_from_params(path: Path) -> dict:
         raise TrackerError(f'{path}: not a text file (not UTF-8 at byte {err.start})') \
             from err
     except OSError as err:
-        raise TrackerError(f'cannot read {path}: {err.strerror or err}') from err
+        raise TrackerError(f'{path}: not a tracker_node parameter file (cannot read it: '
+                           f'{err.strerror or err})') from err
     except yaml.YAMLError as err:
         raise TrackerError(f'{path}: not valid YAML: {yaml_error_line(err)}') from err
     except (KeyError, TypeError, AttributeError) as err:
