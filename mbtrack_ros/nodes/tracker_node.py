@@ -70,9 +70,6 @@ __all__ = ['GroundTruthInitializer', 'TrackerNode', 'main', 'make_executor', 'sp
 WARN_PERIOD_S = 10.0
 RATE_WINDOW_NS = 1_000_000_000  # input rates in /diagnostics: the last second of stamps
 RATE_WINDOW_MAX = 1024  # stamps kept per camera for the rate (bounded under any input)
-#: with ``rescale_images``, an image may be at most this many times the calibrated size on
-#: a side (checked on the declared size, before decoding)
-RESCALE_MAX = MAX_RESCALE
 
 
 class GroundTruthInitializer:
@@ -338,12 +335,14 @@ class TrackerNode(Node):
             self._newest_stamp = max(self._newest_stamp, stamp)
         if msg.header.frame_id and msg.header.frame_id != cam.frame_id:
             self._refuse(camera, 'frame-id', f'unexpected frame id '
-                         f'{msg.header.frame_id[:60]!r} (calibration: {cam.frame_id!r})')
+                         f'{msg.header.frame_id[:60]!r} (calibration: {cam.frame_id!r}; '
+                         'set frame_id of this camera in the calibration file)')
             return
         if stamp <= 0:
             self._refuse(camera, 'stamp', 'the header stamp is zero (not set by the driver)')
             return
-        scale = RESCALE_MAX if self.params.rescale_images else 1.0
+        # rescale_images: at most MAX_RESCALE times the calibrated size on a side
+        scale = MAX_RESCALE if self.params.rescale_images else 1.0
         try:
             rgb = (compressed_to_rgb(msg, expected=(cam.width, cam.height), max_scale=scale)
                    if isinstance(msg, CompressedImage)
