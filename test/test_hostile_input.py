@@ -723,3 +723,27 @@ def test_bag_player_reports_a_skipped_chunk(recording, tmp_path, capsys):
                             '-p', 'rate:=100.0', '-p', 'start_delay:=0.0'])
     err = capsys.readouterr().err
     assert code == 1 and 'messages unreadable' in err, err
+
+
+def test_soak_bad_images_are_each_refused(node_context, tmp_path):
+    """Every kind of bad image the soak injects (raw and compressed) is refused and counted
+    by the node, so the soak's injected count must equal the node's count."""
+    from mbtrack_ros.commands.bench_live import BAD_KINDS, bad_image
+    node = _node(node_context, tmp_path)
+    try:
+        for k, kind in enumerate(BAD_KINDS):
+            for compressed in (False, True):
+                before = node._dropped
+                node._on_image('cam0', bad_image(kind, 10 ** 9 + k, 'cam0', 160, 120,
+                                                 compressed=compressed))
+                assert node._dropped == before + 1, (kind, compressed)
+    finally:
+        node.destroy_node()
+
+
+def test_lost_frame_sets_named_by_their_stamp_gaps():
+    from mbtrack_ros.recording.bag import _gaps
+    text = _gaps([0, 10, 20, 50, 60, 70, 100])
+    assert 'between frame sets 2 and 3 (stamps 20 .. 50, ~2 lost)' in text
+    assert 'between frame sets 5 and 6 (stamps 70 .. 100, ~2 lost)' in text
+    assert 'after frame set 2' in _gaps([0, 10, 20])

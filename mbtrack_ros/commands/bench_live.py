@@ -15,8 +15,8 @@ reads the node's counters from ``/diagnostics`` and the CPU time of the tracker 
 offline speed: with the default parameters and, in a source checkout, with the fast and the
 offline profiles (``config/clear_room_fast.yaml``, ``config/clear_room_offline.yaml``).
 
-**Soak** (``--live-bad-rate P``, with a long ``--live-frames`` and usually
-``--live-no-offline``): the listener also publishes a bad image on one camera's topic
+**Soak** (``--live-bad-rate P``, with a long ``--live-frames``, ``--live-compressed`` to
+keep its recording small, and ``--live-no-offline``): the listener also publishes a bad image on one camera's topic
 (``--live-bad-camera``, reliable) for a share ``P`` of the frame sets, right after the
 ``/clock`` tick of that stamp, cycling through kinds the node must refuse (unknown encoding,
 unexpected frame id, a declared 8192x8192 image, a data length that does not match, a zero
@@ -123,11 +123,13 @@ def cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
 
-def make_recording(path: Path, *, frames: int, seed: int = 0) -> Path:
-    """The benchmark recording: clear-room, 4 corner cameras, 320x240, 15 Hz."""
+def make_recording(path: Path, *, frames: int, seed: int = 0,
+                   compressed: bool = False) -> Path:
+    """The benchmark recording: clear-room, 4 corner cameras, 320x240, 15 Hz (``compressed``:
+    JPEG images, ~15 kB instead of 230 kB each, for long soaks)."""
     from mbtrack_ros.synth.generator import generate
     return generate('clear-room', path, seed=seed, frames=frames, width=320, height=240,
-                    fps=FPS, ceiling=False)
+                    fps=FPS, ceiling=False, compressed=compressed)
 
 
 @dataclass
@@ -156,15 +158,27 @@ class LiveResult:
 BAD_KINDS = ('encoding', 'frame-id', 'too-large', 'data-length', 'stamp')
 
 
-def bad_image(kind: str, stamp_ns: int, camera: str, width: int, height: int):
-    """A ``sensor_msgs/Image`` of camera ``camera`` (``width`` x ``height`` rgb8) made bad in
-    the way ``kind`` (one of :data:`BAD_KINDS`) names; small (at most one row of data)."""
-    from sensor_msgs.msg import Image
+def bad_image(kind: str, stamp_ns: int, camera: str, width: int, height: int, *,
+              compressed: bool = False):
+    """A ``sensor_msgs/Image`` (``compressed``: ``CompressedImage``) of camera ``camera``
+    (``width`` x ``height`` rgb8) made bad in the way ``kind`` (one of :data:`BAD_KINDS`)
+    names; small (at most one row of data, or a PNG header)."""
+    from sensor_msgs.msg import CompressedImage, Image
 
     from mbtrack_ros.nodes.messages import make_header
+    header = make_header(0 if kind == 'stamp' else stamp_ns,
+                         'elsewhere' if kind == 'frame-id' else f'{camera}_optical_frame')
+    if compressed:
+        msg = CompressedImage(header=header, format='tiff' if kind == 'encoding' else 'png')
+        side = 8192 if kind == 'too-large' else None
+        # a PNG signature and header (declaring 8192x8192 for too-large), then junk; the
+        # data-length kind has no header at all
+        ihdr = (b'\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR'
+                + (side or width).to_bytes(4, 'big') + (side or height).to_bytes(4, 'big'))
+        msg.data = (b'' if kind == 'data-length' else ihdr) + bytes(64)
+        return msg
     msg = Image(height=height, width=width, encoding='rgb8', step=width * 3)
-    msg.header = make_header(0 if kind == 'stamp' else stamp_ns,
-                             'elsewhere' if kind == 'frame-id' else f'{camera}_optical_frame')
+    msg.header = header
     if kind == 'encoding':
         msg.encoding = 'yuv422'
     elif kind == 'too-large':
@@ -219,15 +233,21 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from rosgraph_msgs.msg import Clock
 
+    from sensor_msgs.msg import CompressedImage, Image
+
     from mbtrack_ros.nodes.conversions import stamp_to_ns
-    from mbtrack_ros.recording.bag import RecordingReader
+    from mbtrack_ros.recording.bag import COMPRESSED, RecordingReader, image_topic
     from mbtrack_ros.recording.csvfiles import read_ground_truth
-    from sensor_msgs.msg import Image
 
     from mbtrack_ros.core.camera import RoomCalibration
 
     with RecordingReader(recording / 'bag') as reader:
         frames = reader.frame_count
+        # a recording of JPEG images: the node subscribes to the compressed topics
+        compressed = reader.topics.get(image_topic('cam0', True)) == COMPRESSED \
+            and image_topic('cam0') not in reader.topics
+    if compressed:
+        node_args = ('-p', 'image_transport:=compressed', *node_args)
     soak_cam = RoomCalibration.load(recording / 'calibration.yaml').cameras[bad_camera] \
         if bad_rate > 0 else None
     truth_count: dict[int, int] = {}
@@ -252,9 +272,9 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
     injected = [0]
     bad_pub = None
     if soak_cam is not None:
-        bad_pub = listener.create_publisher(Image, f'/{bad_camera}/image_raw',
-                                            QoSProfile(depth=100,
-                                                       reliability=ReliabilityPolicy.RELIABLE))
+        bad_pub = listener.create_publisher(
+            CompressedImage if compressed else Image, image_topic(bad_camera, compressed),
+            QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
 
     def on_clock(msg, info) -> None:  # info: rmw message info, system clock ns
         t = info['source_timestamp'] / 1e9
@@ -269,7 +289,8 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
                 kind = BAD_KINDS[injected[0] % len(BAD_KINDS)]
                 injected[0] += 1
         if inject:
-            bad_pub.publish(bad_image(kind, s, bad_camera, soak_cam.width, soak_cam.height))
+            bad_pub.publish(bad_image(kind, s, bad_camera, soak_cam.width, soak_cam.height,
+                                      compressed=compressed))
 
     def on_people(msg, info) -> None:
         t = info['received_timestamp'] / 1e9
@@ -459,6 +480,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "tracker process's memory growth (default 0: none)")
     parser.add_argument('--live-bad-camera', default='cam0', metavar='NAME',
                         help='camera whose topic gets the bad images (default cam0)')
+    parser.add_argument('--live-compressed', action='store_true',
+                        help='generate the recording with JPEG images (a long soak\'s '
+                             'recording stays small); the node then subscribes to the '
+                             'compressed topics')
 
 
 def soak_summary(live: LiveResult, camera: str) -> str:
@@ -523,7 +548,8 @@ def main_live(args: argparse.Namespace) -> int:
                 recording = args.live_recording
             print(f'{_PROG}: generating {args.live_frames} frames of clear-room into '
                   f'{recording}', file=sys.stderr)
-            make_recording(recording, frames=args.live_frames, seed=seed)
+            make_recording(recording, frames=args.live_frames, seed=seed,
+                           compressed=args.live_compressed)
         load0 = os.getloadavg()
         live = run_live(recording, seed=seed, use_sim_time=not args.live_no_sim_time,
                         ground_truth=args.live_ground_truth, node_args=node_args,
