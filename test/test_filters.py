@@ -155,8 +155,7 @@ def test_a_stopping_wall_gives_particles_on_it_no_speed_away_from_it():
     the positions are reflected alike, but with bounces the particles that crossed the
     wall leave with the speed they came at, and the cloud's mean velocity points away from
     the wall twice as fast as with a stopping wall, where they only keep their speed along
-    it (the drift off a wall of docs/detection.md, "A camera that sees little of a target
-    says nothing about it; a wall stops a particle")."""
+    it (a bouncing cloud drifts off the wall)."""
     floor = (0.0, 0.0, 6.0, 5.0)
     out = {}
     for stops in (False, True):
@@ -385,7 +384,7 @@ def _walking_velocity(motion: MotionConfig, seed: int) -> np.ndarray:
 
 
 def test_velocity_is_not_dragged_by_the_orientation_of_the_appearance_model():
-    """The clear-room finding (docs/detection.md, "Orientation apart from velocity"): when
+    """When
     the orientation follows the velocity, an appearance model annotated with the wrong
     orientation selects particles walking the wrong way and the estimate lags; with the
     orientation a random walk of its own (the default) the velocity is the person's."""
@@ -499,8 +498,7 @@ def _crossing_run(algorithm: str, seed: int, frames: int = 45) -> tuple[bool, in
 def test_hjs_keeps_identities_through_an_occlusion_where_separable_fails():
     # 80 seeds (about 30 s): the 8 seeds this test had at first gave HJS 7/8, separable
     # 2/8 with one random generator shared by the tracks, 5/8 and 6/8 with one stream per
-    # track; on 80 seeds HJS 55, separable 48 (13 runs only HJS right, 6 only separable;
-    # docs/diag/twins_crossing.py)
+    # track; on 80 seeds HJS 55, separable 48 (13 runs only HJS right, 6 only separable)
     seeds = range(80)
     runs = [_crossing_run('hjs', s) for s in seeds]
     hjs = sum(ok for ok, _ in runs)

@@ -83,7 +83,7 @@ def _brute_w_star(masks, dist, prior, target, p, exclude):
 
 @pytest.mark.parametrize('n_targets,n_particles,seed,zeros', [
     (2, 4, 0, 0), (3, 3, 1, 0), (3, 5, 2, 0), (3, 5, 4, 3),
-    (3, (2, 6, 3), 5, 2)])     # unequal counts (docs/diag/variant_crowd_particles.patch)
+    (3, (2, 6, 3), 5, 2)])     # unequal particle counts per target
 def test_hjs_incremental_equals_brute_force(n_targets, n_particles, seed, zeros):
     counts = n_particles if isinstance(n_particles, tuple) else (n_particles,) * n_targets
     rng = np.random.default_rng(seed)
@@ -187,7 +187,6 @@ def test_a_camera_in_which_a_target_is_hidden_says_nothing_about_it():
     """A target the camera hides behind a nearer one (prior-expected visible fraction
     below ``min_visible_share``) gets 0 on every particle from that camera: the occlusion
     penalty and the nearer target's background term would otherwise still rank its places
-    (docs/detection.md, "A camera in which a target is hidden says nothing about it").
     The other targets' scores do not change, and with the threshold at 0 the hidden
     target gets the plain Eq. 19 scores of ``hjs_debug``."""
     rng = np.random.default_rng(11)
@@ -669,7 +668,7 @@ def test_coverage_term_adds_gain_times_brute_force_coverage(separable):
 
 def test_coverage_term_prefers_the_foreground_over_a_look_alike_background():
     """A person and a painted look-alike of her on the wall behind: colour alone cannot
-    tell them apart, the foreground can (the still person of docs/detection.md's lead)."""
+    tell them apart, the foreground can."""
     cams = _two_cameras()
     mm = MeasurementModel(_room(*cams), LikelihoodConfig(min_visible_pixels=5))
     colours = [((230, 190, 160), (200, 30, 30), (30, 30, 200))] * 2

@@ -55,7 +55,7 @@ FPS = 15.0
 _BURST = re.compile(r"one stamp's messages took p50 (?P<p50>[\d.]+) ms, p95 (?P<p95>[\d.]+) ms")
 REPO = Path(__file__).resolve().parents[2]
 FAST_PROFILE = REPO / 'config' / 'clear_room_fast.yaml'  # tracker_node parameters
-# the offline speed profile (issue 5's >= 5x real time): fewer particles, detection on every
+# the offline speed profile: fewer particles, detection on every
 # 3rd frame set, images processed at half size
 OFFLINE_PROFILE = REPO / 'config' / 'clear_room_offline.yaml'
 
@@ -345,7 +345,7 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
              '-p', f'bag:={recording}', '-p', f'rate:={rate}',
              '-p', 'wait_for_subscribers:=true', '-p', 'start_delay:=1.0',
              # our /clock reader too: a listener that missed the first /clock messages timed
-             # only later frames and took a frame ~15 for frame 0 (docs/live_measurements.md)
+             # only later frames and took a later frame for frame 0
              '-p', f'clock_subscribers:={2 if use_sim_time else 1}'],
             cwd=REPO, env=env, stdout=player_log, stderr=subprocess.STDOUT, text=True)
         cpu0, wall0 = cpu_seconds(node.pid), time.monotonic()

@@ -50,7 +50,7 @@ __all__ = ['add_parser', 'run']
 
 _PROG = 'mbtrack replay'
 # The tracks.mcap writer runs at this niceness above the replay: it takes the CPU the
-# tracker's threads leave (docs/live_measurements.md, "Offline speed, part 6").
+# tracker's threads leave.
 _WRITER_NICENESS = 10
 # /diagnostics of tracks.mcap: one message per second of message time (as the node's
 # diagnostics_period) and one with the final counts

@@ -50,19 +50,16 @@ class TrackerConfig:
         d_occ: occlusion penalty d_occ (000 Eq. 26).
         min_inside_share: a camera that sees less of a target's silhouettes inside its
             image (on average over its particles) says nothing about the target
-            (``LikelihoodConfig.min_inside_share``; docs/detection.md, "A camera that sees
-            little of a target says nothing about it; a wall stops a particle"); 0: only
-            the particles it does not see at all get their target's mean there.
+            (``LikelihoodConfig.min_inside_share``), share in [0, 1]; 0: only the particles
+            it does not see at all get their target's mean there.
         min_visible_share: a camera in which a target is hidden (its prior-expected
             visible fraction sum(w*) / area below this) says nothing about the target
-            (``LikelihoodConfig.min_visible_share``; docs/detection.md, "A camera in which a
-            target is hidden says nothing about it"); 0: never.
-        mrf_radius: spatial-exclusion radius, metres. 000 §VI-A uses 0.4; people who stand
-            or walk side by side are 0.42-0.5 m apart centre to centre, and at 0.4 the prior
-            pushed their tracks apart and off them (30 clear-room runs with automatic
-            detection: 141 -> 103 identity switches, MOTA 95.46 -> 95.65 %;
-            docs/detection.md, "Fresh recordings, the suite and the exclusion radius").
-            ``mbtrack experiments`` keeps 0.4 for 000 §VI.
+            (``LikelihoodConfig.min_visible_share``), share in [0, 1]; 0: never.
+        mrf_radius: spatial-exclusion radius r of the MRF prior (000 Eq. 16), metres, > 0.
+            000 §VI-A uses 0.4; people who stand or walk side by side are 0.42-0.5 m apart
+            centre to centre, and a radius near that pushes their tracks apart (0.3 keeps
+            them; docs/evaluation.md measures the result). ``mbtrack experiments`` keeps
+            0.4 for 000 §VI.
         mrf_epsilon: floor of the exclusion potential.
         use_mrf: apply the MRF prior (False = ablation of 000 §VI-C).
         theta_bp: BP stopping threshold (000 Eq. 43: 0.01).
@@ -95,8 +92,7 @@ class TrackerConfig:
             with visibility/existence probabilities (001), see
             :mod:`mbtrack_ros.core.detection.manager`.
         subsample: the likelihood reads every k-th image row of the silhouettes (1: all
-            rows; a speed option: 2 saved ~6 % of the CPU and cost MOTA on clear-room,
-            docs/live_measurements.md).
+            rows; 2-8: less CPU, less accuracy).
         pipeline_search: with detection, run the search for new people of frame t on the
             detection's worker thread while frame t+1 is filtered, and add its people after
             frame t+1's result (one frame later than without; deterministic, the same live
@@ -105,18 +101,18 @@ class TrackerConfig:
             release, visibility and existence, background update, search) on every k-th
             frame set only (the 1st, (k+1)-th, ... since the start or a reset); the frame
             sets between are only filtered and report the tracks with the visibility and
-            existence of the last detection frame set (1: every frame set; a speed option,
-            its cost in docs/live_measurements.md).
+            existence of the last detection frame set (1: every frame set; larger: less
+            CPU, people found later and kept less well).
         image_scale: the tracker works on the images resized by this factor in (0, 1]
             (:meth:`Tracker.step` resizes them once, the cameras' intrinsics are scaled to
             match); pixel lengths of the detection (morphology, edge validation, masks)
             and the likelihood's smallest visible area are scaled with it. 1: the images
-            as they come; a speed option (docs/live_measurements.md, part 3). Tracks are in
-            room coordinates whatever the scale.
+            as they come; smaller: less CPU, less accuracy. Tracks are in room coordinates
+            whatever the scale.
         adaptation_rate: with detection, blending rate of the slow, occlusion-aware
             appearance-model adaptation of confirmed tracks (``AdaptationConfig.rate``,
-            :mod:`mbtrack_ros.core.detection.adaptation`; None: its default, 0.05, which
-            docs/detection.md measures in "Appearance adaptation, again"); 0 = off.
+            :mod:`mbtrack_ros.core.detection.adaptation`; None: its default, 0.05), per
+            adaptation in [0, 1]; 0 = off.
     """
 
     algorithm: str = 'hjs'
@@ -431,8 +427,7 @@ class Tracker:
         A track's particles then do not depend on how many other tracks there are or
         what they drew, so a change that touches one track (a birth a frame later, a
         release elsewhere in the room) leaves the draws of the others as they were; with
-        one shared generator it reordered every later draw of every track
-        (docs/detection.md, "One random stream per track")."""
+        one shared generator it would reorder every later draw of every track."""
         key = tuple(int(v) % 2 ** 64 for v in (stamp_ns, round(float(state[X]) * 1000),
                                                 round(float(state[Y]) * 1000)))
         return np.random.default_rng(np.random.SeedSequence(self._entropy, spawn_key=key))

@@ -39,25 +39,22 @@ warm_up                         bool       run the pipeline on a few synthetic f
                                            loading (true)
 tracker.algorithm               string     hjs | separable | joint | registered baseline
 tracker.particles               int        particles per target (100)
-tracker.subsample               int        likelihood on every k-th image row (1; a speed
-                                           option that costs accuracy, see
-                                           docs/live_measurements.md)
+tracker.subsample               int        likelihood on every k-th image row, 1-8 (1; a
+                                           speed option that costs accuracy)
 tracker.pipeline_search         bool       search frame t for new people on a worker
                                            thread while frame t+1 is filtered (false;
                                            people start one frame later)
 tracker.image_scale             double     the tracker works on the images resized by
                                            this factor in (0, 1] (1.0; a speed option
-                                           that costs accuracy, see
-                                           docs/live_measurements.md)
+                                           that costs accuracy)
 tracker.joint_particles         int        joint-filter particles (10000)
 tracker.sigma                   double     likelihood width, 000 Eq. 19 (0.12)
 tracker.d_occ                   double     occlusion penalty, 000 Eq. 26 (0.15)
 tracker.min_inside_share        double     a camera that sees less of a target inside its
-                                           image says nothing about it (0.5,
-                                           docs/detection.md)
+                                           image says nothing about it, share 0-1 (0.5)
 tracker.min_visible_share       double     a camera in which a target is hidden behind
                                            others (expected visible fraction below this)
-                                           says nothing about it (0.1, docs/detection.md)
+                                           says nothing about it, share 0-1 (0.1)
 tracker.mrf_radius              double     exclusion radius, m (0.3; 000 §VI-A: 0.4)
 tracker.use_mrf                 bool       spatial-exclusion MRF prior (true)
 tracker.seed                    int        random seed, -1 = fresh entropy (-1)
@@ -88,11 +85,10 @@ detection.reuse_in_entry_zones  bool       tracks released in front of the door 
                                            once (their people are taken to have left)
 detection.every                 int        run the detection pipeline (release, existence,
                                            background, search) on every k-th frame set
-                                           only (1; a speed option that costs accuracy,
-                                           see docs/live_measurements.md)
+                                           only (1; a speed option that costs accuracy)
 detection.adaptation_rate       double     blending rate of the slow appearance-model
                                            adaptation of confirmed, unoccluded tracks;
-                                           0 = off (0.05, docs/detection.md)
+                                           0 = off (0.05)
 motion.velocity_noise           double     velocity diffusion, m/s per sqrt(s) (0.6)
 motion.position_noise           double     extra position diffusion, m per sqrt(s) (0.15)
 motion.orientation_noise        double     orientation diffusion, rad per sqrt(s) (1.0)
@@ -100,7 +96,7 @@ motion.max_speed                double     velocities are clipped to this, m/s (
 motion.orientation_follows_velocity
                                 bool       a walking body faces its direction of motion,
                                            as in 000 §VI (false: the orientation is a
-                                           random walk of its own, docs/detection.md)
+                                           random walk of its own)
 motion.wall_stops               bool       a particle reaching the floor's border loses its
                                            velocity into it (true; false: it bounces)
 ==============================  =========  =================================================

@@ -22,8 +22,7 @@ are queued (at most ``max_pending_sets``) and the tracker step runs in its own p
 woken by a condition variable, so it overlaps with message reception (the numba kernels and
 OpenCV release the GIL). The callbacks are dispatched by rclpy's ``EventsExecutor`` (C++
 event queue; ``executor`` parameter): the Python ``MultiThreadedExecutor`` rebuilt its wait
-set for every message and cost an idle node tens of ms per frame set
-(docs/live_measurements.md). Time is message time only.
+set for every message, which costs CPU and latency. Time is message time only.
 
 Track start: with ``detection.enabled`` the tracker step detects, acquires and releases
 people itself (``TrackerConfig.detection``); with ``init_ground_truth`` tracks are started and
@@ -270,7 +269,7 @@ class TrackerNode(Node):
     def _warm_up(self) -> None:
         """Load every compiled kernel of the step now (:func:`warm_up`, a throwaway
         tracker): without it the first frame sets with people queued up behind kernel
-        loading (docs/live_measurements.md)."""
+        loading."""
         from mbtrack_ros.core.detection.detector import is_ceiling
         from mbtrack_ros.nodes.warmup import warm_up
 

@@ -3,9 +3,8 @@
 Fast DDS (the default RMW of Jazzy) gives every participant a 512 kB shared-memory segment
 for the payloads it writes. One 320x240 rgb8 image is 230 kB, so a frame set of four images
 published back to back does not fit: the samples that find no room are repaired later by the
-reliability protocol, and the last image of a set arrived up to 80-550 ms late (p95 145 ms;
-docs/live_measurements.md, "transport floor"). With a 16 MB segment the same stream arrives
-within 3-7 ms (p95). :func:`use_large_shm_segment` installs such a profile for this process
+reliability protocol, and the last image of a set arrives hundreds of milliseconds late.
+With a 16 MB segment the same stream arrives within a few milliseconds. :func:`use_large_shm_segment` installs such a profile for this process
 (shared memory plus UDPv4, as the built-in transports, only the segment larger) unless the
 user configured Fast DDS already. It must run before ``rclpy.init``.
 
