@@ -25,7 +25,13 @@ from mbtrack_ros.core.dynamics import DynamicsError, MotionConfig
 from mbtrack_ros.core.filters import FilterConfig, FilterError, TrackingFilter, make_filter
 from mbtrack_ros.core.state import SIT, STATE_DIM, FrameResult, TrackEstimate, VX, VY, X, Y
 
-__all__ = ['Tracker', 'TrackerConfig', 'TrackerError']
+__all__ = ['MAX_JOINT_PARTICLES', 'MAX_PARTICLES', 'Tracker', 'TrackerConfig', 'TrackerError']
+
+
+#: most particles per target (``TrackerConfig.particles``, node ``tracker.particles``)
+MAX_PARTICLES = 100_000
+#: most joint particles (``TrackerConfig.joint_particles``, node ``tracker.joint_particles``)
+MAX_JOINT_PARTICLES = 1_000_000
 
 
 class TrackerError(ValueError):
@@ -151,6 +157,10 @@ class TrackerConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
                 bad(f'{name} must be an integer >= 1, got {value!r}')
+        for name, cap in (('particles', MAX_PARTICLES), ('joint_particles',
+                                                         MAX_JOINT_PARTICLES)):
+            if getattr(self, name) > cap:  # memory grows linearly with the particles
+                bad(f'{name} must be at most {cap}, got {getattr(self, name)}')
         for name in ('min_inside_share', 'min_visible_share'):
             share = getattr(self, name)
             if isinstance(share, bool) or not (isinstance(share, (int, float))

@@ -4,7 +4,7 @@ The messages are built by :mod:`mbtrack_ros.nodes.messages` (the same builders a
 node), serialised with ``rclpy.serialization.serialize_message`` (CDR) and written raw with
 ``rosbags.rosbag2.Writer``. Topics (node name ``tracker_node``):
 
-=====================================  ==============================================
+=====================================  =======================================
 ``/tracker_node/people``               geometry_msgs/PoseArray
 ``/tracker_node/tracks``               sensor_msgs/PointCloud2 (layout in messages.py)
 ``/tracker_node/markers``              visualization_msgs/MarkerArray
@@ -15,7 +15,7 @@ node), serialised with ``rclpy.serialization.serialize_message`` (CDR) and writt
                                        ``anonymous`` std_msgs/Bool (REP-155)
 ``/tracker_node/detections``           vision_msgs/Detection3DArray
 ``/tf``                                tf2_msgs/TFMessage (``person_<id>`` frames)
-=====================================  ==============================================
+=====================================  =======================================
 
 The last four (:mod:`.people_outputs`) are written when their message packages import;
 their types are registered from the packages' ``.msg`` definitions, so the bag carries the
@@ -200,6 +200,12 @@ class OutputBagWriter:
             self._put(self._conn['detections'], stamp, frame.detections)
         if frame.tf is not None and frame.tf.transforms and 'tf' in self._conn:
             self._put(self._conn['tf'], stamp, frame.tf)
+
+    def write_diagnostics(self, stamp_ns: int, values: dict) -> None:
+        """Write a ``/diagnostics`` message of a :class:`messages.DiagnosticsSnapshot` with
+        these field values (the counts of an offline replay)."""
+        self._put(self._conn['diagnostics'], stamp_ns, messages.diagnostics_message(
+            stamp_ns, messages.DiagnosticsSnapshot(**values)))
 
     def write_markers(self, stamp_ns: int, markers) -> None:
         """Write an extra MarkerArray (e.g. DELETEALL after a reset)."""

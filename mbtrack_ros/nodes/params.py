@@ -21,10 +21,12 @@ sync.slop                       double     largest stamp spread in a frame set, 
 sync.timeout                    double     wait for a late camera, message time, s (0.2)
 output_frame_id                 string     frame of all outputs ('' = calibration frame)
 rescale_images                  bool       resize images whose size differs from the
-                                           calibration instead of dropping them (false)
+                                           calibration (up to 4 times larger per side)
+                                           instead of dropping them (false)
 debug_images                    bool       always publish ``~/debug/<cam>/occlusion``
                                            (default false: only when subscribed)
-diagnostics_period              double     seconds of message time between /diagnostics (1.0)
+diagnostics_period              double     seconds of message time between /diagnostics (1.0);
+                                           of wall-clock time while no frame set forms
 init_ground_truth               string     ground-truth CSV to start/end tracks from ('')
 output_bag                      string     also write every output to this MCAP bag ('')
 max_pending_sets                int        frame sets queued for the tracker; the oldest
@@ -121,8 +123,10 @@ from mbtrack_ros.core.camera import CalibrationError, RoomCalibration
 from mbtrack_ros.core.dynamics import MotionConfig
 from mbtrack_ros.core.detection.manager import AutoDetectionConfig
 from mbtrack_ros.core.detection.release import ReleaseConfig
-from mbtrack_ros.core.tracker import TrackerConfig, TrackerError
+from mbtrack_ros.core.tracker import (
+    MAX_JOINT_PARTICLES, MAX_PARTICLES, TrackerConfig, TrackerError)
 from mbtrack_ros.nodes.tracker_parameters import TRACKER_PARAMETERS, tracker_config_values
+from mbtrack_ros.recording.calibration_io import load_calibration
 
 __all__ = ['EXECUTORS', 'RELIABILITIES', 'TRACKER_PARAMETERS', 'TRANSPORTS', 'CameraInput',
            'NodeParams', 'ParamsError', 'declare_and_read']
@@ -217,7 +221,7 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
     'outputs.tf': (True, 'a person_<id> frame per track on /tf under the output frame '
                    '(needs tf2_msgs)', {}),
     'tracker.algorithm': ('hjs', 'hjs | separable | joint | a registered baseline', {}),
-    'tracker.particles': (100, 'particles per target (000 §VI)', _ir(1, 100_000)),
+    'tracker.particles': (100, 'particles per target (000 §VI)', _ir(1, MAX_PARTICLES)),
     'tracker.subsample': (1, 'likelihood on every k-th image row (speed option)', _ir(1, 8)),
     'tracker.pipeline_search': (False, 'search frame t for new people on a worker thread '
                                 'while frame t+1 is filtered (TrackerConfig.pipeline_search)',
@@ -225,7 +229,8 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
     'tracker.image_scale': (1.0, 'the tracker works on the images resized by this factor '
                             'in (0, 1] (speed option, TrackerConfig.image_scale)',
                             _fr(0.0, 1.0)),
-    'tracker.joint_particles': (10_000, 'joint-filter particles', _ir(1, 1_000_000)),
+    'tracker.joint_particles': (10_000, 'joint-filter particles',
+                                _ir(1, MAX_JOINT_PARTICLES)),
     'tracker.sigma': (0.12, 'likelihood width sigma (000 Eq. 19)', _fr(1e-4, 10.0)),
     'tracker.d_occ': (0.15, 'occlusion penalty d_occ (000 Eq. 26)', _fr(0.0, 10.0)),
     'tracker.min_inside_share': (0.5, 'a camera that sees less of a target\'s silhouettes '
@@ -322,10 +327,13 @@ def declare_and_read(node: Node) -> tuple[NodeParams, RoomCalibration]:
         raise ParamsError('parameter calibration_file is required')
     if not Path(calib_file).is_file():
         raise ParamsError(f'calibration_file {calib_file!r} does not exist')
+    calibration_warnings: list[str] = []
     try:
-        calibration = RoomCalibration.load(calib_file)
+        calibration = load_calibration(calib_file, 'room', warn=calibration_warnings.append)
     except CalibrationError as err:
         raise ParamsError(str(err)) from err
+    for line in calibration_warnings:
+        node.get_logger().warning(line)
     names = [str(c) for c in v['cameras'] if str(c)] or calibration.names
     try:
         calibration = calibration.subset(names)
