@@ -45,3 +45,32 @@ def test_a_person_hidden_through_the_first_frames_gets_key_views_from_later_ones
     only_first = plan_key_views(cal, truth[:4] + truth[8:12], search_frames=4, max_views=2)
     assert only_first[2] == []
     assert [v.frame for v in plan[1]] == [v.frame for v in only_first[1]]
+
+
+def test_experiments_render_presets_over_recording_seeds(tmp_path, capsys):
+    """One command renders the recordings of a preset (several recording seeds), replays
+    each run on all of them and reports the preset: one table row per run (with the frame
+    rate of Table I) and one posterior-mass plot (Fig. 6) over all recordings."""
+    import json
+
+    out = tmp_path / 'exp'
+    code = main(['experiments', '--presets', 'lanz-seq4-short', '--recording-seeds', '1-2',
+                 '--frames', '5', '--runs', 'hjs:8,hjs-nomrf:8', '--out', str(out)])
+    assert code == 0
+    recs = sorted((out / 'recordings').iterdir())
+    assert [r.name for r in recs] == ['lanz-seq4-short_s1', 'lanz-seq4-short_s2']
+    assert RoomCalibration.load(recs[0] / 'calibration.yaml').cameras['cam0'].width == 200
+    table = (out / 'results.md').read_text()
+    assert '| lanz-seq4-short | hjs N=8 |' in table
+    assert '| lanz-seq4-short | hjs-nomrf N=8 |' in table
+    assert (out / 'posterior_lanz-seq4-short.png').stat().st_size > 0
+    res = json.loads((out / 'results.json').read_text())
+    assert len(res['runs']) == 4 and {r['mrf'] for r in res['runs']} == {True, False}
+    assert all(s['recordings'] == [r.name for r in recs] for s in res['summary'])
+    capsys.readouterr()
+    assert main(['experiments', '--presets', 'lanz-seq4-short', '--recording-seeds', 'x',
+                 '--out', str(out)]) == 2
+    assert main(['experiments', '--presets', 'no-such', '--recording-seeds', '1',
+                 '--out', str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "bad seed 'x'" in err and 'unknown preset' in err
