@@ -333,7 +333,10 @@ class HJSFilter(_MarginalParticleFilter):
     Predict: per target resample + 1-body dynamics (000 Eq. 15), then belief propagation of
     the spatial-exclusion MRF on the particle weights (000 Eq. 16-18, 43) unless
     ``config.use_mrf`` is False (the ablation of 000 §VI-C). Update: the HJS likelihood
-    ``measurement.hjs`` with the BP beliefs as priors (000 Eq. 26-40).
+    ``measurement.hjs`` with the BP beliefs as priors (000 Eq. 26-40). The step's estimate
+    (``TrackUpdate``) weighs the particles by BP belief x likelihood; the particles go on to
+    the next step weighted by the likelihood alone, so that every estimate carries one
+    copy of the exclusion (see the comment in :meth:`step`; docs/hjs_fidelity.md).
     """
 
     name = 'hjs'
