@@ -456,9 +456,9 @@ def test_particles_carry_the_likelihood_and_the_estimate_one_copy_of_the_exclusi
     for k, tid in enumerate((1, 2)):
         parts, logw, _ = filt.cloud(tid)
         ll = meas._ll(parts, k)
-        np.testing.assert_allclose(np.exp(logw), np.exp(ll - ll.max()) / np.exp(ll - ll.max()).sum(),
-                                   rtol=1e-9)
-        post = meas.prior_weights[k] * np.exp(ll - ll.max())
+        lik = np.exp(ll - ll.max())
+        np.testing.assert_allclose(np.exp(logw), lik / lik.sum(), rtol=1e-9)
+        post = meas.prior_weights[k] * lik
         np.testing.assert_allclose(out[tid].weights, post / post.sum(), rtol=1e-9)
         assert np.abs(out[tid].weights - np.exp(logw)).max() > 1e-3   # the MRF acted
 
