@@ -14,7 +14,8 @@ from mbtrack_ros import __version__
 __all__ = ['build_parser', 'main']
 
 # Subcommand modules, in the order `mbtrack --help` lists them.
-SUBCOMMANDS = ('demo', 'synth', 'replay', 'eval', 'bench', 'import_video', 'experiments')
+SUBCOMMANDS = ('demo', 'synth', 'replay', 'eval', 'bench', 'import_video', 'experiments',
+               'calibrate', 'synth_board')
 
 
 def build_parser(only: Sequence[str] | None = None) -> argparse.ArgumentParser:
