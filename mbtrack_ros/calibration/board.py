@@ -317,17 +317,18 @@ _SHEET = (0.210, 0.297)
 _SHEET_MARGIN = 0.01
 
 
-def printable_sheets(board: Board, dpi: float) -> list[tuple[str, np.ndarray]]:
+def printable_sheets(board: Board, dpi: float, *, split: bool = True
+                     ) -> list[tuple[str, np.ndarray]]:
     """The board at true size for printing at ``dpi``: one image when it fits an A4 sheet,
     else A4 tiles (row-major) whose printable areas butt together, each labelled with its
     place (``r1c2``) in its margin. Returns ``[(label, (H, W) uint8)]``, label '' for a single
-    image (with a white margin of one quarter square)."""
+    image (with a white margin of one quarter square; always when ``split`` is False)."""
     if not (20 <= dpi <= 1200):
         raise CalibrateError(f'--dpi must be within 20..1200, got {dpi}')
     ppm = dpi / 0.0254
     w, h = board.size
     margin = 0.25 * board.square
-    if (w + 2 * margin <= _SHEET[0] and h + 2 * margin <= _SHEET[1]) or \
+    if not split or (w + 2 * margin <= _SHEET[0] and h + 2 * margin <= _SHEET[1]) or \
             (w + 2 * margin <= _SHEET[1] and h + 2 * margin <= _SHEET[0]):
         return [('', board.image(ppm, margin))]
     full = board.image(ppm, margin)

@@ -102,8 +102,9 @@ def calibrate_intrinsics(name: str, board: Board, detections: Sequence[Detection
     usable = [d for d in detections if _usable(board, d)]
     if len(usable) < MIN_VIEWS:
         raise CalibrateError(
-            f'{name}: only {len(usable)} of {len(detections)} images of {source or "the source"}'
-            f' show the board {board.text} with >= {MIN_CORNERS} corners (need {MIN_VIEWS}): '
+            f'{name}: {len(usable)} of {len(detections)} images of {source or "the source"} '
+            f'show the board {board.text} with >= {MIN_CORNERS} corners, {MIN_VIEWS} are '
+            f'needed: '
             f'record more views, the board filling a third to two thirds of the image, '
             f'tilted, in every part of the image')
     feats = np.array([_spread_features(board, d, width, height) for d in usable])

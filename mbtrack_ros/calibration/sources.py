@@ -2,6 +2,7 @@
 a video that OpenCV reads, or a recording directory (its bag's first frame per camera)."""
 from __future__ import annotations
 
+import os
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 
@@ -49,6 +50,8 @@ def read_frames(name: str, path: Path, *, max_frames: int = 200
     if path.suffix.lower() in IMAGE_SUFFIXES:
         yield path.name, _read_image(name, path)
         return
+    # keep FFmpeg's own messages about a broken file off stderr: the refusal below says it
+    os.environ.setdefault('OPENCV_FFMPEG_LOGLEVEL', '-8')
     cap = cv2.VideoCapture(str(path))
     try:
         if not cap.isOpened():

@@ -35,6 +35,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     p.add_argument('board', metavar='BOARD', help=_BOARD_HELP)
     p.add_argument('out', type=Path, metavar='OUT.png')
     p.add_argument('--dpi', type=float, default=150.0, help='print resolution (default 150)')
+    p.add_argument('--one-image', action='store_true',
+                   help='one image of the whole board, not split into A4 sheets')
 
     p = actions.add_parser('intrinsics', help='lens of each camera from views of the board '
                                               'held in front of it')
@@ -80,6 +82,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                         'images/videos; none: grey images')
     p.add_argument('--out', type=Path, required=True, metavar='DIR',
                    help='folder for NAME.png per camera and top.png')
+    p = actions.add_parser('compare', help='differences between two calibrations of the same '
+                                           'cameras (e.g. a recovered one and the truth)')
+    p.add_argument('reference', type=Path, metavar='REFERENCE.yaml')
+    p.add_argument('calibration', type=Path, metavar='CAL.yaml')
     for sub in actions.choices.values():
         sub.error = _one_line_error(sub.prog)
     return parser
@@ -119,10 +125,10 @@ def run(args: argparse.Namespace) -> int:
 
     action = getattr(args, 'action', None)
     if action is None:
-        return _error('give an action: board, intrinsics, extrinsics, room or check')
+        return _error('give an action: board, intrinsics, extrinsics, room, check or compare')
     try:
         return {'board': _board, 'intrinsics': _intrinsics, 'extrinsics': _extrinsics,
-                'room': _room, 'check': _check}[action](args)
+                'room': _room, 'check': _check, 'compare': _compare}[action](args)
     except (CalibrateError, CalibrationError) as err:
         return _error(str(err).splitlines()[0])
     except OSError as err:
@@ -202,7 +208,7 @@ def _gray(image):
 def _board(args) -> int:
     from mbtrack_ros.calibration.board import parse_board, printable_sheets, write_png
     board = parse_board(args.board)
-    sheets = printable_sheets(board, args.dpi)
+    sheets = printable_sheets(board, args.dpi, split=not args.one_image)
     out = args.out if args.out.suffix.lower() == '.png' else args.out.with_suffix('.png')
     out.parent.mkdir(parents=True, exist_ok=True)
     written = []
@@ -464,4 +470,32 @@ def _check(args) -> int:
                                                            images.get(name)))
     write_png(args.out / 'top.png', top_view(calibration))
     print(f'{_PROG}: wrote {len(calibration.names)} camera pictures and top.png to {args.out}')
+    return 0
+
+
+def _compare(args) -> int:
+    import numpy as np
+
+    from mbtrack_ros.calibration.errors import CalibrateError
+    from mbtrack_ros.core.camera import RoomCalibration
+    ref = RoomCalibration.load(args.reference)
+    cal = RoomCalibration.load(args.calibration)
+    common = [n for n in cal.names if n in ref.cameras]
+    if not common:
+        raise CalibrateError(f'{args.calibration} and {args.reference} have no camera in '
+                             f'common')
+    worst = np.zeros(3)
+    for name in common:
+        a, b = ref.cameras[name], cal.cameras[name]
+        if (a.width, a.height) != (b.width, b.height):
+            a = a.scaled(b.width, b.height)
+        cos = (np.trace(b.R @ a.R.T) - 1.0) / 2.0
+        rot = float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+        centre = float(np.linalg.norm(b.center - a.center))
+        focal = float(b.focal / a.focal - 1.0)
+        worst = np.maximum(worst, [rot, centre, abs(focal)])
+        print(f'{name}: rotation {rot:.3f} deg, centre {100 * centre:.2f} cm, focal '
+              f'{100 * focal:+.3f} %')
+    print(f'worst: rotation {worst[0]:.3f} deg, centre {100 * worst[1]:.2f} cm, focal '
+          f'{100 * worst[2]:.3f} %')
     return 0

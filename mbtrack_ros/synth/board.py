@@ -96,11 +96,11 @@ def exact_rays(camera: Camera, pixels: np.ndarray, iterations: int = 4) -> np.nd
     return rays / np.linalg.norm(rays, axis=1, keepdims=True)
 
 
-def _board_hits(camera: Camera, pixels: np.ndarray, R: np.ndarray, t: np.ndarray
-                ) -> tuple[np.ndarray, np.ndarray]:
+def _board_hits(camera: Camera, pixels: np.ndarray, R: np.ndarray, t: np.ndarray, *,
+                exact: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Board-frame points (N, 2) and ray lengths (N,) where the rays of ``pixels`` (N, 2)
     meet the board plane ``X = R p + t`` (NaN when they do not)."""
-    rays = exact_rays(camera, pixels)
+    rays = exact_rays(camera, pixels) if exact else camera.pixel_rays(pixels)
     C = camera.center
     n = R[:, 2]
     with np.errstate(divide='ignore', invalid='ignore'):
@@ -142,7 +142,7 @@ def render_boards(camera: Camera, placements: Sequence[tuple[Board, np.ndarray, 
         x0, y0 = board.outline[0, :2]
         lo = np.array([x0 - _MARGIN, y0 - _MARGIN])
         hi = lo + np.array([tex.shape[1], tex.shape[0]]) / _TEXTURE_PPM
-        xy, _ = _board_hits(camera, grid, R, t)
+        xy, _ = _board_hits(camera, grid, R, t, exact=False)  # where to look closer
         pad = 0.1 * board.square
         near = np.all((xy > lo - pad) & (xy < hi + pad), axis=1)
         near = cv2.dilate(near.reshape(H, W).astype(np.uint8), np.ones((5, 5), np.uint8))
