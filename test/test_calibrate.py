@@ -236,3 +236,31 @@ def test_bad_input_is_one_line_exit_2_and_writes_nothing(tmp_path, capsys, case)
     if case != 'bad_dict':
         assert ('cam0' in err) or ('cam7' in err)
     assert not out.exists()
+
+
+def test_calibration_package_imports_no_ros():
+    import subprocess
+    import sys
+    code = ('import sys\nimport mbtrack_ros.calibration.board, mbtrack_ros.calibration.solve, '
+            'mbtrack_ros.calibration.check, mbtrack_ros.calibration.sources, '
+            'mbtrack_ros.synth.board\n'
+            "bad = sorted(m for m in sys.modules if m.split('.')[0] in ('rclpy', 'sensor_msgs'))\n"
+            "sys.exit(1 if bad else 0)\n")
+    assert subprocess.run([sys.executable, '-c', code]).returncode == 0
+
+
+def test_boards_from_options_and_yaml(tmp_path):
+    import argparse
+
+    from mbtrack_ros.commands.calibrate import _boards
+    spec2 = 'charuco:5:4:0.25:0.19:DICT_4X4_50:10'
+    boards = _boards(argparse.Namespace(board=[BOARD, spec2], board_pose=['1,2,0', '3,1,90']))
+    assert [p for _, p in boards] == [BoardPose(1, 2, 0), BoardPose(3, 1, 90)]
+    (tmp_path / 'b.yaml').write_text(f'boards:\n- {{board: "{BOARD}"}}\n'
+                                     f'- {{board: "{spec2}", pose: [3, 1, 90]}}\n')
+    boards = _boards(argparse.Namespace(board=[str(tmp_path / 'b.yaml')], board_pose=[]))
+    assert boards[0][1] == BoardPose() and boards[1][1] == BoardPose(3.0, 1.0, 90.0)
+    with pytest.raises(CalibrateError, match='share marker ids'):
+        _boards(argparse.Namespace(board=[BOARD, BOARD], board_pose=['0,0,0', '1,1,0']))
+    with pytest.raises(CalibrateError, match='--board-pose'):
+        _boards(argparse.Namespace(board=[BOARD, spec2], board_pose=[]))

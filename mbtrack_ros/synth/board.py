@@ -21,8 +21,8 @@ from mbtrack_ros.core.camera import Camera, RoomCalibration, look_at
 from mbtrack_ros.synth.errors import SynthError
 from mbtrack_ros.synth.room import FLOOR, CameraView, Room, default_room, make_calibration
 
-__all__ = ['floor_images', 'intrinsics_images', 'intrinsics_poses', 'render_boards', 'rig_calibration',
-           'write_board_images']
+__all__ = ['exact_rays', 'floor_images', 'intrinsics_images', 'intrinsics_poses',
+           'render_boards', 'rig_calibration', 'write_board_images']
 
 _TEXTURE_PPM = 2000.0   # board texture resolution, pixels per metre
 _MARGIN = 0.04          # white paper around the squares, metres
