@@ -149,11 +149,14 @@ def calibrate_intrinsics(name: str, board: Board, detections: Sequence[Detection
 @dataclass(frozen=True)
 class FloorObservation:
     """Corners of board ``board`` (index into the boards list) seen by one camera:
-    ids (N,) and pixels (N, 2), averaged over the frames that show them."""
+    ids (N,) and pixels (N, 2) the solver fits (photometrically refined), ``detected``
+    (N, 2) as the corner detector found them, averaged over the frames (None: the same as
+    ``pixels``); the reported RMS error is against the detected corners."""
 
     board: int
     ids: np.ndarray
     pixels: np.ndarray
+    detected: np.ndarray | None = None
 
 
 @dataclass
@@ -163,7 +166,7 @@ class CameraPose:
     Attributes:
         camera: the camera with its new extrinsics.
         corners: board corners it sees.
-        rms: reprojection RMS error over them, pixels.
+        rms: reprojection RMS error of the detected corners, pixels.
         boards: indices of the boards it sees.
     """
 
@@ -255,7 +258,7 @@ def solve_extrinsics(cameras: Sequence[Camera], boards: Sequence[tuple[Board, Bo
         solved = _with_pose(cam, rvecs[cam.name], tvecs[cam.name])
         pts = np.concatenate([_room_points(boards[o.board][0], poses[o.board], o.ids)
                               for o in obs])
-        pix = np.concatenate([o.pixels for o in obs])
+        pix = np.concatenate([o.pixels if o.detected is None else o.detected for o in obs])
         res = _project(rvecs[cam.name], tvecs[cam.name], cam, pts) - pix
         rms = float(np.sqrt(np.mean(np.sum(res ** 2, axis=1))))
         out.append(CameraPose(solved, len(pix), rms, sorted({o.board for o in obs})))

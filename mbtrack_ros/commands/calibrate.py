@@ -352,6 +352,9 @@ def _boards(args):
 def _extrinsics(args) -> int:
     from dataclasses import replace
 
+    import numpy as np
+
+    from mbtrack_ros.calibration.align import refine_corners
     from mbtrack_ros.calibration.errors import CalibrateError
     from mbtrack_ros.calibration.solve import (MIN_CORNERS, FloorObservation,
                                                average_detections, solve_extrinsics,
@@ -371,11 +374,19 @@ def _extrinsics(args) -> int:
         size = None
         per_board = [[] for _ in boards]
         from mbtrack_ros.calibration.sources import read_frames
+        total = None
+        frames = 0
         for _, image in read_frames(name, path, max_frames=args.max_frames):
+            if size is not None and image.shape[1::-1] != size:
+                raise CalibrateError(f'{name}: the images of {path} differ in size: give one '
+                                     f'camera\'s pictures')
             size = image.shape[1::-1]
             gray = _gray(image)
+            total = gray.astype(np.float64) if total is None else total + gray
+            frames += 1
             for k, (board, _) in enumerate(boards):
                 per_board[k].append(board.detect(gray, far=True))
+        mean_gray = (total / max(frames, 1)).astype(np.float32)
         if size != (cam.width, cam.height):
             sx, sy = size[0] / cam.width, size[1] / cam.height
             if abs(sx - sy) > 0.01 * sx:
@@ -386,7 +397,8 @@ def _extrinsics(args) -> int:
         for k, dets in enumerate(per_board):
             ids, pixels = average_detections(dets)
             if len(ids) >= MIN_CORNERS:
-                obs.append(FloorObservation(k, ids, pixels))
+                refined = refine_corners(mean_gray, cam, boards[k][0], ids, pixels)
+                obs.append(FloorObservation(k, ids, refined, pixels))
             elif len(ids):
                 partial.append((boards[k][0], len(ids)))
         if not obs:

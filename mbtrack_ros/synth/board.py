@@ -16,12 +16,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from mbtrack_ros.calibration.align import exact_rays
 from mbtrack_ros.calibration.board import Board, BoardPose
 from mbtrack_ros.core.camera import Camera, RoomCalibration, look_at
 from mbtrack_ros.synth.errors import SynthError
 from mbtrack_ros.synth.room import FLOOR, CameraView, Room, default_room, make_calibration
 
-__all__ = ['exact_rays', 'floor_images', 'intrinsics_images', 'intrinsics_poses',
+__all__ = ['floor_images', 'intrinsics_images', 'intrinsics_poses',
            'render_boards', 'rig_calibration', 'write_board_images']
 
 _TEXTURE_PPM = 2000.0   # board texture resolution, pixels per metre
@@ -64,36 +65,6 @@ def _sample(texture: np.ndarray, uv: np.ndarray) -> np.ndarray:
     out = cv2.remap(texture, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR,
                     borderMode=cv2.BORDER_REPLICATE)
     return out.reshape(-1)[:n]
-
-
-def exact_rays(camera: Camera, pixels: np.ndarray, iterations: int = 4) -> np.ndarray:
-    """Unit world rays (N, 3) of pixels (N, 2): :meth:`Camera.pixel_rays` polished by Newton
-    steps on :meth:`Camera.project` (finite-difference Jacobian), so that projecting a ray
-    gives its pixel back to 1e-6 px also near the corners of wide-angle images, where OpenCV's
-    fixed-point undistortion stops up to pixels short."""
-    pixels = np.asarray(pixels, np.float64).reshape(-1, 2)
-    n = camera.normalized_rays(pixels)[:, :2].copy()  # (N, 2) normalised image coordinates
-    C, Rt = camera.center, camera.R.T
-
-    def proj(xy):
-        return camera.project(C + np.concatenate([xy, np.ones((len(xy), 1))], 1) @ Rt.T)
-
-    eps = 1e-6
-    for _ in range(iterations):
-        f = proj(n)
-        r = f - pixels
-        if not np.any(np.abs(r) > 1e-7):
-            break
-        jx = (proj(n + (eps, 0.0)) - f) / eps
-        jy = (proj(n + (0.0, eps)) - f) / eps
-        det = jx[:, 0] * jy[:, 1] - jy[:, 0] * jx[:, 1]
-        with np.errstate(divide='ignore', invalid='ignore'):
-            dx = (jy[:, 1] * r[:, 0] - jy[:, 0] * r[:, 1]) / det
-            dy = (-jx[:, 1] * r[:, 0] + jx[:, 0] * r[:, 1]) / det
-        step = np.stack([dx, dy], 1)
-        n = np.where(np.isfinite(step), n - step, n)
-    rays = np.concatenate([n, np.ones((len(n), 1))], 1) @ camera.R
-    return rays / np.linalg.norm(rays, axis=1, keepdims=True)
 
 
 def _board_hits(camera: Camera, pixels: np.ndarray, R: np.ndarray, t: np.ndarray, *,
