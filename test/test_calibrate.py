@@ -160,8 +160,8 @@ def test_extrinsics_end_to_end_recovers_the_rig(tmp_path, capsys):
     got = RoomCalibration.load(out)
     assert got.exits == ((4.2, 4.7, 5.1, 5.9),) and got.floor == truth.floor
     for name, cam in truth.cameras.items():
-        assert _rotation_deg(got.cameras[name].R, cam.R) < 1.0
-        assert np.linalg.norm(got.cameras[name].center - cam.center) < 0.06
+        assert _rotation_deg(got.cameras[name].R, cam.R) < 0.3
+        assert np.linalg.norm(got.cameras[name].center - cam.center) < 0.02
     az, dep = viewing_direction(got.cameras['cam0'])
     assert 30 < az < 50 and 15 < dep < 40
     # check pictures of the result
@@ -174,6 +174,25 @@ def test_extrinsics_end_to_end_recovers_the_rig(tmp_path, capsys):
     u, v = np.round(truth.cameras['cam0'].project(np.array([[5.7, 4.7, 0.0]]))[0]).astype(int)
     assert np.abs(over[v - 2:v + 3, u - 2:u + 3].astype(int)
                   - src[v - 2:v + 3, u - 2:u + 3]).max() > 60
+
+
+def test_photometric_alignment_beats_the_corner_detector():
+    """A board across the room at 480 x 360: the aligned board gives its corners within
+    0.05 px of Camera.project, several times closer than the detected corners."""
+    from mbtrack_ros.calibration.align import refine_corners
+    cam = _room(480, 360).cameras['cam0']
+    board = parse_board(BOARD)
+    R, t = BoardPose(1.0, 2.2, 20.0).matrix()
+    image = render_boards(cam, [(board, R, t)], rng=np.random.default_rng(4))
+    gray = cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)
+    det = board.detect(gray, far=True)
+    assert len(det) >= 8
+    truth = cam.project(board.corners[det.ids] @ R.T + t)
+    refined = refine_corners(gray, cam, board, det.ids, det.pixels)
+
+    def rms(p):
+        return float(np.sqrt(np.mean(np.sum((p - truth) ** 2, axis=1))))
+    assert rms(refined) < 0.05 and rms(refined) < 0.5 * rms(det.pixels)
 
 
 def test_joint_refinement_moves_a_mismeasured_board():
