@@ -283,3 +283,19 @@ def test_boards_from_options_and_yaml(tmp_path):
         _boards(argparse.Namespace(board=[BOARD, BOARD], board_pose=['0,0,0', '1,1,0']))
     with pytest.raises(CalibrateError, match='--board-pose'):
         _boards(argparse.Namespace(board=[BOARD, spec2], board_pose=[]))
+
+
+def test_room_action_keeps_what_it_is_not_told(tmp_path, capsys):
+    cal = replace(_room(), exits=((4.2, 4.7, 5.1, 5.9),))
+    cal.save(tmp_path / 'cal.yaml')
+    (tmp_path / 'room.yaml').write_text('entry_zones: [[4.0, 3.8, 5.3, 4.7]]\n')
+    out = tmp_path / 'out.yaml'
+    assert main(['calibrate', 'room', str(tmp_path / 'cal.yaml'), str(out),
+                 '--room', str(tmp_path / 'room.yaml')]) == 0
+    got = RoomCalibration.load(out)
+    assert got.floor == cal.floor and got.exits == cal.exits
+    assert got.entry_zones == ((4.0, 3.8, 5.3, 4.7),)
+    assert main(['calibrate', 'room', str(tmp_path / 'cal.yaml'), str(tmp_path / 'bad.yaml'),
+                 '--exit', '1,1,2,2']) == 2
+    assert 'overlaps the floor' in capsys.readouterr().err
+    assert not (tmp_path / 'bad.yaml').exists()

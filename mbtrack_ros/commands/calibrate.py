@@ -162,13 +162,16 @@ def _rect(text: str, what: str) -> tuple[float, float, float, float]:
     return values
 
 
-def _room_parts(args, cameras):
-    """(floor, entry_zones, exits) from --room, --floor, --entry-zone, --exit."""
+def _room_parts(args, cameras, current=None):
+    """(floor, entry_zones, exits) from --room, --floor, --entry-zone, --exit; what they do
+    not give is kept from ``current`` (a RoomCalibration) when there is one."""
     import yaml
 
     from mbtrack_ros.calibration.errors import CalibrateError
     from mbtrack_ros.recording.calibration_io import default_floor
     floor, zones, exits = None, [], []
+    if current is not None:
+        floor, zones, exits = current.floor, list(current.entry_zones), list(current.exits)
     if args.room is not None:
         try:
             doc = yaml.safe_load(args.room.read_text(encoding='utf-8')) or {}
@@ -182,10 +185,12 @@ def _room_parts(args, cameras):
             f = [f.get(k) for k in ('x_min', 'y_min', 'x_max', 'y_max')]
         if f is not None:
             floor = _rect(','.join(str(v) for v in f), f'{args.room} floor')
-        zones = [_rect(','.join(str(v) for v in z), f'{args.room} entry_zones')
-                 for z in doc.get('entry_zones') or []]
-        exits = [_rect(','.join(str(v) for v in e), f'{args.room} exits')
-                 for e in doc.get('exits') or []]
+        if 'entry_zones' in doc:
+            zones = [_rect(','.join(str(v) for v in z), f'{args.room} entry_zones')
+                     for z in doc.get('entry_zones') or []]
+        if 'exits' in doc:
+            exits = [_rect(','.join(str(v) for v in e), f'{args.room} exits')
+                     for e in doc.get('exits') or []]
     if args.floor:
         floor = _rect(args.floor, '--floor')
     if args.entry_zone:
@@ -450,7 +455,7 @@ def _room(args) -> int:
 
     from mbtrack_ros.core.camera import RoomCalibration
     calibration = RoomCalibration.load(args.calibration)
-    floor, zones, exits = _room_parts(args, list(calibration.cameras.values()))
+    floor, zones, exits = _room_parts(args, list(calibration.cameras.values()), calibration)
     out = replace(calibration, floor=floor, entry_zones=zones, exits=exits)
     out = RoomCalibration.from_dict(out.to_dict())  # validates the exits against the floor
     _save_calibration(out, args.out)
