@@ -415,7 +415,8 @@ def _extrinsics(args) -> int:
                     f'camera\'s image: use larger squares, move it nearer or uncover it')
             raise CalibrateError(
                 f'{name}: no board ({", ".join(b.text for b, _ in boards)}) found in {path}: '
-                f'check that the board lies in this camera\'s view, lit and uncovered, and '
+                f'check that the board lies in this camera\'s view, large enough (markers '
+                f'at least 15 pixels wide: larger squares or nearer), lit and uncovered, and '
                 f'that --board matches the printed one (dictionary, squares)')
         cameras.append(cam)
         observations[name] = obs
