@@ -8,9 +8,9 @@ is in the image, how large and how tilted it is).
 Extrinsics: per camera a planar PnP (IPPE, then Levenberg-Marquardt) on all board corners it
 sees (photometrically refined, :mod:`.align`), in room coordinates; when boards other than
 the first are seen, one bundle adjustment (``scipy.optimize.least_squares``) over every
-camera pose and every such board's floor pose ``(x, y, yaw)``: reprojection residuals in units of ``CORNER_SIGMA_PX`` plus the given
-board poses as measurements (``POSE_SIGMA_M``, ``POSE_SIGMA_DEG``). The first board defines
-the room frame and is not moved.
+camera pose and every such board's floor pose ``(x, y, yaw)``: reprojection residuals in
+units of ``CORNER_SIGMA_PX`` plus the given board poses as measurements (``POSE_SIGMA_M``,
+``POSE_SIGMA_DEG``). The first board defines the room frame and is not moved.
 """
 from __future__ import annotations
 
