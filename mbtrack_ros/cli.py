@@ -15,7 +15,7 @@ __all__ = ['build_parser', 'main']
 
 # Subcommand modules, in the order `mbtrack --help` lists them.
 SUBCOMMANDS = ('demo', 'synth', 'replay', 'eval', 'bench', 'import_video', 'experiments',
-               'evaluate')
+               'evaluate', 'calibrate', 'synth_board')
 
 
 def build_parser(only: Sequence[str] | None = None) -> argparse.ArgumentParser:
