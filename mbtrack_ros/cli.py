@@ -10,6 +10,7 @@ from collections.abc import Sequence
 from typing import NoReturn
 
 from mbtrack_ros import __version__
+from mbtrack_ros.commands import one_line_error
 
 __all__ = ['build_parser', 'main']
 
@@ -39,17 +40,9 @@ def build_parser(only: Sequence[str] | None = None) -> argparse.ArgumentParser:
                 continue  # subcommand not part of this build
             raise
         sub = module.add_parser(subparsers)
-        sub.error = _one_line_error(sub.prog)
+        sub.error = one_line_error(sub.prog)
         sub.set_defaults(_run=module.run, _error=sub.error)
     return parser
-
-
-def _one_line_error(prog: str):
-    """argparse's error hook for a subcommand: one line on stderr, exit code 2."""
-    def error(message: str) -> None:
-        print(f'{prog}: error: {message}', file=sys.stderr)
-        raise SystemExit(2)
-    return error
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -55,10 +55,11 @@ def context():
 
 @contextmanager
 def playing(recording: Path, nodes: list, context, *, rate: float, threads: int,
-            timeout: float):
+            timeout: float, topics: list[str] | None = None):
     """Spin ``nodes`` in a multi-threaded executor while ``bag_player`` (its own process)
-    plays ``recording`` at ``rate``; yields once the player has finished (its exit code is
-    checked). On exit: player killed if still running, executor stopped, nodes destroyed."""
+    plays ``recording`` at ``rate`` (only ``topics`` if given); yields once the player has
+    finished (its exit code is checked). On exit: player killed if still running, executor
+    stopped, nodes destroyed."""
     from rclpy.executors import MultiThreadedExecutor
 
     executor = MultiThreadedExecutor(num_threads=threads, context=context)
@@ -69,7 +70,8 @@ def playing(recording: Path, nodes: list, context, *, rate: float, threads: int,
     player = subprocess.Popen(
         [sys.executable, '-m', 'mbtrack_ros.nodes.bag_player', '--ros-args',
          '-p', f'bag:={recording}', '-p', f'rate:={rate}', '-p', 'wait_for_subscribers:=true',
-         '-p', 'start_delay:=1.0'],
+         '-p', 'start_delay:=1.0']
+        + (['-p', f'topics:=[{", ".join(topics)}]'] if topics else []),
         cwd=REPO, env=dict(os.environ, PYTHONPATH=str(REPO)), stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT, text=True)
     try:

@@ -14,7 +14,6 @@ import subprocess
 import sys
 import threading
 import time
-from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -33,7 +32,7 @@ from rclpy.node import Node  # noqa: E402
 from rclpy.qos import (  # noqa: E402
     DurabilityPolicy, QoSProfile, ReliabilityPolicy)
 
-from conftest import REPO  # noqa: E402
+from conftest import REPO, playing  # noqa: E402
 
 pytestmark = pytest.mark.ros
 
@@ -122,37 +121,6 @@ def recording(tmp_path_factory) -> Path:
     return generate('clear-room-short', tmp_path_factory.mktemp('rec') / 'crs', seed=0)
 
 
-@contextmanager
-def playing_camera(recording: Path, nodes: list, context, *, timeout: float):
-    """conftest.playing for the images of CAMERA alone: ``nodes`` spin in a
-    multi-threaded executor while bag_player (its own process) plays them; yields once the
-    player has finished."""
-    from rclpy.executors import MultiThreadedExecutor
-
-    executor = MultiThreadedExecutor(num_threads=3, context=context)
-    for node in nodes:
-        executor.add_node(node)
-    spinner = threading.Thread(target=executor.spin, daemon=True)
-    spinner.start()
-    player = subprocess.Popen(
-        [sys.executable, '-m', 'mbtrack_ros.nodes.bag_player', '--ros-args',
-         '-p', f'bag:={recording}', '-p', 'rate:=1.0', '-p', 'wait_for_subscribers:=true',
-         '-p', 'start_delay:=1.0', '-p', f'topics:=[/{CAMERA}/image_raw]'],
-        cwd=REPO, env=dict(os.environ, PYTHONPATH=str(REPO)), stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT, text=True)
-    try:
-        out, _ = player.communicate(timeout=timeout)
-        assert player.returncode == 0, out
-        yield
-    finally:
-        if player.poll() is None:
-            player.kill()
-        executor.shutdown()
-        spinner.join(timeout=5)
-        for node in nodes:
-            node.destroy_node()
-
-
 def expected_confidence(point, cameras: list[str]) -> float:
     """REP-155 location_confidence from a ``~/tracks`` point (people_outputs' rule)."""
     from mbtrack_ros.nodes.messages import field_name
@@ -195,7 +163,8 @@ def test_rep155_consumer_follows_the_tracks(recording, tmp_path):
         cameras = [CAMERA]
         consumer = Rep155Consumer(context)
         reference = TracksReference(context, cameras)
-        with playing_camera(recording, [consumer, reference], context, timeout=240):
+        with playing(recording, [consumer, reference], context, rate=1.0, threads=3,
+                     timeout=240, topics=[f'/{CAMERA}/image_raw']):
             deadline = time.monotonic() + 180
             while time.monotonic() < deadline:
                 with consumer.lock:

@@ -62,7 +62,7 @@ def exact_rays(camera: Camera, pixels: np.ndarray, iterations: int = 4) -> np.nd
     return rays / np.linalg.norm(rays, axis=1, keepdims=True)
 
 
-def _sample(texture: np.ndarray, uv: np.ndarray) -> np.ndarray:
+def sample_bilinear(texture: np.ndarray, uv: np.ndarray) -> np.ndarray:
     """Bilinear samples (N,) of a (h, w) float32 texture at pixel positions (N, 2)."""
     n = len(uv)
     rows = -(-n // 4096)
@@ -122,7 +122,7 @@ def refine_corners(gray: np.ndarray, camera: Camera, board: Board, ids: np.ndarr
             s = (normal @ t) / (rays @ normal)
         xy = ((rays * s[:, None] - t) @ R)[:, :2]
         uv = (np.nan_to_num(xy) - origin) * _TEXTURE_PPM - 0.5
-        model = _sample(texture, uv.astype(np.float32)).reshape(len(grid), -1).mean(axis=1)
+        model = sample_bilinear(texture, uv.astype(np.float32)).reshape(len(grid), -1).mean(axis=1)
         A = np.stack([np.ones_like(model), model, model * u, model * v], 1)
         coef, *_ = np.linalg.lstsq(A, image, rcond=None)
         return A @ coef - image

@@ -13,6 +13,8 @@ import os
 import sys
 from pathlib import Path
 
+from mbtrack_ros.commands import one_line_error
+
 __all__ = ['add_parser', 'run']
 
 _PROG = 'mbtrack calibrate'
@@ -87,16 +89,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     p.add_argument('reference', type=Path, metavar='REFERENCE.yaml')
     p.add_argument('calibration', type=Path, metavar='CAL.yaml')
     for sub in actions.choices.values():
-        sub.error = _one_line_error(sub.prog)
+        sub.error = one_line_error(sub.prog)
     return parser
-
-
-def _one_line_error(prog: str):
-    """argparse's error hook for an action: one line on stderr, exit code 2."""
-    def error(message: str) -> None:
-        print(f'{prog}: error: {message}', file=sys.stderr)
-        raise SystemExit(2)
-    return error
 
 
 def _room_options(p: argparse.ArgumentParser) -> None:

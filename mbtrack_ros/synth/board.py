@@ -16,7 +16,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from mbtrack_ros.calibration.align import exact_rays
+from mbtrack_ros.calibration.align import exact_rays, sample_bilinear
 from mbtrack_ros.calibration.board import Board, BoardPose
 from mbtrack_ros.core.camera import Camera, RoomCalibration, look_at
 from mbtrack_ros.synth.errors import SynthError
@@ -53,18 +53,6 @@ def rig_calibration(width: int, height: int, *, camera_height: float | None = No
 
 def _texture(board: Board) -> np.ndarray:
     return board.image(_TEXTURE_PPM, _MARGIN).astype(np.float32) / 255.0
-
-
-def _sample(texture: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """Bilinear samples (N,) of a (h, w) float32 texture at pixel positions (N, 2)."""
-    n = len(uv)
-    rows = -(-n // 4096)
-    maps = np.zeros((rows * 4096, 2), np.float32)
-    maps[:n] = uv
-    maps = maps.reshape(rows, 4096, 2)
-    out = cv2.remap(texture, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR,
-                    borderMode=cv2.BORDER_REPLICATE)
-    return out.reshape(-1)[:n]
 
 
 def _board_hits(camera: Camera, pixels: np.ndarray, R: np.ndarray, t: np.ndarray, *,
@@ -127,7 +115,7 @@ def render_boards(camera: Camera, placements: Sequence[tuple[Board, np.ndarray, 
             inside &= s < np.repeat(depth.reshape(-1)[index], len(sub)) + 1e-3
         # texture pixel (u, v) of board point (x, y): pixel centres at integers
         uv = ((np.nan_to_num(xy) - lo) * _TEXTURE_PPM - 0.5).astype(np.float32)
-        refl = _sample(tex, uv)
+        refl = sample_bilinear(tex, uv)
         value = light * (_INK + (_PAPER - _INK) * refl)
         bg = np.repeat(image.reshape(-1, 3)[index], len(sub), axis=0)
         mixed = np.where(inside[:, None], value[:, None], bg)
