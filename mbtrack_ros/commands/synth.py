@@ -30,7 +30,26 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                         help='rosbag2 storage plugin (default mcap)')
     parser.add_argument('--no-ceiling', action='store_true',
                         help='leave out the ceiling camera')
+    real = parser.add_argument_group(
+        'real-room conditions', 'added to any preset (mbtrack_ros/synth/conditions.py); '
+        'default: the preset\'s own (real-room has them all), else none')
+    real.add_argument('--capture-spread', type=float, default=None, metavar='F',
+                      help='free-running cameras: capture times spread over F frame '
+                           'periods, 0..1 (0: synchronised)')
     return parser
+
+
+def _conditions(args: argparse.Namespace, preset):
+    """The preset's conditions with the options given on top (None: the preset's)."""
+    from dataclasses import replace
+
+    from mbtrack_ros.synth.conditions import PRESET_CONDITIONS, Conditions
+
+    given = {name: getattr(args, name) for name in ('capture_spread',)
+             if getattr(args, name, None) is not None}
+    if not given:
+        return None
+    return replace(PRESET_CONDITIONS.get(preset.name, Conditions()), **given)
 
 
 def _error(message: str) -> int:
@@ -57,11 +76,13 @@ def run(args: argparse.Namespace) -> int:
         return _error(f'--fps must be positive, got {args.fps}')
     try:
         preset = get_preset(args.preset)
+        conditions = _conditions(args, preset)
         start = time.perf_counter()
         out = generate(preset, args.outdir, seed=args.seed, frames=args.frames,
                        width=args.width, height=args.height, fps=args.fps,
                        ceiling=not args.no_ceiling, compressed=args.compressed,
-                       storage=args.storage, progress=sys.stderr.isatty())
+                       storage=args.storage, progress=sys.stderr.isatty(),
+                       conditions=conditions)
     except (SynthError, OSError) as err:
         return _error(str(err).splitlines()[0] if str(err) else type(err).__name__)
     elapsed = time.perf_counter() - start

@@ -1,0 +1,104 @@
+"""Real-room conditions: free-running cameras end to end (synth -> bag -> frame sets ->
+per-camera capture times in the likelihood), illumination normalisation."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mbtrack_ros.core.camera import Camera, RoomCalibration, look_at
+from mbtrack_ros.core.likelihood import LikelihoodConfig, LikelihoodError, MeasurementModel
+from mbtrack_ros.core.state import THETA, VX, VY, X, Y
+from mbtrack_ros.synth.conditions import Conditions
+from mbtrack_ros.synth.generator import Synthesizer, generate
+
+
+def _cameras():
+    cams = {}
+    for name, eye in (('a', (3.0, 0.0, 2.5)), ('b', (0.0, 3.0, 2.5))):
+        R, t = look_at(eye, (0.0, 0.0, 0.9))
+        cams[name] = Camera(name, 40, 30, [[50.0, 0, 19.5], [0, 50.0, 14.5], [0, 0, 1]],
+                            np.zeros(5), R, t)
+    return RoomCalibration(cams, (-3.0, -3.0, 3.0, 3.0))
+
+
+def test_capture_offsets_evaluate_each_camera_at_its_capture_time():
+    """Brute force: with camera b's image taken dt before the particles' time, the HJS
+    log-likelihood equals camera a's at the particles plus camera b's at the particles
+    moved by v dt."""
+    from test_likelihood import _random_image, _random_model  # noqa: PLC0415
+
+    rng = np.random.default_rng(5)
+    room = _cameras()
+    images = {n: _random_image(rng, 30, 40) for n in room.cameras}
+    models = [_random_model(rng, 1.7), _random_model(rng, 1.6)]
+    parts = []
+    for centre in ((0.3, 0.2), (-0.4, -0.3)):
+        p = np.zeros((12, 6))
+        p[:, X] = centre[0] + rng.uniform(-0.2, 0.2, 12)
+        p[:, Y] = centre[1] + rng.uniform(-0.2, 0.2, 12)
+        p[:, VX], p[:, VY] = rng.uniform(-1.5, 1.5, (2, 12))
+        p[:, THETA] = rng.uniform(-np.pi, np.pi, 12)
+        parts.append(p)
+    prior = [np.full(12, 1 / 12)] * 2
+    dt = -0.05
+    mm = MeasurementModel(room, LikelihoodConfig(threads=1))
+    mm.set_images(images)
+    mm.set_capture_offsets({'b': dt})
+    got = mm.hjs(parts, prior, models).loglik
+
+    def one(name, particles):
+        single = MeasurementModel(room.subset([name]), LikelihoodConfig(threads=1))
+        single.set_images({name: images[name]})
+        return single.hjs(particles, prior, models).loglik
+
+    moved = [p.copy() for p in parts]
+    for p, q in zip(moved, parts):
+        p[:, X:Y + 1] += q[:, VX:VY + 1] * dt
+    want = [la + lb for la, lb in zip(one('a', parts), one('b', moved))]
+    for g, w in zip(got, want):
+        np.testing.assert_allclose(g, w, atol=1e-9)
+    # set_images clears the offsets; a bad camera or value is refused
+    mm.set_images(images)
+    plain = mm.hjs(parts, prior, models).loglik
+    np.testing.assert_allclose(plain[0], (np.array(one('a', parts)) + one('b', parts))[0])
+    with pytest.raises(LikelihoodError, match='unknown camera'):
+        mm.set_capture_offsets({'z': 0.1})
+    with pytest.raises(LikelihoodError, match='finite'):
+        mm.set_capture_offsets({'a': float('nan')})
+
+
+def test_free_running_synth_recording_groups_into_complete_sets(tmp_path):
+    """Capture times spread over a whole frame period: the recording's own stamps, and the
+    replay reader makes one complete set per frame whose stamp is the latest capture (the
+    ground-truth time)."""
+    from mbtrack_ros.recording.bag import RecordingReader
+
+    out = generate('clear-room-short', tmp_path / 'rec', seed=3, frames=8, width=80,
+                   height=60, conditions=Conditions(capture_spread=1.0))
+    synth = Synthesizer('clear-room-short', seed=3, frames=1, width=80, height=60,
+                        conditions=Conditions(capture_spread=1.0))
+    leads = sorted(synth.capture_leads_ns.values())
+    assert leads[0] == 0 and leads[-1] > 0.7 * synth.period_ns
+    with RecordingReader(out) as reader:
+        sets = list(reader.frames())
+        truth = sorted({r.stamp_ns for r in reader.ground_truth()})
+    assert len(sets) == 8 and all(not fs.missing for fs in sets)
+    assert [fs.stamp_ns for fs in sets] == truth
+    for fs in sets:
+        assert {fs.stamp_ns - s for s in fs.stamps.values()} == set(leads)
+    # with the old fixed 10 ms grouping, no set would have been complete
+    with RecordingReader(out, tolerance_ns=5_000_000) as reader:
+        assert all(fs.missing for fs in reader.frames())
+
+
+def test_conditions_leave_the_recording_otherwise_unchanged():
+    """A condition draws from its own stream: the same people and noise without it."""
+    plain = list(Synthesizer('clear-room-short', seed=4, frames=3, width=80, height=60))
+    spread = list(Synthesizer('clear-room-short', seed=4, frames=3, width=80, height=60,
+                              conditions=Conditions(capture_spread=0.5)))
+    assert [r.x for r in plain[-1].ground_truth] == [r.x for r in spread[-1].ground_truth]
+    # frame 0 has no motion to interpolate: identical images
+    for name in plain[0].images:
+        assert np.array_equal(plain[0].images[name], spread[0].images[name])
+    with pytest.raises(Exception, match='capture spread'):
+        Conditions(capture_spread=2.0)
