@@ -102,3 +102,48 @@ def test_conditions_leave_the_recording_otherwise_unchanged():
         assert np.array_equal(plain[0].images[name], spread[0].images[name])
     with pytest.raises(Exception, match='capture spread'):
         Conditions(capture_spread=2.0)
+
+
+def test_colour_gains_recover_a_light_change_despite_people():
+    """Brute force: an image that is the background times known channel gains, with a
+    third of its pixels replaced by 'people' (random colours), gives those gains back."""
+    from mbtrack_ros.core.detection.illumination import _divide, colour_gains
+
+    rng = np.random.default_rng(8)
+    bg = rng.uniform(30, 200, (60, 80, 3))
+    for gains in ([0.6, 0.6, 0.6], [1.4, 1.4, 1.4], [1.05, 0.97, 0.8]):
+        image = np.clip(bg * gains + rng.normal(0, 2.0, bg.shape), 0, 255)
+        people = rng.random((60, 80)) < 0.33
+        image[people] = rng.uniform(0, 255, (people.sum(), 3))
+        got = colour_gains(image.astype(np.uint8), bg)
+        np.testing.assert_allclose(got, gains, atol=0.02)
+        flat = _divide(np.full((2, 2, 3), 120, np.uint8), np.asarray(gains))
+        np.testing.assert_array_equal(flat[0, 0], np.clip(np.rint(120 / np.asarray(gains)),
+                                                          0, 255))
+    # too few usable samples (all dark): no change
+    np.testing.assert_array_equal(colour_gains(np.zeros((4, 4, 3)), np.zeros((4, 4, 3))),
+                                  np.ones(3))
+
+
+def test_light_switch_creates_no_track_and_keeps_the_tracks():
+    """Lights down by 40 % in one frame, later a warmer white: automatic detection starts
+    the same tracks as without the change and none is lost or added."""
+    from mbtrack_ros.core.tracker import Tracker, TrackerConfig
+
+    def run(conditions):
+        synth = Synthesizer('clear-room-short', seed=1, frames=60, conditions=conditions)
+        tracker = Tracker(synth.calibration, TrackerConfig(detection=True, particles=40,
+                                                           seed=1))
+        counts, born = [], set()
+        for frame in synth:
+            result = tracker.step(frame.stamp_ns, frame.images)
+            counts.append(len(result.tracks))
+            born |= {t.track_id for t in result.tracks}
+        return counts, born, len(frame.ground_truth)
+
+    plain, plain_born, people = run(Conditions())
+    switched, switched_born, _ = run(Conditions(light_changes=(
+        (1.5, (0.6, 0.6, 0.6), 0.0), (2.5, (1.05, 0.97, 0.8), 0.0))))
+    assert plain[-1] == people
+    assert len(switched_born) == len(plain_born)      # no false birth
+    assert switched[20:] == plain[20:]                # the tracks survive the switches

@@ -36,7 +36,29 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     real.add_argument('--capture-spread', type=float, default=None, metavar='F',
                       help='free-running cameras: capture times spread over F frame '
                            'periods, 0..1 (0: synchronised)')
+    real.add_argument('--light-change', action='append', default=None, metavar='T:F[:RAMP]',
+                      help='at T seconds the light is multiplied by F (one factor, or '
+                           'R,G,B factors for a change of colour), reached over RAMP '
+                           'seconds (default 0: in one frame); repeatable')
+    real.add_argument('--exposure-drift', type=float, default=None, metavar='A',
+                      help='auto exposure: each camera\'s gain drifts by +-A (e.g. 0.08)')
     return parser
+
+
+def _light_change(text: str) -> tuple:
+    """``T:F[:RAMP]`` -> (T, factors, RAMP); raises ValueError with a one-line reason."""
+    parts = text.split(':')
+    if len(parts) not in (2, 3):
+        raise ValueError(f'--light-change {text!r}: expected T:F or T:F:RAMP')
+    try:
+        factors = [float(f) for f in parts[1].split(',')]
+        if len(factors) not in (1, 3):
+            raise ValueError
+        return (float(parts[0]), tuple(factors * 3 if len(factors) == 1 else factors),
+                float(parts[2]) if len(parts) == 3 else 0.0)
+    except ValueError:
+        raise ValueError(f'--light-change {text!r}: T, F (or R,G,B) and RAMP must be '
+                         'numbers') from None
 
 
 def _conditions(args: argparse.Namespace, preset):
@@ -45,8 +67,10 @@ def _conditions(args: argparse.Namespace, preset):
 
     from mbtrack_ros.synth.conditions import PRESET_CONDITIONS, Conditions
 
-    given = {name: getattr(args, name) for name in ('capture_spread',)
+    given = {name: getattr(args, name) for name in ('capture_spread', 'exposure_drift')
              if getattr(args, name, None) is not None}
+    if getattr(args, 'light_change', None):
+        given['light_changes'] = tuple(_light_change(t) for t in args.light_change)
     if not given:
         return None
     return replace(PRESET_CONDITIONS.get(preset.name, Conditions()), **given)
@@ -76,7 +100,10 @@ def run(args: argparse.Namespace) -> int:
         return _error(f'--fps must be positive, got {args.fps}')
     try:
         preset = get_preset(args.preset)
-        conditions = _conditions(args, preset)
+        try:
+            conditions = _conditions(args, preset)
+        except ValueError as err:
+            return _error(str(err))
         start = time.perf_counter()
         out = generate(preset, args.outdir, seed=args.seed, frames=args.frames,
                        width=args.width, height=args.height, fps=args.fps,

@@ -403,6 +403,10 @@ class Tracker:
         if self.config.detection:
             from mbtrack_ros.core.detection.manager import AutoDetection
             self.detection = AutoDetection(calibration, self.config.detection_config(scale))
+        self.illumination = None
+        if self.detection is not None:   # the background model is the reference
+            from mbtrack_ros.core.detection.illumination import IlluminationNormaliser
+            self.illumination = IlluminationNormaliser(self.detection.background)
 
     @property
     def track_ids(self) -> list[int]:
@@ -500,6 +504,8 @@ class Tracker:
         self._models.clear()
         if self.detection is not None:
             self.detection.reset()
+        if self.illumination is not None:
+            self.illumination.reset()
         self._last_stamp = None
         self._search_pending = False
         self._steps = 0
@@ -556,6 +562,8 @@ class Tracker:
         dt = 0.0 if self._last_stamp is None else (stamp_ns - self._last_stamp) / 1e9
         t0 = time.perf_counter()
         images = self.working_images(images)   # the one resize of every frame
+        if self.illumination is not None:   # global colour gains undone (illumination.py)
+            images = self.illumination.normalise(images)
         detect = self.detection is not None \
             and self._steps % int(self.config.detection_every) == 0
         if detect:  # the foreground runs on a worker during the filter

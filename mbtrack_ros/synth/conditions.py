@@ -11,10 +11,16 @@ were: the same recording with and without a condition differs only by it.
   ``t_i``); its image shows
   the people where they were then (positions interpolated between frames) and carries that
   capture time as its stamp.
+* ``light_changes``: scheduled changes of the room's light, ``(time_s, (r, g, b) factors,
+  ramp_s)`` each: from ``time_s`` on, the light of every camera is multiplied by the
+  factors, reached linearly over ``ramp_s`` seconds (0: in one frame, a switch). Equal
+  factors dim or brighten; unequal ones change the colour of the light (a warmer white).
+* ``exposure_drift``: auto exposure of each camera: its gain drifts as
+  ``1 + exposure_drift sin(2 pi t / P_k + phi_k)``, periods ``P_k`` of 6-15 s.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -33,11 +39,30 @@ class Conditions:
     """
 
     capture_spread: float = 0.0
+    light_changes: tuple[tuple[float, tuple[float, float, float], float], ...] = ()
+    exposure_drift: float = 0.0
 
     def __post_init__(self) -> None:
         if not (0.0 <= float(self.capture_spread) <= 1.0):
             raise SynthError(f'capture spread must be in [0, 1] frame periods, got '
                              f'{self.capture_spread}')
+        changes = []
+        for change in self.light_changes:
+            try:
+                time_s, factors, ramp_s = change
+                factors = tuple(float(f) for f in np.broadcast_to(
+                    np.asarray(factors, dtype=np.float64), (3,)))
+                time_s, ramp_s = float(time_s), float(ramp_s)
+            except (TypeError, ValueError) as err:
+                raise SynthError(f'a light change is (time_s, factors, ramp_s), got '
+                                 f'{change!r}') from err
+            if not (time_s >= 0 and ramp_s >= 0 and all(0.05 <= f <= 5 for f in factors)):
+                raise SynthError(f'light change {change!r}: time and ramp must be >= 0 s, '
+                                 'factors in 0.05..5')
+            changes.append((time_s, factors, ramp_s))
+        object.__setattr__(self, 'light_changes', tuple(sorted(changes)))
+        if not 0.0 <= float(self.exposure_drift) < 0.5:
+            raise SynthError(f'exposure drift must be in [0, 0.5), got {self.exposure_drift}')
 
     @property
     def active(self) -> bool:
@@ -50,8 +75,32 @@ class Conditions:
             return np.zeros(cameras)
         return float(self.capture_spread) * rng.permutation(cameras) / cameras
 
+    def light(self, time_s: float) -> np.ndarray:
+        """(3,) float32 factors of the room's light at ``time_s`` (1 before any change)."""
+        out = np.ones(3)
+        for start, factors, ramp in self.light_changes:
+            if time_s < start:
+                break
+            share = 1.0 if ramp <= 0 else min(1.0, (time_s - start) / ramp)
+            out *= 1.0 + share * (np.asarray(factors) - 1.0)
+        return out.astype(np.float32)
+
+    def exposure(self, cameras: int, rng: np.random.Generator):
+        """A function ``(camera index, time_s) -> gain`` of the auto-exposure drift."""
+        periods = rng.uniform(6.0, 15.0, cameras)
+        phases = rng.uniform(0.0, 2 * np.pi, cameras)
+        amp = float(self.exposure_drift)
+
+        def gain(k: int, time_s: float) -> float:
+            if amp == 0:
+                return 1.0
+            return float(1.0 + amp * np.sin(2 * np.pi * time_s / periods[k] + phases[k]))
+        return gain
+
     def to_dict(self) -> dict:
-        return {'capture_spread': float(self.capture_spread)}
+        return {'capture_spread': float(self.capture_spread),
+                'light_changes': [[t, list(f), r] for t, f, r in self.light_changes],
+                'exposure_drift': float(self.exposure_drift)}
 
 
 def conditions_rng(seed: int) -> np.random.Generator:
@@ -60,7 +109,13 @@ def conditions_rng(seed: int) -> np.random.Generator:
 
 
 #: conditions of presets that exist for them (``real-room``)
+_REAL_ROOM = Conditions(
+    capture_spread=1.0, exposure_drift=0.08,
+    light_changes=((6.0, (0.7, 0.7, 0.7), 0.5),          # dimmed by 30 % over 0.5 s
+                   (12.0, (1.05, 0.97, 0.8), 0.0),       # a warmer white, switched
+                   (16.0, (1.4, 1.4, 1.4), 0.0)))        # +40 % in one frame
 PRESET_CONDITIONS: dict[str, Conditions] = {
-    'real-room': Conditions(capture_spread=1.0),
-    'real-room-short': Conditions(capture_spread=1.0),
+    'real-room': _REAL_ROOM,
+    'real-room-short': replace(_REAL_ROOM, light_changes=((1.0, (0.6, 0.6, 0.6), 0.0),
+                                                          (2.0, (1.05, 0.97, 0.8), 0.0))),
 }

@@ -194,6 +194,7 @@ class Synthesizer:
         self.capture_leads_ns = {
             n: int(round(lead * self.period_ns))
             for n, lead in zip(self.views, self.conditions.capture_leads(n_cam, crng))}
+        self._exposure = self.conditions.exposure(n_cam, crng)
         self._poses: dict[int, tuple] = {}
         self._started = False
         self._pool = ThreadPoolExecutor(max_workers=min(2, len(self.views)),
@@ -244,7 +245,7 @@ class Synthesizer:
                 tops[person.person_id] = top
             self._poses = poses
             ellipsoids = Ellipsoids.concat(bodies)
-            light = self.illumination(time_s)
+            light = self.illumination(time_s) * self.conditions.light(time_s)
             offsets = self.rng.integers(0, 3 * _BASE_PIXELS, len(self.views))
             if pixels != _BASE_PIXELS:   # the same draws, spread over this size's bank
                 offsets = offsets * pixels // _BASE_PIXELS
@@ -266,7 +267,8 @@ class Synthesizer:
             def shoot(k: int, view: CameraView) -> tuple[np.ndarray, np.ndarray]:
                 radiance, _, ids = render_view(view, at_capture(view.camera.name),
                                                time_s=time_s, door_angle=door)
-                return expose(radiance, self.gains[k] * np.float32(light), self.noise_bank,
+                gain = self.gains[k] * light * np.float32(self._exposure(k, time_s))
+                return expose(radiance, gain.astype(np.float32), self.noise_bank,
                               int(offsets[k])), ids
 
             # cameras are independent: render them on two threads (compiled kernels release
