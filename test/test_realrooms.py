@@ -147,3 +147,55 @@ def test_light_switch_creates_no_track_and_keeps_the_tracks():
     assert plain[-1] == people
     assert len(switched_born) == len(plain_born)      # no false birth
     assert switched[20:] == plain[20:]                # the tracks survive the switches
+
+
+def test_shadow_model_brightness_chromaticity_and_texture():
+    """Horprasert distortions against brute force; a scaled copy of a textured reference is
+    shadow, a darker patch of another texture or colour is not; shadow pixels are not
+    foreground of the background model."""
+    from mbtrack_ros.core.detection.background import BackgroundConfig, BackgroundModel
+    from mbtrack_ros.core.detection.shadow import _distortions, shadow_change, shadow_mask
+
+    rng = np.random.default_rng(9)
+    ref = rng.uniform(40, 220, (48, 64, 3))
+    img = rng.uniform(0, 255, (48, 64, 3))
+    alpha, cd, _ = _distortions(img, ref)
+    for (i, j) in [(0, 0), (10, 20), (47, 63)]:
+        a = img[i, j] @ ref[i, j] / (ref[i, j] @ ref[i, j])
+        assert alpha[i, j] == pytest.approx(a, rel=1e-5)
+        assert cd[i, j] == pytest.approx(np.linalg.norm(img[i, j] - a * ref[i, j])
+                                         / np.linalg.norm(ref[i, j]), rel=1e-4)
+    # a textured floor: blocks of grey with a tint
+    tex = np.repeat(np.repeat(rng.uniform(60, 200, (12, 16)), 4, 0), 4, 1)
+    floor = np.stack([tex, tex * 0.95, tex * 0.85], axis=2).astype(np.uint8)
+    shadowed = floor.copy()
+    shadowed[10:30, 10:40] = (floor[10:30, 10:40] * 0.65).astype(np.uint8)
+    other = floor.copy()                          # a dark person: other texture, colour
+    other[10:30, 10:40] = rng.uniform(20, 60, (20, 30, 3)).astype(np.uint8)
+    inner = (slice(13, 27), slice(13, 37))
+    assert shadow_mask(shadowed, floor)[inner].mean() > 0.95
+    assert shadow_mask(other, floor)[inner].mean() < 0.05
+    assert not shadow_mask(floor, floor).any()    # unchanged: alpha 1 is no shadow
+    assert shadow_change(floor, shadowed)[inner].mean() > 0.95
+    assert shadow_change(shadowed, floor)[inner].mean() > 0.95
+    model = BackgroundModel(BackgroundConfig(people=None))
+    model.bootstrap([floor] * 3)
+    fg_shadow = model.foreground(shadowed)
+    fg_person = model.foreground(other)
+    assert fg_shadow[inner].mean() < 0.05 and fg_person[inner].mean() > 0.95
+
+
+def test_moving_shadows_are_no_person_at_the_bootstrap():
+    """Ceiling lamps: the multi-view person cue of the never-empty room takes no place where
+    nobody stands (a moving shadow's change is not a person's motion)."""
+    from mbtrack_ros.core.detection.people import PeopleCue, PeopleCueConfig
+
+    synth = Synthesizer('clear-room-short', seed=104, frames=6,
+                        conditions=Conditions(lamps=2))
+    frames = list(synth)
+    people = np.array([[r.x, r.y] for r in frames[-1].ground_truth])
+    places = PeopleCue(synth.calibration, PeopleCueConfig()).places(
+        [f.images for f in frames])
+    assert len(places) >= 1
+    for p in places:
+        assert np.min(np.linalg.norm(people - p, axis=1)) < 0.5, p

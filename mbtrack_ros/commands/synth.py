@@ -40,6 +40,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                       help='at T seconds the light is multiplied by F (one factor, or '
                            'R,G,B factors for a change of colour), reached over RAMP '
                            'seconds (default 0: in one frame); repeatable')
+    real.add_argument('--lamps', type=int, default=None, metavar='L',
+                      help='people cast shadows from L ceiling lamps (e.g. 2)')
     real.add_argument('--exposure-drift', type=float, default=None, metavar='A',
                       help='auto exposure: each camera\'s gain drifts by +-A (e.g. 0.08)')
     return parser
@@ -67,7 +69,8 @@ def _conditions(args: argparse.Namespace, preset):
 
     from mbtrack_ros.synth.conditions import PRESET_CONDITIONS, Conditions
 
-    given = {name: getattr(args, name) for name in ('capture_spread', 'exposure_drift')
+    given = {name: getattr(args, name) for name in ('capture_spread', 'exposure_drift',
+                                                     'lamps')
              if getattr(args, name, None) is not None}
     if getattr(args, 'light_change', None):
         given['light_changes'] = tuple(_light_change(t) for t in args.light_change)

@@ -15,6 +15,9 @@ were: the same recording with and without a condition differs only by it.
   ramp_s)`` each: from ``time_s`` on, the light of every camera is multiplied by the
   factors, reached linearly over ``ramp_s`` seconds (0: in one frame, a switch). Equal
   factors dim or brighten; unequal ones change the colour of the light (a warmer white).
+* ``lamps``: people cast shadows from this many ceiling lamps (in a row along the room's
+  width, 0.2 m below the ceiling), each giving ``lamp_share`` of the light where it shines
+  (:mod:`mbtrack_ros.synth.shadows`).
 * ``exposure_drift``: auto exposure of each camera: its gain drifts as
   ``1 + exposure_drift sin(2 pi t / P_k + phi_k)``, periods ``P_k`` of 6-15 s.
 """
@@ -41,8 +44,13 @@ class Conditions:
     capture_spread: float = 0.0
     light_changes: tuple[tuple[float, tuple[float, float, float], float], ...] = ()
     exposure_drift: float = 0.0
+    lamps: int = 0
+    lamp_share: float = 0.35
 
     def __post_init__(self) -> None:
+        if not (0 <= int(self.lamps) <= 8 and 0 < self.lamp_share * max(1, self.lamps) <= 1):
+            raise SynthError(f'lamps must be 0..8 and lamps x lamp_share at most 1, got '
+                             f'{self.lamps} x {self.lamp_share}')
         if not (0.0 <= float(self.capture_spread) <= 1.0):
             raise SynthError(f'capture spread must be in [0, 1] frame periods, got '
                              f'{self.capture_spread}')
@@ -75,6 +83,15 @@ class Conditions:
             return np.zeros(cameras)
         return float(self.capture_spread) * rng.permutation(cameras) / cameras
 
+    def lamp_positions(self, room) -> tuple[np.ndarray, np.ndarray] | None:
+        """((L, 3) lamp positions, (L,) shares) of the shadow-casting lamps, or None."""
+        if not self.lamps:
+            return None
+        xs = (np.arange(self.lamps) + 0.5) * room.width / self.lamps
+        pos = np.stack([xs, np.full(self.lamps, room.depth / 2),
+                        np.full(self.lamps, room.height - 0.2)], axis=1)
+        return pos, np.full(self.lamps, float(self.lamp_share))
+
     def light(self, time_s: float) -> np.ndarray:
         """(3,) float32 factors of the room's light at ``time_s`` (1 before any change)."""
         out = np.ones(3)
@@ -100,7 +117,8 @@ class Conditions:
     def to_dict(self) -> dict:
         return {'capture_spread': float(self.capture_spread),
                 'light_changes': [[t, list(f), r] for t, f, r in self.light_changes],
-                'exposure_drift': float(self.exposure_drift)}
+                'exposure_drift': float(self.exposure_drift), 'lamps': int(self.lamps),
+                'lamp_share': float(self.lamp_share)}
 
 
 def conditions_rng(seed: int) -> np.random.Generator:
@@ -110,7 +128,7 @@ def conditions_rng(seed: int) -> np.random.Generator:
 
 #: conditions of presets that exist for them (``real-room``)
 _REAL_ROOM = Conditions(
-    capture_spread=1.0, exposure_drift=0.08,
+    capture_spread=1.0, exposure_drift=0.08, lamps=2,
     light_changes=((6.0, (0.7, 0.7, 0.7), 0.5),          # dimmed by 30 % over 0.5 s
                    (12.0, (1.05, 0.97, 0.8), 0.0),       # a warmer white, switched
                    (16.0, (1.4, 1.4, 1.4), 0.0)))        # +40 % in one frame

@@ -31,6 +31,7 @@ from mbtrack_ros.synth.errors import SynthError
 from mbtrack_ros.synth.motion import PersonState
 from mbtrack_ros.synth.presets import Preset, get_preset, populate
 from mbtrack_ros.synth.raster import draw_ellipsoids, expose
+from mbtrack_ros.synth.shadows import cast_shadows
 from mbtrack_ros.synth.room import CameraView, Room, default_room, make_calibration
 
 __all__ = ['EPOCH_NS', 'SynthFrame', 'Synthesizer', 'generate', 'iter_frames',
@@ -246,6 +247,7 @@ class Synthesizer:
             self._poses = poses
             ellipsoids = Ellipsoids.concat(bodies)
             light = self.illumination(time_s) * self.conditions.light(time_s)
+            lamps = self.conditions.lamp_positions(self.room)
             offsets = self.rng.integers(0, 3 * _BASE_PIXELS, len(self.views))
             if pixels != _BASE_PIXELS:   # the same draws, spread over this size's bank
                 offsets = offsets * pixels // _BASE_PIXELS
@@ -265,8 +267,12 @@ class Synthesizer:
                 return Ellipsoids.concat(moved)
 
             def shoot(k: int, view: CameraView) -> tuple[np.ndarray, np.ndarray]:
-                radiance, _, ids = render_view(view, at_capture(view.camera.name),
-                                               time_s=time_s, door_angle=door)
+                bodies_then = at_capture(view.camera.name)
+                radiance, depth, ids = render_view(view, bodies_then, time_s=time_s,
+                                                   door_angle=door)
+                if lamps is not None:   # cast shadows (conditions.lamps)
+                    cast_shadows(view.rays, view.camera.center, depth, ids, radiance,
+                                 lamps[0], lamps[1], bodies_then)
                 gain = self.gains[k] * light * np.float32(self._exposure(k, time_s))
                 return expose(radiance, gain.astype(np.float32), self.noise_bank,
                               int(offsets[k])), ids
