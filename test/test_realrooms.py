@@ -199,3 +199,28 @@ def test_moving_shadows_are_no_person_at_the_bootstrap():
     assert len(places) >= 1
     for p in places:
         assert np.min(np.linalg.norm(people - p, axis=1)) < 0.5, p
+
+
+def test_debug_image_paints_shadow_pixels_in_their_own_colour():
+    pytest.importorskip('rclpy')
+    from mbtrack_ros.core.tracker import Tracker, TrackerConfig
+    from mbtrack_ros.nodes.debug import shadow_layer
+    from mbtrack_ros.nodes.messages import SHADOW_COLOUR, debug_overlay
+
+    rgb = np.full((60, 80, 3), 100, np.uint8)
+    shadows = np.zeros((30, 40), bool)
+    shadows[5:10, 5:10] = True                  # half size: resized to the image
+    out = debug_overlay(rgb, shadows=shadows)
+    assert tuple(out[15, 15]) != (100, 100, 100) and tuple(out[40, 60]) == (100, 100, 100)
+    assert np.argmax(out[15, 15]) == int(np.argmax(SHADOW_COLOUR))
+    # the layer of a tracker: shadows on its learnt background, None before it is learnt
+    synth = Synthesizer('clear-room-short', seed=104, frames=10, conditions=Conditions(lamps=2))
+    tracker = Tracker(synth.calibration, TrackerConfig(detection=True, particles=20, seed=0))
+    frames = list(synth)
+    assert shadow_layer(tracker, 'cam0', frames[0].images['cam0']) is None
+    for f in frames:
+        tracker.step(f.stamp_ns, f.images)
+    layer = shadow_layer(tracker, 'cam0', frames[-1].images['cam0'])
+    assert layer is not None and layer.shape == (240, 320)
+    assert not np.any(layer & (frames[-1].id_buffers['cam0'] > 0)) or \
+        np.mean(layer[frames[-1].id_buffers['cam0'] > 0]) < 0.2   # people are no shadow

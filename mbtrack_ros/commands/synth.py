@@ -42,6 +42,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                            'seconds (default 0: in one frame); repeatable')
     real.add_argument('--lamps', type=int, default=None, metavar='L',
                       help='people cast shadows from L ceiling lamps (e.g. 2)')
+    real.add_argument('--calibration-error', default=None, metavar='DEG,M',
+                      help='also write calibration_perturbed.yaml: every camera turned by '
+                           'DEG degrees and moved by M metres (e.g. 1,0.03)')
     real.add_argument('--exposure-drift', type=float, default=None, metavar='A',
                       help='auto exposure: each camera\'s gain drifts by +-A (e.g. 0.08)')
     return parser
@@ -72,6 +75,13 @@ def _conditions(args: argparse.Namespace, preset):
     given = {name: getattr(args, name) for name in ('capture_spread', 'exposure_drift',
                                                      'lamps')
              if getattr(args, name, None) is not None}
+    if getattr(args, 'calibration_error', None):
+        try:
+            deg, metres = (float(v) for v in args.calibration_error.split(','))
+        except ValueError:
+            raise ValueError(f'--calibration-error {args.calibration_error!r}: expected '
+                             'DEG,M (two numbers)') from None
+        given['calibration_error'] = (deg, metres)
     if getattr(args, 'light_change', None):
         given['light_changes'] = tuple(_light_change(t) for t in args.light_change)
     if not given:

@@ -51,7 +51,7 @@ from mbtrack_ros.core.tracker import Tracker, TrackerError
 from mbtrack_ros.nodes import messages
 from mbtrack_ros.nodes.conversions import (
     ImageConversionError, compressed_to_rgb, image_to_rgb, rgb_to_image, stamp_to_ns)
-from mbtrack_ros.nodes.debug import occlusion_layers
+from mbtrack_ros.nodes.debug import occlusion_layers, shadow_layer
 from mbtrack_ros.nodes.params import NodeParams, ParamsError, declare_and_read
 from mbtrack_ros.nodes.transport import use_large_shm_segment
 from mbtrack_ros.recording.csvfiles import CsvFormatError, GroundTruthRow, read_ground_truth
@@ -473,7 +473,8 @@ class TrackerNode(Node):
         occ, sil = occlusion_layers(self.tracker.measurement,
                                     self.tracker.calibration.cameras[camera],
                                     result, self.tracker.models)
-        out = messages.debug_overlay(rgb, occlusion=occ, silhouettes=sil)
+        out = messages.debug_overlay(rgb, occlusion=occ, silhouettes=sil,
+                                     shadows=shadow_layer(self.tracker, camera, rgb))
         return rgb_to_image(out, messages.make_header(
             result.stamp_ns, self.calibration.cameras[camera].frame_id))
 

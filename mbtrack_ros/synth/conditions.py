@@ -18,6 +18,10 @@ were: the same recording with and without a condition differs only by it.
 * ``lamps``: people cast shadows from this many ceiling lamps (in a row along the room's
   width, 0.2 m below the ceiling), each giving ``lamp_share`` of the light where it shines
   (:mod:`mbtrack_ros.synth.shadows`).
+* ``calibration_error``: ``(degrees, metres)``: a perturbed calibration is written beside
+  the true one (``calibration_perturbed.yaml``): every camera turned by ``degrees`` about
+  a random axis through its centre and its centre moved by ``metres`` in a random
+  direction (what a careful calibration in a real room gets wrong).
 * ``exposure_drift``: auto exposure of each camera: its gain drifts as
   ``1 + exposure_drift sin(2 pi t / P_k + phi_k)``, periods ``P_k`` of 6-15 s.
 """
@@ -25,6 +29,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
+import cv2
 import numpy as np
 
 from mbtrack_ros.synth.errors import SynthError
@@ -46,6 +51,7 @@ class Conditions:
     exposure_drift: float = 0.0
     lamps: int = 0
     lamp_share: float = 0.35
+    calibration_error: tuple[float, float] = (0.0, 0.0)
 
     def __post_init__(self) -> None:
         if not (0 <= int(self.lamps) <= 8 and 0 < self.lamp_share * max(1, self.lamps) <= 1):
@@ -69,6 +75,11 @@ class Conditions:
                                  'factors in 0.05..5')
             changes.append((time_s, factors, ramp_s))
         object.__setattr__(self, 'light_changes', tuple(sorted(changes)))
+        deg, metres = (float(v) for v in self.calibration_error)
+        if not (0 <= deg <= 20 and 0 <= metres <= 1):
+            raise SynthError(f'calibration error must be 0..20 degrees and 0..1 m, got '
+                             f'{self.calibration_error}')
+        object.__setattr__(self, 'calibration_error', (deg, metres))
         if not 0.0 <= float(self.exposure_drift) < 0.5:
             raise SynthError(f'exposure drift must be in [0, 0.5), got {self.exposure_drift}')
 
@@ -91,6 +102,21 @@ class Conditions:
         pos = np.stack([xs, np.full(self.lamps, room.depth / 2),
                         np.full(self.lamps, room.height - 0.2)], axis=1)
         return pos, np.full(self.lamps, float(self.lamp_share))
+
+    def perturbed(self, calibration, rng: np.random.Generator):
+        """``calibration`` with every camera's pose off by ``calibration_error``."""
+        deg, metres = self.calibration_error
+        cams = {}
+        for name, cam in calibration.cameras.items():
+            axis = rng.normal(size=3)
+            axis /= np.linalg.norm(axis)
+            rvec = (np.radians(deg) * axis).reshape(3, 1)
+            turn = cv2.Rodrigues(rvec)[0]
+            shift = rng.normal(size=3)
+            centre = cam.center + metres * shift / np.linalg.norm(shift)
+            R = turn @ cam.R          # turned about the camera's own centre
+            cams[name] = replace(cam, R=R, t=-R @ centre)
+        return replace(calibration, cameras=cams)
 
     def light(self, time_s: float) -> np.ndarray:
         """(3,) float32 factors of the room's light at ``time_s`` (1 before any change)."""
@@ -118,7 +144,8 @@ class Conditions:
         return {'capture_spread': float(self.capture_spread),
                 'light_changes': [[t, list(f), r] for t, f, r in self.light_changes],
                 'exposure_drift': float(self.exposure_drift), 'lamps': int(self.lamps),
-                'lamp_share': float(self.lamp_share)}
+                'lamp_share': float(self.lamp_share),
+                'calibration_error': list(self.calibration_error)}
 
 
 def conditions_rng(seed: int) -> np.random.Generator:
@@ -128,7 +155,7 @@ def conditions_rng(seed: int) -> np.random.Generator:
 
 #: conditions of presets that exist for them (``real-room``)
 _REAL_ROOM = Conditions(
-    capture_spread=1.0, exposure_drift=0.08, lamps=2,
+    capture_spread=1.0, exposure_drift=0.08, lamps=2, calibration_error=(1.0, 0.03),
     light_changes=((6.0, (0.7, 0.7, 0.7), 0.5),          # dimmed by 30 % over 0.5 s
                    (12.0, (1.05, 0.97, 0.8), 0.0),       # a warmer white, switched
                    (16.0, (1.4, 1.4, 1.4), 0.0)))        # +40 % in one frame

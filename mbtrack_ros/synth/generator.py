@@ -327,6 +327,9 @@ def generate(preset: str | Preset, outdir: str | Path, *, seed: int = 0,
                         fps=fps, ceiling=ceiling, conditions=conditions)
     outdir.mkdir(parents=True, exist_ok=True)
     synth.calibration.save(outdir / 'calibration.yaml')
+    if any(synth.conditions.calibration_error):   # what the user's calibration says
+        synth.conditions.perturbed(synth.calibration, np.random.default_rng(
+            [synth.seed, 0xCA1])).save(outdir / 'calibration_perturbed.yaml')
     rows: list[GroundTruthRow] = []
     frames_iter: Iterator[SynthFrame] = iter(synth)
     if progress:
