@@ -196,3 +196,17 @@ def test_bad_configuration_and_unknown_camera():
         FrameSetSynchronizer(())
     with pytest.raises(SyncError, match='frame_rate'):
         FrameSetSynchronizer(('a',), frame_rate=-1.0)
+
+
+def test_set_stamps_never_go_back():
+    """Free-running cameras with drops: the set stamps (latest capture) increase."""
+    rng = np.random.default_rng(11)
+    cams = ('a', 'b', 'c')
+    phases = {'a': 0, 'b': 15 * MS, 'c': 35 * MS}
+    events = [e for e in jittered_stream(200, cams, phases=phases, jitter_ms=2)
+              if rng.random() > 0.15]
+    sync = FrameSetSynchronizer(cams)
+    sets = feed(sync, events) + sync.flush()
+    stamps = [s.stamp_ns for s in sets]
+    assert all(b > a for a, b in zip(stamps, stamps[1:]))
+    assert all(s.stamp_ns >= max(s.stamps.values()) for s in sets)

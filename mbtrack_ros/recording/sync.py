@@ -59,7 +59,8 @@ class FrameSet:
 
     Attributes:
         index: running number of emitted sets (0-based, not reset by :meth:`reset`).
-        stamp_ns: the set's stamp: the latest capture time in it, integer ns.
+        stamp_ns: the set's stamp: the latest capture time in it (or 1 ns after the
+            previous set's stamp, should that be later), integer ns.
         images: camera name -> image (whatever object was passed to ``add``).
         stamps: camera name -> that frame's own capture time (stamp + time offset), ns.
         missing: cameras without a frame in this set, in configuration order.
@@ -151,6 +152,7 @@ class FrameSetSynchronizer:
         self._newest: int | None = None
         self._reference: int | None = None
         self._emitted: int | None = None  # end of the last emitted set's window
+        self._last_set: int | None = None  # stamp of the last emitted set
         self._index = 0
         self._after_reset = False
 
@@ -310,7 +312,13 @@ class FrameSetSynchronizer:
             # the next window: centred one period after this set's mean capture time
             self._reference = int(round(sum(stamps.values()) / len(stamps))) + period
             self._emitted = min(end, self._reference - (self.tolerance or 0))
-        fs = FrameSet(index=self._index, stamp_ns=max(stamps.values()),
+        # the latest capture; never before the previous set's (an incomplete set after a
+        # complete one could end earlier, and the tracker's time must not go back)
+        stamp = max(stamps.values())
+        if self._last_set is not None and not self._after_reset:
+            stamp = max(stamp, self._last_set + 1)
+        self._last_set = stamp
+        fs = FrameSet(index=self._index, stamp_ns=stamp,
                       images={c: images[c] for c in self.cameras if c in images},
                       stamps={c: stamps[c] for c in self.cameras if c in stamps},
                       missing=missing, after_reset=self._after_reset)
