@@ -152,7 +152,7 @@ def run(rec: Path, out: Path, seed: int, no_people_cue: bool = False,
             det.config = replace(det.config, **detection)
         if release:  # ReleaseConfig fields overridden, e.g. spare_support=0 (no spare rule)
             det = tracker.detection
-            det.releaser = release_module.Releaser(tracker.calibration,  # image_scale's size
+            det.releaser = release_module.Releaser(tracker.calibration,  # the working size
                                                    replace(det.releaser.config, **release))
         if no_people_cue:  # the bootstrap before issue 6: every pixel learnt, 10 x 4 frames
             bg = replace(tracker.detection.config.background, people=None,
