@@ -7,20 +7,24 @@ Run from a checkout on a machine with nothing but Python >= 3.11::
 
 It creates (or reuses) ``.venv`` beside ``setup.py``, installs the package with everything it
 needs from the package index (ROS 2 Jazzy wheels included), and reinstalls only when
-``setup.py`` changed. Debian and Ubuntu ship Python without ``ensurepip`` unless
-``python3-venv`` is installed; then pip itself is fetched from the package index.
+``setup.py`` changed; then builds the interface packages of ``interfaces/`` that the
+environment lacks (:mod:`mbtrack_ros.interfaces_build`). Packages come from the index pip is
+configured with (``pip.conf``, ``PIP_INDEX_URL``); no address is written here. Debian and
+Ubuntu ship Python without ``ensurepip`` unless ``python3-venv`` is installed: then the
+system's own pip (if any) downloads pip for the environment, and without either the
+bootstrap says which package to install.
 """
 from __future__ import annotations
 
 import hashlib
-import json
 import os
 import subprocess
 import sys
 import tempfile
-import urllib.request
 import venv
 from pathlib import Path
+
+from mbtrack_ros.interfaces_build import ensure_interfaces
 
 ROOT = Path(__file__).resolve().parent.parent
 VENV = Path(os.environ.get('MBTRACK_VENV', ROOT / '.venv'))
@@ -35,35 +39,43 @@ def _python() -> Path:
     return VENV / ('Scripts/python.exe' if os.name == 'nt' else 'bin/python')
 
 
-def _fetch_pip(target: Path) -> Path:
-    """Download the newest pip wheel from the package index (for Pythons without ensurepip)."""
-    index = os.environ.get('MBTRACK_PYPI_JSON', 'https://pypi.org/pypi/pip/json')
-    with urllib.request.urlopen(index, timeout=60) as response:
-        info = json.load(response)
-    wheel = next(u for u in info['urls'] if u['filename'].endswith('.whl'))
-    path = target / wheel['filename']
-    with urllib.request.urlopen(wheel['url'], timeout=120) as response:
-        path.write_bytes(response.read())
-    return path
+class SetupError(Exception):
+    """The environment cannot be made on this machine; the message says what to install."""
+
+
+def _has_pip(python: Path | str) -> bool:
+    return subprocess.run([str(python), '-m', 'pip', '--version'],
+                          capture_output=True).returncode == 0
+
+
+def _pip_from_system_pip(python: Path) -> None:
+    """Install pip into the environment with the system Python's pip: it downloads the pip
+    wheel from its configured index, and the wheel installs itself."""
+    with tempfile.TemporaryDirectory() as tmp:
+        subprocess.run([sys.executable, '-m', 'pip', 'download', '--quiet', '--no-deps',
+                        '--only-binary=:all:', '--dest', tmp, 'pip'], check=True)
+        wheel = next(Path(tmp).glob('pip-*.whl'))
+        subprocess.run([str(python), str(wheel / 'pip'), 'install', '--quiet', '--no-index',
+                        str(wheel)], check=True)
 
 
 def ensure_venv() -> Path:
     """Create the virtual environment with a working pip; returns its python."""
     python = _python()
-    if python.exists() and subprocess.run([python, '-m', 'pip', '--version'],
-                                          capture_output=True).returncode == 0:
+    if python.exists() and _has_pip(python):
         return python
     _say(f'creating virtual environment {VENV}')
     try:
         venv.create(VENV, with_pip=True, clear=True)
     except subprocess.CalledProcessError:
         venv.create(VENV, with_pip=False, clear=True)  # no ensurepip on this Python
-    if subprocess.run([python, '-m', 'pip', '--version'], capture_output=True).returncode:
-        _say('this Python has no ensurepip: fetching pip from the package index')
-        with tempfile.TemporaryDirectory() as tmp:
-            wheel = _fetch_pip(Path(tmp))
-            subprocess.run([python, str(wheel / 'pip'), 'install', '--quiet', str(wheel)],
-                           check=True)
+    if not _has_pip(python):
+        if not _has_pip(sys.executable):
+            raise SetupError('this Python has neither ensurepip nor pip: install the '
+                             'python3-venv package (sudo apt install python3-venv) and run '
+                             'again')
+        _say('this Python has no ensurepip: installing pip with the system\'s pip')
+        _pip_from_system_pip(python)
     return python
 
 
@@ -93,6 +105,10 @@ def main(argv: list[str] | None = None) -> int:
     try:
         python = ensure_venv()
         ensure_installed(python)
+        ensure_interfaces(python, VENV)
+    except SetupError as err:
+        _say(str(err))
+        return 2
     except (OSError, subprocess.CalledProcessError, StopIteration) as err:
         _say(f'setting up the environment failed: {err}')
         return 1

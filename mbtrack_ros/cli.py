@@ -14,7 +14,8 @@ from mbtrack_ros import __version__
 __all__ = ['build_parser', 'main']
 
 # Subcommand modules, in the order `mbtrack --help` lists them.
-SUBCOMMANDS = ('demo', 'synth', 'replay', 'eval', 'bench', 'import_video', 'experiments')
+SUBCOMMANDS = ('demo', 'synth', 'replay', 'eval', 'bench', 'import_video', 'experiments',
+               'evaluate', 'calibrate', 'synth_board')
 
 
 def build_parser(only: Sequence[str] | None = None) -> argparse.ArgumentParser:
@@ -57,8 +58,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     As the ``mbtrack`` command (``argv`` None), a subcommand that sets the parser default
     ``_quick_exit`` (replay: every file it wrote is closed, its writer process has ended)
     ends the process as soon as it returns, without the interpreter's tear-down of numba,
-    LLVM, OpenCV and the rest: 0.3-0.6 s of every replay (docs/live_measurements.md,
-    part 5)."""
+    LLVM, OpenCV and the rest, which costs a fraction of a second per run."""
     words = list(sys.argv[1:] if argv is None else argv)
     command = next((w for w in words if not w.startswith('-')), '').replace('-', '_')
     parser = build_parser(only=(command,) if command in SUBCOMMANDS else None)

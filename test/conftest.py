@@ -41,17 +41,6 @@ def rng() -> np.random.Generator:
 REPO = Path(__file__).resolve().parents[1]
 
 
-def load_script(path: str, name: str):
-    """A script of the repository that is not part of the package (``docs/...``), loaded
-    as module ``name`` from ``path`` (relative to the repository root)."""
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location(name, REPO / path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 @pytest.fixture
 def context():
     """A fresh rclpy context for one test's nodes (shut down after it)."""

@@ -1,5 +1,5 @@
 """Slow, occlusion-aware appearance adaptation (core/detection/adaptation.py,
-PersonModel.add_view / adapt; docs/detection.md "Appearance adaptation")."""
+PersonModel.add_view / adapt)."""
 from __future__ import annotations
 
 from dataclasses import replace

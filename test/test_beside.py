@@ -1,5 +1,4 @@
-"""Births beside a live track (AutoDetectionConfig.beside_support, docs/detection.md
-"Births beside a live track"): a confirmed detection next to a reported track that fell
+"""Births beside a live track (AutoDetectionConfig.beside_support): a confirmed detection next to a reported track that fell
 behind its person moves that track instead of starting a second one on the person; a
 newcomer next to a track on a person of its own is born."""
 from __future__ import annotations

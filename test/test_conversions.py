@@ -113,7 +113,7 @@ def test_bad_inputs_raise_one_line_errors():
     one_line_error(lambda: image_to_rgb(empty), 'empty image')
     bad_jpeg = CompressedImage(format='jpeg')
     bad_jpeg.data = b'\xff\xd8not a jpeg at all'
-    one_line_error(lambda: compressed_to_rgb(bad_jpeg), 'cannot decode')
+    one_line_error(lambda: compressed_to_rgb(bad_jpeg), 'no PNG or JPEG header')
     tiff = CompressedImage(format='tiff')
     tiff.data = b'II*\x00'
     one_line_error(lambda: compressed_to_rgb(tiff), 'unsupported compressed format')

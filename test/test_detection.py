@@ -403,7 +403,7 @@ def test_a_person_in_the_doorway_hidden_in_one_camera_is_detected_by_the_others(
     the corridor, a background model that learnt them beyond the open door); its veto
     must not hide them from the other three. Off the entry zones, and within
     ``excuse_radius`` of a track, the veto stays. Opt-in (``excuse_weakest``): on the 18
-    clear-room runs it cost mean MOTA (docs/detection.md)."""
+    clear-room runs it cost mean MOTA."""
     rng = np.random.default_rng(12)
     calib = make_room(ceiling=False)
     bgs = backgrounds(calib)
@@ -1214,7 +1214,7 @@ def test_a_person_re_found_soon_after_the_release_gets_the_released_id(
 def test_a_person_re_found_2_5_s_after_the_release_keeps_her_id_by_default(reuse_time):
     """A person whose track was released is detected again at the same place 2.5 s
     later (on clear-room a person who stood up from her chair was re-found 2.4-2.9 s after
-    her track's release, docs/detection.md "Weak moves; longer reuse"): the default
+    her track's release): the default
     ``reuse_time`` (3 s) gives her the released id back; with the former 2 s the id has
     ended and a new one is issued."""
     rng = np.random.default_rng(5)
@@ -1239,8 +1239,7 @@ def test_a_person_re_found_1_3_m_from_her_released_track_keeps_her_id_by_default
         reuse_radius, reused):
     """A person's track is released where she stood, and she is detected again 1.3 m
     away (on clear-room a track left 1.1-1.3 m behind a person turning along a wall is
-    released as spare and she is found again a few frames later, docs/detection.md
-    "Reuse radius"): the default ``reuse_radius`` (1.5 m) gives her the released id back;
+    released as spare and she is found again a few frames later): the default ``reuse_radius`` (1.5 m) gives her the released id back;
     with the former 1 m a new id is issued."""
     rng = np.random.default_rng(5)
     calib, bgs, tracker = _painted_room_tracker(4, reuse_radius=reuse_radius)

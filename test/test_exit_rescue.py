@@ -1,5 +1,4 @@
-"""The exit rescue (AutoDetectionConfig.exit_rescue, docs/detection.md "Exit releases at the
-door"): a track that the exit rule would release while its person still stands at the door
+"""The exit rescue (AutoDetectionConfig.exit_rescue): a track that the exit rule would release while its person still stands at the door
 is moved back onto them with its id; a track whose person walked out is released."""
 from __future__ import annotations
 
@@ -107,7 +106,7 @@ def test_bad_exit_rescue_is_refused():
 def test_a_person_standing_at_the_door_keeps_the_id_of_a_track_pushed_into_the_exit(rescue):
     """End to end with the tracker on painted frames: a person standing at the door is
     tracked; the track is then put 0.4 m deep into the exit (where cam2 and cam3 cannot
-    judge it and the filter drifts outwards, docs/detection.md). With the rescue the same
+    judge it and the filter drifts outwards). With the rescue the same
     track is back on the person in the next frames and no other id appears; without it the
     exit rule releases the track (a person re-found would get a new id; this one stands
     still, which the detector's motion test does not confirm)."""

@@ -83,7 +83,7 @@ def _brute_w_star(masks, dist, prior, target, p, exclude):
 
 @pytest.mark.parametrize('n_targets,n_particles,seed,zeros', [
     (2, 4, 0, 0), (3, 3, 1, 0), (3, 5, 2, 0), (3, 5, 4, 3),
-    (3, (2, 6, 3), 5, 2)])     # unequal counts (docs/diag/variant_crowd_particles.patch)
+    (3, (2, 6, 3), 5, 2)])     # unequal particle counts per target
 def test_hjs_incremental_equals_brute_force(n_targets, n_particles, seed, zeros):
     counts = n_particles if isinstance(n_particles, tuple) else (n_particles,) * n_targets
     rng = np.random.default_rng(seed)
@@ -187,7 +187,6 @@ def test_a_camera_in_which_a_target_is_hidden_says_nothing_about_it():
     """A target the camera hides behind a nearer one (prior-expected visible fraction
     below ``min_visible_share``) gets 0 on every particle from that camera: the occlusion
     penalty and the nearer target's background term would otherwise still rank its places
-    (docs/detection.md, "A camera in which a target is hidden says nothing about it").
     The other targets' scores do not change, and with the threshold at 0 the hidden
     target gets the plain Eq. 19 scores of ``hjs_debug``."""
     rng = np.random.default_rng(11)
@@ -669,7 +668,7 @@ def test_coverage_term_adds_gain_times_brute_force_coverage(separable):
 
 def test_coverage_term_prefers_the_foreground_over_a_look_alike_background():
     """A person and a painted look-alike of her on the wall behind: colour alone cannot
-    tell them apart, the foreground can (the still person of docs/detection.md's lead)."""
+    tell them apart, the foreground can."""
     cams = _two_cameras()
     mm = MeasurementModel(_room(*cams), LikelihoodConfig(min_visible_pixels=5))
     colours = [((230, 190, 160), (200, 30, 30), (30, 30, 200))] * 2
@@ -736,3 +735,76 @@ def test_coverage_masks_from_a_callable_are_fetched_once_and_give_the_same_term(
     mm.set_foreground(lambda: bad, 1.0)
     with pytest.raises(LikelihoodError, match='foreground mask'):
         mm.hjs(particles, [np.ones(6)], models)
+
+
+def _painted_scene(colours_a, colours_b, paint_a_as=None):
+    """A hand-made two-person scene: camera, image and one-hot models. Person A stands in
+    front of person B and hides part of B; every part is painted in one colour over a grey
+    background (A over B); ``paint_a_as`` paints A in other colours than its model."""
+    cam = _camera('cam', (0.0, -3.5, 1.6), size=(80, 60), focal=90.0)
+    mm = MeasurementModel(_room(cam), LikelihoodConfig(sigma=0.1, d_occ=D_OCC,
+                                                       min_visible_pixels=1))
+    states = np.zeros((2, 6))
+    states[0, :2] = (0.15, -0.8)                  # A, nearer the camera
+    states[1, :2] = (0.0, 0.6)                    # B, partly behind A
+    image = np.full((60, 80, 3), 128, np.uint8)
+    bins_of = []
+    models = []
+    for colours in (colours_a, colours_b):
+        px = np.array(colours, np.uint8).reshape(3, 1, 1, 3)
+        bins_of.append([int(quantize(px[q])[0, 0]) for q in range(3)])
+        hists = np.zeros((1, 3, 512))
+        for q in range(3):
+            hists[0, q, bins_of[-1][q]] = 1.0
+        models.append(PersonModel(1.75, 0.5, [0.0], hists))
+    labels = [mm.render_labels('cam', states[k], models[k]) for k in range(2)]
+    painted = [colours_a if paint_a_as is None else paint_a_as, colours_b]
+    for k in (1, 0):                              # far first: A is painted over B
+        for q in range(3):
+            image[labels[k] == q + 1] = painted[k][q]
+    mm.set_images({'cam': image})
+    return mm, states, models, labels, image
+
+
+def test_hand_made_two_person_scene_foreground_term_is_d_occ_times_the_hidden_share():
+    """000 Eq. 26 on a scene whose visible parts match their one-hot models exactly (d =
+    0): the front person scores 0; the person behind scores d_occ times the share of the
+    silhouette the front one hides (beta / (alpha + beta)), computed from the rendered
+    masks; nobody is in front of A, and A's own evidence is perfect, so both background
+    terms (Eq. 40) are 0."""
+    a = [[200, 170, 140], [200, 30, 30], [30, 30, 140]]
+    b = [[90, 60, 40], [30, 180, 30], [40, 40, 40]]
+    mm, states, models, labels, _ = _painted_scene(a, b)
+    dbg = mm.hjs_debug('cam', [states[:1], states[1:]], [np.ones(1), np.ones(1)], models)
+    mask_a, mask_b = labels[0] > 0, labels[1] > 0
+    hidden = (mask_a & mask_b).sum() / mask_b.sum()
+    assert 0.1 < hidden < 0.9                                   # the case is real
+    assert dbg.fc[0] == pytest.approx(0.0, abs=1e-12)
+    assert dbg.fc[1] == pytest.approx(D_OCC * hidden, abs=1e-12)
+    np.testing.assert_array_equal(dbg.w_star[1][mask_b], (~mask_a)[mask_b])
+    assert dbg.bc[0] == 0.0 and dbg.bc[1] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_hand_made_two_person_scene_background_term_is_the_occluders_evidence():
+    """000 Eq. 36-40: with A painted in other colours than its model, a hypothesis of B
+    behind A carries A's evidence over the share of A it overlaps: bc_B = r(A, B) F(A)
+    with r of Eq. 37 (overlap / A's area) and F(A) A's foreground term with nobody in
+    front of it (Eq. 33 with w = 1, brute force); a B far beside A carries none of it
+    (the pixels outside every silhouette are the background layer g(∅) of Eq. 20, not
+    scored)."""
+    a = [[200, 170, 140], [200, 30, 30], [30, 30, 140]]
+    b = [[90, 60, 40], [30, 180, 30], [40, 40, 40]]
+    mm, states, models, labels, image = _painted_scene(
+        a, b, paint_a_as=[[200, 170, 140], [30, 30, 200], [30, 30, 140]])
+    beside = states[1:].copy()
+    beside[0, :2] = (1.4, 0.6)
+    dbg = mm.hjs_debug('cam', [states[:1], np.concatenate([states[1:], beside])],
+                       [np.ones(1), np.ones(2)], models)
+    mask_a, mask_b = labels[0] > 0, labels[1] > 0
+    f_a = _F(quantize(image), labels[0], np.ones(mask_a.shape), models[0].histograms[0])
+    assert f_a > 0.1 and dbg.fc[0] == pytest.approx(f_a, abs=1e-12)
+    r = (mask_a & mask_b).sum() / mask_a.sum()                  # Eq. 37
+    assert r > 0.1
+    assert dbg.bc[1] == pytest.approx(r * f_a, abs=1e-12)
+    beside_mask = mm.render_labels('cam', beside[0], models[1]) > 0
+    assert not (beside_mask & mask_a).any() and dbg.bc[2] == 0.0

@@ -221,3 +221,33 @@ def test_bench_offline_speed_runs_the_profiles(recording, capsys, profile):
     assert '(hjs, N=50)' in capsys.readouterr().err  # the profile's particle count
     assert fast['cpu_seconds'] > 0
     assert fast['x_real_time'] == pytest.approx(FRAMES / fast['wall_seconds'] / 15.0)
+
+
+# -- soak (bench --live --live-bad-rate) ----------------------------------------------------
+def test_memory_growth_of_a_series():
+    from mbtrack_ros.commands.bench_live import memory_growth
+    flat = [(float(t), 500.0) for t in range(100)]
+    assert memory_growth(flat) == 0.0
+    leak = [(float(t), 500.0 + t) for t in range(100)]
+    assert memory_growth(leak) == pytest.approx((500 + 94.5) / (500 + 14.5) - 1)
+    assert np.isnan(memory_growth(flat[:10]))
+
+
+@pytest.mark.ros
+def test_short_soak_counts_every_injected_bad_image(recording):
+    """A short soak: bad images on cam0 for a fifth of the frame sets; the node refuses
+    each (counted once in /diagnostics), and every frame set is still processed."""
+    from mbtrack_ros.commands.bench_live import BAD_KINDS, run_live, soak_summary
+    live = run_live(recording, seed=SEED, bad_rate=0.2, bad_camera='cam0',
+                    node_args=('-p', 'warm_up:=false'), timeout=300.0)
+    assert live.injected_bad == int(FRAMES * 0.2) >= len(BAD_KINDS)
+    d = live.diagnostics
+    assert int(d['dropped images (bad)']) == live.injected_bad
+    assert int(d['frame sets']) + int(d['incomplete frame sets']) == FRAMES
+    assert int(d['dropped frame sets (queue full)']) == 0
+    assert live.people_messages == FRAMES
+    assert len(live.rss_mb) >= 3 and all(mb > 50 for _, mb in live.rss_mb)
+    text = soak_summary(live, 'cam0')
+    assert f'frame sets processed {FRAMES} of {FRAMES}' in text
+    assert f'injected on cam0: {live.injected_bad}; /diagnostics dropped images (bad): ' \
+           f'{live.injected_bad}' in text

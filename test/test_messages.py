@@ -180,7 +180,7 @@ def test_output_bag_round_trip(tmp_path):
     for k, r in enumerate(results):
         r.stamp_ns = STAMP + k * 40_000_000
     out = tmp_path / 'tracks.mcap'
-    with OutputBagWriter(out, calibration, ['cam0']) as writer:
+    with OutputBagWriter(out, calibration, ['cam0'], people=False) as writer:
         for r in results:
             writer.write(r)
     with pytest.raises(OutputBagError, match='already exists'):

@@ -1,11 +1,11 @@
 """The tracker on real cameras: the pose2sim clip copied into the package (60 fps).
 
-Issue 6 on shortened clips: (a) frames 45-54: a track started 42 cm away from the subject
+On shortened clips: (a) frames 45-54: a track started 42 cm away from the subject
 (0.3 m in x and y) must be pulled onto him by the appearance likelihood on the real images,
 and then stay within 20 cm of the reference hip midpoint, with one id; (b) frames 0-17: with
 automatic detection and no initialisation the subject, who is in the room from the first
 frame and never leaves it, must be detected within 15 frames (the never-empty room: the
-people cue keeps him out of the bootstrap background, docs/real_data.md).
+people cue keeps him out of the bootstrap background).
 """
 from __future__ import annotations
 

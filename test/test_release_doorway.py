@@ -1,6 +1,6 @@
 """Doorways: in front of a door only the cameras on the door's wall count as a track's
 support (ReleaseConfig.doorway_band, RoomCalibration.doorway_witnesses), and such a track
-ends after ReleaseConfig.doorway_timeout (docs/detection.md, "Releases after leaving")."""
+ends after ReleaseConfig.doorway_timeout."""
 from __future__ import annotations
 
 from dataclasses import replace
@@ -121,8 +121,7 @@ def test_a_spare_track_that_the_door_wall_cameras_cover_keeps_the_ordinary_timeo
     second explains no foreground of its own, so it is spare and counts as unsupported;
     the cameras on the door's wall still cover it. It ends after ``timeout`` like a spare
     track anywhere, not after the doorway timeout, which is for a track those cameras
-    see on empty floor (measured: such spare tracks had often kept their person,
-    docs/detection.md, h-rel2)."""
+    see on empty floor (such spare tracks have often kept their person)."""
     calib = _calibration()
     person, beside = DOORWAY, (DOORWAY[0] + 0.15, DOORWAY[1])
     states = _states([person, beside])
@@ -151,14 +150,12 @@ def test_the_track_of_a_person_who_walked_out_ends_sooner_with_the_doorway_rule(
     timeout ended it 1.13 s after the person
     crossed the wall (their last ground-truth row), the doorway rule 0.40 s after (tracker
     seeds 1-5; on seed 0 the person got a second track on the way in, ended 1.00 and 0.87
-    s after; ``docs/diag/walk_out.py --no-ceiling --reach-radius 0 --paper-motion
-    --doorway-band B --seed S``). The median over tracker seeds 0-2 is compared. The reach is off
+    s after). The median over tracker seeds 0-2 is compared. The reach is off
     (``reach_radius`` 0): it moves the lagging track after its person into the exit (ended
     0.2 s after without the doorway rule), which is not what this compares. The motion is
     the coupled one of 000 (``orientation_follows_velocity``), with which the track lags:
     with the default motion its velocity follows the person and the track ends 0.40 s
-    after their last row without the doorway rule too (``docs/diag/walk_out.py
-    --no-ceiling --doorway-band 0 --reach-radius 0``; 1.13 s with ``--paper-motion``)."""
+    after their last row without the doorway rule too (1.13 s with the coupled motion)."""
     from mbtrack_ros.core.dynamics import MotionConfig
     from mbtrack_ros.core.tracker import Tracker, TrackerConfig
     from mbtrack_ros.synth import Synthesizer

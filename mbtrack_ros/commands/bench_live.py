@@ -14,6 +14,17 @@ reads the node's counters from ``/diagnostics`` and the CPU time of the tracker 
 ``/proc/<pid>/stat``. Then ``mbtrack replay`` runs over the same recording, timed, for the
 offline speed: with the default parameters and, in a source checkout, with the fast and the
 offline profiles (``config/clear_room_fast.yaml``, ``config/clear_room_offline.yaml``).
+
+**Soak** (``--live-bad-rate P``, with a long ``--live-frames``, ``--live-compressed`` to
+keep its recording small, and ``--live-no-offline``): the listener also publishes a bad image on one camera's topic
+(``--live-bad-camera``, reliable) for a share ``P`` of the frame sets, right after the
+``/clock`` tick of that stamp, cycling through kinds the node must refuse (unknown encoding,
+unexpected frame id, a declared 8192x8192 image, a data length that does not match, a zero
+stamp). The resident memory of the tracker process is sampled every second; the summary gives
+its growth (median of the last tenth of the run against the median of the second tenth, after
+start-up), the frame sets processed against the frames played, and the node's final
+``/diagnostics`` count of bad images against the number injected (the node publishes its
+counts on a wall-clock period once no frame set forms, so the last message has them all).
 """
 from __future__ import annotations
 
@@ -33,9 +44,10 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ['LatencyError', 'LatencyStats', 'LiveResult', 'add_arguments', 'cpu_seconds',
-           'latency_stats', 'make_recording', 'match_latencies', 'nearest_rank',
-           'run_live', 'run_offline', 'main_live']
+__all__ = ['BAD_KINDS', 'LatencyError', 'LatencyStats', 'LiveResult', 'add_arguments',
+           'bad_image', 'cpu_seconds', 'latency_stats', 'make_recording', 'match_latencies',
+           'memory_growth', 'nearest_rank', 'rss_megabytes', 'run_live', 'run_offline',
+           'main_live', 'soak_summary']
 
 _PROG = 'mbtrack bench'
 FPS = 15.0
@@ -43,7 +55,7 @@ FPS = 15.0
 _BURST = re.compile(r"one stamp's messages took p50 (?P<p50>[\d.]+) ms, p95 (?P<p95>[\d.]+) ms")
 REPO = Path(__file__).resolve().parents[2]
 FAST_PROFILE = REPO / 'config' / 'clear_room_fast.yaml'  # tracker_node parameters
-# the offline speed profile (issue 5's >= 5x real time): fewer particles, detection on every
+# the offline speed profile: fewer particles, detection on every
 # 3rd frame set, images processed at half size
 OFFLINE_PROFILE = REPO / 'config' / 'clear_room_offline.yaml'
 
@@ -111,11 +123,13 @@ def cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
 
-def make_recording(path: Path, *, frames: int, seed: int = 0) -> Path:
-    """The benchmark recording: clear-room, 4 corner cameras, 320x240, 15 Hz."""
+def make_recording(path: Path, *, frames: int, seed: int = 0,
+                   compressed: bool = False) -> Path:
+    """The benchmark recording: clear-room, 4 corner cameras, 320x240, 15 Hz (``compressed``:
+    JPEG images, ~15 kB instead of 230 kB each, for long soaks)."""
     from mbtrack_ros.synth.generator import generate
     return generate('clear-room', path, seed=seed, frames=frames, width=320, height=240,
-                    fps=FPS, ceiling=False)
+                    fps=FPS, ceiling=False, compressed=compressed)
 
 
 @dataclass
@@ -136,6 +150,60 @@ class LiveResult:
     publish_spread_p50: float = float('nan')
     publish_spread_p95: float = float('nan')
     latency_series: tuple[tuple[float, float], ...] = ()  # (s since first frame, latency s)
+    injected_bad: int = 0  # bad images published on the soak camera
+    rss_mb: tuple[tuple[float, float], ...] = ()  # (s since the player started, RSS MB)
+
+
+#: kinds of bad images the soak injects, in turn
+BAD_KINDS = ('encoding', 'frame-id', 'too-large', 'data-length', 'stamp')
+
+
+def bad_image(kind: str, stamp_ns: int, camera: str, width: int, height: int, *,
+              compressed: bool = False):
+    """A ``sensor_msgs/Image`` (``compressed``: ``CompressedImage``) of camera ``camera``
+    (``width`` x ``height`` rgb8) made bad in the way ``kind`` (one of :data:`BAD_KINDS`)
+    names; small (at most one row of data, or a PNG header)."""
+    from sensor_msgs.msg import CompressedImage, Image
+
+    from mbtrack_ros.nodes.messages import make_header
+    header = make_header(0 if kind == 'stamp' else stamp_ns,
+                         'elsewhere' if kind == 'frame-id' else f'{camera}_optical_frame')
+    if compressed:
+        msg = CompressedImage(header=header, format='tiff' if kind == 'encoding' else 'png')
+        side = 8192 if kind == 'too-large' else None
+        # a PNG signature and header (declaring 8192x8192 for too-large), then junk; the
+        # data-length kind has no header at all
+        ihdr = (b'\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR'
+                + (side or width).to_bytes(4, 'big') + (side or height).to_bytes(4, 'big'))
+        msg.data = (b'' if kind == 'data-length' else ihdr) + bytes(64)
+        return msg
+    msg = Image(height=height, width=width, encoding='rgb8', step=width * 3)
+    msg.header = header
+    if kind == 'encoding':
+        msg.encoding = 'yuv422'
+    elif kind == 'too-large':
+        msg.width = msg.height = 8192
+        msg.step = 8192 * 3
+    msg.data = bytes(width * 3)  # one row: the length never matches
+    return msg
+
+
+def rss_megabytes(pid: int) -> float:
+    """Resident set size of process ``pid``, MB (``/proc/<pid>/status`` VmRSS)."""
+    for line in Path(f'/proc/{pid}/status').read_text().splitlines():
+        if line.startswith('VmRSS:'):
+            return int(line.split()[1]) / 1024.0
+    return float('nan')
+
+
+def memory_growth(series) -> float:
+    """Relative RSS growth of a ``(t, MB)`` series: the median of its last tenth over the
+    median of its second tenth (after start-up), minus 1; NaN for fewer than 20 samples."""
+    values = np.array([mb for _, mb in series], dtype=np.float64)
+    if values.size < 20:
+        return float('nan')
+    tenth = values.size // 10
+    return float(np.median(values[-tenth:]) / np.median(values[tenth:2 * tenth]) - 1.0)
 
 
 def _diag_values(msg) -> dict:
@@ -145,11 +213,13 @@ def _diag_values(msg) -> dict:
 
 def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
              max_pending_sets: int = 15, timeout: float = 600.0, use_sim_time: bool = True,
-             ground_truth: bool = False, node_args: tuple[str, ...] = ()) -> LiveResult:
+             ground_truth: bool = False, node_args: tuple[str, ...] = (),
+             bad_rate: float = 0.0, bad_camera: str = 'cam0') -> LiveResult:
     """Play ``recording`` to a tracker_node process and measure (see the module docstring).
 
     ``ground_truth``: start tracks from the recording's ground truth (``init_ground_truth``)
-    instead of the automatic detection.
+    instead of the automatic detection. ``bad_rate``: share of the frame sets after whose
+    ``/clock`` tick a bad image (:func:`bad_image`) is published on ``bad_camera`` (soak).
     """
     if ground_truth:
         node_args = ('-p', 'detection.enabled:=false',
@@ -163,12 +233,23 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from rosgraph_msgs.msg import Clock
 
+    from sensor_msgs.msg import CompressedImage, Image
+
     from mbtrack_ros.nodes.conversions import stamp_to_ns
-    from mbtrack_ros.recording.bag import RecordingReader
+    from mbtrack_ros.recording.bag import COMPRESSED, RecordingReader, image_topic
     from mbtrack_ros.recording.csvfiles import read_ground_truth
+
+    from mbtrack_ros.core.camera import RoomCalibration
 
     with RecordingReader(recording / 'bag') as reader:
         frames = reader.frame_count
+        # a recording of JPEG images: the node subscribes to the compressed topics
+        compressed = reader.topics.get(image_topic('cam0', True)) == COMPRESSED \
+            and image_topic('cam0') not in reader.topics
+    if compressed:
+        node_args = ('-p', 'image_transport:=compressed', *node_args)
+    soak_cam = RoomCalibration.load(recording / 'calibration.yaml').cameras[bad_camera] \
+        if bad_rate > 0 else None
     truth_count: dict[int, int] = {}
     for r in read_ground_truth(recording / 'ground_truth.csv'):
         truth_count[r.stamp_ns] = truth_count.get(r.stamp_ns, 0) + 1
@@ -188,11 +269,28 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
     group = ReentrantCallbackGroup()  # a /clock callback never waits for a people callback
     qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
 
+    injected = [0]
+    bad_pub = None
+    if soak_cam is not None:
+        bad_pub = listener.create_publisher(
+            CompressedImage if compressed else Image, image_topic(bad_camera, compressed),
+            QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+
     def on_clock(msg, info) -> None:  # info: rmw message info, system clock ns
         t = info['source_timestamp'] / 1e9
         s = stamp_to_ns(msg.clock)
         with lock:
+            new = s not in images
             images.setdefault(s, t)
+            k = len(images) - 1
+            inject = (bad_pub is not None and new
+                      and int((k + 1) * bad_rate) > int(k * bad_rate))
+            if inject:
+                kind = BAD_KINDS[injected[0] % len(BAD_KINDS)]
+                injected[0] += 1
+        if inject:
+            bad_pub.publish(bad_image(kind, s, bad_camera, soak_cam.width, soak_cam.height,
+                                      compressed=compressed))
 
     def on_people(msg, info) -> None:
         t = info['received_timestamp'] / 1e9
@@ -202,8 +300,12 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
             tracks[s] = len(msg.poses)
 
     def on_diag(msg) -> None:
+        main = next(s for s in msg.status if s.name == 'mbtrack_ros: tracker')
+        values = _diag_values(msg)
+        if main.message.startswith('no frame set'):
+            values['_reason'] = main.message
         with lock:
-            diags.append(_diag_values(msg))
+            diags.append(values)
 
     listener.create_subscription(Clock, '/clock', on_clock,
                                  QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE),
@@ -243,10 +345,22 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
              '-p', f'bag:={recording}', '-p', f'rate:={rate}',
              '-p', 'wait_for_subscribers:=true', '-p', 'start_delay:=1.0',
              # our /clock reader too: a listener that missed the first /clock messages timed
-             # only later frames and took a frame ~15 for frame 0 (docs/live_measurements.md)
+             # only later frames and took a later frame for frame 0
              '-p', f'clock_subscribers:={2 if use_sim_time else 1}'],
             cwd=REPO, env=env, stdout=player_log, stderr=subprocess.STDOUT, text=True)
         cpu0, wall0 = cpu_seconds(node.pid), time.monotonic()
+        rss: list[tuple[float, float]] = []
+        sampling = threading.Event()
+
+        def sample() -> None:
+            while not sampling.wait(1.0):
+                try:
+                    rss.append((time.monotonic() - wall0, rss_megabytes(node.pid)))
+                except OSError:
+                    return
+
+        sampler = threading.Thread(target=sample, daemon=True)
+        sampler.start()
         if player.wait(timeout=timeout) != 0:
             raise RuntimeError(f'bag_player exited with {player.returncode}')
         # the last frame sets: wait until no output has come for 1 s
@@ -258,6 +372,18 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
                 last_n, quiet = n, time.monotonic()
             time.sleep(0.1)
         cpu1, wall1 = cpu_seconds(node.pid), time.monotonic()
+        # the final counts: the node publishes /diagnostics on a wall-clock period once no
+        # frame set forms; wait for one sent after the last output
+        with lock:
+            seen = len(diags)
+        deadline = time.monotonic() + 5.0
+        while time.monotonic() < deadline:
+            with lock:
+                if len(diags) > seen and diags[-1].get('_reason'):
+                    break
+            time.sleep(0.1)
+        sampling.set()
+        sampler.join(timeout=5)
     finally:
         for proc in (player, node):
             if proc is not None and proc.poll() is None:
@@ -294,7 +420,8 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
         mean_tracks=float(np.mean(list(tracks.values()))) if tracks else 0.0,
         publish_spread_p50=float(burst['p50']) / 1e3 if burst else float('nan'),
         publish_spread_p95=float(burst['p95']) / 1e3 if burst else float('nan'),
-        latency_series=tuple(zip(((stamps - first) / 1e9).tolist(), lat.tolist())))
+        latency_series=tuple(zip(((stamps - first) / 1e9).tolist(), lat.tolist())),
+        injected_bad=injected[0], rss_mb=tuple(rss))
 
 
 def run_offline(recording: Path, *, seed: int = 0, ground_truth: bool = False,
@@ -346,6 +473,43 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              '-p (repeatable), e.g. tracker.pipeline_search:=true')
     parser.add_argument('--live-no-offline', action='store_true',
                         help='skip the offline replays after the live run')
+    parser.add_argument('--live-bad-rate', type=float, default=0.0, metavar='P',
+                        help='soak: publish a bad image on --live-bad-camera for this share '
+                             'of the frame sets (0..1, e.g. 0.01); the summary compares the '
+                             "node's /diagnostics with what was injected and reports the "
+                             "tracker process's memory growth (default 0: none)")
+    parser.add_argument('--live-bad-camera', default='cam0', metavar='NAME',
+                        help='camera whose topic gets the bad images (default cam0)')
+    parser.add_argument('--live-compressed', action='store_true',
+                        help='generate the recording with JPEG images (a long soak\'s '
+                             'recording stays small); the node then subscribes to the '
+                             'compressed topics')
+
+
+def soak_summary(live: LiveResult, camera: str) -> str:
+    """The soak's lines: memory growth, frame sets processed, injected vs counted."""
+    d = live.diagnostics
+
+    def count(key: str) -> int:
+        try:
+            return int(d.get(key, 0))
+        except ValueError:
+            return 0
+
+    formed = count('frame sets') + count('incomplete frame sets')
+    lost = (count('dropped frame sets (queue full)') + count('dropped frame sets (step error)')
+            + count('dropped frame sets (repeated stamp)'))
+    mb = [m for _, m in live.rss_mb]
+    growth = memory_growth(live.rss_mb)
+    return (f'soak: tracker_node RSS {mb[0] if mb else float("nan"):.0f} MB at start, '
+            f'{max(mb) if mb else float("nan"):.0f} MB peak, {mb[-1] if mb else float("nan"):.0f}'
+            f' MB at the end, growth {100 * growth:+.1f} % (median of the last tenth of '
+            f'{len(mb)} samples over the second tenth)\n'
+            f'soak: frame sets processed {formed - lost} of {live.frames} played ({formed} '
+            f'formed, {count("incomplete frame sets")} incomplete, {lost} dropped)\n'
+            f'soak: bad images injected on {camera}: {live.injected_bad}; /diagnostics '
+            f'dropped images (bad): {count("dropped images (bad)")}; dropped frames (late or '
+            f'duplicate): {count("dropped frames (late or duplicate)")}')
 
 
 def _error(message: str) -> int:
@@ -357,6 +521,11 @@ def main_live(args: argparse.Namespace) -> int:
     """``mbtrack bench --live``: run, print a summary, optionally write JSON."""
     if args.live_frames < 30:
         return _error(f'--live-frames must be >= 30, got {args.live_frames}')
+    if not 0.0 <= args.live_bad_rate <= 1.0:
+        return _error(f'--live-bad-rate must be in [0, 1], got {args.live_bad_rate}')
+    if args.live_bad_camera not in ('cam0', 'cam1', 'cam2', 'cam3'):
+        return _error(f'--live-bad-camera must be one of cam0..cam3, got '
+                      f'{args.live_bad_camera!r}')
     bad = [p for p in args.live_param if ':=' not in p or p.startswith(':=')]
     if bad:
         return _error(f'--live-param must be NAME:=VALUE, got {bad[0]!r}')
@@ -379,10 +548,13 @@ def main_live(args: argparse.Namespace) -> int:
                 recording = args.live_recording
             print(f'{_PROG}: generating {args.live_frames} frames of clear-room into '
                   f'{recording}', file=sys.stderr)
-            make_recording(recording, frames=args.live_frames, seed=seed)
+            make_recording(recording, frames=args.live_frames, seed=seed,
+                           compressed=args.live_compressed)
         load0 = os.getloadavg()
         live = run_live(recording, seed=seed, use_sim_time=not args.live_no_sim_time,
-                        ground_truth=args.live_ground_truth, node_args=node_args)
+                        ground_truth=args.live_ground_truth, node_args=node_args,
+                        bad_rate=args.live_bad_rate, bad_camera=args.live_bad_camera,
+                        timeout=max(600.0, 2.0 * args.live_frames / FPS))
         load1 = os.getloadavg()
         offline = fast = quick = None
         if not args.live_no_offline:
@@ -417,6 +589,8 @@ def main_live(args: argparse.Namespace) -> int:
           'of a stamp)')
     print(f'tracker_node CPU: {live.cpu_seconds:.1f} s over {live.wall_seconds:.1f} s '
           f'= {live.cpu_percent:.0f} % of one core')
+    if args.live_bad_rate > 0:
+        print(soak_summary(live, args.live_bad_camera))
     for name, off in (('default', offline), (f'fast profile {FAST_PROFILE.name}', fast),
                       (f'offline profile {OFFLINE_PROFILE.name}', quick)):
         if off is not None:

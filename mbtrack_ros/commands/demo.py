@@ -174,8 +174,8 @@ def _run_live(args: argparse.Namespace, rec: Path, info: dict
     else:
         tracker_params['detection.enabled'] = True
     # the player waits until the tracker subscribes to every camera and to /clock: images
-    # published before that are lost, and the tracker then learnt its background from
-    # frames 13-21 with people standing in them (MOTA 62-76 % instead of 94 %)
+    # published before that are lost, and the tracker would learn its background from
+    # later frames with people standing in them
     player_params = {'bag': rec, 'rate': args.rate, 'exit_when_done': True,
                      'start_delay': 1.0, 'wait_for_subscribers': True,
                      'clock_subscribers': 1}

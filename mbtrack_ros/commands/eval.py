@@ -52,13 +52,14 @@ def _error(msg: str) -> int:
 
 def _calibration(args: argparse.Namespace, notes: list[str]) -> RoomCalibration | None:
     """The explicitly given calibration (errors propagate) or the optional default one."""
+    from mbtrack_ros.recording.calibration_io import load_calibration
     if args.calibration is not None:
-        return RoomCalibration.load(args.calibration)
+        return load_calibration(args.calibration, 'room', warn=notes.append)
     default = Path(args.ground_truth).parent / 'calibration.yaml'
     if not default.is_file():
         return None
     try:
-        return RoomCalibration.load(default)
+        return load_calibration(default, 'room', warn=notes.append)
     except CalibrationError as err:
         notes.append(f'{default} not drawn: {err}')
         return None

@@ -3,8 +3,12 @@
 For every recording directory (made by ``mbtrack synth``) and every run ``ALG:N`` the
 recording is replayed (``mbtrack replay --init-from ground_truth.csv --save-particles``),
 scored with CLEAR MOT and the posterior-mass curve (000 Fig. 6), and the curves of each
-recording are plotted into one PNG. With ``--ablation`` the HJS filter is run with and
-without the spatial-exclusion MRF over several seeds (000 §VI-C). Results go to
+recording are plotted into one PNG. ``--presets lanz-seq1,lanz-seq4 --recording-seeds
+200-204`` renders the recordings itself (into ``OUTDIR/recordings``, reused when present)
+and reports each preset over all its recordings and run seeds: one curve per preset (Fig.
+6) and one table row per preset and run with its frame rate (Table I). The run
+``hjs-nomrf:N`` is HJS without the spatial-exclusion MRF (the ablation of 000 §VI-C);
+``--ablation`` runs it against HJS on one recording over several seeds. Results go to
 ``OUTDIR/results.md`` and ``OUTDIR/results.json``.
 """
 from __future__ import annotations
@@ -44,6 +48,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                              'baselines pdaf and jpdaf, joint samples for jlf, which have '
                              'no posterior-mass curve), e.g. hjs:100,pdaf:100,jpdaf:100,'
                              'jlf:100')
+    parser.add_argument('--presets', default='', metavar='NAMES',
+                        help='comma-separated mbtrack synth presets to render and evaluate '
+                             '(e.g. lanz-seq1,lanz-seq2,lanz-seq3,lanz-seq4), each over the '
+                             '--recording-seeds')
+    parser.add_argument('--recording-seeds', default='200-204', metavar='SEEDS',
+                        help='recording seeds of --presets: comma-separated, A-B ranges '
+                             '(default 200-204)')
+    parser.add_argument('--frames', type=int, default=None, metavar='N',
+                        help="frames of each rendered recording (default: the preset's)")
     parser.add_argument('--ablation', type=Path, default=None, metavar='RECORDING',
                         help='recording for the MRF ablation (HJS N=100 with/without MRF)')
     parser.add_argument('--seeds', default='0,1,2,3,4', help='seeds of the ablation')
@@ -66,6 +79,38 @@ def _error(msg: str) -> int:
     return 2
 
 
+def _parse_seeds(text: str) -> list[int]:
+    """'200-202,7' -> [200, 201, 202, 7]; raises ValueError."""
+    out: list[int] = []
+    for item in filter(None, (s.strip() for s in text.split(','))):
+        a, dash, b = item.partition('-')
+        try:
+            out += list(range(int(a), int(b) + 1)) if dash else [int(a)]
+        except ValueError as err:
+            raise ValueError(f'bad seed {item!r}: expected N or A-B') from err
+    return out
+
+
+def _render(presets: list[str], seeds: list[int], frames: int | None,
+            root: Path) -> dict[str, list[Path]]:
+    """Render (or reuse) one recording per preset and seed under ``root``; preset name ->
+    recording directories. Raises SynthError for an unknown preset."""
+    from mbtrack_ros.synth import generate, get_preset
+
+    groups: dict[str, list[Path]] = {}
+    for name in presets:
+        preset = get_preset(name)
+        groups[name] = []
+        for seed in seeds:
+            rec = root / f'{name}_s{seed}'
+            if not (rec / 'ground_truth.csv').exists():
+                print(f'{_PROG}: rendering {rec.name}', file=sys.stderr)
+                generate(preset, rec, seed=seed, frames=frames, width=preset.size[0],
+                         height=preset.size[1])
+            groups[name].append(rec)
+    return groups
+
+
 def _parse_runs(text: str) -> list[tuple[str, int]]:
     runs = []
     for item in filter(None, (s.strip() for s in text.split(','))):
@@ -86,6 +131,9 @@ def _replay(recording: Path, out: Path, alg: str, n: int, seed: int, max_frames:
     from mbtrack_ros.recording.csvfiles import read_ground_truth, read_tracks
 
     gt = recording / 'ground_truth.csv'
+    label = alg
+    if alg == 'hjs-nomrf':      # 000 §VI-C: HJS without the exclusion MRF
+        alg, mrf = 'hjs', False
     particles = alg not in _NO_PARTICLES
     argv = ['replay', str(recording), '--out', str(out), '--init-from', str(gt),
             '--algorithm', alg, '--seed', str(seed), '--d-occ', str(d_occ),
@@ -115,7 +163,7 @@ def _replay(recording: Path, out: Path, alg: str, n: int, seed: int, max_frames:
     else:  # baselines: no posterior samples (mass and curve not defined)
         at_025 = at_05 = float('nan')
         curve = None
-    return {'recording': recording.name, 'algorithm': alg, 'particles': n, 'seed': seed,
+    return {'recording': recording.name, 'algorithm': label, 'particles': n, 'seed': seed,
             'mrf': mrf, 'd_occ': d_occ, 'sigma': sigma,
             'params': None if params is None else str(params), 'exit_code': code,
             'frames': frames,
@@ -127,8 +175,9 @@ def _replay(recording: Path, out: Path, alg: str, n: int, seed: int, max_frames:
             'mass_0_25': at_025, 'curve': curve}
 
 
-def _aggregate(group: list[dict]) -> dict:
-    """Mean +- std over seeds of one (recording, run), as formatted strings."""
+def _aggregate(group: list[dict], name: str | None = None) -> dict:
+    """Mean +- std over the runs (recordings x seeds) of one (recording or preset ``name``,
+    run), as formatted strings."""
     def ms(key: str, scale: float = 1.0, digits: int = 3, unit: str = '') -> str:
         v = np.array([g[key] for g in group], np.float64) * scale
         if np.all(np.isnan(v)):  # not defined (baselines have no posterior mass)
@@ -138,8 +187,9 @@ def _aggregate(group: list[dict]) -> dict:
         return f'{v.mean():.{digits}f} +- {v.std(ddof=1):.{digits}f}{unit}'
 
     first = group[0]
-    return {'recording': first['recording'], 'algorithm': first['algorithm'],
+    return {'recording': name or first['recording'], 'algorithm': first['algorithm'],
             'particles': first['particles'], 'seeds': [g['seed'] for g in group],
+            'recordings': sorted({g['recording'] for g in group}),
             'frames_per_s': float(np.mean([g['frames_per_s'] for g in group])),
             'mota': ms('mota', 100, 1, ' %'), 'motp_mm': ms('motp_mm', 1, 0, ' mm'),
             'miss_rate': ms('miss_rate', 100, 1, ' %'), 'mismatches': ms('mismatches', 1, 1),
@@ -158,15 +208,21 @@ def run(args: argparse.Namespace) -> int:
         runs = _parse_runs(args.runs)
         seeds = [int(s) for s in args.seeds.split(',') if s.strip()]
         run_seeds = [int(s) for s in args.run_seeds.split(',') if s.strip()]
+        recording_seeds = _parse_seeds(args.recording_seeds)
     except ValueError as err:
         return _error(str(err))
+    presets = [p.strip() for p in args.presets.split(',') if p.strip()]
+    if presets and not recording_seeds:
+        return _error('--recording-seeds is empty')
+    if args.frames is not None and args.frames < 1:
+        return _error(f'--frames must be >= 1, got {args.frames}')
     if not run_seeds:
         return _error('--run-seeds is empty')
     for rec in list(args.recordings) + ([args.ablation] if args.ablation else []):
         if not (rec / 'ground_truth.csv').exists() or not (rec / 'bag').exists():
             return _error(f'{rec} is not a recording directory made by mbtrack synth')
-    if not args.recordings and args.ablation is None:
-        return _error('nothing to do: give recordings and/or --ablation')
+    if not args.recordings and args.ablation is None and not presets:
+        return _error('nothing to do: give recordings, --presets and/or --ablation')
     if args.params is not None:
         from mbtrack_ros.commands.replay import tracker_values_from_params
         from mbtrack_ros.core.tracker import TrackerError
@@ -179,33 +235,43 @@ def run(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     img.mkdir(parents=True, exist_ok=True)
     from mbtrack_ros.evaluation.plots import plot_posterior_curves
+    from mbtrack_ros.synth import SynthError
+
+    groups = {rec.name: [rec] for rec in args.recordings}
+    try:
+        groups.update(_render(presets, recording_seeds, args.frames, out / 'recordings'))
+    except (SynthError, OSError) as err:
+        return _error(str(err).splitlines()[0] if str(err) else type(err).__name__)
 
     rows: list[dict] = []
     summary: list[dict] = []
     lik = {'d_occ': args.d_occ, 'sigma': args.sigma, 'params': args.params}
-    for rec in args.recordings:
+    for gname, recs in groups.items():
         curves = {}
         for alg, n in runs:
             name = f'{alg}_{n}'
             group = []
-            for seed in run_seeds:
-                print(f'{_PROG}: {rec.name} {name} seed {seed}', file=sys.stderr)
-                r = _replay(rec, out / rec.name / f'{name}_s{seed}', alg, n, seed,
-                            args.max_frames, **lik)
-                rows.append(r)
-                group.append(r)
-            summary.append(_aggregate(group))
+            for rec in recs:
+                for seed in run_seeds:
+                    print(f'{_PROG}: {rec.name} {name} seed {seed}', file=sys.stderr)
+                    r = _replay(rec, out / rec.name / f'{name}_s{seed}', alg, n, seed,
+                                args.max_frames, **lik)
+                    rows.append(r)
+                    group.append(r)
+            summary.append(_aggregate(group, gname))
             if group[0]['curve'] is None:  # baselines: no posterior-mass curve
                 continue
             d = np.array(group[0]['curve'][0])
             frac = np.mean([g['curve'][1] for g in group], axis=0)
-            curves[f'{"HJS" if alg == "hjs" else alg[0].upper()}_{n}p'] = (d, frac)
+            label = {'hjs': 'HJS', 'hjs-nomrf': 'HJS-noMRF'}.get(alg, alg[0].upper())
+            curves[f'{label}_{n}p'] = (d, frac)
         if not curves:
             continue
-        plot_posterior_curves(curves, img / f'posterior_{rec.name}{args.tag}.png',
-                              title=f'{rec.name}: posterior mass around the truth'
-                                    + (f' ({len(run_seeds)} seeds)' if len(run_seeds) > 1
-                                       else ''))
+        runs_text = f'{len(recs)} recordings x {len(run_seeds)} seeds' \
+            if len(recs) > 1 else f'{len(run_seeds)} seeds'
+        plot_posterior_curves(curves, img / f'posterior_{gname}{args.tag}.png',
+                              title=f'{gname}: posterior mass around the truth'
+                                    + (f' ({runs_text})' if len(group) > 1 else ''))
     ablation: list[dict] = []
     if args.ablation is not None:
         for mrf in (True, False):
@@ -215,8 +281,10 @@ def run(args: argparse.Namespace) -> int:
                 ablation.append(_replay(args.ablation, out / 'ablation' / tag, 'hjs', 100,
                                         seed, args.max_frames, mrf=mrf, **lik))
     lines = [f'd_occ = {args.d_occ}, sigma = {args.sigma}, seeds {args.run_seeds}'
+             + (f', recording seeds {args.recording_seeds}' if presets else '')
              + (f', parameters of {args.params}' if args.params is not None else '')
-             + '; mean +- standard deviation over seeds', '',
+             + '; mean +- standard deviation over recordings and seeds; frames/s: Table I '
+               '(wall clock of the whole replay)', '',
              '| recording | run | frames/s | MOTA | MOTP | miss | ID switches | '
              'mass@0.25m | mass@0.5m |',
              '| --- | --- |' + ' ---: |' * 7]

@@ -8,7 +8,7 @@ from decimal import Decimal
 from pathlib import Path
 
 from mbtrack_ros.core.camera import CalibrationError
-from mbtrack_ros.recording.calibration_io import FORMATS, UP_AXES, read_calibration
+from mbtrack_ros.recording.calibration_io import FORMATS, UP_AXES, load_calibration
 from mbtrack_ros.recording.video import EPOCH_NS, VideoImportError, import_videos
 
 __all__ = ['add_parser', 'run']
@@ -119,9 +119,10 @@ def run(args: argparse.Namespace) -> int:
         if args.calibration_format == 'camera-info' and not camera_info:
             raise VideoImportError('--calibration-format camera-info needs --camera-info '
                                    'NAME=YAML for each camera')
-        calibration = read_calibration(args.calibration, args.calibration_format,
-                                       camera_info=camera_info, up_axis=args.up_axis,
-                                       floor_offset=args.floor_offset, floor=floor)
+        calibration = load_calibration(
+            args.calibration, args.calibration_format, camera_info=camera_info,
+            up_axis=args.up_axis, floor_offset=args.floor_offset, floor=floor,
+            warn=lambda line: print(f'{_PROG}: warning: {line}', file=sys.stderr))
         summary = import_videos(
             args.outdir, calibration, videos, fps=args.fps, width=args.width,
             start_offsets=offsets, compressed=args.compressed, reference=args.reference,

@@ -18,7 +18,7 @@ import threading
 
 import numpy as np
 
-__all__ = ['BackgroundWriter', 'output_bag_writer', 'serve']
+__all__ = ['BackgroundWriter', 'DiagnosticCounts', 'output_bag_writer', 'serve']
 
 # Bytes of pickled results buffered before they are written to the child's pipe (a frame
 # with 4 tracks pickles to ~2 kB). One pipe write per frame cost the replay's main thread
@@ -30,6 +30,22 @@ _PIPE_BUFFER = 32768
 # lower priority does not block the tracker's writes.
 _F_SETPIPE_SZ = 1031
 _PIPE_SIZE = 1 << 20
+
+
+@dataclasses.dataclass(frozen=True)
+class DiagnosticCounts:
+    """A ``/diagnostics`` message to write at ``stamp_ns``: ``values`` are
+    ``nodes.messages.DiagnosticsSnapshot`` fields (``OutputBagWriter.write_diagnostics``)."""
+
+    stamp_ns: int
+    values: dict
+
+
+def _write_item(writer, item) -> None:
+    if isinstance(item, DiagnosticCounts):
+        writer.write_diagnostics(item.stamp_ns, item.values)
+    else:
+        writer.write(item)
 
 
 def output_bag_writer(path, camera_names: list[str], frame_id: str):
@@ -94,7 +110,7 @@ class BackgroundWriter:
                 return
             if self._error is None:
                 try:
-                    self._writer.write(result)
+                    _write_item(self._writer, result)
                 except BaseException as err:  # reported in the main thread
                     self._error = err
 
@@ -157,6 +173,17 @@ class BackgroundWriter:
         else:
             self._queue.put(item)
 
+    def write_diagnostics(self, stamp_ns: int, values: dict) -> None:
+        """Queue a ``/diagnostics`` message with these counts (:class:`DiagnosticCounts`)."""
+        self.ready()
+        if self._error is not None:
+            raise self._error
+        item = DiagnosticCounts(int(stamp_ns), dict(values))
+        if self._child is not None:
+            self._send(item, flush=False)
+        else:
+            self._queue.put(item)
+
     def close(self) -> None:
         """Write what is queued, close the bag, raise a write error if one happened."""
         self.ready()
@@ -208,7 +235,7 @@ def serve() -> None:
         writer = pickle.load(source)()
         reply(None)
         while (result := pickle.load(source)) is not None:
-            writer.write(result)
+            _write_item(writer, result)
         writer.close()
     except BaseException as err:  # noqa: BLE001 - raised in the parent
         reply(err)

@@ -16,8 +16,11 @@ Tracks are initialised from ground truth (``--init-from``, :mod:`mbtrack_ros.cor
 each person's track starts at its first ground-truth frame and ends after its last one.
 Without ``--init-from`` people are detected, acquired and released automatically
 (:mod:`mbtrack_ros.core.detection`).
-A damaged bag stops the run with a message naming the last good frame; what was tracked up
-to there is kept on disk and the exit code is 1.
+A damaged bag stops the run with a message naming the last good frame (or, for a damaged
+chunk inside the bag, the frame sets lost); what was tracked up to there is kept on disk and
+the exit code is 1. A frame set whose stamp is not later than the last processed one is
+dropped (never processed twice); undecodable images are dropped; both are counted in the
+summary and in the ``/diagnostics`` of ``tracks.mcap``.
 """
 from __future__ import annotations
 
@@ -34,12 +37,13 @@ import numpy as np
 import yaml
 
 from mbtrack_ros.commands.output_writer import BackgroundWriter, output_bag_writer
-from mbtrack_ros.core.camera import CalibrationError, RoomCalibration
+from mbtrack_ros.core.camera import CalibrationError, RoomCalibration, yaml_error_line
 from mbtrack_ros.core.filters import FilterError
 from mbtrack_ros.core.initiation import InitiationError, initial_tracks, plan_key_views
 from mbtrack_ros.core.likelihood import LikelihoodError
 from mbtrack_ros.core.tracker import Tracker, TrackerConfig, TrackerError
 from mbtrack_ros.recording.bag import BagError, FrameSet, RecordingReader, prefetched
+from mbtrack_ros.recording.calibration_io import load_calibration
 from mbtrack_ros.recording.csvfiles import (
     CsvFormatError, GroundTruthRow, TrackRow, read_ground_truth, write_tracks)
 
@@ -47,8 +51,11 @@ __all__ = ['add_parser', 'run']
 
 _PROG = 'mbtrack replay'
 # The tracks.mcap writer runs at this niceness above the replay: it takes the CPU the
-# tracker's threads leave (docs/live_measurements.md, "Offline speed, part 6").
+# tracker's threads leave.
 _WRITER_NICENESS = 10
+# /diagnostics of tracks.mcap: one message per second of message time (as the node's
+# diagnostics_period) and one with the final counts
+_DIAGNOSTICS_PERIOD_NS = 1_000_000_000
 
 
 class _UserError(Exception):
@@ -76,9 +83,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument('--algorithm', default=None,
                         help='hjs (default), separable, joint, or a registered baseline')
     parser.add_argument('--particles', type=int, default=None, metavar='N',
-                        help='particles per person (default 100)')
+                        help='particles per person (default 100, at most 100000)')
     parser.add_argument('--joint-particles', type=int, default=None, metavar='N',
-                        help='joint particles of --algorithm joint (default 10000)')
+                        help='joint particles of --algorithm joint (default 10000, at '
+                             'most 1000000)')
     parser.add_argument('--no-mrf', action='store_true',
                         help='disable the spatial-exclusion MRF prior (ablation)')
     parser.add_argument('--mrf-radius', type=float, default=None, metavar='R',
@@ -141,7 +149,8 @@ def _resolve_inputs(args: argparse.Namespace) -> tuple[Path, RoomCalibration]:
             raise _UserError(f'{bag} is not a recording directory with calibration.yaml; '
                              'give the room calibration with --config ROOM.yaml')
     try:
-        calibration = RoomCalibration.load(config)
+        calibration = load_calibration(config, 'room', warn=lambda line: print(
+            f'{_PROG}: warning: {line}', file=sys.stderr))
     except CalibrationError as err:
         raise _UserError(str(err)) from err
     return bag, calibration
@@ -156,14 +165,24 @@ def tracker_values_from_params(path: Path) -> dict:
     from mbtrack_ros.nodes.tracker_parameters import (  # no rclpy
         TRACKER_PARAMETERS, tracker_config_values)
     try:
-        doc = yaml.safe_load(Path(path).read_text())
+        doc = yaml.safe_load(Path(path).read_text(encoding='utf-8'))
         params = doc['tracker_node']['ros__parameters']
-    except (OSError, yaml.YAMLError, KeyError, TypeError) as err:
-        raise TrackerError(f'{path}: not a tracker_node parameter file ({err})') from err
-    flat: dict = {}
-    for section in ('tracker', 'detection', 'motion'):
-        for key, value in (params.get(section) or {}).items():
-            flat[f'{section}.{key}'] = value
+        flat: dict = {}
+        for section in ('tracker', 'detection', 'motion'):
+            for key, value in (params.get(section) or {}).items():
+                flat[f'{section}.{key}'] = value
+    except UnicodeDecodeError as err:
+        raise TrackerError(f'{path}: not a text file (not UTF-8 at byte {err.start})') \
+            from err
+    except OSError as err:
+        raise TrackerError(f'{path}: not a tracker_node parameter file (cannot read it: '
+                           f'{err.strerror or err})') from err
+    except yaml.YAMLError as err:
+        raise TrackerError(f'{path}: not valid YAML: {yaml_error_line(err)}') from err
+    except (KeyError, TypeError, AttributeError) as err:
+        raise TrackerError(f'{path}: not a tracker_node parameter file (expected '
+                           f'tracker_node: ros__parameters: ..., {type(err).__name__} '
+                           f'{err})') from err
     unknown = sorted(k for k in flat if k.startswith(('tracker.', 'motion.'))
                      and k != 'tracker.seed' and k not in TRACKER_PARAMETERS)
     if unknown:
@@ -313,10 +332,14 @@ def _track_rows(tracker: Tracker, reader: RecordingReader, index: _FrameIndex, s
         for fs in frames:
             if args.max_frames is not None and status['frames'] >= args.max_frames:
                 break
-            frame = index.frame(fs.stamp_ns)
-            if tracker.last_stamp_ns is not None and fs.stamp_ns < tracker.last_stamp_ns:
-                status['skipped'] += 1  # stamps going backwards: skip the frame set
+            for cam, reason in fs.errors.items():  # undecodable images: counted, noted
+                status['bad_images'][cam] = status['bad_images'].get(cam, 0) + 1
+                status['bad_reasons'].setdefault(cam, reason)
+            if tracker.last_stamp_ns is not None and fs.stamp_ns <= tracker.last_stamp_ns:
+                # a repeated or earlier stamp: never process an instant twice
+                status['skipped'] += 1
                 continue
+            frame = index.frame(fs.stamp_ns)
             for tid, init in list(live.items()):
                 if frame is not None and frame > init.last_frame:
                     tracker.remove_track(tid)
@@ -335,6 +358,7 @@ def _track_rows(tracker: Tracker, reader: RecordingReader, index: _FrameIndex, s
                 status['bag_error'] = f'frame set {fs.index}: {err}'
                 break
             status['frames'] += 1
+            status['live_tracks'] = len(result.tracks)
             if not starts:  # automatic detection: ids 1, 2, ... count the births
                 status['tracks'] = max([status['tracks']] + [t.track_id for t in result.tracks])
             status['tracker_s'] += result.timings.get('total', 0.0)
@@ -344,6 +368,10 @@ def _track_rows(tracker: Tracker, reader: RecordingReader, index: _FrameIndex, s
                 recorder.add_frame(result)
             if outputs is not None:  # the tracker_node messages, for offline replay
                 outputs.write(result)
+                if (status['diag_stamp'] is None
+                        or fs.stamp_ns - status['diag_stamp'] >= _DIAGNOSTICS_PERIOD_NS):
+                    outputs.write_diagnostics(fs.stamp_ns, _counts(status))
+                    status['diag_stamp'] = fs.stamp_ns
             for t in result.tracks:
                 vis = max(t.visible_fraction.values()) if t.visible_fraction else float('nan')
                 yield TrackRow(stamp_ns=fs.stamp_ns, frame=fs.index, track_id=t.track_id,
@@ -358,8 +386,22 @@ def _track_rows(tracker: Tracker, reader: RecordingReader, index: _FrameIndex, s
         frames.close()  # stop the reader thread before the reader closes
         for text in reader.warnings:
             print(f'{_PROG}: warning: {text}', file=sys.stderr)
+        if outputs is not None and status.get('last_stamp') is not None:
+            try:  # the final counts; a writer error is raised by outputs.close()
+                outputs.write_diagnostics(status['last_stamp'], _counts(status))
+            except Exception:  # noqa: BLE001
+                pass
         bar.close()
         status['wall_s'] = time.perf_counter() - t_start
+
+
+def _counts(status: dict) -> dict:
+    """The replay's counts as ``DiagnosticsSnapshot`` fields (``/diagnostics`` of
+    tracks.mcap): undecodable images are the bad images, frame sets dropped for a repeated
+    or earlier stamp the duplicates."""
+    bad = sum(status['bad_images'].values())
+    return dict(frame_sets=status['frames'], bad_images=bad, late_frames=status['skipped'],
+                dropped_frames=bad + status['skipped'], tracks=status.get('live_tracks', 0))
 
 
 def _output_bag(out: Path, calibration: RoomCalibration):
@@ -410,13 +452,19 @@ def run(args: argparse.Namespace) -> int:
             out.mkdir(parents=True, exist_ok=True)
         except OSError as err:
             raise _UserError(f'cannot create {out}: {err.strerror or err}') from err
+        for name in ('tracks.csv',) + (('particles.npz',) if args.save_particles else ()):
+            if (out / name).exists() and not (out / name).is_file():
+                raise _UserError(f'{out / name} exists and is not a file')
         index = _FrameIndex(truth or eval_truth or [])
         if not ((bag / 'metadata.yaml').exists() or (bag / 'bag' / 'metadata.yaml').exists()):
             raise _UserError(f'{bag} is not a rosbag2 directory nor a recording directory '
                              '(no metadata.yaml)')
         try:
             with RecordingReader(bag, **_sync_options(args, bag, calibration)) as reader:
-                # opened once (~0.15 s an opening)
+                # opened once (~0.15 s an opening); bounded work per image: at most
+                # MAX_RESCALE times the calibrated size
+                reader.limit_image_sizes({n: (c.width, c.height)
+                                          for n, c in calibration.cameras.items()})
                 first: dict[str, np.ndarray] = {}
                 try:
                     for fs in reader.frames():
@@ -456,7 +504,9 @@ def run(args: argparse.Namespace) -> int:
                         from mbtrack_ros.evaluation.posterior import ParticleRecorder
                         recorder = ParticleRecorder()
                     status = {'frames': 0, 'tracks': 0, 'skipped': 0, 'tracker_s': 0.0,
-                              'wall_s': 0.0, 'last_frame': -1, 'bag_error': None}
+                              'wall_s': 0.0, 'last_frame': -1, 'bag_error': None,
+                              'bad_images': {}, 'bad_reasons': {}, 'diag_stamp': None,
+                              'last_stamp': None}
                     tracks_path = out / 'tracks.csv'
                     rows: list[TrackRow] = []
 
@@ -468,6 +518,9 @@ def run(args: argparse.Namespace) -> int:
 
                     try:
                         write_tracks(tracks_path, collect())
+                    except OSError as err:
+                        raise _UserError(f'cannot write {tracks_path}: '
+                                         f'{err.strerror or err}') from err
                     finally:
                         if outputs is not None:
                             outputs.close()
@@ -490,8 +543,13 @@ def run(args: argparse.Namespace) -> int:
               + (f' and {out / "particles.npz"}' if recorder is not None else ''),
               file=sys.stderr)
         if status['skipped']:
-            print(f'{_PROG}: note: skipped {status["skipped"]} frame set(s) whose stamps went '
-                  'backwards', file=sys.stderr)
+            print(f'{_PROG}: note: dropped {status["skipped"]} frame set(s) whose stamp was '
+                  'not later than the last processed one', file=sys.stderr)
+        if status['bad_images']:
+            print(f'{_PROG}: note: dropped {sum(status["bad_images"].values())} undecodable '
+                  'image(s): ' + '; '.join(f'{cam}: {n} (first: {status["bad_reasons"][cam]})'
+                                           for cam, n in status['bad_images'].items()),
+                  file=sys.stderr)
         if eval_truth is not None:
             last = status.get('last_stamp')
             if last is not None:  # --max-frames or a damaged bag: score the replayed part

@@ -23,8 +23,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument('--seed', type=int, default=0, help='random seed (default 0)')
     parser.add_argument('--compressed', action='store_true',
                         help='store JPEG CompressedImage messages instead of raw rgb8')
-    parser.add_argument('--width', type=int, default=320, help='image width (default 320)')
-    parser.add_argument('--height', type=int, default=240, help='image height (default 240)')
+    parser.add_argument('--width', type=int, default=None,
+                        help="image width (default: the preset's, 320 or 200 for lanz-seq*)")
+    parser.add_argument('--height', type=int, default=None,
+                        help="image height (default: the preset's, 240 or 150 for lanz-seq*)")
     parser.add_argument('--fps', type=float, default=15.0, help='frame rate (default 15)')
     parser.add_argument('--storage', choices=('mcap', 'sqlite3'), default='mcap',
                         help='rosbag2 storage plugin (default mcap)')
@@ -107,19 +109,21 @@ def run(args: argparse.Namespace) -> int:
         return _error('PRESET and OUTDIR are required (or use --list)')
     if args.frames is not None and args.frames <= 0:
         return _error(f'--frames must be positive, got {args.frames}')
-    if not (16 <= args.width <= 4096 and 16 <= args.height <= 4096):
-        return _error(f'image size {args.width}x{args.height} outside 16..4096 pixels')
     if not args.fps > 0:
         return _error(f'--fps must be positive, got {args.fps}')
     try:
         preset = get_preset(args.preset)
-        try:
-            conditions = _conditions(args, preset)
-        except ValueError as err:
-            return _error(str(err))
+        conditions = _conditions(args, preset)
+    except (SynthError, ValueError) as err:
+        return _error(str(err).splitlines()[0])
+    width = preset.size[0] if args.width is None else args.width
+    height = preset.size[1] if args.height is None else args.height
+    if not (16 <= width <= 4096 and 16 <= height <= 4096):
+        return _error(f'image size {width}x{height} outside 16..4096 pixels')
+    try:
         start = time.perf_counter()
         out = generate(preset, args.outdir, seed=args.seed, frames=args.frames,
-                       width=args.width, height=args.height, fps=args.fps,
+                       width=width, height=height, fps=args.fps,
                        ceiling=not args.no_ceiling, compressed=args.compressed,
                        storage=args.storage, progress=sys.stderr.isatty(),
                        conditions=conditions)

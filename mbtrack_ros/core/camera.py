@@ -25,7 +25,16 @@ import yaml
 
 from mbtrack_ros.core import _kernels
 
-__all__ = ['CalibrationError', 'Camera', 'RoomCalibration', 'look_at']
+__all__ = ['MAX_FLOOR_SIDE', 'MAX_IMAGE_SIDE', 'MIN_FLOOR_VIEW', 'CalibrationError',
+           'Camera', 'RoomCalibration', 'check_floor_views', 'look_at', 'yaml_error_line']
+
+#: largest image side a camera may declare, pixels (images larger than this are refused)
+MAX_IMAGE_SIDE = 8192
+#: largest side of the walkable floor, metres (the detection grids cover the whole floor)
+MAX_FLOOR_SIDE = 100.0
+#: share of the floor a camera must see (its image of the floor rectangle) to count as a
+#: useful view; less gets a warning, a room where no camera sees any of it is refused
+MIN_FLOOR_VIEW = 0.03
 
 
 class CalibrationError(ValueError):
@@ -33,13 +42,54 @@ class CalibrationError(ValueError):
 
 
 def _as_matrix(value: Any, shape: tuple[int, ...], what: str) -> np.ndarray:
+    if isinstance(value, (str, bytes)):
+        raise CalibrationError(f'{what}: expected {int(np.prod(shape))} numbers, '
+                               f'got text {value!r:.40}')
     try:
-        array = np.asarray(value, dtype=np.float64).reshape(shape)
-    except (TypeError, ValueError) as err:
-        raise CalibrationError(f'{what}: expected {shape} numbers, got {value!r}') from err
+        array = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError) as err:
+        raise CalibrationError(f'{what}: expected {int(np.prod(shape))} numbers, '
+                               f'got {value!r:.60}') from err
+    if array.size != int(np.prod(shape)):
+        raise CalibrationError(f'{what}: expected {int(np.prod(shape))} numbers, '
+                               f'got {array.size}')
     if not np.all(np.isfinite(array)):
         raise CalibrationError(f'{what}: contains non-finite values')
-    return array
+    return array.reshape(shape)
+
+
+def _number(value: Any, what: str) -> float:
+    """A finite float from a YAML scalar (bool and text refused)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise CalibrationError(f'{what}: expected a number, got {value!r:.40}')
+    try:
+        number = float(value)
+    except OverflowError as err:
+        raise CalibrationError(f'{what}: number out of range') from err
+    if not np.isfinite(number):
+        raise CalibrationError(f'{what}: must be finite, got {number}')
+    return number
+
+
+def _image_side(value: Any, what: str) -> int:
+    """An image side, a whole number of pixels in 1 .. MAX_IMAGE_SIDE."""
+    number = _number(value, what)
+    if number != round(number) or not 1 <= number <= MAX_IMAGE_SIDE:
+        raise CalibrationError(f'{what}: expected a whole number of pixels in 1 .. '
+                               f'{MAX_IMAGE_SIDE}, got {value!r:.40}')
+    return int(number)
+
+
+def _rectangle(value: Any, what: str) -> tuple[float, float, float, float]:
+    """A non-empty finite ``(x_min, y_min, x_max, y_max)`` rectangle, metres."""
+    if isinstance(value, (str, bytes)) or not isinstance(value, (list, tuple, np.ndarray)) \
+            or len(value) != 4:
+        raise CalibrationError(f'{what}: expected [x_min, y_min, x_max, y_max], '
+                               f'got {value!r:.60}')
+    x0, y0, x1, y1 = (_number(v, what) for v in value)
+    if not (x1 > x0 and y1 > y0):
+        raise CalibrationError(f'{what}: empty rectangle {[x0, y0, x1, y1]}')
+    return (x0, y0, x1, y1)
 
 
 @dataclass(frozen=True, eq=False)
@@ -70,34 +120,43 @@ class Camera:
     time_offset: float = 0.0
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, 'K', _as_matrix(self.K, (3, 3), f'{self.name}.K'))
+        what = f'camera {self.name}'
+        object.__setattr__(self, 'K', _as_matrix(self.K, (3, 3), f'{what}: K'))
         try:
             offset = float(self.time_offset)
         except (TypeError, ValueError):
             offset = float('nan')
         if not (np.isfinite(offset) and abs(offset) <= 10.0):
-            raise CalibrationError(f'{self.name}.time_offset must be a number of seconds '
-                                   f'within +-10, got {self.time_offset!r}')
+            raise CalibrationError(f'{what}: time_offset must be a number of seconds within '
+                                   f'+-10, got {self.time_offset!r:.40}')
         object.__setattr__(self, 'time_offset', offset)
         dist = np.zeros(5)
-        given = np.asarray(self.dist, dtype=np.float64).ravel()
+        try:
+            given = (None if isinstance(self.dist, (str, bytes))
+                     else np.asarray(self.dist, dtype=np.float64).ravel())
+        except (TypeError, ValueError, OverflowError):
+            given = None
+        if given is None:
+            raise CalibrationError(f'{what}: distortion_coefficients: expected numbers, got '
+                                   f'{self.dist!r:.40}')
         if given.size > 5:
-            raise CalibrationError(f'{self.name}.dist: at most 5 plumb_bob coefficients')
+            raise CalibrationError(f'{what}: dist: at most 5 plumb_bob coefficients')
+        if not np.all(np.isfinite(given)):  # a NaN coefficient projects every point to NaN
+            raise CalibrationError(f'{what}: distortion_coefficients: contains non-finite '
+                                   'values')
         dist[: given.size] = given
         object.__setattr__(self, 'dist', dist)
-        R = _as_matrix(self.R, (3, 3), f'{self.name}.R')
+        R = _as_matrix(self.R, (3, 3), f'{what}: R')
         if not np.allclose(R @ R.T, np.eye(3), atol=1e-5) or np.linalg.det(R) < 0:
-            raise CalibrationError(f'{self.name}.R is not a rotation matrix')
+            raise CalibrationError(f'{what}: R is not a rotation matrix')
         object.__setattr__(self, 'R', R)
-        object.__setattr__(self, 't', _as_matrix(self.t, (3,), f'{self.name}.t'))
-        if int(self.width) <= 0 or int(self.height) <= 0:
-            raise CalibrationError(f'{self.name}: image size must be positive')
-        object.__setattr__(self, 'width', int(self.width))
-        object.__setattr__(self, 'height', int(self.height))
+        object.__setattr__(self, 't', _as_matrix(self.t, (3,), f'{what}: t'))
+        object.__setattr__(self, 'width', _image_side(self.width, f'{what}: image_width'))
+        object.__setattr__(self, 'height', _image_side(self.height, f'{what}: image_height'))
         if not self.frame_id:
             object.__setattr__(self, 'frame_id', f'{self.name}_optical_frame')
         if self.K[0, 0] <= 0 or self.K[1, 1] <= 0:
-            raise CalibrationError(f'{self.name}.K: focal lengths must be positive')
+            raise CalibrationError(f'{what}: K: focal lengths must be positive')
         # the rotation matrix OpenCV's projectPoints rebuilds from the Rodrigues vector
         # (differs from R in the last bits); project() uses it to give the same pixels
         rvec, _ = cv2.Rodrigues(R)
@@ -257,25 +316,42 @@ class Camera:
     @classmethod
     def from_dict(cls, entry: Mapping[str, Any]) -> Camera:
         """Build a camera from a calibration-file entry; raises :class:`CalibrationError`."""
-        def data(key: str) -> Any:
-            value = entry[key]
-            return value['data'] if isinstance(value, Mapping) else value
+        if not isinstance(entry, Mapping):
+            raise CalibrationError(f'camera entry is not a mapping: {entry!r:.40}')
+        name = str(entry.get('camera_name', '?'))
+        what = f'camera {name}'
 
-        try:
-            name = str(entry['camera_name'])
-            model = entry.get('distortion_model', 'plumb_bob')
-            if model not in ('plumb_bob', 'rational_polynomial') and model:
-                raise CalibrationError(f'{name}: unsupported distortion model {model!r}')
-            dist = np.asarray(data('distortion_coefficients'), dtype=np.float64).ravel()[:5]
-            ext = entry['extrinsics']
-            return cls(name=name, width=entry['image_width'], height=entry['image_height'],
-                       K=data('camera_matrix'), dist=dist, R=ext['rotation'],
-                       t=ext['translation'], frame_id=str(entry.get('frame_id', '')),
-                       time_offset=entry.get('time_offset', 0.0))
-        except KeyError as err:
-            raise CalibrationError(f'camera entry misses key {err}') from err
-        except TypeError as err:
-            raise CalibrationError(f'malformed camera entry: {err}') from err
+        def get(mapping: Mapping[str, Any], key: str) -> Any:
+            if key not in mapping:
+                raise CalibrationError(f'{what}: misses key {key!r}')
+            return mapping[key]
+
+        def data(key: str) -> Any:
+            value = get(entry, key)
+            return get(value, 'data') if isinstance(value, Mapping) else value
+
+        if 'camera_name' not in entry:
+            raise CalibrationError("camera entry misses key 'camera_name'")
+        model = entry.get('distortion_model', 'plumb_bob')
+        if model not in ('plumb_bob', 'rational_polynomial') and model:
+            raise CalibrationError(f'{what}: distortion_model: unsupported model {model!r:.40}')
+        dist = data('distortion_coefficients')
+        if isinstance(dist, (str, bytes)) or not isinstance(dist, (list, tuple)):
+            raise CalibrationError(f'{what}: distortion_coefficients: expected a list of '
+                                   f'numbers, got {dist!r:.40}')
+        dist = _as_matrix(dist, (len(dist),), f'{what}: distortion_coefficients')
+        if np.any(dist[5:] != 0):
+            raise CalibrationError(f'{what}: distortion_coefficients: only plumb_bob '
+                                   '[k1, k2, p1, p2, k3] is supported')
+        ext = get(entry, 'extrinsics')
+        if not isinstance(ext, Mapping):
+            raise CalibrationError(f'{what}: extrinsics: expected a mapping with rotation '
+                                   'and translation')
+        return cls(name=name, width=get(entry, 'image_width'),
+                   height=get(entry, 'image_height'), K=data('camera_matrix'), dist=dist[:5],
+                   R=get(ext, 'rotation'), t=get(ext, 'translation'),
+                   frame_id=str(entry.get('frame_id', '') or ''),
+                   time_offset=entry.get('time_offset', 0.0))
 
 
 def look_at(eye: Iterable[float], target: Iterable[float],
@@ -373,10 +449,16 @@ class RoomCalibration:
     def __post_init__(self) -> None:
         if not self.cameras:
             raise CalibrationError('a room needs at least one camera')
-        x0, y0, x1, y1 = (float(v) for v in self.floor)
-        if not (x1 > x0 and y1 > y0):
-            raise CalibrationError(f'floor bounds are empty: {self.floor}')
+        try:
+            x0, y0, x1, y1 = _rectangle(self.floor, 'floor')
+        except CalibrationError as err:
+            raise CalibrationError(f'floor bounds are empty or not numbers: {err}') from err
+        if max(x1 - x0, y1 - y0) > MAX_FLOOR_SIDE:
+            raise CalibrationError(f'floor: {x1 - x0:.6g} x {y1 - y0:.6g} m exceeds the '
+                                   f'largest floor side {MAX_FLOOR_SIDE:g} m')
         object.__setattr__(self, 'floor', (x0, y0, x1, y1))
+        object.__setattr__(self, 'entry_zones', tuple(
+            _rectangle(z, f'entry_zones[{i}]') for i, z in enumerate(self.entry_zones)))
         object.__setattr__(self, 'exits', tuple(_check_exit(e, self.floor) for e in self.exits))
 
     def exit_depth(self, xy: np.ndarray) -> np.ndarray:
@@ -492,16 +574,25 @@ class RoomCalibration:
             raise CalibrationError('not a room calibration (no "cameras" list)')
         if not doc['cameras']:
             raise CalibrationError('a room needs at least one camera')
-        try:
-            cams = [Camera.from_dict(entry) for entry in doc['cameras']]
-            f = doc['floor']
-            floor = (f['x_min'], f['y_min'], f['x_max'], f['y_max'])
-        except (KeyError, TypeError) as err:
-            raise CalibrationError(f'malformed room calibration: {err}') from err
+        if not isinstance(doc['cameras'], list):
+            raise CalibrationError('cameras: expected a list of camera entries')
+        cams = [Camera.from_dict(entry) for entry in doc['cameras']]
+        f = doc.get('floor')
+        if not isinstance(f, Mapping):
+            raise CalibrationError('floor: expected a mapping x_min, y_min, x_max, y_max')
+        missing = [k for k in ('x_min', 'y_min', 'x_max', 'y_max') if k not in f]
+        if missing:
+            raise CalibrationError(f'floor: misses key {missing[0]!r}')
+        floor = tuple(_number(f[k], f'floor: {k}') for k in ('x_min', 'y_min', 'x_max',
+                                                             'y_max'))
         names = [c.name for c in cams]
         if len(set(names)) != len(names):
             raise CalibrationError(f'duplicate camera names in {names}')
-        zones = tuple(tuple(float(v) for v in z) for z in doc.get('entry_zones', []) or [])
+        zones = doc.get('entry_zones', []) or []
+        if not isinstance(zones, list):
+            raise CalibrationError(f'entry_zones: expected a list of [x_min, y_min, x_max, '
+                                   f'y_max], got {zones!r:.40}')
+        zones = tuple(_rectangle(z, f'entry_zones[{i}]') for i, z in enumerate(zones))
         exits = doc.get('exits', []) or []
         if not isinstance(exits, list):
             raise CalibrationError(f'exits must be a list of [x_min, y_min, x_max, y_max], '
@@ -525,9 +616,48 @@ class RoomCalibration:
             doc = yaml.safe_load(path.read_text(encoding='utf-8'))
         except OSError as err:
             raise CalibrationError(f'cannot read calibration {path}: {err.strerror}') from err
+        except UnicodeDecodeError as err:
+            raise CalibrationError(f'{path}: not a text file (not UTF-8 at byte '
+                                   f'{err.start})') from err
         except yaml.YAMLError as err:
-            raise CalibrationError(f'{path} is not valid YAML: {err}') from err
+            raise CalibrationError(f'{path} is not valid YAML: {yaml_error_line(err)}') \
+                from err
         try:
             return cls.from_dict(doc)
         except CalibrationError as err:
             raise CalibrationError(f'{path}: {err}') from err
+
+    def floor_views(self, samples: int = 41) -> dict[str, float]:
+        """Share of the floor rectangle each camera sees, in [0, 1] by camera name.
+
+        The floor is sampled on a ``samples`` x ``samples`` grid at z = 0; a sample is seen
+        when it lies in front of the camera and projects inside its image.
+        """
+        x0, y0, x1, y1 = self.floor
+        gx, gy = np.meshgrid(np.linspace(x0, x1, samples), np.linspace(y0, y1, samples))
+        points = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], axis=1)
+        return {name: float(np.mean(cam.in_image(cam.project(points))))
+                for name, cam in self.cameras.items()}
+
+
+def yaml_error_line(err: Exception) -> str:
+    """One line for a YAML parser error: the problem and where (line, column)."""
+    problem = getattr(err, 'problem', None) or str(err).strip().splitlines()[0]
+    mark = getattr(err, 'problem_mark', None)
+    where = f' at line {mark.line + 1}, column {mark.column + 1}' if mark is not None else ''
+    return f'{problem}{where}'
+
+
+def check_floor_views(calibration: RoomCalibration, source: str = '') -> list[str]:
+    """The floor-view check of a calibration: one warning per camera that sees less than
+    :data:`MIN_FLOOR_VIEW` of the floor (:meth:`RoomCalibration.floor_views`); raises
+    :class:`CalibrationError` when no camera sees any of it (nothing could be tracked).
+    ``source`` (the file) prefixes every message."""
+    prefix = f'{source}: ' if source else ''
+    views = calibration.floor_views()
+    if not any(share > 0.0 for share in views.values()):
+        raise CalibrationError(f'{prefix}no camera sees the floor {list(calibration.floor)} '
+                               '(check the extrinsics: R maps world to camera, z up)')
+    return [f'{prefix}camera {name}: sees {100 * share:.1f} % of the floor (less than '
+            f'{100 * MIN_FLOOR_VIEW:.0f} %); check its extrinsics'
+            for name, share in views.items() if share < MIN_FLOOR_VIEW]

@@ -16,18 +16,15 @@ Over a time step ``dt`` (seconds, from image stamps) every particle row
   direction instead, ``theta = atan2(vy, vx) + N(0, orientation_noise^2 dt)``. That is
   off by default: the appearance likelihood then selects velocities through the key view
   their direction picks, and a model acquired automatically is annotated with the walking
-  direction of three detection frames, often wrong; on the clear-room recordings the
-  coupled filter's mean velocity kept 0.09-0.49 m/s of a 0.68-0.69 m/s walk (median
-  projection), the uncoupled one 0.68-0.70 m/s (docs/detection.md, "Orientation apart
-  from velocity");
+  direction of three detection frames, often wrong, and a wrong key view then selects
+  particles walking the wrong way (``test_filters`` compares both);
 * sitting label: flips with probability ``1 - exp(-sit_flip_rate * dt)``;
 * the floor bounds of the room reflect positions back inside; the velocity component
   into the wall is set to 0 (``wall_stops``: a person walks up to a wall and stays there;
   a bounce would send the particles that touched the wall away from it at the speed they
-  came, and the cloud of a person walking along a wall drifts off it, docs/detection.md,
-  "A camera that sees little of a target says nothing about it; a wall stops a
-  particle"), or flipped without ``wall_stops``; with exits (rectangles
-  beyond a door that share a piece of the floor's border, ``RoomCalibration.exits``) the
+  came, and the cloud of a person walking along a wall drifts off it), or flipped
+  without ``wall_stops``; with exits (rectangles beyond a door that share a piece of the
+  floor's border, ``RoomCalibration.exits``) the
   walkable region is the floor and the exits: a particle that lands in any of them stays,
   one that lands outside all of them is reflected in the rectangle it started from (the
   floor when it started outside every rectangle).

@@ -333,10 +333,27 @@ class HJSFilter(_MarginalParticleFilter):
     Predict: per target resample + 1-body dynamics (000 Eq. 15), then belief propagation of
     the spatial-exclusion MRF on the particle weights (000 Eq. 16-18, 43) unless
     ``config.use_mrf`` is False (the ablation of 000 §VI-C). Update: the HJS likelihood
-    ``measurement.hjs`` with the BP beliefs as priors (000 Eq. 26-40).
+    ``measurement.hjs`` with the BP beliefs as priors (000 Eq. 26-40). The step's estimate
+    (``TrackUpdate``) weighs the particles by BP belief x likelihood; the particles go on to
+    the next step weighted by the likelihood alone, so that every estimate carries one
+    copy of the exclusion (see the comment in :meth:`step`; docs/hjs_fidelity.md).
     """
 
     name = 'hjs'
+
+    def _exclusion_prior(self, ids: list[int], particles: list[np.ndarray],
+                         prior: list[np.ndarray]) -> list[np.ndarray]:
+        """BP beliefs (000 Eq. 16-18, 43) of the spatial-exclusion MRF on the propagated
+        particles with prior weights ``prior`` (K arrays (N,), normalised)."""
+        cfg = self.config
+        if len(ids) < 2:
+            return prior
+        bp = belief_propagation(
+            [p[:, X:Y + 1] for p in particles], prior, radius=cfg.mrf_radius,
+            epsilon=cfg.mrf_epsilon, theta=cfg.theta_bp, max_iterations=cfg.max_bp_iterations)
+        self.stats['bp_iterations'] = float(bp.iterations)
+        self.stats['bp_kl'] = float(bp.kl)
+        return bp.weights
 
     def step(self, dt: float, measurement: MeasurementModel, images: dict[str, np.ndarray],
              rng: np.random.Generator) -> dict[int, TrackUpdate]:
@@ -349,16 +366,9 @@ class HJSFilter(_MarginalParticleFilter):
         particles = self._propagate(ids, dt)
         t1 = time.perf_counter()
         n = [p.shape[0] for p in particles]
-        if self.config.use_mrf and len(ids) > 1:
-            bp = belief_propagation(
-                [p[:, X:Y + 1] for p in particles], [np.full(m, 1.0 / m) for m in n],
-                radius=self.config.mrf_radius, epsilon=self.config.mrf_epsilon,
-                theta=self.config.theta_bp, max_iterations=self.config.max_bp_iterations)
-            prior = bp.weights
-            self.stats['bp_iterations'] = float(bp.iterations)
-            self.stats['bp_kl'] = float(bp.kl)
-        else:
-            prior = [np.full(m, 1.0 / m) for m in n]
+        prior = [np.full(m, 1.0 / m) for m in n]
+        if self.config.use_mrf:
+            prior = self._exclusion_prior(ids, particles, prior)
         t2 = time.perf_counter()
         models = [self._models[t] for t in ids]
         result = measurement.hjs(particles, prior, models)
@@ -366,6 +376,21 @@ class HJSFilter(_MarginalParticleFilter):
         with np.errstate(divide='ignore'):
             log_prior = [np.log(p) for p in prior]
         updates = self._finish(ids, particles, log_prior, result.loglik, result)
+        if self.config.use_mrf and len(ids) > 1:
+            # The exclusion is a constraint on the joint state at every time step (000
+            # Eq. 13); a hard one is idempotent, delta^T = delta, so the exact joint filter
+            # applies it once however many frames pass. The HJS belief is a product of
+            # marginals: resampled by the beliefs above, the particles would carry this
+            # frame's messages into the next frame, which multiplies in new ones on top,
+            # m^T. Where the other target's position is uncertain (depth seen by one or
+            # two cameras) its message is a smooth ramp, and the repeated ramps push the
+            # tracks apart frame after frame. The particles are therefore carried on with
+            # the weights of the independently propagated prior times the likelihood
+            # (prior to BP: uniform), and every step's estimate carries one copy of the
+            # exclusion, the exact marginal of 000 Eq. 16 for two targets.
+            for k, tid in enumerate(ids):
+                self._logw[tid], _ = normalize_log_weights(
+                    np.asarray(result.loglik[k], dtype=np.float64))
         self.timings = {'predict': t1 - t0, 'mrf': t2 - t1, 'update': t3 - t2,
                         'posterior': time.perf_counter() - t3}
         return updates

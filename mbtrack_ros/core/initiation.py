@@ -144,6 +144,7 @@ def initial_state(rows: Sequence[PersonTruth], index: int = 0, *,
 def plan_key_views(calibration: RoomCalibration, truth: Sequence[PersonTruth], *,
                    search_frames: int = 60, max_views: int = 6, width: float = 0.5,
                    min_area: int = 150, max_overlap: float = 0.05,
+                   others: Sequence[PersonTruth] | None = None,
                    ) -> dict[int, list[KeyView]]:
     """Choose unoccluded key views per person (see the module docstring).
 
@@ -153,13 +154,17 @@ def plan_key_views(calibration: RoomCalibration, truth: Sequence[PersonTruth], *
         search_frames: how many of each person's first ground-truth frames to consider.
         max_views: views per person.
         width: body width, metres.
-        min_area: smallest silhouette area in pixels.
+        min_area: smallest silhouette area in pixels of a 320x240 image (scaled with each
+            camera's pixel count).
         max_overlap: largest fraction of the silhouette a closer person may cover.
+        others: ground truth rows of everybody who may hide the people of ``truth``
+            (default ``truth``).
 
     Returns:
         person id -> key views (possibly empty when the person is never seen unoccluded).
     """
-    people = _by_person(truth)
+    wanted_people = {r.person_id for r in truth}
+    people = _by_person(truth if others is None else others)
     heights = {pid: body_height(rows) for pid, rows in people.items()}
     states = {pid: [initial_state(rows, i) for i in range(len(rows))]
               for pid, rows in people.items()}
@@ -168,7 +173,8 @@ def plan_key_views(calibration: RoomCalibration, truth: Sequence[PersonTruth], *
         for i, r in enumerate(rows):
             by_frame[int(r.frame)].append((pid, i))
     candidates: dict[int, list[KeyView]] = defaultdict(list)
-    wanted = {pid: {int(r.frame) for r in rows[:search_frames]} for pid, rows in people.items()}
+    wanted = {pid: ({int(r.frame) for r in rows[:search_frames]} if pid in wanted_people
+                    else set()) for pid, rows in people.items()}
     frames = sorted(f for f in by_frame if any(f in w for w in wanted.values()))
     for frame in frames:
         present = by_frame[frame]
@@ -176,6 +182,7 @@ def plan_key_views(calibration: RoomCalibration, truth: Sequence[PersonTruth], *
         st = np.array([states[p][i] for p, i in present])
         hs = np.array([heights[p] for p in pids])
         for cam_name, cam in calibration.cameras.items():
+            smallest = min_area * cam.width * cam.height / (320 * 240)
             sil = rasterize(cam, st, BodyShape(width=width), heights=hs,
                             widths=np.full(len(pids), width))
             masks = None
@@ -183,7 +190,7 @@ def plan_key_views(calibration: RoomCalibration, truth: Sequence[PersonTruth], *
                 if frame not in wanted[pid]:
                     continue
                 area = int(sil.area[a])
-                if area < min_area or area != int(sil.full_area[a]):
+                if area < smallest or area != int(sil.full_area[a]):
                     continue  # too small or cut by the image border
                 if masks is None:
                     masks = [sil.mask(b) > 0 for b in range(len(pids))]
@@ -200,8 +207,18 @@ def plan_key_views(calibration: RoomCalibration, truth: Sequence[PersonTruth], *
                 candidates[pid].append(KeyView(pid, frame, int(row.stamp_ns), cam_name,
                                                s.copy(), rel, area))
     plan: dict[int, list[KeyView]] = {}
-    for pid in people:
+    for pid in sorted(wanted_people):
         plan[pid] = _spread_views(candidates.get(pid, []), max_views)
+    unseen = [pid for pid, views in plan.items() if not views]
+    longest = max((len(rows) for rows in people.values()), default=0)
+    if unseen and search_frames < longest:
+        # 000 §VI-A acquires the models before tracking, apart from the sequence: a person
+        # partly hidden all through the first frames gets views from later ones
+        rest = [r for r in truth if r.person_id in unseen]
+        later = plan_key_views(calibration, rest, search_frames=longest,
+                               max_views=max_views, width=width, min_area=min_area,
+                               max_overlap=max_overlap, others=truth)
+        plan.update(later)
     return plan
 
 

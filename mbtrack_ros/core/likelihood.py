@@ -26,25 +26,22 @@ fraction sum(w*) / area is below ``min_visible_share``), the camera adds 0 to al
 particles; otherwise a particle the camera sees fewer than ``min_visible_pixels`` of gets
 the prior-weighted mean of the target's seen particles there. An unseen silhouette would
 otherwise score 0, the best score any camera gives: a track beside a camera was drawn into
-the part of the floor the camera does not see, away from the places it sees in part
-(docs/detection.md, "A camera that sees little of a target says nothing about it; a wall
-stops a particle"). A camera that sees a few pixels of a hidden target still scores its
+the part of the floor the camera does not see, away from the places it sees in part.
+A camera that sees a few pixels of a hidden target still scores its
 places by the occlusion penalty and the background term of the targets in front (Eq. 26,
 Eq. 40), which differ by several nats between places it cannot tell apart: that pulled
-the track of a person no camera saw into the crowd (docs/detection.md, "A camera in which
-a target is hidden says nothing about it"). With exits in the calibration (rectangles
+the track of a person no camera saw into the crowd. With exits in the calibration (rectangles
 beyond a door), a camera on the door's wall cannot see a particle
 in the exit once it is level with the camera or beyond (past the wall): that particle gets
 the mean of its target's other particles in that camera
 (``MeasurementModel._without_hidden``), else the wall would pull every track back from the
-doorway (docs/detection.md, "Exits"). The exit's strip between the floor's edge and the
-wall is in front of the camera and scored as usual (docs/detection.md, "The wall beside
-the door in the synth; the door-wall cameras and the strip in front of the wall").
+doorway. The exit's strip between the floor's edge and the wall is in front of the
+camera and scored as usual.
 
 With automatic detection the frame's foreground masks come too
 (:meth:`MeasurementModel.set_foreground`): each particle then gains ``k f_c`` per camera,
 ``f_c`` the foreground fraction of its silhouette, counted on the spans the camera's kernel
-rasterised (docs/detection.md, "Foreground coverage in the particle weights").
+rasterised.
 
 How w* enters the foreground term (000 Eq. 33): the image histogram of a part is
 accumulated with per-pixel weight w*(u); the rendered (model) histogram of a part is
@@ -339,8 +336,7 @@ class MeasurementModel:
         the exponential in f that the existence update's evidence uses
         (:func:`~mbtrack_ros.core.existence.coverage_log_ratio`).
         The colour likelihood alone lets a track whose person stands still drift onto
-        background that resembles her (docs/detection.md, "Foreground coverage in the
-        particle weights").
+        background that resembles them.
 
         ``masks`` may be a callable returning them: it is called once, by the first camera
         thread that has finished its colour update, so masks still being extracted on

@@ -35,6 +35,7 @@ class TrackEstimate:
         existence: posterior probability that the person exists.
         particles: (N, 6) particle states after the update, or None.
         weights: (N,) normalised particle weights, or None.
+        width: body width of the person's model, metres.
     """
 
     track_id: int
@@ -46,6 +47,7 @@ class TrackEstimate:
     existence: float = 1.0
     particles: np.ndarray | None = None
     weights: np.ndarray | None = None
+    width: float = 0.5
 
     def heading(self, walking_speed: float = WALKING_SPEED) -> float:
         """Radians: the direction of the mean velocity when the person walks (at least

@@ -25,7 +25,14 @@ from mbtrack_ros.core.dynamics import DynamicsError, MotionConfig
 from mbtrack_ros.core.filters import FilterConfig, FilterError, TrackingFilter, make_filter
 from mbtrack_ros.core.state import SIT, STATE_DIM, FrameResult, TrackEstimate, VX, VY, X, Y
 
-__all__ = ['REFERENCE_PIXELS', 'Tracker', 'TrackerConfig', 'TrackerError', 'length_scale']
+__all__ = ['MAX_JOINT_PARTICLES', 'MAX_PARTICLES', 'REFERENCE_PIXELS', 'Tracker', 'TrackerConfig',
+           'TrackerError', 'length_scale']
+
+
+#: most particles per target (``TrackerConfig.particles``, node ``tracker.particles``)
+MAX_PARTICLES = 100_000
+#: most joint particles (``TrackerConfig.joint_particles``, node ``tracker.joint_particles``)
+MAX_JOINT_PARTICLES = 1_000_000
 
 
 class TrackerError(ValueError):
@@ -44,19 +51,16 @@ class TrackerConfig:
         d_occ: occlusion penalty d_occ (000 Eq. 26).
         min_inside_share: a camera that sees less of a target's silhouettes inside its
             image (on average over its particles) says nothing about the target
-            (``LikelihoodConfig.min_inside_share``; docs/detection.md, "A camera that sees
-            little of a target says nothing about it; a wall stops a particle"); 0: only
-            the particles it does not see at all get their target's mean there.
+            (``LikelihoodConfig.min_inside_share``), share in [0, 1]; 0: only the particles
+            it does not see at all get their target's mean there.
         min_visible_share: a camera in which a target is hidden (its prior-expected
             visible fraction sum(w*) / area below this) says nothing about the target
-            (``LikelihoodConfig.min_visible_share``; docs/detection.md, "A camera in which a
-            target is hidden says nothing about it"); 0: never.
-        mrf_radius: spatial-exclusion radius, metres. 000 §VI-A uses 0.4; people who stand
-            or walk side by side are 0.42-0.5 m apart centre to centre, and at 0.4 the prior
-            pushed their tracks apart and off them (30 clear-room runs with automatic
-            detection: 141 -> 103 identity switches, MOTA 95.46 -> 95.65 %;
-            docs/detection.md, "Fresh recordings, the suite and the exclusion radius").
-            ``mbtrack experiments`` keeps 0.4 for 000 §VI.
+            (``LikelihoodConfig.min_visible_share``), share in [0, 1]; 0: never.
+        mrf_radius: spatial-exclusion radius r of the MRF prior (000 Eq. 16), metres, > 0.
+            000 §VI-A uses 0.4; people who stand or walk side by side are 0.42-0.5 m apart
+            centre to centre, and a radius near that pushes their tracks apart (0.3 keeps
+            them; docs/evaluation.md measures the result). ``mbtrack experiments`` keeps
+            0.4 for 000 §VI.
         mrf_epsilon: floor of the exclusion potential.
         use_mrf: apply the MRF prior (False = ablation of 000 §VI-C).
         theta_bp: BP stopping threshold (000 Eq. 43: 0.01).
@@ -89,8 +93,7 @@ class TrackerConfig:
             with visibility/existence probabilities (001), see
             :mod:`mbtrack_ros.core.detection.manager`.
         subsample: the likelihood reads every k-th image row of the silhouettes (1: all
-            rows; a speed option: 2 saved ~6 % of the CPU and cost MOTA on clear-room,
-            docs/live_measurements.md).
+            rows; 2-8: less CPU, less accuracy).
         pipeline_search: with detection, run the search for new people of frame t on the
             detection's worker thread while frame t+1 is filtered, and add its people after
             frame t+1's result (one frame later than without; deterministic, the same live
@@ -99,8 +102,8 @@ class TrackerConfig:
             release, visibility and existence, background update, search) on every k-th
             frame set only (the 1st, (k+1)-th, ... since the start or a reset); the frame
             sets between are only filtered and report the tracks with the visibility and
-            existence of the last detection frame set (1: every frame set; a speed option,
-            its cost in docs/live_measurements.md).
+            existence of the last detection frame set (1: every frame set; larger: less
+            CPU, people found later and kept less well).
         working_pixels: pixels per camera image the tracker works on (default 320 x 240 =
             76800): a camera with more is resized by ``sqrt(working_pixels / (w h))``
             (aspect ratio kept, never enlarged; :meth:`Tracker.step` resizes each image
@@ -108,14 +111,12 @@ class TrackerConfig:
             detection's morphology, mask growth and edge validation, the likelihood's
             smallest visible area) is given at 320 x 240 and scaled with the working size
             (:data:`REFERENCE_PIXELS`), so the same room gives the same results from a
-            640 x 480 or a 1920 x 1080 camera. More pixels cost time and gain little for
-            people a few metres away; fewer (e.g. 19200, 160 x 120) is a speed option
-            (docs/live_measurements.md, part 3). Tracks are in room coordinates whatever
-            the size.
+            640 x 480 or a 1920 x 1080 camera. Fewer pixels (e.g. 19200, 160 x 120): less
+            CPU, less accuracy. Tracks are in room coordinates whatever the size.
         adaptation_rate: with detection, blending rate of the slow, occlusion-aware
             appearance-model adaptation of confirmed tracks (``AdaptationConfig.rate``,
-            :mod:`mbtrack_ros.core.detection.adaptation`; None: its default, 0.05, which
-            docs/detection.md measures in "Appearance adaptation, again"); 0 = off.
+            :mod:`mbtrack_ros.core.detection.adaptation`; None: its default, 0.05), per
+            adaptation in [0, 1]; 0 = off.
     """
 
     algorithm: str = 'hjs'
@@ -160,6 +161,10 @@ class TrackerConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
                 bad(f'{name} must be an integer >= 1, got {value!r}')
+        for name, cap in (('particles', MAX_PARTICLES), ('joint_particles',
+                                                         MAX_JOINT_PARTICLES)):
+            if getattr(self, name) > cap:  # memory grows linearly with the particles
+                bad(f'{name} must be at most {cap}, got {getattr(self, name)}')
         for name in ('min_inside_share', 'min_visible_share'):
             share = getattr(self, name)
             if isinstance(share, bool) or not (isinstance(share, (int, float))
@@ -466,8 +471,7 @@ class Tracker:
         A track's particles then do not depend on how many other tracks there are or
         what they drew, so a change that touches one track (a birth a frame later, a
         release elsewhere in the room) leaves the draws of the others as they were; with
-        one shared generator it reordered every later draw of every track
-        (docs/detection.md, "One random stream per track")."""
+        one shared generator it would reorder every later draw of every track."""
         key = tuple(int(v) % 2 ** 64 for v in (stamp_ns, round(float(state[X]) * 1000),
                                                 round(float(state[Y]) * 1000)))
         return np.random.default_rng(np.random.SeedSequence(self._entropy, spawn_key=key))
@@ -593,7 +597,8 @@ class Tracker:
                 track_id=tid, mean=u.mean, covariance=u.covariance,
                 height=self._heights.get(tid, float('nan')),
                 visible_fraction=dict(u.visible_fraction), existence=1.0,
-                particles=u.particles, weights=u.weights))
+                particles=u.particles, weights=u.weights,
+                width=float(getattr(self._models.get(tid), 'width', 0.5))))
         timings = {'prepare': t1 - t0}
         timings.update(self.filter.timings)
         timings['filter'] = t2 - t1

@@ -17,6 +17,9 @@ required), ``rate`` (playback speed factor, 1.0), ``loop`` (restart at the end, 
 ``clock_subscribers`` (with ``wait_for_subscribers``, also wait until ``/clock`` has this many
 matched subscribers, 0: a tracker with ``use_sim_time`` plus any listener that times
 frames by their ``/clock``, so that none misses the first ones).
+
+A damaged bag (truncated MCAP, unreadable chunk) is played up to the damage, as
+``mbtrack replay`` reads it; the player then logs the damage and exits with code 1.
 """
 from __future__ import annotations
 
@@ -24,6 +27,7 @@ import importlib
 import sys
 import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import rclpy
@@ -36,6 +40,7 @@ from rosgraph_msgs.msg import Clock
 
 from mbtrack_ros.nodes.conversions import ns_to_stamp
 from mbtrack_ros.nodes.transport import use_large_shm_segment
+from mbtrack_ros.recording.bag import BagError, stream_mcap
 
 __all__ = ['BagPlayer', 'PlayerError', 'main', 'message_class']
 
@@ -44,6 +49,14 @@ IMAGE_TYPES = {'sensor_msgs/msg/Image', 'sensor_msgs/msg/CompressedImage'}
 
 class PlayerError(RuntimeError):
     """The bag cannot be played (one-line reason)."""
+
+
+@dataclass(frozen=True)
+class _Connection:
+    """A topic of a damaged bag read without rosbags' index."""
+
+    topic: str
+    msgtype: str
 
 
 def message_class(msgtype: str) -> type:
@@ -100,12 +113,28 @@ class BagPlayer(Node):
         self.subscriber_timeout = float(declare(
             'subscriber_timeout', 30.0, 'longest wait for subscribers, s', 0.0, 3600.0))
         topics = [t for t in declare('topics', [''], 'topics to play (default all)') if t]
+        self.damaged: str | None = None  # why playing stopped before the end of the bag
+        self._mcap_files: list[Path] = []
         try:
             self._reader = AnyReader([self.bag])
             self._reader.open()
+            conns = self._reader.connections
         except Exception as err:  # rosbags raises several types for damaged bags
-            raise PlayerError(f'cannot open bag {self.bag}: {err}') from err
-        self._conns = [c for c in self._reader.connections if not topics or c.topic in topics]
+            self._reader = None
+            self._mcap_files = sorted(self.bag.glob('*.mcap'))
+            if not self._mcap_files:
+                raise PlayerError(f'cannot open bag {self.bag}: {err}') from err
+            # a truncated MCAP has no summary: play its complete records up to the damage
+            self.get_logger().warning(f'bag {self.bag} is damaged ({err}); playing it up '
+                                      'to the damage')
+            found: dict[str, str] = {}
+            try:
+                for topic, msgtype, _, _ in stream_mcap(self._mcap_files):
+                    found.setdefault(topic, msgtype)
+            except BagError:
+                pass
+            conns = [_Connection(t, m) for t, m in found.items()]
+        self._conns = [c for c in conns if not topics or c.topic in topics]
         if not self._conns:
             raise PlayerError(f'bag {self.bag} has none of the requested topics')
         # reliable publishers match both best-effort (sensor data) and reliable subscribers;
@@ -156,13 +185,38 @@ class BagPlayer(Node):
         finally:
             self.done.set()
 
+    def _messages(self):
+        """(topic, log time ns, cdr) of the played topics; a damaged part ends the pass
+        (``damaged`` says why) after every message before it."""
+        topics = {c.topic for c in self._conns}
+        if self._reader is not None:
+            source = ((c.topic, stamp, raw)
+                      for c, stamp, raw in self._reader.messages(connections=self._conns))
+        else:
+            source = ((topic, stamp, raw)
+                      for topic, _, stamp, raw in stream_mcap(self._mcap_files, topics))
+        played = 0
+        try:
+            for item in source:
+                played += 1
+                yield item
+        except Exception as err:  # damaged chunk, truncated file ...
+            self.damaged = f'{type(err).__name__}: {str(err)[:200]}'
+            self.get_logger().error(f'bag {self.bag} is damaged after {self.published} '
+                                    f'messages: {self.damaged}')
+            return
+        declared = sum(getattr(c, 'msgcount', 0) for c in self._conns)
+        if self._reader is not None and played < declared:  # a chunk the reader skipped
+            self.damaged = f'{declared - played} of its {declared} messages unreadable'
+            self.get_logger().error(f'bag {self.bag} is damaged: {self.damaged}')
+
     def _play_once(self) -> bool:
         """One pass through the bag; False when stopped before the end."""
         wall0 = bag0 = None
         clock = Clock()
         last = None  # bag time of the previous message
         burst0 = 0.0
-        for conn, stamp, raw in self._reader.messages(connections=self._conns):
+        for topic, stamp, raw in self._messages():
             if self._stop.is_set():
                 return False
             if wall0 is None:
@@ -178,15 +232,16 @@ class BagPlayer(Node):
                     ns_to_stamp(stamp, clock.clock)
                     self._clock.publish(clock)
                 last = stamp
-            self._pubs[conn.topic].publish(raw if isinstance(raw, bytes) else bytes(raw))
+            self._pubs[topic].publish(raw if isinstance(raw, bytes) else bytes(raw))
             self.published += 1
         if last is not None:
             self.burst_seconds.append(time.monotonic() - burst0)
-        return True
+        return self.damaged is None or not self.loop
 
     def destroy_node(self) -> None:
         self._stop.set()
-        self._reader.close()
+        if self._reader is not None:
+            self._reader.close()
         super().destroy_node()
 
 
@@ -209,6 +264,10 @@ def main(args: list[str] | None = None) -> int:
             f'published {node.published} messages from {node.bag}; one stamp\'s messages '
             f'took p50 {1e3 * bursts[len(bursts) // 2]:.1f} ms, '
             f'p95 {1e3 * bursts[min(len(bursts) - 1, int(0.95 * len(bursts)))]:.1f} ms')
+        if node.damaged is not None:
+            print(f'bag_player: error: {node.bag} is damaged; played {node.published} '
+                  f'messages up to the damage ({node.damaged})', file=sys.stderr)
+            code = 1
     except PlayerError as err:
         print(f'bag_player: error: {err}', file=sys.stderr)
         code = 2

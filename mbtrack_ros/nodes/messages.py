@@ -260,6 +260,10 @@ class DiagnosticsSnapshot:
             raised.
         queued_sets, queue_peak: frame sets waiting for the tracker now, and the most that
             waited since the previous message.
+        dropped_sets_repeated: of ``dropped_frames``, frame sets dropped because their stamp
+            equals the last processed one (never processed twice).
+        reason: why no frame set formed (a message sent on the wall-clock period while
+            none does; WARN when not empty).
     """
 
     input_rate_hz: dict[str, float] = field(default_factory=dict)
@@ -276,6 +280,8 @@ class DiagnosticsSnapshot:
     dropped_sets_error: int = 0
     queued_sets: int = 0
     queue_peak: int = 0
+    dropped_sets_repeated: int = 0
+    reason: str = ''
 
 
 def diagnostics_message(stamp_ns: int, snap: DiagnosticsSnapshot, *,
@@ -288,7 +294,10 @@ def diagnostics_message(stamp_ns: int, snap: DiagnosticsSnapshot, *,
     msg = DiagnosticArray()
     msg.header = make_header(stamp_ns, '')
     main = DiagnosticStatus(name=name, hardware_id=hardware_id)
-    if snap.missing_cameras:
+    if snap.reason:
+        main.level = DiagnosticStatus.WARN
+        main.message = snap.reason
+    elif snap.missing_cameras:
         main.level = DiagnosticStatus.WARN
         main.message = 'missing camera(s): ' + ', '.join(snap.missing_cameras)
     else:
@@ -303,6 +312,7 @@ def diagnostics_message(stamp_ns: int, snap: DiagnosticsSnapshot, *,
         kv('dropped frames (late or duplicate)', snap.late_frames),
         kv('dropped frame sets (queue full)', snap.dropped_sets_full),
         kv('dropped frame sets (step error)', snap.dropped_sets_error),
+        kv('dropped frame sets (repeated stamp)', snap.dropped_sets_repeated),
         kv('queued frame sets', snap.queued_sets),
         kv('queued frame sets (peak)', snap.queue_peak)]
     statuses = [main]

@@ -28,10 +28,12 @@ camera.<name>.time_offset       double     s added to the camera's stamps to giv
                                            calibration's ``time_offset``, else 0.0)
 output_frame_id                 string     frame of all outputs ('' = calibration frame)
 rescale_images                  bool       resize images whose size differs from the
-                                           calibration instead of dropping them (false)
+                                           calibration (up to 4 times larger per side)
+                                           instead of dropping them (false)
 debug_images                    bool       always publish ``~/debug/<cam>/occlusion``
                                            (default false: only when subscribed)
-diagnostics_period              double     seconds of message time between /diagnostics (1.0)
+diagnostics_period              double     seconds of message time between /diagnostics (1.0);
+                                           of wall-clock time while no frame set forms
 init_ground_truth               string     ground-truth CSV to start/end tracks from ('')
 output_bag                      string     also write every output to this MCAP bag ('')
 max_pending_sets                int        frame sets queued for the tracker; the oldest
@@ -42,27 +44,32 @@ executor                        string     ``events`` (rclpy EventsExecutor, def
 warm_up                         bool       run the pipeline on a few synthetic frames at
                                            start so the first real frames pay no kernel
                                            loading (true)
+outputs.persons                 bool       REP-155 persons: /humans/persons/tracked and
+                                           per person location_confidence, anonymous
+                                           (true; needs hri_msgs)
+outputs.detections              bool       ~/detections vision_msgs/Detection3DArray
+                                           (true; needs vision_msgs)
+outputs.tf                      bool       person_<id> frames on /tf (true; needs
+                                           tf2_msgs)
 tracker.algorithm               string     hjs | separable | joint | registered baseline
 tracker.particles               int        particles per target (100)
-tracker.subsample               int        likelihood on every k-th image row (1; a speed
-                                           option that costs accuracy, see
-                                           docs/live_measurements.md)
+tracker.subsample               int        likelihood on every k-th image row, 1-8 (1; a
+                                           speed option that costs accuracy)
 tracker.pipeline_search         bool       search frame t for new people on a worker
                                            thread while frame t+1 is filtered (false;
                                            people start one frame later)
 tracker.working_pixels          int        pixels per camera image the tracker works
                                            on; larger images are resized once per frame
-                                           (76800 = 320x240; fewer is a speed option,
-                                           see docs/live_measurements.md)
+                                           (76800 = 320x240; fewer: less CPU, less
+                                           accuracy)
 tracker.joint_particles         int        joint-filter particles (10000)
 tracker.sigma                   double     likelihood width, 000 Eq. 19 (0.12)
 tracker.d_occ                   double     occlusion penalty, 000 Eq. 26 (0.15)
 tracker.min_inside_share        double     a camera that sees less of a target inside its
-                                           image says nothing about it (0.5,
-                                           docs/detection.md)
+                                           image says nothing about it, share 0-1 (0.5)
 tracker.min_visible_share       double     a camera in which a target is hidden behind
                                            others (expected visible fraction below this)
-                                           says nothing about it (0.1, docs/detection.md)
+                                           says nothing about it, share 0-1 (0.1)
 tracker.mrf_radius              double     exclusion radius, m (0.3; 000 §VI-A: 0.4)
 tracker.use_mrf                 bool       spatial-exclusion MRF prior (true)
 tracker.seed                    int        random seed, -1 = fresh entropy (-1)
@@ -93,11 +100,10 @@ detection.reuse_in_entry_zones  bool       tracks released in front of the door 
                                            once (their people are taken to have left)
 detection.every                 int        run the detection pipeline (release, existence,
                                            background, search) on every k-th frame set
-                                           only (1; a speed option that costs accuracy,
-                                           see docs/live_measurements.md)
+                                           only (1; a speed option that costs accuracy)
 detection.adaptation_rate       double     blending rate of the slow appearance-model
                                            adaptation of confirmed, unoccluded tracks;
-                                           0 = off (0.05, docs/detection.md)
+                                           0 = off (0.05)
 motion.velocity_noise           double     velocity diffusion, m/s per sqrt(s) (0.6)
 motion.position_noise           double     extra position diffusion, m per sqrt(s) (0.15)
 motion.orientation_noise        double     orientation diffusion, rad per sqrt(s) (1.0)
@@ -105,7 +111,7 @@ motion.max_speed                double     velocities are clipped to this, m/s (
 motion.orientation_follows_velocity
                                 bool       a walking body faces its direction of motion,
                                            as in 000 §VI (false: the orientation is a
-                                           random walk of its own, docs/detection.md)
+                                           random walk of its own)
 motion.wall_stops               bool       a particle reaching the floor's border loses its
                                            velocity into it (true; false: it bounces)
 ==============================  =========  =================================================
@@ -125,8 +131,10 @@ from mbtrack_ros.core.camera import CalibrationError, RoomCalibration
 from mbtrack_ros.core.dynamics import MotionConfig
 from mbtrack_ros.core.detection.manager import AutoDetectionConfig
 from mbtrack_ros.core.detection.release import ReleaseConfig
-from mbtrack_ros.core.tracker import TrackerConfig, TrackerError
+from mbtrack_ros.core.tracker import (
+    MAX_JOINT_PARTICLES, MAX_PARTICLES, TrackerConfig, TrackerError)
 from mbtrack_ros.nodes.tracker_parameters import TRACKER_PARAMETERS, tracker_config_values
+from mbtrack_ros.recording.calibration_io import load_calibration
 
 __all__ = ['EXECUTORS', 'RELIABILITIES', 'TRACKER_PARAMETERS', 'TRANSPORTS', 'CameraInput',
            'NodeParams', 'ParamsError', 'declare_and_read']
@@ -170,6 +178,9 @@ class NodeParams:
     executor: str = 'events'
     warm_up: bool = True
     qos_depth: int = 10
+    outputs_persons: bool = True
+    outputs_detections: bool = True
+    outputs_tf: bool = True
     frame_rate: float = 0.0
     time_offsets: dict[str, float] = field(default_factory=dict)
 
@@ -216,8 +227,14 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
                  'are dispatched; the tracker step has its own thread', {}),
     'warm_up': (True, 'run the tracker on a few synthetic frames at start (loads every '
                 'compiled kernel before the first real frame)', {}),
+    'outputs.persons': (True, 'REP-155 persons: /humans/persons/tracked, per person '
+                        'location_confidence and anonymous (needs hri_msgs)', {}),
+    'outputs.detections': (True, '~/detections as vision_msgs/Detection3DArray (needs '
+                           'vision_msgs)', {}),
+    'outputs.tf': (True, 'a person_<id> frame per track on /tf under the output frame '
+                   '(needs tf2_msgs)', {}),
     'tracker.algorithm': ('hjs', 'hjs | separable | joint | a registered baseline', {}),
-    'tracker.particles': (100, 'particles per target (000 §VI)', _ir(1, 100_000)),
+    'tracker.particles': (100, 'particles per target (000 §VI)', _ir(1, MAX_PARTICLES)),
     'tracker.subsample': (1, 'likelihood on every k-th image row (speed option)', _ir(1, 8)),
     'tracker.pipeline_search': (False, 'search frame t for new people on a worker thread '
                                 'while frame t+1 is filtered (TrackerConfig.pipeline_search)',
@@ -226,7 +243,8 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
                                'larger images are resized once per frame, every pixel '
                                'threshold follows (TrackerConfig.working_pixels)',
                                _ir(4800, 100_000_000)),
-    'tracker.joint_particles': (10_000, 'joint-filter particles', _ir(1, 1_000_000)),
+    'tracker.joint_particles': (10_000, 'joint-filter particles',
+                                _ir(1, MAX_JOINT_PARTICLES)),
     'tracker.sigma': (0.12, 'likelihood width sigma (000 Eq. 19)', _fr(1e-4, 10.0)),
     'tracker.d_occ': (0.15, 'occlusion penalty d_occ (000 Eq. 26)', _fr(0.0, 10.0)),
     'tracker.min_inside_share': (0.5, 'a camera that sees less of a target\'s silhouettes '
@@ -323,10 +341,13 @@ def declare_and_read(node: Node) -> tuple[NodeParams, RoomCalibration]:
         raise ParamsError('parameter calibration_file is required')
     if not Path(calib_file).is_file():
         raise ParamsError(f'calibration_file {calib_file!r} does not exist')
+    calibration_warnings: list[str] = []
     try:
-        calibration = RoomCalibration.load(calib_file)
+        calibration = load_calibration(calib_file, 'room', warn=calibration_warnings.append)
     except CalibrationError as err:
         raise ParamsError(str(err)) from err
+    for line in calibration_warnings:
+        node.get_logger().warning(line)
     names = [str(c) for c in v['cameras'] if str(c)] or calibration.names
     try:
         calibration = calibration.subset(names)
@@ -394,7 +415,9 @@ def declare_and_read(node: Node) -> tuple[NodeParams, RoomCalibration]:
         diagnostics_period_ns=int(round(v['diagnostics_period'] * 1e9)),
         init_ground_truth=gt, output_bag=str(v['output_bag']),
         max_pending_sets=int(v['max_pending_sets']), executor=executor,
-        warm_up=bool(v['warm_up']), qos_depth=int(v['qos_depth']))
+        warm_up=bool(v['warm_up']), qos_depth=int(v['qos_depth']),
+        outputs_persons=bool(v['outputs.persons']),
+        outputs_detections=bool(v['outputs.detections']), outputs_tf=bool(v['outputs.tf']))
     return params, calibration
 
 

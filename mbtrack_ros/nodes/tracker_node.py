@@ -5,9 +5,19 @@ Inputs (``qos_profile_sensor_data``): one image topic per camera (``sensor_msgs/
 Outputs (reliable, stamped with the frame set's time: the latest capture time of its images,
 :mod:`mbtrack_ros.recording.sync`; frame ``output_frame_id``):
 ``~/people`` (PoseArray), ``~/tracks`` (PointCloud2), ``~/markers`` (MarkerArray),
-``~/debug/<camera>/occlusion`` (Image, only computed when subscribed or enabled) and
-``/diagnostics`` (DiagnosticArray). See :mod:`mbtrack_ros.nodes.params` for parameters and
+``~/debug/<camera>/occlusion`` (Image, only computed when subscribed or enabled),
+``/diagnostics`` (DiagnosticArray), and the standard people outputs of
+:mod:`mbtrack_ros.nodes.people_outputs` (REP-155 ``/humans/persons/...``,
+``~/detections``, ``/tf``). See :mod:`mbtrack_ros.nodes.params` for parameters and
 :mod:`mbtrack_ros.nodes.messages` for the message layouts.
+
+Bad input: an image is checked before it is decoded (frame id, a zero stamp, the size its
+header declares against the calibration, :mod:`mbtrack_ros.recording.images`); a refused
+image is counted in ``/diagnostics`` (``dropped images (bad)``) and logged once per cause
+and camera every 10 s. A frame set whose stamp equals the last processed one is dropped and
+counted (``dropped frame sets (repeated stamp)``). While no frame set forms, ``/diagnostics``
+is still published every ``diagnostics_period`` seconds of wall-clock time, with the counts
+and the reason.
 
 Threading: image callbacks only convert the image and hand it to the
 :class:`~mbtrack_ros.recording.sync.FrameSetSynchronizer`; complete (or timed-out) frame sets
@@ -15,8 +25,7 @@ are queued (at most ``max_pending_sets``) and the tracker step runs in its own p
 woken by a condition variable, so it overlaps with message reception (the numba kernels and
 OpenCV release the GIL). The callbacks are dispatched by rclpy's ``EventsExecutor`` (C++
 event queue; ``executor`` parameter): the Python ``MultiThreadedExecutor`` rebuilt its wait
-set for every message and cost an idle node tens of ms per frame set
-(docs/live_measurements.md). Time is message time only.
+set for every message, which costs CPU and latency. Time is message time only.
 
 Track start: with ``detection.enabled`` the tracker step detects, acquires and releases
 people itself (``TrackerConfig.detection``); with ``init_ground_truth`` tracks are started and
@@ -53,14 +62,17 @@ from mbtrack_ros.nodes.conversions import (
     ImageConversionError, compressed_to_rgb, image_to_rgb, rgb_to_image, stamp_to_ns)
 from mbtrack_ros.nodes.debug import occlusion_layers, shadow_layer
 from mbtrack_ros.nodes.params import NodeParams, ParamsError, declare_and_read
+from mbtrack_ros.nodes.people_outputs import PeopleFrameBuilder, PeopleOutputs
 from mbtrack_ros.nodes.transport import use_large_shm_segment
 from mbtrack_ros.recording.csvfiles import CsvFormatError, GroundTruthRow, read_ground_truth
+from mbtrack_ros.recording.images import MAX_RESCALE
 from mbtrack_ros.recording.sync import FrameSet, FrameSetSynchronizer
 
 __all__ = ['GroundTruthInitializer', 'TrackerNode', 'main', 'make_executor', 'spin']
 
 WARN_PERIOD_S = 10.0
 RATE_WINDOW_NS = 1_000_000_000  # input rates in /diagnostics: the last second of stamps
+RATE_WINDOW_MAX = 1024  # stamps kept per camera for the rate (bounded under any input)
 
 
 class GroundTruthInitializer:
@@ -186,7 +198,13 @@ class TrackerNode(Node):
         self._shown: set[int] = set()  # track ids with markers on screen
         self._pending: deque[FrameSet] = deque()
         self._warned: dict[str, float] = {}
-        self._dropped = 0  # images refused (bad encoding/size)
+        self._dropped = 0  # images refused (bad encoding/size/frame id/stamp)
+        self._received = 0  # images received
+        self._last_bad: tuple[str, str] | None = None  # (camera, cause) of the last refusal
+        self._repeated_sets = 0  # frame sets dropped: stamp equal to the last processed one
+        self._newest_stamp = 0  # newest image stamp received (for idle /diagnostics)
+        self._last_diag_wall = time.monotonic()  # wall time of the last /diagnostics
+        self._at_last_diag = (0, 0, 0)  # received, refused, late at the last /diagnostics
         self._dropped_sets = 0  # frame sets lost: queue full (tracker behind) or step error
         self._dropped_full = 0  # of these, because the queue was full
         self._queue_peak = 0  # longest frame-set queue since the last /diagnostics
@@ -194,7 +212,8 @@ class TrackerNode(Node):
         self._last_stamp: int | None = None
         self._last_diag: int | None = None
         self._step_times: list[float] = []
-        self._rate_window: dict[str, list[int]] = {c: [] for c in p.camera_names}
+        self._rate_window: dict[str, deque[int]] = {
+            c: deque(maxlen=RATE_WINDOW_MAX) for c in p.camera_names}
         self._last_missing: tuple[str, ...] = ()
         self._ground_truth: GroundTruthInitializer | None = None
         if p.init_ground_truth:
@@ -207,13 +226,21 @@ class TrackerNode(Node):
                 self.get_logger().warning(
                     'no unoccluded key view in the ground truth for person(s) '
                     f'{self._ground_truth.unplanned}: they will not be tracked')
+        people = PeopleFrameBuilder(p.output_frame_id, persons=p.outputs_persons,
+                                    detections=p.outputs_detections, tf=p.outputs_tf)
+        if people.missing:
+            self.get_logger().warning(
+                f'output(s) {", ".join(people.missing)} off: their message packages '
+                '(hri_msgs, vision_msgs, tf2_msgs) are not installed (python3 -m '
+                'mbtrack_ros.bootstrap builds them into its environment)')
         self._output_bag = None
         if p.output_bag:
             from mbtrack_ros.nodes.output_bag import OutputBagError, OutputBagWriter
             try:
                 self._output_bag = OutputBagWriter(p.output_bag, self.calibration,
                                                    p.camera_names,
-                                                   frame_id=p.output_frame_id)
+                                                   frame_id=p.output_frame_id,
+                                                   people=any(people.enabled.values()))
             except OutputBagError as err:
                 raise ParamsError(f'output_bag: {err}') from err
 
@@ -226,6 +253,7 @@ class TrackerNode(Node):
                                               output_qos)
         self.pub_debug = {c: self.create_publisher(Image, f'~/debug/{c}/occlusion', output_qos)
                           for c in p.camera_names}
+        self.people_outputs = PeopleOutputs(self, people, output_qos)
         # inputs: cheap callbacks, one mutually exclusive group per camera (frames of one
         # camera stay in order under a multi-threaded executor)
         self._subs = []
@@ -256,7 +284,7 @@ class TrackerNode(Node):
     def _warm_up(self) -> None:
         """Load every compiled kernel of the step now (:func:`warm_up`, a throwaway
         tracker): without it the first frame sets with people queued up behind kernel
-        loading (docs/live_measurements.md)."""
+        loading."""
         from mbtrack_ros.core.detection.detector import is_ceiling
         from mbtrack_ros.nodes.warmup import warm_up
 
@@ -299,9 +327,12 @@ class TrackerNode(Node):
             self._warned[cause] = now
             self.get_logger().warning(text)
 
-    def _count_drop(self) -> None:
+    def _refuse(self, camera: str, cause: str, text: str) -> None:
+        """Drop an image: count it and log once per (camera, cause) every WARN_PERIOD_S."""
         with self._lock:
             self._dropped += 1
+            self._last_bad = (camera, cause)
+        self.warn_once(f'{camera}:{cause}', f'{camera}: dropping image ({cause}): {text}')
 
     def _on_camera_info(self, camera: str, msg: CameraInfo) -> None:
         cam = self.calibration.cameras[camera]
@@ -310,28 +341,38 @@ class TrackerNode(Node):
                            f'{msg.width}x{msg.height}, the calibration {cam.width}x{cam.height}')
 
     def _on_image(self, camera: str, msg: Image | CompressedImage) -> None:
+        """Check (before decoding: frame id, stamp, declared size), convert, synchronise."""
         stamp = stamp_to_ns(msg.header.stamp)
-        try:
-            rgb = (compressed_to_rgb(msg) if isinstance(msg, CompressedImage)
-                   else image_to_rgb(msg))
-        except ImageConversionError as err:
-            self._count_drop()
-            self.warn_once(f'{camera}:convert', f'{camera}: dropping bad image: {err}')
-            return
         cam = self.calibration.cameras[camera]
-        if rgb.shape[:2] != (cam.height, cam.width):
-            if not self.params.rescale_images:
-                self._count_drop()
-                self.warn_once(f'{camera}:size', f'{camera}: image is {rgb.shape[1]}x'
-                               f'{rgb.shape[0]}, calibration {cam.width}x{cam.height}: '
-                               'dropped (set rescale_images to resize)')
-                return
-            rgb = cam.fit(rgb)  # the tracker resizes it to its working size
-        if msg.header.frame_id and msg.header.frame_id != cam.frame_id:
-            self.warn_once(f'{camera}:frame', f'{camera}: unexpected frame id '
-                           f'{msg.header.frame_id!r} (calibration: {cam.frame_id!r})')
         with self._lock:
-            self._rate_window[camera].append(stamp)
+            self._received += 1
+            self._newest_stamp = max(self._newest_stamp, stamp)
+        if msg.header.frame_id and msg.header.frame_id != cam.frame_id:
+            self._refuse(camera, 'frame-id', f'unexpected frame id '
+                         f'{msg.header.frame_id[:60]!r} (calibration: {cam.frame_id!r}; '
+                         'set frame_id of this camera in the calibration file)')
+            return
+        if stamp <= 0:
+            self._refuse(camera, 'stamp', 'the header stamp is zero (not set by the driver)')
+            return
+        # rescale_images: at most MAX_RESCALE times the calibrated size on a side
+        scale = MAX_RESCALE if self.params.rescale_images else 1.0
+        try:
+            rgb = (compressed_to_rgb(msg, expected=(cam.width, cam.height), max_scale=scale)
+                   if isinstance(msg, CompressedImage)
+                   else image_to_rgb(msg, expected=(cam.width, cam.height), max_scale=scale))
+        except ImageConversionError as err:
+            hint = (' (set rescale_images to resize)' if err.cause == 'size-mismatch'
+                    else '')
+            self._refuse(camera, err.cause, f'{err}{hint}')
+            return
+        if rgb.shape[:2] != (cam.height, cam.width):
+            rgb = cam.fit(rgb)  # the tracker resizes it to its working size
+        with self._lock:
+            window = self._rate_window[camera]
+            window.append(stamp)
+            while window and window[0] < stamp - RATE_WINDOW_NS:
+                window.popleft()
             ready = self.sync.add(camera, stamp, rgb)
             self._queue(ready)
             warnings, self.sync.warnings = self.sync.warnings, []
@@ -359,14 +400,51 @@ class TrackerNode(Node):
         self._wake.notify()
 
     def _step_loop(self) -> None:
-        """The step thread: wait for queued frame sets, process them, until closing."""
+        """The step thread: wait for queued frame sets, process them, until closing; while
+        none comes, publish /diagnostics every diagnostics_period of wall-clock time."""
+        period = self.params.diagnostics_period_ns / 1e9
         while True:
             with self._wake:
-                while not self._pending and not self._closing:
-                    self._wake.wait()
+                if not self._pending and not self._closing:
+                    self._wake.wait(timeout=period)
                 if self._closing:
                     return
-            self.process_pending()
+                idle = not self._pending
+            if idle:
+                self.idle_diagnostics()
+            else:
+                self.process_pending()
+
+    def idle_diagnostics(self) -> DiagnosticArray | None:
+        """Publish /diagnostics when none went out for ``diagnostics_period`` of wall-clock
+        time (no frame set formed): the counts and why no set formed. Stamped with the
+        newest image stamp received (message time), else the node's clock."""
+        period = self.params.diagnostics_period_ns / 1e9
+        if time.monotonic() - self._last_diag_wall < period:
+            return None
+        stamp = self._newest_stamp or self.get_clock().now().nanoseconds
+        snap = self.snapshot(FrameResult(stamp_ns=stamp), reason=self._idle_reason(period))
+        diag = messages.diagnostics_message(stamp, snap)
+        self.pub_diag.publish(diag)
+        return diag
+
+    def _idle_reason(self, period: float) -> str:
+        with self._lock:
+            received, refused, late = self._at_last_diag
+            received = self._received - received
+            refused = self._dropped - refused
+            late = self.sync.counters.dropped_frames - late
+            last_bad = self._last_bad
+            waiting = [c for c, n in self.sync.pending.items() if n == 0]
+        head = f'no frame set in the last {period:g} s: '
+        if received == 0:
+            return head + 'no images received'
+        if refused >= received:
+            return head + (f'all {received} images refused as bad (last: {last_bad[0]}, '
+                           f'{last_bad[1]})' if last_bad else f'all {received} images refused')
+        if late:
+            return head + f'{late} frames dropped by the synchroniser (late or repeated stamps)'
+        return head + 'waiting for camera(s) ' + (', '.join(waiting) or '?')
 
     def _on_frame_sets(self) -> None:
         """Alias of :meth:`process_pending` (older tests and tools call this name)."""
@@ -384,6 +462,14 @@ class TrackerNode(Node):
                     if not self._pending or self._closing:
                         return
                     fs = self._pending.popleft()
+                    repeated = (not fs.after_reset and self._last_stamp is not None
+                                and fs.stamp_ns == self._last_stamp)
+                    if repeated:  # never process an instant twice
+                        self._repeated_sets += 1
+                if repeated:
+                    self.warn_once('repeated', f'frame set at {fs.stamp_ns} ns dropped: its '
+                                   'stamp equals the last processed one')
+                    continue
                 try:
                     self.process(fs)
                 except Exception as err:  # noqa: BLE001 - a bad frame must not kill the node
@@ -451,6 +537,7 @@ class TrackerNode(Node):
         self.pub_people.publish(people)
         self.pub_tracks.publish(cloud)
         self.pub_markers.publish(markers)
+        standard = self.people_outputs.publish(result)
         debug = {}
         for cam, pub in self.pub_debug.items():
             if cam in fs.images and (self.params.debug_images
@@ -465,7 +552,7 @@ class TrackerNode(Node):
             self._last_diag = result.stamp_ns
         if self._output_bag is not None:
             self._output_bag.write(result, people=people, cloud=cloud, markers=markers,
-                                   diagnostics=diag, debug=debug)
+                                   diagnostics=diag, debug=debug, standard=standard)
 
     def debug_image(self, camera: str, rgb: np.ndarray, result: FrameResult) -> Image:
         """``~/debug/<camera>/occlusion``: occlusion maps and silhouettes (000 Fig. 4)."""
@@ -478,7 +565,9 @@ class TrackerNode(Node):
         return rgb_to_image(out, messages.make_header(
             result.stamp_ns, self.calibration.cameras[camera].frame_id))
 
-    def snapshot(self, result: FrameResult) -> messages.DiagnosticsSnapshot:
+    def snapshot(self, result: FrameResult, reason: str = '') -> messages.DiagnosticsSnapshot:
+        """The counts of /diagnostics (and the rates of the last second of message time);
+        ``reason``: why no frame set formed (idle /diagnostics)."""
         with self._lock:
             rates = {}
             for cam, stamps in self._rate_window.items():
@@ -489,19 +578,23 @@ class TrackerNode(Node):
                 recent = sorted({t for t in stamps if t >= newest - RATE_WINDOW_NS})
                 span = (recent[-1] - recent[0]) / 1e9 if len(recent) > 1 else 0.0
                 rates[cam] = (len(recent) - 1) / span if span > 0 else 0.0
-                self._rate_window[cam] = recent
+                self._rate_window[cam] = deque(recent, maxlen=RATE_WINDOW_MAX)
             counters = self.sync.counters
             snap = messages.DiagnosticsSnapshot(
                 input_rate_hz=rates,
                 step_seconds=float(np.mean(self._step_times)) if self._step_times else 0.0,
                 frame_sets=counters.complete, incomplete_sets=counters.incomplete,
-                dropped_frames=self._dropped + counters.dropped_frames + self._dropped_sets,
+                dropped_frames=(self._dropped + counters.dropped_frames + self._dropped_sets
+                                + self._repeated_sets),
                 tracks=len(result.tracks), missing_cameras=tuple(self._last_missing),
                 resets=self._resets, bad_images=self._dropped,
                 late_frames=counters.dropped_frames, dropped_sets_full=self._dropped_full,
                 dropped_sets_error=self._dropped_sets - self._dropped_full,
-                queued_sets=len(self._pending), queue_peak=self._queue_peak)
+                queued_sets=len(self._pending), queue_peak=self._queue_peak,
+                dropped_sets_repeated=self._repeated_sets, reason=reason)
             self._queue_peak = len(self._pending)
+            self._last_diag_wall = time.monotonic()
+            self._at_last_diag = (self._received, self._dropped, counters.dropped_frames)
             self._step_times.clear()
         return snap
 

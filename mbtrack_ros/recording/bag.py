@@ -36,11 +36,11 @@ from rosbags.typesys import Stores, get_typestore
 from mbtrack_ros.core.camera import RoomCalibration
 from mbtrack_ros.recording.csvfiles import GroundTruthRow
 from mbtrack_ros.recording.images import (
-    ImageConversionError, decode_compressed, decode_raw, encode_compressed)
+    MAX_RESCALE, ImageConversionError, decode_compressed, decode_raw, encode_compressed)
 
 __all__ = [
     'GROUND_TRUTH_TOPIC', 'BagError', 'FrameSet', 'RecordingReader', 'RecordingWriter',
-    'camera_info_topic', 'image_topic', 'prefetched', 'typestore',
+    'camera_info_topic', 'image_topic', 'prefetched', 'stream_mcap', 'typestore',
 ]
 
 GROUND_TRUTH_TOPIC = '/ground_truth/people'
@@ -211,6 +211,31 @@ class FrameSet:
     stamps: dict[str, int] = field(default_factory=dict)
 
 
+def stream_mcap(paths: Sequence[Path], topics: set[str] | None = None
+                ) -> Iterator[tuple[str, str, int, bytes]]:
+    """(topic, msgtype, log time ns, cdr) of every complete message of MCAP files read
+    front to back without their summary (a truncated or damaged file, which the indexed
+    readers refuse); raises :class:`BagError` at the first damaged record."""
+    for path in paths:
+        schemas: dict[int, str] = {}
+        channels: dict[int, tuple[str, str]] = {}
+        try:
+            with Path(path).open('rb') as handle:
+                for record in StreamReader(handle).records:
+                    if isinstance(record, Schema):
+                        schemas[record.id] = record.name
+                    elif isinstance(record, Channel):
+                        channels[record.id] = (record.topic,
+                                               schemas.get(record.schema_id, ''))
+                    elif isinstance(record, Message):
+                        topic, msgtype = channels[record.channel_id]
+                        if topics is None or topic in topics:
+                            yield topic, msgtype, int(record.log_time), record.data
+        except Exception as err:
+            raise BagError(f'{Path(path).name}: damaged MCAP ({err or type(err).__name__})') \
+                from err
+
+
 _IMAGE_TOPIC = re.compile(r'^/?(?P<camera>.+?)/image(?:_raw|_rect|_rect_color|_color)?'
                           r'(?P<compressed>/compressed)?$')
 
@@ -252,6 +277,17 @@ class RecordingReader:
         self._reader: AnyReader | None = None
         self._mcap_files: list[Path] = []
         self._damaged: str | None = None
+        self._sizes: dict[str, tuple[int, int]] = {}  # camera -> calibrated (width, height)
+        self._max_scale = 1.0
+
+    def limit_image_sizes(self, sizes: dict[str, tuple[int, int]], *,
+                          max_scale: float = MAX_RESCALE) -> None:
+        """Refuse, before decoding, images of camera ``c`` whose declared size (raw header,
+        PNG/JPEG header) is more than ``max_scale`` times ``sizes[c]`` = (width, height) on
+        a side (``max_scale`` 1: exactly that size): bounded work per message; they are
+        listed in ``FrameSet.errors``."""
+        self._sizes = {str(c): (int(w), int(h)) for c, (w, h) in sizes.items()}
+        self._max_scale = float(max_scale)
 
     def __enter__(self) -> RecordingReader:
         try:
@@ -280,24 +316,8 @@ class RecordingReader:
 
     def _stream(self, topics: set[str] | None) -> Iterator[tuple[str, str, bytes]]:
         """(topic, msgtype, cdr) of every complete message of damaged MCAP files."""
-        for path in self._mcap_files:
-            schemas: dict[int, str] = {}
-            channels: dict[int, tuple[str, str]] = {}
-            try:
-                with path.open('rb') as handle:
-                    for record in StreamReader(handle).records:
-                        if isinstance(record, Schema):
-                            schemas[record.id] = record.name
-                        elif isinstance(record, Channel):
-                            channels[record.id] = (record.topic,
-                                                   schemas.get(record.schema_id, ''))
-                        elif isinstance(record, Message):
-                            topic, msgtype = channels[record.channel_id]
-                            if topics is None or topic in topics:
-                                yield topic, msgtype, record.data
-            except Exception as err:
-                raise BagError(f'{path.name}: damaged MCAP ({err or type(err).__name__})') \
-                    from err
+        for topic, msgtype, _, data in stream_mcap(self._mcap_files, topics):
+            yield topic, msgtype, data
 
     def _messages(self, topics: Iterable[str]) -> Iterator[tuple[str, str, bytes]]:
         topics = set(topics)
@@ -352,12 +372,14 @@ class RecordingReader:
         """Why the bag could only be read up to a damaged part, or None if it is intact."""
         return self._damaged
 
-    def _decode(self, msgtype: str, raw: bytes) -> tuple[int, np.ndarray]:
+    def _decode(self, msgtype: str, raw: bytes, camera: str = '') -> tuple[int, np.ndarray]:
         msg = typestore.deserialize_cdr(raw, msgtype)
+        limit = dict(expected=self._sizes.get(camera), max_scale=self._max_scale)
         if msgtype == IMAGE:
-            image = decode_raw(msg.encoding, msg.height, msg.width, msg.step, msg.data)
+            image = decode_raw(msg.encoding, msg.height, msg.width, msg.step, msg.data,
+                               **limit)
         else:
-            image = decode_compressed(msg.format, msg.data)
+            image = decode_compressed(msg.format, msg.data, **limit)
         return _stamp_ns(msg.header), image
 
     def frames(self) -> Iterator[FrameSet]:
@@ -381,6 +403,7 @@ class RecordingReader:
                                                   if c in self.cameras})
         self.sync = sync
         index = 0
+        stamps: list[int] = []  # of the frame sets, to name the ones a damage lost
 
         def convert(ready) -> Iterator[FrameSet]:
             nonlocal index
@@ -393,10 +416,12 @@ class RecordingReader:
                                missing=list(s.missing),
                                errors={c: e for c, (_, e) in s.images.items() if e},
                                stamps=dict(s.stamps))
+                stamps.append(s.stamp_ns)
                 index += 1
 
         iterator = self._messages(self._by_topic)
         newest = {c: 0 for c in self.cameras}
+        read: dict[str, int] = {}  # image messages read per topic
         while True:
             try:
                 topic, msgtype, raw = next(iterator)
@@ -407,8 +432,9 @@ class RecordingReader:
                 raise BagError(f'{self.path}: unreadable after frame set {index - 1}: '
                                f'{err}') from err
             cam = self._by_topic[topic]
+            read[topic] = read.get(topic, 0) + 1
             try:
-                stamp, image = self._decode(msgtype, raw)
+                stamp, image = self._decode(msgtype, raw, cam)
                 error = None
             except ImageConversionError as err:
                 stamp, image, error = None, None, str(err)
@@ -422,16 +448,45 @@ class RecordingReader:
         if self._damaged:
             raise BagError(f'{self.path}: damaged bag, read up to frame set {index - 1} '
                            f'({self._damaged})')
+        lost = {t: self._counts.get(t, 0) - read.get(t, 0) for t in self._by_topic
+                if read.get(t, 0) < self._counts.get(t, 0)}
+        if lost:  # a damaged chunk the reader skipped: the bag's own counts say so
+            raise BagError(f'{self.path}: damaged bag, '
+                           + ', '.join(f'{n} of the {self._counts[t]} images of {t}'
+                                       for t, n in lost.items())
+                           + f' unreadable; {_gaps(stamps)}')
+
+    def _deserialize(self, raw: bytes, msgtype: str, topic: str):
+        try:
+            return typestore.deserialize_cdr(raw, msgtype)
+        except Exception as err:  # rosbags' SerdeError, struct errors ... of damaged data
+            raise BagError(f'{self.path}: cannot deserialise a {msgtype} message on {topic}: '
+                           f'{type(err).__name__}') from err
+
+    def _checked(self, topics: Iterable[str]) -> Iterator[tuple[str, str, bytes]]:
+        """:meth:`_messages` with every read error turned into :class:`BagError`."""
+        iterator = self._messages(topics)
+        while True:
+            try:
+                item = next(iterator)
+            except StopIteration:
+                return
+            except BagError:
+                raise
+            except Exception as err:  # damaged chunk, truncated file ...
+                raise BagError(f'{self.path}: unreadable: {type(err).__name__}: '
+                               f'{str(err)[:200]}') from err
+            yield item
 
     def camera_infos(self) -> dict[str, object]:
         """The first CameraInfo message of every camera that has one (rosbags objects)."""
         infos: dict[str, object] = {}
         topics = [t for t, m in self._all.items()
                   if m == CAMERA_INFO and t.endswith('/camera_info')]
-        for topic, _, raw in self._messages(topics):
+        for topic, _, raw in self._checked(topics):
             cam = topic[: -len('/camera_info')].strip('/')
             if cam not in infos:
-                infos[cam] = typestore.deserialize_cdr(raw, CAMERA_INFO)
+                infos[cam] = self._deserialize(raw, CAMERA_INFO, topic)
             if len(infos) == len(topics):
                 break
         return infos
@@ -441,15 +496,35 @@ class RecordingReader:
         rows: list[GroundTruthRow] = []
         if GROUND_TRUTH_TOPIC not in self._all:
             return rows
-        for frame, (_, _, raw) in enumerate(self._messages([GROUND_TRUTH_TOPIC])):
-            msg = typestore.deserialize_cdr(raw, POINT_CLOUD)
-            pts = np.frombuffer(np.asarray(msg.data, dtype=np.uint8).tobytes(),
-                                dtype=_GT_DTYPE, count=msg.width)
+        for frame, (_, _, raw) in enumerate(self._checked([GROUND_TRUTH_TOPIC])):
+            msg = self._deserialize(raw, POINT_CLOUD, GROUND_TRUTH_TOPIC)
+            data = np.asarray(msg.data, dtype=np.uint8).tobytes()
+            if msg.width * _GT_DTYPE.itemsize > len(data):
+                raise BagError(f'{self.path}: ground truth message {frame} declares '
+                               f'{msg.width} points in {len(data)} bytes')
+            pts = np.frombuffer(data, dtype=_GT_DTYPE, count=msg.width)
             stamp = _stamp_ns(msg.header)
             rows.extend(GroundTruthRow(stamp, frame, int(p['id']), float(p['x']),
                                        float(p['y']), float(p['z_head']),
                                        bool(p['sitting'] > 0.5), ()) for p in pts)
         return rows
+
+
+def _gaps(stamps: list[int], shown: int = 3) -> str:
+    """Where frame sets are missing: the stamp gaps longer than 1.5 frame periods (the
+    median step) between the frame sets read, or after the last one."""
+    if len(stamps) < 2:
+        return f'read {len(stamps)} frame set(s)'
+    steps = np.diff(np.asarray(stamps, dtype=np.int64))
+    period = float(np.median(steps))
+    big = np.flatnonzero(steps > 1.5 * period)
+    if big.size == 0:
+        return (f'frame sets after frame set {len(stamps) - 1} (stamp {stamps[-1]}) or '
+                'within a frame set lost')
+    parts = [f'between frame sets {i} and {i + 1} (stamps {stamps[i]} .. {stamps[i + 1]}, '
+             f'~{round(steps[i] / period) - 1} lost)' for i in big[:shown]]
+    more = f' and {big.size - shown} more gap(s)' if big.size > shown else ''
+    return 'frame sets lost ' + '; '.join(parts) + more
 
 
 _T_item = TypeVar('_T_item')

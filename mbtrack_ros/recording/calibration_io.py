@@ -15,13 +15,20 @@ Every reader can re-express the world frame so that the floor is ``z = 0`` and `
 (:func:`reexpress_world`: ``up_axis`` names the source axis that points up, ``floor_offset``
 the floor's coordinate along it). The projection itself stays in :mod:`mbtrack_ros.core.camera`.
 Every malformed file raises :class:`CalibrationError` with a one-line reason naming the file.
+
+:func:`load_calibration` is the one validation layer every command and ``tracker_node`` read
+their calibration through: the readers check types, finiteness and ranges (image sides up to
+``MAX_IMAGE_SIDE``, a floor side up to ``MAX_FLOOR_SIDE`` metres, entry zones and exits as
+4 finite numbers), then :func:`~mbtrack_ros.core.camera.check_floor_views` warns about a
+camera that sees less than ``MIN_FLOOR_VIEW`` of the floor and refuses a room where no
+camera sees it. Messages are one line naming the file, the camera and the key.
 """
 from __future__ import annotations
 
 import json
 import tomllib
 import xml.etree.ElementTree as ET
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -30,10 +37,12 @@ import cv2
 import numpy as np
 import yaml
 
-from mbtrack_ros.core.camera import CalibrationError, Camera, RoomCalibration
+from mbtrack_ros.core.camera import (
+    CalibrationError, Camera, RoomCalibration, check_floor_views, yaml_error_line)
 
 __all__ = [
-    'FORMATS', 'UP_AXES', 'CalibrationError', 'Intrinsics', 'default_floor', 'read_calibration',
+    'FORMATS', 'UP_AXES', 'CalibrationError', 'Intrinsics', 'default_floor',
+    'load_calibration', 'read_calibration',
     'read_camera_info', 'read_camera_info_calibration', 'read_opencv_calibration',
     'read_qualisys_calibration', 'reexpress_world', 'world_rotation',
 ]
@@ -220,7 +229,9 @@ def _load_document(path: Path) -> Any:
             return tomllib.loads(text)
         return yaml.safe_load(text)
     except (json.JSONDecodeError, tomllib.TOMLDecodeError, yaml.YAMLError, cv2.error) as err:
-        first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+        first = (yaml_error_line(err) if isinstance(err, yaml.YAMLError)
+                 else str(err).strip().splitlines()[0] if str(err).strip()
+                 else type(err).__name__)
         raise CalibrationError(
             f'{path}: not a readable {suffix or "YAML"} file ({first})') from err
 
@@ -349,7 +360,7 @@ def read_camera_info(path: str | Path) -> Intrinsics:
     try:
         doc = yaml.safe_load(text)
     except yaml.YAMLError as err:
-        raise CalibrationError(f'{path}: not valid YAML ({str(err).splitlines()[0]})') from err
+        raise CalibrationError(f'{path}: not valid YAML ({yaml_error_line(err)})') from err
     if not isinstance(doc, Mapping):
         raise CalibrationError(f'{path}: not a camera_info YAML (expected a mapping)')
     missing = [k for k in ('image_width', 'image_height', 'camera_matrix') if k not in doc]
@@ -551,3 +562,20 @@ def read_calibration(path: str | Path, fmt: str = 'auto', *,
         return read_camera_info_calibration(camera_info, path, **options)
     raise CalibrationError(f'unknown calibration format {fmt!r} '
                            f'(one of {", ".join(FORMATS)}, room, auto)')
+
+
+def load_calibration(path: str | Path, fmt: str = 'auto', *,
+                     warn: Callable[[str], None] | None = None,
+                     **options: Any) -> RoomCalibration:
+    """Read a calibration (:func:`read_calibration`, same ``fmt`` and options) and check that
+    its cameras see the floor (:func:`~mbtrack_ros.core.camera.check_floor_views`).
+
+    ``warn`` receives one line per camera that sees too little of the floor. Raises
+    :class:`CalibrationError` (one line naming the file, the camera and the key) for every
+    unusable file, including one where no camera sees the floor.
+    """
+    calibration = read_calibration(path, fmt, **options)
+    for line in check_floor_views(calibration, str(path)):
+        if warn is not None:
+            warn(line)
+    return calibration

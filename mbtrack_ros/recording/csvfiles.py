@@ -31,6 +31,9 @@ GROUND_TRUTH_COLUMNS = ('stamp_ns', 'frame', 'person_id', 'x', 'y', 'z_head', 's
                         'visible_cameras')
 
 
+_INT64_MIN, _INT64_MAX = -2 ** 63, 2 ** 63 - 1
+
+
 class CsvFormatError(ValueError):
     """A CSV file that is unreadable or lacks the documented columns."""
 
@@ -80,6 +83,9 @@ def _parse(path: Path, lineno: int, value: str, kind: type, column: str):
         result = kind(value)
     except (TypeError, ValueError) as err:
         raise CsvFormatError(f'{path}:{lineno}: bad {column} value {value!r}') from err
+    if kind is int and not _INT64_MIN <= result <= _INT64_MAX:  # stamps and ids are int64
+        raise CsvFormatError(f'{path}:{lineno}: {column} value {value:.30} is out of the '
+                             '64-bit integer range')
     if kind is float and column in ('x', 'y', 'z_head') and not np.isfinite(result):
         raise CsvFormatError(f'{path}:{lineno}: {column} is not finite')
     return result

@@ -7,8 +7,13 @@ Shared by :mod:`mbtrack_ros.recording.bag` (rosbags message classes) and
 
 Supported raw encodings: ``rgb8``, ``bgr8``, ``mono8``, ``rgba8``, ``bgra8`` (8 bits per
 channel; rows may be padded, ``step >= width * channels``). Compressed: JPEG and PNG.
-Every bad input raises :class:`ImageConversionError` with a one-line reason, before any large
-allocation.
+Every bad input raises :class:`ImageConversionError` with a one-line reason and a short
+``cause`` (one of :data:`CAUSES`), before any large allocation. Work per message is bounded
+before decoding: the declared size (raw header fields, or the PNG IHDR / JPEG SOF header of a
+compressed payload, read without decoding) is checked against :data:`MAX_SIDE` and, when the
+caller passes ``expected`` (the calibrated size), against it: equal, or with ``max_scale`` > 1
+at most that many times larger per side. A compressed payload without a readable size header
+is refused, never decoded blind.
 """
 from __future__ import annotations
 
@@ -16,46 +21,84 @@ import cv2
 import numpy as np
 
 __all__ = [
-    'CHANNELS', 'MAX_SIDE', 'ImageConversionError', 'decode_compressed', 'decode_raw',
-    'encode_compressed', 'encode_raw',
+    'CAUSES', 'CHANNELS', 'MAX_RESCALE', 'MAX_SIDE', 'ImageConversionError',
+    'compressed_size',
+    'decode_compressed', 'decode_raw', 'encode_compressed', 'encode_raw',
 ]
 
 #: channels per pixel of each supported raw encoding
 CHANNELS = {'rgb8': 3, 'bgr8': 3, 'mono8': 1, 'rgba8': 4, 'bgra8': 4}
 #: largest accepted image side, pixels (refused before allocating)
 MAX_SIDE = 8192
+#: where images may be resized to the calibration (node ``rescale_images``, ``mbtrack
+#: replay``), the most times larger than the calibrated size they may be on a side
+MAX_RESCALE = 4.0
+# JPEG segments (markers, fill bytes) read looking for the frame header: real files have ~10
+_MAX_SEGMENTS = 1024
+
+
+#: the ``cause`` of an :class:`ImageConversionError` (logs are throttled per cause)
+CAUSES = ('encoding', 'empty', 'too-large', 'size-mismatch', 'step', 'data-length', 'format',
+          'no-data', 'no-header', 'undecodable', 'decoded-size')
 
 
 class ImageConversionError(ValueError):
-    """An image message that cannot be converted (one-line reason)."""
+    """An image message that cannot be converted (one-line reason; ``cause`` names the
+    kind of defect, one of :data:`CAUSES`)."""
+
+    def __init__(self, message: str, cause: str = 'undecodable') -> None:
+        super().__init__(message)
+        self.cause = cause
+
+    def __reduce__(self):
+        return type(self), (str(self), self.cause)
 
 
-def _check_size(width: int, height: int) -> None:
+def _check_size(width: int, height: int, expected: tuple[int, int] | None = None,
+                max_scale: float = 1.0) -> None:
+    """Refuse a declared ``width`` x ``height``: empty, above :data:`MAX_SIDE`, or (with
+    ``expected = (width, height)``) different from it, or with ``max_scale`` > 1 larger than
+    ``max_scale`` times it on a side."""
     if width <= 0 or height <= 0:
-        raise ImageConversionError(f'empty image ({width}x{height})')
+        raise ImageConversionError(f'empty image ({width}x{height})', 'empty')
     if width > MAX_SIDE or height > MAX_SIDE:
         raise ImageConversionError(
-            f'declared size {width}x{height} exceeds the limit {MAX_SIDE}x{MAX_SIDE}')
+            f'declared size {width}x{height} exceeds the limit {MAX_SIDE}x{MAX_SIDE}',
+            'too-large')
+    if expected is None:
+        return
+    ew, eh = int(expected[0]), int(expected[1])
+    if max_scale <= 1.0:
+        if (width, height) != (ew, eh):
+            raise ImageConversionError(f'declared size {width}x{height} differs from the '
+                                       f'calibration {ew}x{eh}', 'size-mismatch')
+    elif width > max_scale * ew or height > max_scale * eh:
+        raise ImageConversionError(
+            f'declared size {width}x{height} is more than {max_scale:g} times the '
+            f'calibration {ew}x{eh}', 'too-large')
 
 
 def decode_raw(encoding: str, height: int, width: int, step: int, data,
-               *, is_bigendian: int = 0) -> np.ndarray:
+               *, is_bigendian: int = 0, expected: tuple[int, int] | None = None,
+               max_scale: float = 1.0) -> np.ndarray:
     """Decode a raw ``sensor_msgs/Image`` payload to ``(height, width, 3) uint8`` RGB.
 
     ``data`` is any bytes-like object or a uint8 array (rclpy gives ``array.array`` or bytes,
-    rosbags a numpy array). The result never aliases ``data``.
+    rosbags a numpy array). The result never aliases ``data``. ``expected`` (width, height)
+    and ``max_scale``: the size check of the module docstring, before any conversion.
     """
     del is_bigendian  # 8-bit encodings only: byte order does not matter
     encoding = str(encoding).strip().lower()
     channels = CHANNELS.get(encoding)
     if channels is None:
         raise ImageConversionError(
-            f'unsupported encoding {encoding!r} (supported: {", ".join(CHANNELS)})')
+            f'unsupported encoding {encoding[:40]!r} (supported: {", ".join(CHANNELS)})',
+            'encoding')
     height, width, step = int(height), int(width), int(step)
-    _check_size(width, height)
+    _check_size(width, height, expected, max_scale)
     if step < width * channels:
         raise ImageConversionError(
-            f'step {step} < width*channels = {width}*{channels} for {encoding}')
+            f'step {step} < width*channels = {width}*{channels} for {encoding}', 'step')
     try:
         buf = np.frombuffer(memoryview(data).cast('B'), dtype=np.uint8)
     except TypeError:
@@ -63,7 +106,7 @@ def decode_raw(encoding: str, height: int, width: int, step: int, data,
     if buf.size != step * height:
         raise ImageConversionError(
             f'data has {buf.size} bytes, expected step*height = {step}*{height} = '
-            f'{step * height}')
+            f'{step * height}', 'data-length')
     rows = buf.reshape(height, step)[:, : width * channels]
     pixels = rows.reshape(height, width, channels)
     if encoding == 'rgb8':
@@ -81,7 +124,7 @@ def _check_rgb(rgb: np.ndarray) -> np.ndarray:
     rgb = np.asarray(rgb)
     if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.dtype != np.uint8:
         raise ImageConversionError(
-            f'expected an (H, W, 3) uint8 RGB array, got {rgb.dtype} {rgb.shape}')
+            f'expected an (H, W, 3) uint8 RGB array, got {rgb.dtype} {rgb.shape}', 'format')
     _check_size(rgb.shape[1], rgb.shape[0])
     return np.ascontiguousarray(rgb)
 
@@ -94,7 +137,8 @@ def encode_raw(rgb: np.ndarray, encoding: str = 'rgb8') -> tuple[int, int, int, 
     rgb = _check_rgb(rgb)
     if encoding not in CHANNELS:
         raise ImageConversionError(
-            f'unsupported encoding {encoding!r} (supported: {", ".join(CHANNELS)})')
+            f'unsupported encoding {encoding!r} (supported: {", ".join(CHANNELS)})',
+            'encoding')
     conv = {'rgb8': None, 'bgr8': cv2.COLOR_RGB2BGR, 'mono8': cv2.COLOR_RGB2GRAY,
             'rgba8': cv2.COLOR_RGB2RGBA, 'bgra8': cv2.COLOR_RGB2BGRA}[encoding]
     out = rgb if conv is None else cv2.cvtColor(rgb, conv)
@@ -108,54 +152,83 @@ def _format_kind(fmt: str) -> str:
         return 'png'
     if 'jpeg' in f or 'jpg' in f:
         return 'jpeg'
-    raise ImageConversionError(f'unsupported compressed format {fmt!r} (jpeg or png)')
+    raise ImageConversionError(f'unsupported compressed format {str(fmt)[:40]!r} (jpeg or '
+                               'png)', 'format')
 
 
-def decode_compressed(fmt: str, data) -> np.ndarray:
+def _buffer(data) -> np.ndarray:
+    try:
+        return np.frombuffer(memoryview(data).cast('B'), dtype=np.uint8)
+    except TypeError:
+        return np.asarray(data, dtype=np.uint8).ravel()
+
+
+def compressed_size(fmt: str, data) -> tuple[int, int]:
+    """``(width, height)`` a JPEG/PNG payload declares in its header (PNG IHDR, JPEG SOF),
+    read without decoding; raises :class:`ImageConversionError` when there is none."""
+    _format_kind(fmt)
+    buf = _buffer(data)
+    if buf.size == 0:
+        raise ImageConversionError('compressed image has no data', 'no-data')
+    w, h = _peek_size(buf)
+    if w is None:
+        raise ImageConversionError(f'no PNG or JPEG header with an image size in {buf.size} '
+                                   'bytes', 'no-header')
+    return w, h
+
+
+def decode_compressed(fmt: str, data, *, expected: tuple[int, int] | None = None,
+                      max_scale: float = 1.0) -> np.ndarray:
     """Decode a ``sensor_msgs/CompressedImage`` payload (JPEG/PNG) to ``(H, W, 3) uint8`` RGB.
 
     ``fmt`` is the message's ``format`` field (``jpeg``, ``png``, ``rgb8; jpeg compressed
-    bgr8`` ...); the decoder itself trusts the file signature. The declared size in the
-    header is checked against :data:`MAX_SIDE` before decoding.
+    bgr8`` ...); the decoder itself trusts the file signature. The size the header declares
+    (:func:`compressed_size`) is checked before decoding (module docstring; ``expected`` =
+    (width, height)), and the decoded image must have that size.
     """
-    _format_kind(fmt)
-    try:
-        buf = np.frombuffer(memoryview(data).cast('B'), dtype=np.uint8)
-    except TypeError:
-        buf = np.asarray(data, dtype=np.uint8).ravel()
-    if buf.size == 0:
-        raise ImageConversionError('compressed image has no data')
-    w, h = _peek_size(buf)
-    if w is not None:
-        _check_size(w, h)
+    w, h = compressed_size(fmt, data)
+    _check_size(w, h, expected, max_scale)
+    buf = _buffer(data)
     image = cv2.imdecode(buf, cv2.IMREAD_COLOR)
     if image is None:
-        raise ImageConversionError(f'cannot decode {buf.size} bytes as {fmt!r}')
-    _check_size(image.shape[1], image.shape[0])
+        raise ImageConversionError(f'cannot decode {buf.size} bytes as {str(fmt)[:40]!r}',
+                                   'undecodable')
+    if image.shape[:2] != (h, w):
+        raise ImageConversionError(f'decoded {image.shape[1]}x{image.shape[0]}, the header '
+                                   f'declares {w}x{h}', 'decoded-size')
     return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
 
 
 def _peek_size(buf: np.ndarray) -> tuple[int | None, int | None]:
-    """Declared (width, height) from a PNG IHDR or JPEG SOF header, without decoding."""
-    head = buf[: 1 << 16].tobytes()
-    if head[:8] == b'\x89PNG\r\n\x1a\n' and len(head) >= 24:
+    """Declared (width, height) from a PNG IHDR or JPEG SOF header, without decoding: the
+    JPEG segments before the frame header are skipped by their lengths (at most
+    ``_MAX_SEGMENTS`` of them: bounded work for any payload)."""
+    if buf.size >= 24 and buf[:8].tobytes() == b'\x89PNG\r\n\x1a\n' \
+            and buf[12:16].tobytes() == b'IHDR':
+        head = buf[:24].tobytes()
         return int.from_bytes(head[16:20], 'big'), int.from_bytes(head[20:24], 'big')
-    if head[:2] == b'\xff\xd8':
-        i = 2
-        while i + 9 < len(head):
-            if head[i] != 0xFF:
-                i += 1
-                continue
-            marker = head[i + 1]
-            if marker in (0xD8, 0x01) or 0xD0 <= marker <= 0xD7 or marker == 0xFF:
-                i += 1 if marker == 0xFF else 2
-                continue
-            length = int.from_bytes(head[i + 2:i + 4], 'big')
-            if 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):
-                h = int.from_bytes(head[i + 5:i + 7], 'big')
-                w = int.from_bytes(head[i + 7:i + 9], 'big')
-                return w, h
-            i += 2 + length
+    if buf.size < 4 or buf[0] != 0xFF or buf[1] != 0xD8:
+        return None, None
+    data = buf.tobytes()
+    i, n = 2, len(data)
+    for _ in range(_MAX_SEGMENTS):
+        if i + 9 >= n or data[i] != 0xFF:
+            return None, None  # the end, or not at a marker: damaged header
+        marker = data[i + 1]
+        if marker == 0xFF:
+            i += 1  # fill byte
+            continue
+        if marker in (0xD8, 0x01) or 0xD0 <= marker <= 0xD7:
+            i += 2
+            continue
+        if marker in (0xD9, 0xDA):  # end of image or start of scan before any SOF
+            return None, None
+        length = (data[i + 2] << 8) | data[i + 3]
+        if 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):
+            return (data[i + 7] << 8) | data[i + 8], (data[i + 5] << 8) | data[i + 6]
+        if length < 2:
+            return None, None
+        i += 2 + length
     return None, None
 
 
@@ -171,5 +244,5 @@ def encode_compressed(rgb: np.ndarray, fmt: str = 'jpeg', *,
     ok, buf = cv2.imencode('.jpg' if kind == 'jpeg' else '.png',
                            cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), params)
     if not ok:
-        raise ImageConversionError(f'OpenCV could not encode the image as {kind}')
+        raise ImageConversionError(f'OpenCV could not encode the image as {kind}', 'format')
     return f'rgb8; {kind} compressed bgr8', buf.tobytes()

@@ -374,12 +374,10 @@ class Crowd:
             x0, x1 = room.door[0] + 0.3, room.door[1] - 0.3
             if abs(w.pos[1] - room.depth) < 0.5:
                 inside = float(np.clip(w.pos[0], x0, x1))
-                # step sideways into the opening at SIDESTEP, not in one frame (a 0.55 m
-                # jump in 1/15 s before); the wall holds whoever comes from the room and is
-                # not in the opening yet; beside the door, a body's clearance from the wall
-                # (the walkable floor's edge) as everywhere else: at the wall itself, half
-                # the body stood inside it, off the floor and the door's exit (clear-room
-                # seed 1 without the ceiling camera, 0.8 s)
+                # step sideways into the opening at SIDESTEP, not in one frame; the wall
+                # holds whoever comes from the room and is not in the opening yet; beside
+                # the door, a body keeps its clearance from the wall (the walkable floor's
+                # edge) as everywhere else, so no body stands half inside the wall
                 step = SIDESTEP * dt
                 w.pos[0] += float(np.clip(inside - w.pos[0], -step, step))
                 if abs(w.pos[0] - inside) > 1e-9 and before[1] < room.depth:

@@ -25,13 +25,15 @@ _ACROSS = np.array([-_VIEW[1], _VIEW[0]])          # perpendicular to it on the 
 
 @dataclass(frozen=True)
 class Preset:
-    """A scenario: cameras (``None`` = all, ceiling optional), frames, crowd builder."""
+    """A scenario: cameras (``None`` = all, ceiling optional), frames, crowd builder and
+    the image size (width, height) in pixels ``mbtrack synth`` renders by default."""
 
     name: str
     description: str
     frames: int
     cameras: tuple[str, ...] | None
     populate: Callable[[Crowd], None]
+    size: tuple[int, int] = (320, 240)
 
 
 def _lanz_area(n_people: int, area: tuple[float, float, float, float]) -> Callable:
@@ -84,18 +86,19 @@ _ANGLE = float(np.arctan2(_VIEW[1], _VIEW[0]))
 _MID = _CAM_XY + 2.6 * _VIEW + 0.05 * _ACROSS
 _AREA_SMALL = (float(_MID[0]), float(_MID[1]), 1.1, 0.45, _ANGLE)
 _AREA_WIDE = (float(_MID[0]), float(_MID[1]), 1.2, 0.75, _ANGLE)
+_LANZ_SIZE = (200, 150)   # 000 §VI-A: images down-sampled to 200x150 pixels
 
 _BASE = (
     Preset('lanz-seq1', '3 people walking randomly in a small area in front of one corner '
            'camera: frequent, long occlusions (670 frames)', 670, ('cam0',),
-           _lanz_area(3, _AREA_SMALL)),
+           _lanz_area(3, _AREA_SMALL), _LANZ_SIZE),
     Preset('lanz-seq2', '4 people walking randomly in front of one corner camera '
-           '(618 frames)', 618, ('cam0',), _lanz_area(4, _AREA_SMALL)),
+           '(618 frames)', 618, ('cam0',), _lanz_area(4, _AREA_SMALL), _LANZ_SIZE),
     Preset('lanz-seq3', '5 people walking randomly in front of one corner camera '
-           '(341 frames)', 341, ('cam0',), _lanz_area(5, _AREA_WIDE)),
+           '(341 frames)', 341, ('cam0',), _lanz_area(5, _AREA_WIDE), _LANZ_SIZE),
     Preset('lanz-seq4', '3 people, one corner camera: identically dressed twins (a few cm '
            'apart in height) walk back and forth fully occluded behind a tall third person '
-           '(215 frames)', 215, ('cam0',), _lanz_seq4),
+           '(215 frames)', 215, ('cam0',), _lanz_seq4, _LANZ_SIZE),
     Preset('clear-room', 'four corner cameras + ceiling camera, 2-5 people entering and '
            'leaving through the door, sitting on chairs; door and screen change (1800 frames, '
            '2 min)', 1800, None, _clear_room),

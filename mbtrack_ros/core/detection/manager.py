@@ -147,7 +147,7 @@ class AutoDetectionConfig:
             to take the released id; 1 accepts any. 0.55: on sixty clear-room runs the
             released track had followed the detected person for 14 candidates (distances
             0.20-0.75, median 0.48) and another person for 18 (0.64-0.77; docs/detection.md,
-            "Weak moves; longer reuse"). 0.5 before: on the thirteenth session's tree
+            "Weak moves; longer reuse"). 0.5 before: on an earlier tree
             other-person candidates went down to 0.41 ("Lost tracks").
         reuse_in_entry_zones: a track released inside an entry zone is lost for
             ``reuse_time`` like any other; False: its id ends at once (its person is taken
@@ -237,7 +237,7 @@ class AutoDetectionConfig:
             beside it. Not where the reach touches an entry zone: in the crowds at the door
             the free foreground beside a track is mostly a newcomer or a neighbour whose
             track lags (on cr1 seed 0, 14 switches against 2 with the door included).
-            ``inf`` disables, the default: on the twenty-second session's tree 4 moved
+            ``inf`` disables, the default: on an earlier tree 4 moved
             tracks only towards their own person (275 of 275 on ninety clear-room runs)
             and cut the switches away from the door (15 against 22), but not in all (62
             either way: the door crowds went the other way; docs/detection.md, "Catching
@@ -269,7 +269,7 @@ class AutoDetectionConfig:
         beside_radius: metres; the track ``beside_support`` moves must be this close to
             the detection (the count of tracks the detection would leave spare still
             runs over ``relocate_radius``). 0.6: on the thirty clear-room runs of seeds
-            0-4 (twenty-sixth session, ``beside_support`` 0.25 within 1 m) the twelve
+            0-4 (``beside_support`` 0.25 within 1 m) the twelve
             moves of a track that had followed the detected person were 0.45-0.57 m from
             the detection, five of the six onto another person 0.73-0.92 m. With it the
             rule's moves on ninety runs went to the track's own person 24 times of 25, yet
@@ -297,7 +297,7 @@ class AutoDetectionConfig:
             coverage in the particle weights"). 0: colour alone.
         birth_exit_depth: metres; a confirmed detection deeper than this inside an exit
             starts or moves no track (its person is in the doorway or beyond). 0.15 m, half
-            the exit release margin of before the fifteenth session, where it was tied to
+            the exit release margin of earlier, where it was tied to
             that margin; kept when the margin became 0.6 (docs/detection.md,
             "Orientation apart from velocity").
     """

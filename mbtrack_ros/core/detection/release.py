@@ -235,8 +235,8 @@ class ReleaseConfig:
             (docs/detection.md, "Spare tracks and release").
         exit_margin: metres from the floor rectangle beyond which a track inside one of the
             calibration's exits is released at once (module docstring); people standing in
-            a doorway stay within it. 0.6 (0.3 m past the synth's door, 0.3 before the
-            fifteenth session): a track whose velocity follows its person
+            a doorway stay within it. 0.6 (0.3 m past the synth's door, 0.3 earlier): a
+            track whose velocity follows its person
             (``MotionConfig.orientation_follows_velocity`` off) overshoots into the exit
             when its person stops in the doorway, and at 0.3 the rule released 67 tracks
             of people still in the room on thirty clear-room runs (17 with the coupled

@@ -1,0 +1,81 @@
+"""``mbtrack evaluate``: the benchmark registry and the quick run CI makes."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from mbtrack_ros.cli import main
+from mbtrack_ros.commands.benchmarks import BENCHMARKS, get_benchmark
+
+
+def test_every_benchmark_has_unique_jobs_in_both_modes():
+    names = [b.name for b in BENCHMARKS]
+    assert len(names) == len(set(names))
+    for bench in BENCHMARKS:
+        for quick in (True, False):
+            jobs = bench.jobs(quick)
+            assert jobs, (bench.name, quick)
+            assert all(j.benchmark == bench.name for j in jobs)
+            assert len({j.name for j in jobs}) == len(jobs), bench.name
+    with pytest.raises(KeyError, match='known: clear_room'):
+        get_benchmark('nope')
+
+
+def test_the_full_run_renders_fresh_recordings_only():
+    """The published tables use recording seeds from 200: not the development seeds."""
+    for bench in BENCHMARKS:
+        for job in bench.jobs(False):
+            assert job.params.get('seed', 200) >= 200, (bench.name, job.name)
+
+
+def test_quick_evaluate_writes_a_table_and_plots_per_benchmark(tmp_path, capsys):
+    out = tmp_path / 'results'
+    assert main(['evaluate', '--quick', '--out', str(out), '--jobs', '2']) == 0, \
+        capsys.readouterr().err
+    raw = json.loads((out / 'results.json').read_text())
+    for bench in BENCHMARKS:
+        text = (out / f'{bench.name}.md').read_text()
+        assert text.startswith(f'# {bench.title}\n')
+        assert f'`mbtrack evaluate --quick --only {bench.name}`' in text
+        rows = [line for line in text.splitlines() if line.startswith('| ')]
+        assert len(rows) >= 3, text          # header, rule, at least one result row
+        plots = [line[line.index('](') + 2:-1] for line in text.splitlines()
+                 if line.startswith('![')]
+        assert plots and all((out / p).stat().st_size > 1000 for p in plots)
+        assert len(raw[bench.name]) == len(bench.jobs(True))
+    clear = raw['clear_room'][0]
+    assert clear['persons'] >= 1 and 0.0 < clear['mota'] <= 1.0
+    real = {r['clip']: r for r in raw['real_clip']}
+    assert real['started_off']['ids'] == 1
+
+    # --report-only writes the same tables from results.json; --fill quotes them in a page
+    before = {b.name: (out / f'{b.name}.md').read_text() for b in BENCHMARKS}
+    for b in BENCHMARKS:
+        (out / f'{b.name}.md').unlink()
+    page = tmp_path / 'page.md'
+    page.write_text('intro\n<!-- results: clear_room -->\nold\n<!-- /results -->\nend\n')
+    assert main(['evaluate', '--quick', '--report-only', '--out', str(out),
+                 '--fill', str(page)]) == 0, capsys.readouterr().err
+    assert {b.name: (out / f'{b.name}.md').read_text() for b in BENCHMARKS} == before
+    filled = page.read_text()
+    assert 'old' not in filled and filled.startswith('intro\n') and filled.endswith('end\n')
+    assert '| `clear-room --seed 200` |' in filled
+    assert '`mbtrack evaluate --quick --only clear_room`' in filled
+
+
+@pytest.mark.parametrize('argv,message', [
+    (['--only', 'nope'], "unknown benchmark 'nope'"),
+    (['--jobs', '0'], '--jobs must be at least 1'),
+    (['--report-only'], 'results.json'),
+])
+def test_bad_options_are_one_line_errors(tmp_path, capsys, argv, message):
+    assert main(['evaluate', '--out', str(tmp_path), *argv]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0]
+
+
+def test_list_names_every_benchmark(capsys):
+    assert main(['evaluate', '--list']) == 0
+    listed = [line.split()[0] for line in capsys.readouterr().out.splitlines()]
+    assert listed == [b.name for b in BENCHMARKS]
