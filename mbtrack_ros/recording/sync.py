@@ -23,8 +23,8 @@ frames per camera and emits :class:`FrameSet` objects in time order:
   (:attr:`FrameSetSynchronizer.warnings`), and the measured period is used;
 * **incomplete** sets, with the views that are there and the names of the missing cameras,
   when every missing camera has already delivered a frame past the window, or when a frame
-  ``timeout`` newer than the set's reference time arrived (a camera that fell silent never stalls the
-  others);
+  ``timeout`` newer than the set's reference time arrived (a camera that fell silent never
+  stalls the others);
 * after a **reset**: stamps going backwards on a camera (a bag restarted, simulated time
   reset) or jumping forward by more than ``jump_ns`` clear all buffers; the next emitted set
   carries ``after_reset=True`` so the caller can reset its tracker too.
