@@ -60,7 +60,7 @@ def test_tracker_defaults_are_the_built_configs_own_defaults():
     from mbtrack_ros.core.detection.manager import AutoDetectionConfig
     from mbtrack_ros.core.likelihood import LikelihoodConfig
 
-    assert Tracker(make_room(), TrackerConfig()).measurement.config == LikelihoodConfig()
+    assert Tracker(make_room(320, 240), TrackerConfig()).measurement.config == LikelihoodConfig()
     assert TrackerConfig().detection_config() == AutoDetectionConfig()
 
 
@@ -164,10 +164,10 @@ def test_offline_profile_is_the_default_with_fewer_particles_sparse_detection_ha
     default = tracker_values_from_params(REPO / 'config' / 'clear_room.yaml')
     assert {k for k in offline.keys() | default.keys()
             if offline.get(k) != default.get(k)} == {'particles', 'detection_every',
-                                                      'image_scale'}
+                                                      'working_pixels'}
     assert offline['particles'] < default['particles']
     assert offline['detection_every'] > default.get('detection_every', 1)
-    assert offline['image_scale'] < default.get('image_scale', 1.0)
+    assert offline['working_pixels'] < default.get('working_pixels', 76800)
 
 
 @pytest.mark.parametrize('profile', [FAST, OFFLINE], ids=['fast', 'offline'])
@@ -200,5 +200,5 @@ def test_fast_profile_loads_in_the_node_and_the_replay(tmp_path, profile):
     assert node_config.subsample == replay_config.subsample == 1
     assert node_config.detection_every == replay_config.detection_every == \
         (1 if profile == FAST else 3)
-    assert node_config.image_scale == replay_config.image_scale == \
-        (1.0 if profile == FAST else 0.5)
+    assert node_config.working_pixels == replay_config.working_pixels == \
+        (76800 if profile == FAST else 19200)

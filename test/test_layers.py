@@ -40,7 +40,7 @@ def test_replay_start_up_imports_neither_rclpy_nor_scipy_spatial(tmp_path):
             f'args = build_parser().parse_args(["replay", "B", "--out", "O", "--params", '
             f'{str(params)!r}])\n'
             'config = replay._config(args)\n'
-            'assert config.image_scale == 0.5 and config.particles == 50, config\n')
+            'assert config.working_pixels == 19200 and config.particles == 50, config\n')
     assert _imported_after(code, ('rclpy', 'scipy.spatial', 'sensor_msgs')) == []
 
 

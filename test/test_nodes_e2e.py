@@ -64,7 +64,7 @@ def test_every_example_config_loads(config, room_calibration, context):
             assert node.get_parameter(name).value == value, name
         p = node.params
         assert p.camera_names == values['cameras']
-        assert p.slop_ns == round(values['sync.slop'] * 1e9)
+        assert p.tolerance_ns == round(values['sync.tolerance'] * 1e9)
         assert p.tracker.algorithm == values['tracker.algorithm']
         assert p.tracker.particles == values.get('tracker.particles', 100)
         transport = values.get('image_transport', 'raw')
@@ -161,12 +161,13 @@ BAD = [
     (['-p', 'tracker.particles:=0'], "'tracker.particles': value out of range"),
     (['-p', 'detection.reuse_time:=-1.0'], "'detection.reuse_time': value out of range"),
     (['-p', 'tracker.subsample:=0'], "'tracker.subsample': value out of range"),
-    (['-p', 'tracker.image_scale:=1.5'], "'tracker.image_scale': value out of range"),
-    (['-p', 'tracker.image_scale:=0.0'], 'image_scale must be a number in (0, 1], got 0.0'),
+    (['-p', 'tracker.working_pixels:=100'], "'tracker.working_pixels': value out of range"),
+    (['-p', 'tracker.working_pixels:=0.5'], "'tracker.working_pixels': wrong type"),
     (['-p', 'image_transport:=udp'], "image_transport: 'udp' is not one of raw, compressed"),
     (['-p', 'camera.cam0.transport:=theora'], 'camera.cam0.transport'),
-    (['-p', 'sync.slop:=1'], "'sync.slop': wrong type"),
-    (['-p', 'sync.slop:=0.5', '-p', 'sync.timeout:=0.2'], 'must exceed sync.slop'),
+    (['-p', 'sync.tolerance:=1'], "'sync.tolerance': wrong type"),
+    (['-p', 'sync.tolerance:=0.5', '-p', 'sync.timeout:=0.2'], 'must exceed sync.tolerance'),
+    (['-p', 'camera.cam0.time_offset:=20.0'], "'camera.cam0.time_offset': value out of range"),
     (['-p', 'tracker.algorithm:=magic'], "tracker.algorithm: 'magic' is not one of"),
     (['-p', 'motion.velocity_noise:=-0.1'], "'motion.velocity_noise': value out of range"),
     (['-p', 'motion.orientation_follows_velocity:=1.0'],

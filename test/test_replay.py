@@ -329,14 +329,14 @@ def test_the_replay_command_ends_at_once_with_complete_outputs(recording, tmp_pa
 
 def test_replay_at_half_scale_resizes_ahead_with_the_same_tracks(recording, tmp_path, capsys,
                                                                  monkeypatch):
-    """With ``--image-scale`` the replay resizes the images in its reader thread (the resize
+    """With ``--working-pixels`` the replay resizes the images in its reader thread (the resize
     of ``Tracker.step``, done ahead): the step gets them at its size, and the tracks are
     those of a replay that leaves the resize to the step, bit for bit."""
     from mbtrack_ros.commands import replay
     from mbtrack_ros.core.tracker import Tracker
 
     gt = recording / 'ground_truth.csv'
-    args = ['replay', str(recording), '--image-scale', '0.5', '--particles', '30',
+    args = ['replay', str(recording), '--working-pixels', '4800', '--particles', '30',
             '--seed', '4', '--init-from', str(gt)]
     seen = []
     step = Tracker.step

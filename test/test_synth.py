@@ -168,24 +168,25 @@ def test_visible_cameras_agree_with_id_buffers_and_people_enter_through_the_door
 
 
 def test_motion_is_smooth_and_bodies_face_the_walking_direction():
-    synth = Synthesizer('lanz-seq1-short', seed=4, frames=40, width=W, height=H)
-    crowd, dt = synth.crowd, 1.0 / synth.fps
-    prev = {p.person_id: p for p in crowd.people()}
     alignment = []
-    for _ in range(300):
-        crowd.step(dt)
-        for p in crowd.people():
-            q = prev[p.person_id]
-            step = np.array([p.x - q.x, p.y - q.y])
-            speed = np.linalg.norm(step) / dt
-            assert speed <= MAX_SPEED + 0.25  # + separation pushes
-            if speed > 0.3:
-                heading = np.array([np.cos(p.theta), np.sin(p.theta)])
-                alignment.append(step @ heading / np.linalg.norm(step))
-            prev[p.person_id] = p
+    for seed in range(4):   # a few crowds: the share is a property of the motion model
+        synth = Synthesizer('lanz-seq1-short', seed=seed, frames=40, width=W, height=H)
+        crowd, dt = synth.crowd, 1.0 / synth.fps
+        prev = {p.person_id: p for p in crowd.people()}
+        for _ in range(300):
+            crowd.step(dt)
+            for p in crowd.people():
+                q = prev[p.person_id]
+                step = np.array([p.x - q.x, p.y - q.y])
+                speed = np.linalg.norm(step) / dt
+                assert speed <= MAX_SPEED + 0.25  # + separation pushes
+                if speed > 0.3:
+                    heading = np.array([np.cos(p.theta), np.sin(p.theta)])
+                    alignment.append(step @ heading / np.linalg.norm(step))
+                prev[p.person_id] = p
     # the body faces the walking direction (only the hard 0.42 m gap pushes sideways)
     alignment = np.array(alignment)
-    assert len(alignment) > 300 and np.mean(alignment > 0.95) > 0.95
+    assert len(alignment) > 1200 and np.mean(alignment > 0.95) > 0.95
     assert all(1.5 <= w.height <= 2.0 for w in crowd.walkers)
 
 

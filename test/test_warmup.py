@@ -83,21 +83,21 @@ def test_node_warm_up_keeps_ids_and_outputs(frames, tmp_path, context):
 
 
 def test_half_scale_warm_up_and_debug_image_at_the_camera_size(frames, tmp_path, context):
-    """tracker.image_scale 0.5: the warm-up's debug overlay and the node's debug image draw
-    the tracker's half-size occlusion layers on full-size camera images."""
+    """tracker.working_pixels 19200 (160x120): the warm-up's debug overlay and the node's
+    debug image draw the tracker's half-size occlusion layers on full-size camera images."""
     from mbtrack_ros.nodes.tracker_node import TrackerNode
     from mbtrack_ros.nodes.warmup import warm_up
 
-    report = warm_up(TrackerConfig(detection=True, seed=0, image_scale=0.5), ceiling=True)
+    report = warm_up(TrackerConfig(detection=True, seed=0, working_pixels=19200), ceiling=True)
     assert report.births >= 1
     calibration, data = frames
     calib = tmp_path / 'calibration.yaml'
     calibration.save(calib)
     node = TrackerNode(cli_args=['--ros-args', '-p', f'calibration_file:={calib}',
-                                 '-p', 'tracker.seed:=5', '-p', 'tracker.image_scale:=0.5',
+                                 '-p', 'tracker.seed:=5', '-p', 'tracker.working_pixels:=19200',
                                  '-p', 'warm_up:=false'], context=context, step_thread=False)
     try:
-        assert node.tracker.config.image_scale == 0.5
+        assert node.tracker.config.working_pixels == 19200
         cam = node.calibration.cameras['cam0']
         assert node.tracker.calibration.cameras['cam0'].width == cam.width // 2
         result = None

@@ -4,7 +4,8 @@ BAG is a rosbag2 directory (MCAP or sqlite3) or a recording directory made by
 ``mbtrack synth`` (then ``--config`` defaults to its ``calibration.yaml``). Frames are read
 with :class:`~mbtrack_ros.recording.bag.RecordingReader` and fed to the
 :class:`~mbtrack_ros.core.tracker.Tracker` as fast as possible (a reader thread decodes, and
-at ``image_scale`` < 1 resizes, the next frame sets while the tracker works:
+to the tracker's working size (``--working-pixels``) resizes, the next frame sets while
+the tracker works:
 :func:`~mbtrack_ros.recording.bag.prefetched`); ``tracks.mcap`` is written by a child
 process (:mod:`mbtrack_ros.commands.output_writer`). Outputs in ``--out``:
 
@@ -109,9 +110,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument('--detection-every', type=int, default=None, metavar='K',
                         help='run the detection pipeline on every K-th frame set only '
                              '(default 1; a speed option that costs accuracy)')
-    parser.add_argument('--image-scale', type=float, default=None, metavar='S',
-                        help='track on the images resized by S in (0, 1] (default 1; a '
-                             'speed option that costs accuracy)')
+    parser.add_argument('--working-pixels', type=int, default=None, metavar='P',
+                        help='pixels per camera image the tracker works on; larger images '
+                             'are resized once per frame (default 76800 = 320x240; fewer is '
+                             'a speed option)')
+    parser.add_argument('--sync-tolerance', type=float, default=None, metavar='S',
+                        help='largest distance of an image\'s capture time from its frame '
+                             'set\'s time, seconds (default: half the frame period, measured '
+                             'from the stamps)')
     parser.add_argument('--init-from', type=Path, default=None, metavar='GROUND_TRUTH.csv',
                         help='start tracks from this ground truth (models from key views)')
     parser.add_argument('--eval', type=Path, default=None, metavar='GROUND_TRUTH.csv',
@@ -193,7 +199,7 @@ def _config(args: argparse.Namespace) -> TrackerConfig:
     try:
         values = tracker_values_from_params(args.params) if args.params is not None else {}
         for name in ('algorithm', 'particles', 'joint_particles', 'sigma', 'd_occ',
-                     'mrf_radius', 'subsample', 'detection_every', 'image_scale'):
+                     'mrf_radius', 'subsample', 'detection_every', 'working_pixels'):
             if getattr(args, name) is not None:  # an explicit option beats the file
                 values[name] = getattr(args, name)
         if args.no_mrf:
@@ -206,6 +212,27 @@ def _config(args: argparse.Namespace) -> TrackerConfig:
         return TrackerConfig.from_dict(values)
     except TrackerError as err:
         raise _UserError(str(err)) from err
+
+
+def _sync_options(args: argparse.Namespace, bag: Path,
+                  calibration: RoomCalibration) -> dict:
+    """The frame-set synchroniser's settings (:class:`RecordingReader`): the tolerance
+    (``--sync-tolerance``, else half the measured frame period), the nominal frame rate of
+    a synth recording (recording.yaml ``fps``, checked against the stamps) and the
+    cameras' ``time_offset`` from the calibration."""
+    tolerance = args.sync_tolerance
+    if tolerance is not None and not (0 <= tolerance <= 1.0):
+        raise _UserError(f'--sync-tolerance must be in [0, 1] seconds, got {tolerance}')
+    fps = 0.0
+    meta = bag / 'recording.yaml'
+    if meta.is_file():
+        try:
+            fps = float((yaml.safe_load(meta.read_text()) or {}).get('fps') or 0.0)
+        except (OSError, yaml.YAMLError, TypeError, ValueError, AttributeError):
+            fps = 0.0
+    offsets = {n: c.time_offset for n, c in calibration.cameras.items() if c.time_offset}
+    return {'tolerance_ns': int(round((tolerance or 0.0) * 1e9)),
+            'frame_rate': fps if fps > 0 else 0.0, 'time_offsets': offsets}
 
 
 class _FrameIndex:
@@ -275,16 +302,12 @@ def _collect_key_images(reader: RecordingReader, index: _FrameIndex,
 
 
 def _at_working_size(frames: Iterator[FrameSet], tracker: Tracker) -> Iterator[FrameSet]:
-    """The frame sets with their images resized to the tracker's processing size
-    (``TrackerConfig.image_scale``) by the resize ``Tracker.step`` would apply
-    (``Camera.fit``), so that it runs in the reader thread; ``Tracker.step`` then finds
-    them at its size. Unchanged at scale 1 (where the step checks the sizes)."""
-    if tracker.config.image_scale == 1.0:
-        yield from frames
-        return
-    cams = tracker.calibration.cameras
+    """The frame sets with their images resized to the tracker's working size
+    (``TrackerConfig.working_pixels``) by the resize ``Tracker.step`` would apply
+    (:meth:`Tracker.working_images`), so that it runs in the reader thread;
+    ``Tracker.step`` then finds them at its size."""
     for fs in frames:
-        fs.images = {c: cams[c].fit(im) if c in cams else im for c, im in fs.images.items()}
+        fs.images = tracker.working_images(fs.images)
         yield fs
 
 
@@ -330,7 +353,7 @@ def _track_rows(tracker: Tracker, reader: RecordingReader, index: _FrameIndex, s
                 status['tracks'] += 1
             images = {c: im for c, im in fs.images.items() if c in known}
             try:
-                result = tracker.step(fs.stamp_ns, images)
+                result = tracker.step(fs.stamp_ns, images, stamps=fs.stamps)
             except (LikelihoodError, TrackerError) as err:
                 status['bag_error'] = f'frame set {fs.index}: {err}'
                 break
@@ -361,6 +384,8 @@ def _track_rows(tracker: Tracker, reader: RecordingReader, index: _FrameIndex, s
         status['bag_error'] = str(err)
     finally:
         frames.close()  # stop the reader thread before the reader closes
+        for text in reader.warnings:
+            print(f'{_PROG}: warning: {text}', file=sys.stderr)
         if outputs is not None and status.get('last_stamp') is not None:
             try:  # the final counts; a writer error is raised by outputs.close()
                 outputs.write_diagnostics(status['last_stamp'], _counts(status))
@@ -435,8 +460,9 @@ def run(args: argparse.Namespace) -> int:
             raise _UserError(f'{bag} is not a rosbag2 directory nor a recording directory '
                              '(no metadata.yaml)')
         try:
-            with RecordingReader(bag) as reader:  # opened once (~0.15 s an opening)
-                # bounded work per image: at most MAX_RESCALE times the calibrated size
+            with RecordingReader(bag, **_sync_options(args, bag, calibration)) as reader:
+                # opened once (~0.15 s an opening); bounded work per image: at most
+                # MAX_RESCALE times the calibrated size
                 reader.limit_image_sizes({n: (c.width, c.height)
                                           for n, c in calibration.cameras.items()})
                 first: dict[str, np.ndarray] = {}

@@ -104,6 +104,9 @@ class Camera:
         R: (3, 3) rotation world -> camera.
         t: (3,) translation world -> camera, metres.
         frame_id: the optical frame id written into image headers.
+        time_offset: seconds added to this camera's image stamps to give the capture time
+            on the rig's common clock (a camera whose clock runs 30 ms late: 0.03); the
+            frame-set synchroniser applies it (:mod:`mbtrack_ros.recording.sync`).
     """
 
     name: str
@@ -114,10 +117,19 @@ class Camera:
     R: np.ndarray
     t: np.ndarray
     frame_id: str = ''
+    time_offset: float = 0.0
 
     def __post_init__(self) -> None:
         what = f'camera {self.name}'
         object.__setattr__(self, 'K', _as_matrix(self.K, (3, 3), f'{what}: K'))
+        try:
+            offset = float(self.time_offset)
+        except (TypeError, ValueError):
+            offset = float('nan')
+        if not (np.isfinite(offset) and abs(offset) <= 10.0):
+            raise CalibrationError(f'{what}: time_offset must be a number of seconds within '
+                                   f'+-10, got {self.time_offset!r:.40}')
+        object.__setattr__(self, 'time_offset', offset)
         dist = np.zeros(5)
         try:
             given = (None if isinstance(self.dist, (str, bytes))
@@ -279,8 +291,9 @@ class Camera:
 
     # -- serialisation --------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
-        """The camera as a calibration-file entry (CameraInfo-style keys + extrinsics)."""
-        return {
+        """The camera as a calibration-file entry (CameraInfo-style keys + extrinsics;
+        ``time_offset`` only when not 0)."""
+        entry = {
             'camera_name': self.name,
             'frame_id': self.frame_id,
             'image_width': self.width,
@@ -296,6 +309,9 @@ class Camera:
                 'translation': self.t.tolist(),
             },
         }
+        if self.time_offset:
+            entry['time_offset'] = self.time_offset
+        return entry
 
     @classmethod
     def from_dict(cls, entry: Mapping[str, Any]) -> Camera:
@@ -334,7 +350,8 @@ class Camera:
         return cls(name=name, width=get(entry, 'image_width'),
                    height=get(entry, 'image_height'), K=data('camera_matrix'), dist=dist[:5],
                    R=get(ext, 'rotation'), t=get(ext, 'translation'),
-                   frame_id=str(entry.get('frame_id', '') or ''))
+                   frame_id=str(entry.get('frame_id', '') or ''),
+                   time_offset=entry.get('time_offset', 0.0))
 
 
 def look_at(eye: Iterable[float], target: Iterable[float],

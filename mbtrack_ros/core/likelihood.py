@@ -68,7 +68,7 @@ from mbtrack_ros.core.appearance import (
 from mbtrack_ros.core.camera import Camera, RoomCalibration
 from mbtrack_ros.core.detection.features import ForegroundIntegral, Spans
 from mbtrack_ros.core.shape import BodyShape, Silhouettes, rasterize
-from mbtrack_ros.core.state import STATE_DIM
+from mbtrack_ros.core.state import STATE_DIM, VX, VY, X, Y
 
 __all__ = ['HJSDebug', 'LikelihoodConfig', 'LikelihoodError', 'LikelihoodResult',
            'MeasurementModel']
@@ -265,6 +265,7 @@ class MeasurementModel:
         self._workspaces = _Workspaces()
         self._camera_cost: dict[str, float] = {}   # seconds of a camera's last HJS update
         self._camera_args: dict[str, tuple] = {}
+        self._offsets: dict[str, float] = {}   # set_capture_offsets()
         body = BodyShape()
         self._profile = (body.fractions, body.half_widths, body.segment_parts,
                          float(body.hip_fraction))
@@ -291,7 +292,41 @@ class MeasurementModel:
             checked[name] = image
         self._images = checked
         self._bins = {}
+        self._offsets = {}
         self._foreground, self._masks_source, self._coverage_gain = {}, {}, 0.0
+
+    def set_capture_offsets(self, offsets: Mapping[str, float]) -> None:
+        """Capture time of each camera's image relative to the particles' time, seconds
+        (<= 0 when the particles are at the latest capture of the frame set; cameras not
+        named: 0). Call after :meth:`set_images` (which clears them).
+
+        Unsynchronised cameras: the camera updates of the HJS filter are independent
+        factors of the likelihood (000 Eq. 19 summed over cameras), so each can be applied
+        at its own capture time. A camera whose image was taken ``dt`` seconds from the
+        particles' time evaluates each particle at ``x + v dt`` (the constant-velocity
+        part of the dynamics, 000 Eq. 15, over ``dt``; the diffusion over a fraction of a
+        frame period is neglected): the particle predicted to that camera's capture time.
+        """
+        out = {}
+        for name, dt in offsets.items():
+            if name not in self.calibration.cameras:
+                raise LikelihoodError(f'capture offset for unknown camera {name!r}')
+            dt = float(dt)
+            if not np.isfinite(dt):
+                raise LikelihoodError(f'{name}: capture offset must be finite, got {dt}')
+            if dt != 0.0:
+                out[name] = dt
+        self._offsets = out
+
+    def _at_capture(self, camera: str, states: np.ndarray) -> np.ndarray:
+        """Particle states (P, 6) moved to ``camera``'s capture time
+        (:meth:`set_capture_offsets`): ``x + v dt``; the same array when dt is 0."""
+        dt = self._offsets.get(camera, 0.0) if self._offsets else 0.0
+        if dt == 0.0:
+            return states
+        moved = states.copy()
+        moved[:, X:Y + 1] += states[:, VX:VY + 1] * dt     # 000 Eq. 15, deterministic part
+        return moved
 
     def set_foreground(self, masks: Mapping[str, np.ndarray]
                        | Callable[[], Mapping[str, np.ndarray]], gain: float) -> None:
@@ -579,10 +614,11 @@ class MeasurementModel:
             bins = self._bins.get(name, _NO_BINS)
             cam_args = self._camera_arguments(name)
             image = self._images[name]
+            cam_states = self._at_capture(name, states)
 
             def run(mfg: np.ndarray, bbg: np.ndarray, wmap: np.ndarray) -> tuple:
                 return _kernels.update_camera(
-                    image, bins, states, target, prior, heights, widths, *shape_args,
+                    image, bins, cam_states, target, prior, heights, widths, *shape_args,
                     angles, n_views, key, *cam_args, *rest, mfg, bbg, wmap, cam_loglik[i],
                     cam_visible[i], cam_inside[i])
 
@@ -615,7 +651,8 @@ class MeasurementModel:
                 cam_loglik[i] += self._coverage_term(cam_cover[i], target, prior, n_targets)
             cam_loglik[i] = self._seen_by(cam_loglik[i], cam_inside[i], cam_visible[i],
                                           target, prior, n_targets)
-            loglik += self._without_hidden(name, cam_loglik[i], states, target, prior,
+            loglik += self._without_hidden(name, cam_loglik[i],
+                                           self._at_capture(name, states), target, prior,
                                            n_targets)
             visible[:, c] = cam_visible[i]
         timings['total'] = time.perf_counter() - t0

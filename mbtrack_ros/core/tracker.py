@@ -25,7 +25,8 @@ from mbtrack_ros.core.dynamics import DynamicsError, MotionConfig
 from mbtrack_ros.core.filters import FilterConfig, FilterError, TrackingFilter, make_filter
 from mbtrack_ros.core.state import SIT, STATE_DIM, FrameResult, TrackEstimate, VX, VY, X, Y
 
-__all__ = ['MAX_JOINT_PARTICLES', 'MAX_PARTICLES', 'Tracker', 'TrackerConfig', 'TrackerError']
+__all__ = ['MAX_JOINT_PARTICLES', 'MAX_PARTICLES', 'REFERENCE_PIXELS', 'Tracker', 'TrackerConfig',
+           'TrackerError', 'length_scale']
 
 
 #: most particles per target (``TrackerConfig.particles``, node ``tracker.particles``)
@@ -103,12 +104,15 @@ class TrackerConfig:
             sets between are only filtered and report the tracks with the visibility and
             existence of the last detection frame set (1: every frame set; larger: less
             CPU, people found later and kept less well).
-        image_scale: the tracker works on the images resized by this factor in (0, 1]
-            (:meth:`Tracker.step` resizes them once, the cameras' intrinsics are scaled to
-            match); pixel lengths of the detection (morphology, edge validation, masks)
-            and the likelihood's smallest visible area are scaled with it. 1: the images
-            as they come; smaller: less CPU, less accuracy. Tracks are in room coordinates
-            whatever the scale.
+        working_pixels: pixels per camera image the tracker works on (default 320 x 240 =
+            76800): a camera with more is resized by ``sqrt(working_pixels / (w h))``
+            (aspect ratio kept, never enlarged; :meth:`Tracker.step` resizes each image
+            once, the intrinsics are scaled to match). Every pixel-unit setting (the
+            detection's morphology, mask growth and edge validation, the likelihood's
+            smallest visible area) is given at 320 x 240 and scaled with the working size
+            (:data:`REFERENCE_PIXELS`), so the same room gives the same results from a
+            640 x 480 or a 1920 x 1080 camera. Fewer pixels (e.g. 19200, 160 x 120): less
+            CPU, less accuracy. Tracks are in room coordinates whatever the size.
         adaptation_rate: with detection, blending rate of the slow, occlusion-aware
             appearance-model adaptation of confirmed tracks (``AdaptationConfig.rate``,
             :mod:`mbtrack_ros.core.detection.adaptation`; None: its default, 0.05), per
@@ -143,7 +147,7 @@ class TrackerConfig:
     subsample: int = 1
     pipeline_search: bool = False
     detection_every: int = 1
-    image_scale: float = 1.0
+    working_pixels: int = 76_800
     adaptation_rate: float | None = None
 
     def __post_init__(self) -> None:
@@ -221,9 +225,11 @@ class TrackerConfig:
                     isinstance(self.adaptation_rate, (int, float))
                     and 0 <= self.adaptation_rate <= 1)):
             bad(f'adaptation_rate must be a number in [0, 1], got {self.adaptation_rate!r}')
-        if isinstance(self.image_scale, bool) or not (
-                isinstance(self.image_scale, (int, float)) and 0 < self.image_scale <= 1):
-            bad(f'image_scale must be a number in (0, 1], got {self.image_scale!r}')
+        if isinstance(self.working_pixels, bool) or not (
+                isinstance(self.working_pixels, (int, np.integer))
+                and MIN_WORKING_PIXELS <= self.working_pixels):
+            bad(f'working_pixels must be an integer >= {MIN_WORKING_PIXELS}, got '
+                f'{self.working_pixels!r}')
         if self.seed is not None and (isinstance(self.seed, bool)
                                       or not isinstance(self.seed, (int, np.integer))):
             bad(f'seed must be an integer or None, got {self.seed!r}')
@@ -238,8 +244,23 @@ class TrackerConfig:
                                 min_inside_share=float(self.min_inside_share),
                                 min_visible_share=float(self.min_visible_share))
 
-    def detection_config(self):
-        """The automatic-detection parameters this configuration sets (003 §4)."""
+    def working_calibration(self, calibration: RoomCalibration) -> RoomCalibration:
+        """The cameras at the size the tracker works on (``working_pixels``): each camera
+        with more pixels resized by ``sqrt(working_pixels / (w h))``, sizes rounded."""
+        cams = {}
+        for name, cam in calibration.cameras.items():
+            pixels = cam.width * cam.height
+            if pixels <= self.working_pixels:
+                cams[name] = cam
+                continue
+            f = float(np.sqrt(self.working_pixels / pixels))
+            cams[name] = cam.scaled(max(1, round(cam.width * f)), max(1, round(cam.height * f)))
+        return replace(calibration, cameras=cams)
+
+    def detection_config(self, length_scale: float = 1.0):
+        """The automatic-detection parameters this configuration sets (003 §4), with its
+        pixel lengths (given at 320 x 240) multiplied by ``length_scale`` (the working
+        size's, :func:`length_scale`)."""
         from mbtrack_ros.core.detection.detector import DetectorConfig
         from mbtrack_ros.core.detection.manager import AutoDetectionConfig
         from mbtrack_ros.core.detection.release import ReleaseConfig
@@ -263,7 +284,7 @@ class TrackerConfig:
             config = replace(config, beside_threshold=float(self.beside_threshold))
         if self.track_coverage is not None:
             config = replace(config, track_coverage=float(self.track_coverage))
-        return _pixels_scaled(config, float(self.image_scale))
+        return _pixels_scaled(config, float(length_scale))
 
     def filter_config(self) -> FilterConfig:
         """The particle-filter parameters of this configuration."""
@@ -291,16 +312,32 @@ class TrackerConfig:
         return cls(**values)
 
 
+#: pixels of the image size at which every pixel-unit default is given (320 x 240)
+REFERENCE_PIXELS = 320 * 240
+#: smallest ``working_pixels`` (80 x 60)
+MIN_WORKING_PIXELS = 80 * 60
+
+
+def length_scale(calibration: RoomCalibration) -> float:
+    """Factor of pixel lengths at the cameras' (working) size relative to 320 x 240:
+    ``sqrt(pixels / REFERENCE_PIXELS)`` of the median camera (one factor for the room;
+    cameras of one rig have similar sizes)."""
+    pixels = sorted(c.width * c.height for c in calibration.cameras.values())
+    if not pixels:
+        return 1.0
+    return float(np.sqrt(pixels[len(pixels) // 2] / REFERENCE_PIXELS))
+
+
 def _length(pixels: int, scale: float) -> int:
-    """A length in pixels of the full-size image, in the image resized by ``scale``
+    """A length in pixels at 320 x 240, at an image size with length factor ``scale``
     (rounded half up)."""
     return int(np.floor(pixels * scale + 0.5))
 
 
 def _pixels_scaled(config, scale: float):
-    """``AutoDetectionConfig`` with its pixel lengths scaled for images resized by
-    ``scale``: background morphology and mask growth, the person cue's dilations, the
-    edge validation. Its areas (``min_area``, ``min_blob_area``) are given at 320x240 and
+    """``AutoDetectionConfig`` with its pixel lengths (given at 320 x 240) scaled by the
+    working size's length factor ``scale``: background morphology and mask growth, the
+    person cue's dilations, the edge validation. Its areas (``min_area``, ``min_blob_area``) are given at 320x240 and
     scaled with the image area where they are used, and metres need nothing."""
     if scale == 1.0:
         return config
@@ -325,8 +362,8 @@ class Tracker:
 
     Args:
         calibration: the room (cameras and floor bounds) at the size of the images given
-            to :meth:`step`; with ``config.image_scale`` below 1 the tracker keeps its
-            cameras resized in :attr:`calibration` and resizes the images.
+            to :meth:`step`; the tracker keeps its cameras at the working size
+            (``config.working_pixels``) in :attr:`calibration` and resizes the images.
         config: tracker parameters.
         rng: random generator; default ``np.random.default_rng(config.seed)``. One draw
             from it seeds the tracks' own streams (:meth:`_stream`); the joint filter
@@ -338,10 +375,13 @@ class Tracker:
     def __init__(self, calibration: RoomCalibration, config: TrackerConfig | None = None, *,
                  rng: np.random.Generator | None = None, measurement=None) -> None:
         self.config = config or TrackerConfig()
-        scale = float(self.config.image_scale)
-        if scale != 1.0:
-            calibration = calibration.scaled_by(scale)
+        #: camera name -> (height, width) of the images given to step()
+        self.input_sizes = {n: (c.height, c.width) for n, c in calibration.cameras.items()}
+        calibration = self.config.working_calibration(calibration)
         self.calibration = calibration  # the cameras at the size the tracker works at
+        self._resize = {n for n, c in calibration.cameras.items()
+                        if (c.height, c.width) != self.input_sizes[n]}
+        scale = length_scale(calibration)
         self.rng = rng if rng is not None else np.random.default_rng(self.config.seed)
         # every track draws from a stream of its own (see _stream), seeded from this
         self._entropy = int(self.rng.integers(2 ** 63))
@@ -353,7 +393,7 @@ class Tracker:
         if measurement is None:
             from mbtrack_ros.core.likelihood import MeasurementModel
             likelihood = self.config.likelihood_config()
-            if scale != 1.0:  # an area: scales with the square
+            if scale != 1.0:  # an area given at 320 x 240: scales with the square
                 likelihood = replace(likelihood, min_visible_pixels=max(1, _length(
                     likelihood.min_visible_pixels, scale * scale)))
             measurement = MeasurementModel(calibration, likelihood)
@@ -367,7 +407,11 @@ class Tracker:
         self.detection = None
         if self.config.detection:
             from mbtrack_ros.core.detection.manager import AutoDetection
-            self.detection = AutoDetection(calibration, self.config.detection_config())
+            self.detection = AutoDetection(calibration, self.config.detection_config(scale))
+        self.illumination = None
+        if self.detection is not None:   # the background model is the reference
+            from mbtrack_ros.core.detection.illumination import IlluminationNormaliser
+            self.illumination = IlluminationNormaliser(self.detection.background)
 
     @property
     def track_ids(self) -> list[int]:
@@ -464,12 +508,24 @@ class Tracker:
         self._models.clear()
         if self.detection is not None:
             self.detection.reset()
+        if self.illumination is not None:
+            self.illumination.reset()
         self._last_stamp = None
         self._search_pending = False
         self._steps = 0
 
+    def working_images(self, images: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """``images`` at the working size: those at a camera's input size are resized
+        (area averaging, ``Camera.fit``), any other is passed on as it is (the likelihood
+        refuses a wrong size). :meth:`step` calls it; a reader thread may call it first."""
+        if not self._resize:
+            return images
+        cams = self.calibration.cameras
+        return {n: cams[n].fit(im) if n in self._resize and im.shape[:2]
+                == self.input_sizes[n] else im for n, im in images.items()}
+
     def step(self, stamp_ns: int, images: dict[str, np.ndarray], *,
-             search: bool = True) -> FrameResult:
+             search: bool = True, stamps: dict[str, int] | None = None) -> FrameResult:
         """Predict all tracks to ``stamp_ns`` and update them with ``images``.
 
         With automatic detection the step also releases tracks and updates existence and
@@ -490,8 +546,14 @@ class Tracker:
         Args:
             stamp_ns: frame stamp, integer nanoseconds; must not go backwards.
             images: ``(H, W, 3) uint8`` RGB images by camera name, at the size of the
-                calibration given to the tracker (resized here once by ``image_scale``).
+                calibration given to the tracker (resized here once to the working size,
+                :meth:`working_images`).
             search: run the detection search now (default) or leave it for :meth:`search`.
+            stamps: camera name -> capture time of its image, integer ns (unsynchronised
+                cameras; default: every image at ``stamp_ns``). The tracks are at
+                ``stamp_ns`` (the latest capture of the set, by convention); each camera's
+                update evaluates the particles predicted to its own capture time
+                (:meth:`MeasurementModel.set_capture_offsets`).
 
         Returns:
             :class:`~mbtrack_ros.core.state.FrameResult` with one estimate per track.
@@ -503,9 +565,9 @@ class Tracker:
                                f'{self._last_stamp} ns; reset the tracker')
         dt = 0.0 if self._last_stamp is None else (stamp_ns - self._last_stamp) / 1e9
         t0 = time.perf_counter()
-        if self.config.image_scale != 1.0:  # the one resize of every frame
-            cams = self.calibration.cameras
-            images = {n: cams[n].fit(im) if n in cams else im for n, im in images.items()}
+        images = self.working_images(images)   # the one resize of every frame
+        if self.illumination is not None:   # global colour gains undone (illumination.py)
+            images = self.illumination.normalise(images)
         detect = self.detection is not None \
             and self._steps % int(self.config.detection_every) == 0
         if detect:  # the foreground runs on a worker during the filter
@@ -513,6 +575,9 @@ class Tracker:
         try:
             seen = images if self.detection is None else self.detection.tracking_images(images)
             self.measurement.set_images(seen)
+            if stamps and hasattr(self.measurement, 'set_capture_offsets'):
+                self.measurement.set_capture_offsets(
+                    {n: (int(stamps[n]) - stamp_ns) / 1e9 for n in seen if n in stamps})
             gain = self.detection.config.track_coverage if detect else 0.0
             if gain > 0:   # the coverage term joins the frame's foreground when it needs it
                 self.measurement.set_foreground(self.detection.started_foreground, gain)

@@ -16,7 +16,29 @@ from mbtrack_ros.core.camera import Camera
 from mbtrack_ros.core.shape import BodyShape, ShapeError, render_labels
 from mbtrack_ros.core.state import FrameResult, TrackEstimate
 
-__all__ = ['occlusion_layers']
+__all__ = ['occlusion_layers', 'shadow_layer']
+
+
+def shadow_layer(tracker, camera: str, rgb: np.ndarray) -> np.ndarray | None:
+    """(h, w) bool pixels of ``rgb`` (the camera's image as received) that the shadow model
+    (:func:`~mbtrack_ros.core.detection.shadow.shadow_mask`) takes for cast shadows on the
+    background, at the tracker's working size; None without a ready background model."""
+    from mbtrack_ros.core.detection.illumination import ycc_to_rgb
+    from mbtrack_ros.core.detection.shadow import shadow_mask
+    from mbtrack_ros.core.tracker import length_scale
+
+    detection = getattr(tracker, 'detection', None)
+    model = None if detection is None else detection.background.models.get(camera)
+    if model is None or not model.ready:
+        return None
+    image = tracker.working_images({camera: rgb})[camera]
+    if image.shape[:2] != model.shape:
+        return None
+    gains = getattr(tracker.illumination, 'gains', {}).get(camera)
+    if gains is not None:   # the image as the background test saw it
+        image = np.clip(image / gains, 0, 255)
+    background = np.clip(ycc_to_rgb(model.background_ycc), 0, 255)
+    return shadow_mask(image, background, length_scale=length_scale(tracker.calibration))
 
 
 def _subsample(track: TrackEstimate, max_particles: int) -> tuple[np.ndarray, np.ndarray]:

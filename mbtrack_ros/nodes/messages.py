@@ -327,9 +327,13 @@ def diagnostics_message(stamp_ns: int, snap: DiagnosticsSnapshot, *,
     return msg
 
 
+#: colour of cast-shadow pixels in the debug image (RGB)
+SHADOW_COLOUR = (170, 0, 255)
+
+
 def debug_overlay(rgb: np.ndarray, *, occlusion: np.ndarray | None = None,
                   silhouettes: Mapping[int, np.ndarray] | None = None,
-                  alpha: float = 0.45) -> np.ndarray:
+                  alpha: float = 0.45, shadows: np.ndarray | None = None) -> np.ndarray:
     """Paint the HJS occlusion map and the track silhouettes over a camera image.
 
     Args:
@@ -339,12 +343,20 @@ def debug_overlay(rgb: np.ndarray, *, occlusion: np.ndarray | None = None,
         silhouettes: track id -> (H, W) bool or float mask of its rendered silhouette
             (000 Fig. 4), outlined and tinted in the track colour.
         alpha: blending weight of the overlays.
+        shadows: (h, w) bool cast-shadow pixels (any size, resized), painted in purple
+            (``SHADOW_COLOUR``).
 
     Returns:
         (H, W, 3) uint8 RGB image (a new array).
     """
     out = np.ascontiguousarray(rgb, dtype=np.uint8).copy()
     h, w = out.shape[:2]
+    if shadows is not None and np.any(shadows):
+        sh = np.asarray(shadows, dtype=np.uint8)
+        if sh.shape != (h, w):
+            sh = cv2.resize(sh, (w, h), interpolation=cv2.INTER_NEAREST)
+        out[sh > 0] = (out[sh > 0] * (1.0 - alpha)
+                       + np.asarray(SHADOW_COLOUR) * alpha).astype(np.uint8)
     if occlusion is not None:
         occ = np.clip(np.asarray(occlusion, dtype=np.float32), 0.0, 1.0)
         if occ.shape != (h, w):

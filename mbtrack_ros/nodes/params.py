@@ -17,8 +17,15 @@ qos_depth                       int        history depth of reliable image subsc
 camera.<name>.image_topic       string     (``/<name>/image_raw``, ``.../compressed``)
 camera.<name>.transport         string     per-camera override of ``image_transport``
 camera.<name>.camera_info_topic string     optional CameraInfo topic for a size check ('')
-sync.slop                       double     largest stamp spread in a frame set, s (0.01)
+sync.tolerance                  double     largest distance of an image's capture time
+                                           from its frame set's time, s; 0 = half the
+                                           frame period, measured from the stamps (0.0)
+sync.frame_rate                 double     the cameras' nominal frame rate, Hz, checked
+                                           against the stamps (0.0 = not given)
 sync.timeout                    double     wait for a late camera, message time, s (0.2)
+camera.<name>.time_offset       double     s added to the camera's stamps to give its
+                                           capture time (a clock offset; default: the
+                                           calibration's ``time_offset``, else 0.0)
 output_frame_id                 string     frame of all outputs ('' = calibration frame)
 rescale_images                  bool       resize images whose size differs from the
                                            calibration (up to 4 times larger per side)
@@ -51,9 +58,10 @@ tracker.subsample               int        likelihood on every k-th image row, 1
 tracker.pipeline_search         bool       search frame t for new people on a worker
                                            thread while frame t+1 is filtered (false;
                                            people start one frame later)
-tracker.image_scale             double     the tracker works on the images resized by
-                                           this factor in (0, 1] (1.0; a speed option
-                                           that costs accuracy)
+tracker.working_pixels          int        pixels per camera image the tracker works
+                                           on; larger images are resized once per frame
+                                           (76800 = 320x240; fewer: less CPU, less
+                                           accuracy)
 tracker.joint_particles         int        joint-filter particles (10000)
 tracker.sigma                   double     likelihood width, 000 Eq. 19 (0.12)
 tracker.d_occ                   double     occlusion penalty, 000 Eq. 26 (0.15)
@@ -110,7 +118,7 @@ motion.wall_stops               bool       a particle reaching the floor's borde
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -158,7 +166,7 @@ class NodeParams:
     cameras: tuple[CameraInput, ...]
     image_reliability: str
     tracker: TrackerConfig
-    slop_ns: int
+    tolerance_ns: int
     timeout_ns: int
     output_frame_id: str
     rescale_images: bool
@@ -173,6 +181,8 @@ class NodeParams:
     outputs_persons: bool = True
     outputs_detections: bool = True
     outputs_tf: bool = True
+    frame_rate: float = 0.0
+    time_offsets: dict[str, float] = field(default_factory=dict)
 
     @property
     def camera_names(self) -> list[str]:
@@ -199,7 +209,10 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
     'qos_depth': (10, 'history depth of reliable image subscriptions and of the outputs; '
                   'a reliable subscriber (or camera) lagging more messages loses the oldest',
                   _ir(1, 1000)),
-    'sync.slop': (0.01, 'largest stamp spread within one frame set, s', _fr(0.0, 1.0)),
+    'sync.tolerance': (0.0, 'largest distance of an image capture time from its frame '
+                       'set time, s; 0 = half the frame period (measured)', _fr(0.0, 1.0)),
+    'sync.frame_rate': (0.0, 'nominal camera frame rate, Hz, checked against the stamps; '
+                        '0 = not given', _fr(0.0, 1000.0)),
     'sync.timeout': (0.2, 'message-time wait for a late camera, s', _fr(0.001, 10.0)),
     'output_frame_id': ('', 'frame id of all outputs; empty = calibration frame', {}),
     'rescale_images': (False, 'resize images whose size differs from the calibration', {}),
@@ -226,9 +239,10 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
     'tracker.pipeline_search': (False, 'search frame t for new people on a worker thread '
                                 'while frame t+1 is filtered (TrackerConfig.pipeline_search)',
                                 {}),
-    'tracker.image_scale': (1.0, 'the tracker works on the images resized by this factor '
-                            'in (0, 1] (speed option, TrackerConfig.image_scale)',
-                            _fr(0.0, 1.0)),
+    'tracker.working_pixels': (76_800, 'pixels per camera image the tracker works on: '
+                               'larger images are resized once per frame, every pixel '
+                               'threshold follows (TrackerConfig.working_pixels)',
+                               _ir(4800, 100_000_000)),
     'tracker.joint_particles': (10_000, 'joint-filter particles',
                                 _ir(1, MAX_JOINT_PARTICLES)),
     'tracker.sigma': (0.12, 'likelihood width sigma (000 Eq. 19)', _fr(1e-4, 10.0)),
@@ -344,6 +358,7 @@ def declare_and_read(node: Node) -> tuple[NodeParams, RoomCalibration]:
         raise ParamsError(f'parameter image_transport: {default_transport!r} is not one of '
                           f'{", ".join(TRANSPORTS)}')
     cameras = []
+    offsets: dict[str, float] = {}
     for cam in names:
         transport = str(_declare(node, f'camera.{cam}.transport', default_transport,
                                  f'raw | compressed for {cam}', {}))
@@ -358,15 +373,21 @@ def declare_and_read(node: Node) -> tuple[NodeParams, RoomCalibration]:
         if not topic:
             raise ParamsError(f'parameter camera.{cam}.image_topic is empty')
         cameras.append(CameraInput(cam, topic, transport, info))
+        offset = _declare(node, f'camera.{cam}.time_offset',
+                          float(calibration.cameras[cam].time_offset),
+                          f's added to the stamps of {cam} to give its capture time',
+                          _fr(-10.0, 10.0))
+        if offset:
+            offsets[cam] = float(offset)
     reliability = str(v['image_reliability'])
     if reliability not in RELIABILITIES:
         raise ParamsError(f'parameter image_reliability: {reliability!r} is not one of '
                           f'{", ".join(RELIABILITIES)}')
-    slop_ns = int(round(v['sync.slop'] * 1e9))
+    tolerance_ns = int(round(v['sync.tolerance'] * 1e9))
     timeout_ns = int(round(v['sync.timeout'] * 1e9))
-    if timeout_ns <= slop_ns:
-        raise ParamsError(f'sync.timeout ({v["sync.timeout"]}) must exceed sync.slop '
-                          f'({v["sync.slop"]})')
+    if timeout_ns <= tolerance_ns:
+        raise ParamsError(f'sync.timeout ({v["sync.timeout"]}) must exceed sync.tolerance '
+                          f'({v["sync.tolerance"]})')
     executor = str(v['executor'])
     if executor not in EXECUTORS:
         raise ParamsError(f'parameter executor: {executor!r} is not one of '
@@ -387,7 +408,8 @@ def declare_and_read(node: Node) -> tuple[NodeParams, RoomCalibration]:
     params = NodeParams(
         calibration_file=calib_file, cameras=tuple(cameras), image_reliability=reliability,
         tracker=tracker,
-        slop_ns=slop_ns, timeout_ns=timeout_ns,
+        tolerance_ns=tolerance_ns, timeout_ns=timeout_ns,
+        frame_rate=float(v['sync.frame_rate']), time_offsets=offsets,
         output_frame_id=str(v['output_frame_id']) or calibration.frame_id,
         rescale_images=bool(v['rescale_images']), debug_images=bool(v['debug_images']),
         diagnostics_period_ns=int(round(v['diagnostics_period'] * 1e9)),

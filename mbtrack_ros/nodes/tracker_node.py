@@ -2,7 +2,8 @@
 
 Inputs (``qos_profile_sensor_data``): one image topic per camera (``sensor_msgs/Image`` or
 ``sensor_msgs/CompressedImage``), optional ``sensor_msgs/CameraInfo`` per camera.
-Outputs (reliable, stamped with the frame set's time, frame ``output_frame_id``):
+Outputs (reliable, stamped with the frame set's time: the latest capture time of its images,
+:mod:`mbtrack_ros.recording.sync`; frame ``output_frame_id``):
 ``~/people`` (PoseArray), ``~/tracks`` (PointCloud2), ``~/markers`` (MarkerArray),
 ``~/debug/<camera>/occlusion`` (Image, only computed when subscribed or enabled),
 ``/diagnostics`` (DiagnosticArray), and the standard people outputs of
@@ -59,7 +60,7 @@ from mbtrack_ros.core.tracker import Tracker, TrackerError
 from mbtrack_ros.nodes import messages
 from mbtrack_ros.nodes.conversions import (
     ImageConversionError, compressed_to_rgb, image_to_rgb, rgb_to_image, stamp_to_ns)
-from mbtrack_ros.nodes.debug import occlusion_layers
+from mbtrack_ros.nodes.debug import occlusion_layers, shadow_layer
 from mbtrack_ros.nodes.params import NodeParams, ParamsError, declare_and_read
 from mbtrack_ros.nodes.people_outputs import PeopleFrameBuilder, PeopleOutputs
 from mbtrack_ros.nodes.transport import use_large_shm_segment
@@ -187,7 +188,9 @@ class TrackerNode(Node):
             self.tracker.detection.prepare()  # one-off work now, not at the bootstrap frame
         if p.warm_up:  # before any subscription: a player waiting for us waits for this too
             self._warm_up()
-        self.sync = FrameSetSynchronizer(p.camera_names, p.slop_ns, p.timeout_ns)
+        # frame sets by nearest capture time (half a frame period, or sync.tolerance)
+        self.sync = FrameSetSynchronizer(p.camera_names, p.tolerance_ns, p.timeout_ns,
+                                         frame_rate=p.frame_rate, time_offsets=p.time_offsets)
         self._lock = threading.Lock()  # synchroniser, frame-set queue and counters
         self._wake = threading.Condition(self._lock)  # a frame set was queued, or closing
         self._step_lock = threading.Lock()  # one tracker step at a time; held while closing
@@ -364,7 +367,7 @@ class TrackerNode(Node):
             self._refuse(camera, err.cause, f'{err}{hint}')
             return
         if rgb.shape[:2] != (cam.height, cam.width):
-            rgb = cam.fit(rgb)  # the tracker resizes it again with tracker.image_scale < 1
+            rgb = cam.fit(rgb)  # the tracker resizes it to its working size
         with self._lock:
             window = self._rate_window[camera]
             window.append(stamp)
@@ -372,6 +375,9 @@ class TrackerNode(Node):
                 window.popleft()
             ready = self.sync.add(camera, stamp, rgb)
             self._queue(ready)
+            warnings, self.sync.warnings = self.sync.warnings, []
+        for text in warnings:
+            self.warn_once('sync:rate', text)
 
     def _queue(self, ready: list[FrameSet]) -> None:
         """Queue frame sets for the step (caller holds the lock); drop the oldest when full.
@@ -505,10 +511,10 @@ class TrackerNode(Node):
         # detection's worker, and starts this frame's there
         t0 = time.perf_counter()
         try:
-            result = self.tracker.step(fs.stamp_ns, fs.images, search=False)
+            result = self.tracker.step(fs.stamp_ns, fs.images, search=False, stamps=fs.stamps)
         except TrackerError as err:
             self.reset(fs.stamp_ns, str(err))
-            result = self.tracker.step(fs.stamp_ns, fs.images, search=False)
+            result = self.tracker.step(fs.stamp_ns, fs.images, search=False, stamps=fs.stamps)
         spent = time.perf_counter() - t0
         result.ended = list(result.ended) + [t for t in ended if t not in result.ended]
         self._last_stamp = fs.stamp_ns
@@ -550,11 +556,12 @@ class TrackerNode(Node):
 
     def debug_image(self, camera: str, rgb: np.ndarray, result: FrameResult) -> Image:
         """``~/debug/<camera>/occlusion``: occlusion maps and silhouettes (000 Fig. 4)."""
-        # the layers at the tracker's image size (tracker.image_scale), drawn at the camera's
+        # the layers at the working size (tracker.working_pixels), drawn at the camera's
         occ, sil = occlusion_layers(self.tracker.measurement,
                                     self.tracker.calibration.cameras[camera],
                                     result, self.tracker.models)
-        out = messages.debug_overlay(rgb, occlusion=occ, silhouettes=sil)
+        out = messages.debug_overlay(rgb, occlusion=occ, silhouettes=sil,
+                                     shadows=shadow_layer(self.tracker, camera, rgb))
         return rgb_to_image(out, messages.make_header(
             result.stamp_ns, self.calibration.cameras[camera].frame_id))
 

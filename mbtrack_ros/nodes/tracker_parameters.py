@@ -32,7 +32,7 @@ TRACKER_PARAMETERS: dict[str, tuple[str, type]] = {
     'detection.reuse_in_entry_zones': ('reuse_in_entry_zones', bool),
     'detection.every': ('detection_every', int),
     'detection.adaptation_rate': ('adaptation_rate', float),
-    'tracker.image_scale': ('image_scale', float),
+    'tracker.working_pixels': ('working_pixels', int),
     'motion.velocity_noise': ('motion.velocity_noise', float),
     'motion.position_noise': ('motion.position_noise', float),
     'motion.orientation_noise': ('motion.orientation_noise', float),

@@ -136,10 +136,13 @@ class RecordingWriter:
             roi=_T['sensor_msgs/msg/RegionOfInterest'](
                 x_offset=0, y_offset=0, height=0, width=0, do_rectify=False))
 
-    def write_frame(self, stamp_ns: int, images: dict[str, np.ndarray]) -> None:
-        """Write one synchronised frame set: an image and a CameraInfo per camera.
+    def write_frame(self, stamp_ns: int, images: dict[str, np.ndarray], *,
+                    stamps: dict[str, int] | None = None) -> None:
+        """Write one frame set: an image and a CameraInfo per camera.
 
-        ``images`` maps camera names to ``(H, W, 3) uint8`` RGB arrays of the calibrated size.
+        ``images`` maps camera names to ``(H, W, 3) uint8`` RGB arrays of the calibrated size;
+        ``stamps`` gives a camera's own capture time, ns (free-running cameras; default
+        ``stamp_ns`` for every camera).
         """
         unknown = set(images) - set(self.calibration.cameras)
         if unknown:
@@ -150,7 +153,8 @@ class RecordingWriter:
             if rgb.shape != (cam.height, cam.width, 3) or rgb.dtype != np.uint8:
                 raise BagError(f'{name}: expected ({cam.height}, {cam.width}, 3) uint8 RGB, '
                                f'got {rgb.dtype} {rgb.shape}')
-            header = _header(stamp_ns, cam.frame_id)
+            own = int(stamps.get(name, stamp_ns)) if stamps else int(stamp_ns)
+            header = _header(own, cam.frame_id)
             if self.compressed:
                 fmt, data = encode_compressed(rgb, 'jpeg', quality=self.jpeg_quality)
                 msg = _T[COMPRESSED](header=header, format=fmt,
@@ -159,10 +163,10 @@ class RecordingWriter:
                 msg = _T[IMAGE](header=header, height=cam.height, width=cam.width,
                                 encoding='rgb8', is_bigendian=0, step=cam.width * 3,
                                 data=np.ascontiguousarray(rgb).reshape(-1))
-            self._writer.write(self._image_conn[name], int(stamp_ns),
+            self._writer.write(self._image_conn[name], own,
                                typestore.serialize_cdr(msg, msg.__msgtype__))
-            info = self._camera_info(name, stamp_ns)
-            self._writer.write(self._info_conn[name], int(stamp_ns),
+            info = self._camera_info(name, own)
+            self._writer.write(self._info_conn[name], own,
                                typestore.serialize_cdr(info, CAMERA_INFO))
         self.frames_written += 1
 
@@ -192,10 +196,11 @@ class FrameSet:
 
     Attributes:
         index: position of the set in the recording, from 0.
-        stamp_ns: header stamp of the set (the earliest of its images), nanoseconds.
+        stamp_ns: stamp of the set: the latest capture time of its images, nanoseconds.
         images: camera name -> ``(H, W, 3) uint8`` RGB.
         missing: cameras without an image in this set.
         errors: camera name -> one-line reason, for images that could not be decoded.
+        stamps: camera name -> the capture time of its image (stamp + time offset), ns.
     """
 
     index: int
@@ -203,6 +208,7 @@ class FrameSet:
     images: dict[str, np.ndarray]
     missing: list[str] = field(default_factory=list)
     errors: dict[str, str] = field(default_factory=dict)
+    stamps: dict[str, int] = field(default_factory=dict)
 
 
 def stream_mcap(paths: Sequence[Path], topics: set[str] | None = None
@@ -238,24 +244,35 @@ class RecordingReader:
     """Read a rosbag2 recording (MCAP or sqlite3) as synchronised frame sets.
 
     Cameras are found from the image topics (``/<camera>/image_raw`` and the like, raw or
-    compressed; if both exist for a camera the raw one is used). Images whose header stamps
-    lie within ``slop_ns`` of each other form one set.
+    compressed; if both exist for a camera the raw one is used). Images are grouped into
+    sets by nearest capture time (:meth:`frames`).
 
     Args:
         path: the bag directory (or a recording directory with a ``bag/`` inside).
         cameras: restrict to these cameras, in this order (default: all, sorted).
-        slop_ns: largest stamp difference inside one set (default 10 ms).
+        tolerance_ns: largest distance of an image's capture time from its set's reference
+            time, ns; 0 (default): half the frame period (measured from the stamps).
+        frame_rate: the nominal frame rate, Hz, checked against the stamps (0: none).
+        time_offsets: camera name -> seconds added to its stamps (its clock offset).
+        timeout_ns: message time to wait for a camera missing from a set, ns.
     """
 
     def __init__(self, path: str | Path, *, cameras: Iterable[str] | None = None,
-                 slop_ns: int = 10_000_000) -> None:
+                 tolerance_ns: int = 0, frame_rate: float = 0.0,
+                 time_offsets: dict[str, float] | None = None,
+                 timeout_ns: int = 1_000_000_000) -> None:
         path = Path(path)
         if (path / 'bag' / 'metadata.yaml').exists():
             path = path / 'bag'
         if not (path / 'metadata.yaml').exists():
             raise BagError(f'{path} is not a rosbag2 directory (no metadata.yaml)')
         self.path = path
-        self.slop_ns = int(slop_ns)
+        self.tolerance_ns = int(tolerance_ns)
+        self.frame_rate = float(frame_rate)
+        self.time_offsets = dict(time_offsets or {})
+        self.timeout_ns = int(timeout_ns)
+        self.warnings: list[str] = []
+        self.sync = None
         self._wanted = list(cameras) if cameras is not None else None
         self._reader: AnyReader | None = None
         self._mcap_files: list[Path] = []
@@ -366,38 +383,52 @@ class RecordingReader:
         return _stamp_ns(msg.header), image
 
     def frames(self) -> Iterator[FrameSet]:
-        """Yield frame sets in stamp order.
+        """Yield frame sets in time order.
 
-        A set is complete when every camera has an image within ``slop_ns``; a camera with
-        no image by the time a later image of another camera arrives is listed in
+        Images are grouped by nearest capture time (stamp + ``time_offsets``) with the
+        :class:`~mbtrack_ros.recording.sync.FrameSetSynchronizer` the live node uses: a set
+        is complete when every camera has an image within the tolerance of the set's
+        reference time (half a frame period by default); a camera without one is listed in
         ``missing``. Undecodable images are listed in ``errors``. A damaged bag raises
-        :class:`BagError` naming the last good frame.
+        :class:`BagError` naming the last good frame. Frame-rate warnings of the
+        synchroniser are in :attr:`warnings` as they come.
         """
-        pending: dict[str, tuple[int, np.ndarray | None, str | None]] = {}
-        index = 0
+        from mbtrack_ros.recording.sync import FrameSetSynchronizer
 
-        def emit() -> FrameSet:
+        self.warnings = []
+        sync = FrameSetSynchronizer(self.cameras, self.tolerance_ns,
+                                    max(self.timeout_ns, self.tolerance_ns + 1),
+                                    frame_rate=self.frame_rate,
+                                    time_offsets={c: o for c, o in self.time_offsets.items()
+                                                  if c in self.cameras})
+        self.sync = sync
+        index = 0
+        stamps: list[int] = []  # of the frame sets, to name the ones a damage lost
+
+        def convert(ready) -> Iterator[FrameSet]:
             nonlocal index
-            stamp = min(s for s, _, _ in pending.values())
-            fs = FrameSet(index=index, stamp_ns=stamp,
-                          images={c: im for c, (_, im, e) in pending.items() if im is not None},
-                          missing=[c for c in self.cameras if c not in pending],
-                          errors={c: e for c, (_, _, e) in pending.items() if e})
-            index += 1
-            pending.clear()
-            return fs
+            self.warnings.extend(sync.warnings)
+            sync.warnings.clear()
+            for s in ready:
+                yield FrameSet(index=index, stamp_ns=s.stamp_ns,
+                               images={c: im for c, (im, _) in s.images.items()
+                                       if im is not None},
+                               missing=list(s.missing),
+                               errors={c: e for c, (_, e) in s.images.items() if e},
+                               stamps=dict(s.stamps))
+                stamps.append(s.stamp_ns)
+                index += 1
 
         iterator = self._messages(self._by_topic)
+        newest = {c: 0 for c in self.cameras}
         read: dict[str, int] = {}  # image messages read per topic
-        stamps: list[int] = []  # of the frame sets, to name the ones a damage lost
         while True:
             try:
                 topic, msgtype, raw = next(iterator)
             except StopIteration:
                 break
             except Exception as err:  # damaged chunk, truncated file ...
-                if pending:
-                    yield emit()
+                yield from convert(sync.flush())
                 raise BagError(f'{self.path}: unreadable after frame set {index - 1}: '
                                f'{err}') from err
             cam = self._by_topic[topic]
@@ -409,20 +440,11 @@ class RecordingReader:
                 stamp, image, error = None, None, str(err)
             except Exception as err:  # undecodable CDR
                 stamp, image, error = None, None, f'cannot deserialise: {err}'
-            if stamp is None:
-                stamp = max((s for s, _, _ in pending.values()), default=0)
-            if pending:
-                first = min(s for s, _, _ in pending.values())
-                if cam in pending or abs(stamp - first) > self.slop_ns:
-                    stamps.append(first)
-                    yield emit()
-            pending[cam] = (stamp, image, error)
-            if len(pending) == len(self.cameras):
-                stamps.append(min(s for s, _, _ in pending.values()))
-                yield emit()
-        if pending:
-            stamps.append(min(s for s, _, _ in pending.values()))
-            yield emit()
+            if stamp is None:  # no stamp to read: taken one step after the camera's last
+                stamp = newest[cam] + 1
+            newest[cam] = stamp
+            yield from convert(sync.add(cam, stamp, (image, error)))
+        yield from convert(sync.flush())
         if self._damaged:
             raise BagError(f'{self.path}: damaged bag, read up to frame set {index - 1} '
                            f'({self._damaged})')

@@ -16,7 +16,7 @@ import math
 import threading
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from queue import Queue
 
@@ -26,10 +26,12 @@ import yaml
 from mbtrack_ros.core.camera import RoomCalibration
 from mbtrack_ros.recording.csvfiles import GroundTruthRow, write_ground_truth
 from mbtrack_ros.synth.body import Ellipsoids, pose_ellipsoids
+from mbtrack_ros.synth.conditions import PRESET_CONDITIONS, Conditions, conditions_rng
 from mbtrack_ros.synth.errors import SynthError
 from mbtrack_ros.synth.motion import PersonState
 from mbtrack_ros.synth.presets import Preset, get_preset, populate
 from mbtrack_ros.synth.raster import draw_ellipsoids, expose
+from mbtrack_ros.synth.shadows import cast_shadows
 from mbtrack_ros.synth.room import CameraView, Room, default_room, make_calibration
 
 __all__ = ['EPOCH_NS', 'SynthFrame', 'Synthesizer', 'generate', 'iter_frames',
@@ -50,6 +52,8 @@ class SynthFrame:
         ground_truth: one row per person inside the room.
         id_buffers: camera name -> (H, W) int16 person id per pixel (0 = none).
         people: states of all present people (also those still in the corridor).
+        stamps: camera name -> capture time of its image, ns (``stamp_ns`` unless the
+            cameras are free-running, :class:`~mbtrack_ros.synth.conditions.Conditions`).
     """
 
     index: int
@@ -59,6 +63,7 @@ class SynthFrame:
     id_buffers: dict[str, np.ndarray] = field(repr=False)
     people: list[PersonState] = field(default_factory=list, repr=False)
     door_angle: float = 0.0
+    stamps: dict[str, int] = field(default_factory=dict)
 
     def __iter__(self) -> Iterator:
         """Unpacks as ``stamp_ns, images, ground_truth``."""
@@ -128,6 +133,9 @@ def render_view(view: CameraView, ellipsoids: Ellipsoids, *, time_s: float = 0.0
     return radiance, depth, ids
 
 
+_BASE_PIXELS = 320 * 240 * 3   # values of the default image size
+
+
 class Synthesizer:
     """A preset rendered frame by frame (deterministic for a seed).
 
@@ -137,12 +145,17 @@ class Synthesizer:
         frames: number of frames (default: the preset's).
         width, height: image size in pixels; fps: frame rate (Hz).
         ceiling: include the ceiling camera where the preset uses all cameras.
+        conditions: real-room conditions (:mod:`mbtrack_ros.synth.conditions`; default:
+            the preset's own, none for most presets).
     """
 
     def __init__(self, preset: str | Preset, *, seed: int = 0, frames: int | None = None,
                  width: int = 320, height: int = 240, fps: float = 15.0,
-                 ceiling: bool = True, room: Room | None = None) -> None:
+                 ceiling: bool = True, room: Room | None = None,
+                 conditions: Conditions | None = None) -> None:
         self.preset = get_preset(preset) if isinstance(preset, str) else preset
+        self.conditions = conditions if conditions is not None else \
+            PRESET_CONDITIONS.get(self.preset.name, Conditions())
         self.frames = self.preset.frames if frames is None else int(frames)
         if self.frames <= 0:
             raise SynthError(f'frames must be positive, got {frames}')
@@ -167,9 +180,22 @@ class Synthesizer:
         self.drift_period = rng.uniform(25.0, 50.0, 2)
         self.drift_phase = rng.uniform(0, 2 * np.pi, 2)
         pixels = self.width * self.height * 3
-        self.noise_bank = (NOISE_SIGMA * rng.standard_normal(4 * pixels)).astype(np.float32)
+        # the main stream draws what it draws at 320x240 whatever the size, so a seed gives
+        # the same people and motion at every resolution; other sizes take their sensor
+        # noise from a stream of their own
+        bank = rng.standard_normal(4 * _BASE_PIXELS)
+        if pixels != _BASE_PIXELS:
+            bank = np.random.default_rng([self.seed, self.width, self.height]) \
+                .standard_normal(4 * pixels)
+        self.noise_bank = (NOISE_SIGMA * bank).astype(np.float32)
         self.crowd = populate(self.preset, self.room, rng)
         self.threshold = visible_threshold(self.width, self.height)
+        crng = conditions_rng(self.seed)
+        #: per camera, how long before the frame's time it captures, ns (free-running)
+        self.capture_leads_ns = {
+            n: int(round(lead * self.period_ns))
+            for n, lead in zip(self.views, self.conditions.capture_leads(n_cam, crng))}
+        self._exposure = self.conditions.exposure(n_cam, crng)
         self._poses: dict[int, tuple] = {}
         self._started = False
         self._pool = ThreadPoolExecutor(max_workers=min(2, len(self.views)),
@@ -196,8 +222,10 @@ class Synthesizer:
     def _frames(self) -> Iterator[SynthFrame]:
         dt = 1.0 / self.fps
         pixels = self.width * self.height * 3
+        before: dict[int, tuple[float, float]] = {}   # positions at the previous frame
         for index in range(self.frames):
             if index:
+                before = {p.person_id: (p.x, p.y) for p in self.crowd.people()}
                 self.crowd.step(dt)
             time_s = index * dt
             people = self.crowd.people()
@@ -218,14 +246,35 @@ class Synthesizer:
                 tops[person.person_id] = top
             self._poses = poses
             ellipsoids = Ellipsoids.concat(bodies)
-            light = self.illumination(time_s)
-            offsets = self.rng.integers(0, 3 * pixels, len(self.views))
+            light = self.illumination(time_s) * self.conditions.light(time_s)
+            lamps = self.conditions.lamp_positions(self.room)
+            offsets = self.rng.integers(0, 3 * _BASE_PIXELS, len(self.views))
+            if pixels != _BASE_PIXELS:   # the same draws, spread over this size's bank
+                offsets = offsets * pixels // _BASE_PIXELS
             door = self.crowd.door_angle
 
+            def at_capture(name: str) -> Ellipsoids:
+                """The bodies where they were when camera ``name`` captured (its lead
+                before the frame's time: positions interpolated from the last frame)."""
+                lead = self.capture_leads_ns[name] / self.period_ns
+                if lead == 0 or not before:
+                    return ellipsoids
+                moved = []
+                for person, ell in zip(people, bodies):
+                    x0, y0 = before.get(person.person_id, (person.x, person.y))
+                    shift = np.array([(x0 - person.x) * lead, (y0 - person.y) * lead, 0.0])
+                    moved.append(replace(ell, centers=ell.centers + shift))
+                return Ellipsoids.concat(moved)
+
             def shoot(k: int, view: CameraView) -> tuple[np.ndarray, np.ndarray]:
-                radiance, _, ids = render_view(view, ellipsoids, time_s=time_s,
-                                               door_angle=door)
-                return expose(radiance, self.gains[k] * np.float32(light), self.noise_bank,
+                bodies_then = at_capture(view.camera.name)
+                radiance, depth, ids = render_view(view, bodies_then, time_s=time_s,
+                                                   door_angle=door)
+                if lamps is not None:   # cast shadows (conditions.lamps)
+                    cast_shadows(view.rays, view.camera.center, depth, ids, radiance,
+                                 lamps[0], lamps[1], bodies_then)
+                gain = self.gains[k] * light * np.float32(self._exposure(k, time_s))
+                return expose(radiance, gain.astype(np.float32), self.noise_bank,
                               int(offsets[k])), ids
 
             # cameras are independent: render them on two threads (compiled kernels release
@@ -244,7 +293,8 @@ class Synthesizer:
                              >= self.threshold)
                 rows.append(GroundTruthRow(stamp, index, person.person_id, person.x, person.y,
                                            tops[person.person_id], person.sit > 0.5, cams))
-            yield SynthFrame(index, stamp, images, rows, id_buffers, people, door)
+            stamps = {n: stamp - self.capture_leads_ns[n] for n in self.views}
+            yield SynthFrame(index, stamp, images, rows, id_buffers, people, door, stamps)
         self._pool.shutdown(wait=False)
 
 
@@ -259,7 +309,8 @@ def iter_frames(preset: str | Preset, *, seed: int = 0, frames: int | None = Non
 def generate(preset: str | Preset, outdir: str | Path, *, seed: int = 0,
              frames: int | None = None, width: int = 320, height: int = 240,
              fps: float = 15.0, ceiling: bool = True, compressed: bool = False,
-             storage: str = 'mcap', progress: bool = False) -> Path:
+             storage: str = 'mcap', progress: bool = False,
+             conditions: Conditions | None = None) -> Path:
     """Write a recording directory: ``bag/``, calibration.yaml, ground_truth.csv,
     recording.yaml. ``outdir`` must not exist or be empty. Returns ``outdir``.
     """
@@ -273,9 +324,12 @@ def generate(preset: str | Preset, outdir: str | Path, *, seed: int = 0,
     if storage not in ('mcap', 'sqlite3'):
         raise SynthError(f'unknown storage {storage!r} (mcap or sqlite3)')
     synth = Synthesizer(preset, seed=seed, frames=frames, width=width, height=height,
-                        fps=fps, ceiling=ceiling)
+                        fps=fps, ceiling=ceiling, conditions=conditions)
     outdir.mkdir(parents=True, exist_ok=True)
     synth.calibration.save(outdir / 'calibration.yaml')
+    if any(synth.conditions.calibration_error):   # what the user's calibration says
+        synth.conditions.perturbed(synth.calibration, np.random.default_rng(
+            [synth.seed, 0xCA1])).save(outdir / 'calibration_perturbed.yaml')
     rows: list[GroundTruthRow] = []
     frames_iter: Iterator[SynthFrame] = iter(synth)
     if progress:
@@ -293,7 +347,7 @@ def generate(preset: str | Preset, outdir: str | Path, *, seed: int = 0,
             with RecordingWriter(outdir / 'bag', synth.calibration, storage=storage,
                                  compressed=compressed) as writer:
                 while (item := queue.get()) is not None:
-                    writer.write_frame(item.stamp_ns, item.images)
+                    writer.write_frame(item.stamp_ns, item.images, stamps=item.stamps)
                     writer.write_ground_truth(item.stamp_ns, item.ground_truth)
                 return
         except BaseException as err:  # reported in the main thread
@@ -325,6 +379,9 @@ def generate(preset: str | Preset, outdir: str | Path, *, seed: int = 0,
             'cameras': list(synth.calibration.cameras), 'compressed': bool(compressed),
             'storage': storage, 'people': int(synth.crowd.next_id - 1),
             'epoch_ns': EPOCH_NS, 'period_ns': synth.period_ns}
+    if synth.conditions.active:
+        meta['conditions'] = synth.conditions.to_dict()
+        meta['capture_lead_ns'] = dict(synth.capture_leads_ns)
     (outdir / 'recording.yaml').write_text(yaml.safe_dump(meta, sort_keys=False),
                                            encoding='utf-8')
     return outdir

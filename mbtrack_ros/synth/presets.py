@@ -104,10 +104,14 @@ _BASE = (
            '2 min)', 1800, None, _clear_room),
     Preset('empty-room', 'all cameras, nobody in the room, the screen changing (60 frames)',
            60, None, _empty),
+    Preset('real-room', 'clear-room with every real-room condition of synth/conditions.py: '
+           'free-running cameras, light changes, auto exposure, shadows from two ceiling '
+           'lamps, a calibration off by 1 deg and 3 cm (300 frames, 20 s)', 300, None,
+           _clear_room),
 )
 
 _SHORT_FRAMES = {'lanz-seq1': 40, 'lanz-seq2': 40, 'lanz-seq3': 30, 'lanz-seq4': 45,
-                 'clear-room': 45, 'empty-room': 10}
+                 'clear-room': 45, 'empty-room': 10, 'real-room': 45}
 
 PRESETS: dict[str, Preset] = {}
 for _p in _BASE:

@@ -56,6 +56,7 @@ import numpy as np
 
 from mbtrack_ros.core.camera import Camera, RoomCalibration
 from mbtrack_ros.core.detection import DetectionError
+from mbtrack_ros.core.detection.shadow import shadow_change
 from mbtrack_ros.core.detection.detector import (
     _grid, _max_span_width, _nms, _states, is_ceiling)
 from mbtrack_ros.core.detection.features import (
@@ -222,9 +223,12 @@ class PeopleCue:
             if len(frames) > 1:
                 moved = np.zeros((cam.height, cam.width), np.uint8)
                 prev = cv2.cvtColor(frames[0][name], cv2.COLOR_RGB2GRAY)
-                for f in frames[1:]:
+                for before, f in zip(frames[:-1], frames[1:]):
                     cur = cv2.cvtColor(f[name], cv2.COLOR_RGB2GRAY)
-                    moved |= (cv2.absdiff(cur, prev) > cfg.motion_threshold).view(np.uint8)
+                    change = cv2.absdiff(cur, prev) > cfg.motion_threshold
+                    if change.any():   # a moving shadow is no person's motion (shadow.py)
+                        change &= ~shadow_change(before[name], f[name])
+                    moved |= change.view(np.uint8)
                     prev = cur
                 if cfg.motion_dilation > 0:      # limbs move, the body between them not
                     moved = cv2.dilate(moved, self._kernel(cfg.motion_dilation))

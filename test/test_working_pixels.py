@@ -1,7 +1,8 @@
-"""Issue 5: ``TrackerConfig.image_scale`` (the tracker works on resized images): validated,
-read by the node's parameter map and ``mbtrack replay``; the cameras are scaled to match,
-every image is resized once per step, the detection's pixel lengths scale, and tracking at
-half size stays within a few centimetres of full size."""
+"""``TrackerConfig.working_pixels`` (the tracker works on images of about that many
+pixels): validated, read by the node's parameter map and ``mbtrack replay``; the cameras are
+scaled to match, every image is resized once per step, the pixel lengths follow the working
+size, and tracking does not depend on the input size (the same room rendered at 320x240 and
+640x480 tracks alike)."""
 from __future__ import annotations
 
 import argparse
@@ -14,16 +15,17 @@ import pytest
 from mbtrack_ros.core import camera as camera_module
 from mbtrack_ros.core.detection.manager import AutoDetectionConfig
 from mbtrack_ros.core.initiation import initial_tracks, plan_key_views
-from mbtrack_ros.core.tracker import Tracker, TrackerConfig, TrackerError
+from mbtrack_ros.core.tracker import (
+    REFERENCE_PIXELS, Tracker, TrackerConfig, TrackerError, length_scale)
 from mbtrack_ros.synth.generator import Synthesizer
 
 from conftest import make_room
 
 
-@pytest.mark.parametrize('bad', [0, 0.0, -0.5, 1.5, float('nan'), True, '0.5', None])
-def test_bad_scale_is_rejected_in_one_line(bad):
-    with pytest.raises(TrackerError, match='image_scale must be a number in') as err:
-        TrackerConfig(image_scale=bad)
+@pytest.mark.parametrize('bad', [0, 100, -5, 76800.0, float('nan'), True, '76800', None])
+def test_bad_working_pixels_are_rejected_in_one_line(bad):
+    with pytest.raises(TrackerError, match='working_pixels must be an integer >=') as err:
+        TrackerConfig(working_pixels=bad)
     assert '\n' not in str(err.value)
 
 
@@ -34,32 +36,32 @@ def test_replay_reads_the_scale_from_params_and_option(tmp_path, capsys):
     replay.add_parser(parser.add_subparsers())
     params = tmp_path / 'node.yaml'
     params.write_text('tracker_node:\n  ros__parameters:\n    tracker:\n'
-                      '      image_scale: 0.5\n')
+                      '      working_pixels: 19200\n')
 
     def config(*extra: str) -> TrackerConfig:
         return replay._config(parser.parse_args(['replay', 'REC', '--out', str(tmp_path),
                                                  *extra]))
 
-    assert config().image_scale == 1.0
-    assert config('--params', str(params)).image_scale == 0.5
-    assert config('--params', str(params), '--image-scale', '0.75').image_scale == 0.75
+    assert config().working_pixels == REFERENCE_PIXELS
+    assert config('--params', str(params)).working_pixels == 19200
+    assert config('--params', str(params), '--working-pixels', '30000').working_pixels == 30000
     rec = tmp_path / 'rec'
     rec.mkdir()
     room = tmp_path / 'room.yaml'
     make_room().save(room)
     args = parser.parse_args(['replay', str(rec), '--out', str(tmp_path / 'o'),
-                              '--config', str(room), '--image-scale', '2'])
+                              '--config', str(room), '--working-pixels', '20'])
     assert replay.run(args) == 2
     err = capsys.readouterr().err.strip()
-    assert 'image_scale must be a number in (0, 1], got 2.0' in err and '\n' not in err
+    assert 'working_pixels must be an integer >= 4800, got 20' in err and '\n' not in err
 
 
 def test_node_parameter_map_has_the_scale():
     pytest.importorskip('rclpy')
     from mbtrack_ros.nodes.params import GLOBAL_PARAMETERS, TRACKER_PARAMETERS
 
-    assert TRACKER_PARAMETERS['tracker.image_scale'] == ('image_scale', float)
-    assert GLOBAL_PARAMETERS['tracker.image_scale'][0] == 1.0
+    assert TRACKER_PARAMETERS['tracker.working_pixels'] == ('working_pixels', int)
+    assert GLOBAL_PARAMETERS['tracker.working_pixels'][0] == REFERENCE_PIXELS
 
 
 def test_calibration_scaled_by_projects_to_the_resized_pixels():
@@ -89,12 +91,28 @@ def test_camera_fit_is_the_block_mean_at_half_size():
     assert cam.fit(same) is same  # already at the size: no copy, no resize
 
 
+def test_working_size_of_cameras_of_any_size():
+    config = TrackerConfig()
+    for (w, h) in [(320, 240), (640, 480), (1280, 720), (1920, 1080), (752, 480)]:
+        cam = config.working_calibration(make_room(w, h)).cameras['cam0']
+        assert abs(cam.width * cam.height - REFERENCE_PIXELS) < 0.01 * REFERENCE_PIXELS
+        assert abs(cam.width / cam.height - w / h) < 0.01
+        assert length_scale(config.working_calibration(make_room(w, h))) == \
+            pytest.approx(1.0, abs=0.01)
+    small = config.working_calibration(make_room(160, 120))
+    assert small.cameras['cam0'].width == 160       # never enlarged
+    assert length_scale(small) == 0.5
+    more = TrackerConfig(working_pixels=4 * REFERENCE_PIXELS).working_calibration(
+        make_room(1280, 960))
+    assert (more.cameras['cam0'].width, more.cameras['cam0'].height) == (640, 480)
+
+
 def test_pixel_lengths_scale_and_scale_one_changes_nothing():
     plain = TrackerConfig().detection_config()
     assert plain == AutoDetectionConfig(detector=plain.detector, release=plain.release,
                                         sigma=plain.sigma)
     assert plain.background == AutoDetectionConfig().background
-    half = TrackerConfig(image_scale=0.5).detection_config()
+    half = TrackerConfig().detection_config(0.5)
     bg, people, det = half.background, half.background.people, half.detector
     assert bg.mask_dilation == 3 and bg.open_size == 3 and bg.close_size == 3
     assert (people.motion_dilation, people.dilation, people.edge_min_pixels) == (1, 2, 6)
@@ -102,21 +120,21 @@ def test_pixel_lengths_scale_and_scale_one_changes_nothing():
     # areas are scaled where they are used (given at 320x240): unchanged in the config
     assert det.min_area == plain.detector.min_area
     assert half.release == plain.release
-    quarter = TrackerConfig(image_scale=0.25).detection_config().background
+    quarter = TrackerConfig().detection_config(0.25).background
     assert quarter.open_size == 1 and quarter.close_size == 3  # radius 1 -> 0, 2 -> 1
-    room = make_room(160, 120)
-    full = Tracker(room, TrackerConfig())
-    small = Tracker(room, TrackerConfig(image_scale=0.5))
-    assert full.measurement.config.min_visible_pixels == 20
-    assert small.measurement.config.min_visible_pixels == 5  # an area: s^2
-    assert small.calibration.cameras['cam0'].width == 80
-    assert full.calibration is room
+    room = make_room(640, 480)
+    full = Tracker(room, TrackerConfig(working_pixels=4 * REFERENCE_PIXELS))
+    small = Tracker(room, TrackerConfig(working_pixels=REFERENCE_PIXELS // 4))
+    assert full.measurement.config.min_visible_pixels == 80  # an area: s^2
+    assert small.measurement.config.min_visible_pixels == 5
+    assert small.calibration.cameras['cam0'].width == 160
+    assert full.calibration.cameras['cam0'] is room.cameras['cam0']
 
 
 def test_every_image_is_resized_once_per_step(monkeypatch):
     synth = Synthesizer('clear-room-short', seed=1, frames=4, width=160, height=120)
-    tracker = Tracker(synth.calibration, TrackerConfig(image_scale=0.5, detection=True,
-                                                       particles=20, seed=0))
+    tracker = Tracker(synth.calibration, TrackerConfig(working_pixels=80 * 60,
+                                                       detection=True, particles=20, seed=0))
     calls = []
     resize = cv2.resize
 
@@ -140,9 +158,10 @@ def test_every_image_is_resized_once_per_step(monkeypatch):
     assert seen and all(shape[:2] == (60, 80) for step in seen for shape in step.values())
 
 
-def _track(synth_frames, calibration, starts, scale: float) -> dict[tuple[int, int], np.ndarray]:
+def _track(synth_frames, calibration, starts,
+           pixels: int) -> dict[tuple[int, int], np.ndarray]:
     """(frame, person) -> tracked floor position, tracks started from ground truth."""
-    tracker = Tracker(calibration, TrackerConfig(image_scale=scale, particles=100, seed=0))
+    tracker = Tracker(calibration, TrackerConfig(working_pixels=pixels, particles=100, seed=0))
     pending, person_of, out = list(starts), {}, {}
     for frame in synth_frames:
         while pending and pending[0].frame <= frame.index:
@@ -165,8 +184,8 @@ def test_half_size_tracks_within_a_few_centimetres_of_full_size():
     starts = sorted(initial_tracks(calibration, truth, key_images, plan, skip_missing=True),
                     key=lambda s: s.frame)
     assert starts
-    full = _track(frames, calibration, starts, 1.0)
-    half = _track(frames, calibration, starts, 0.5)
+    full = _track(frames, calibration, starts, REFERENCE_PIXELS)
+    half = _track(frames, calibration, starts, REFERENCE_PIXELS // 4)
     gt = {(r.frame, r.person_id): np.array([r.x, r.y]) for r in truth}
     keys = sorted(set(full) & set(half) & set(gt))
     assert len(keys) > 20
@@ -218,3 +237,25 @@ def test_node_defaults_are_the_trackers_defaults():
         if ours is None:
             ours = left_to_pipeline[field]
         assert GLOBAL_PARAMETERS[key][0] == ours, key
+
+
+def test_same_room_at_twice_the_resolution_tracks_alike():
+    """Working-resolution invariance: a room rendered at 320x240 and at 640x480 (default
+    working_pixels: both tracked at 320x240) tracks as accurately."""
+    errors = []
+    for width, height in ((320, 240), (640, 480)):
+        synth = Synthesizer('clear-room-short', seed=2, frames=20, width=width, height=height)
+        calibration = synth.calibration
+        frames = list(synth)
+        truth = [r for f in frames for r in f.ground_truth]
+        plan = plan_key_views(calibration, truth)
+        needed = {v.frame for views in plan.values() for v in views}
+        key_images = {f.index: f.images for f in frames if f.index in needed}
+        starts = sorted(initial_tracks(calibration, truth, key_images, plan,
+                                       skip_missing=True), key=lambda s: s.frame)
+        out = _track(frames, calibration, starts, REFERENCE_PIXELS)
+        gt = {(r.frame, r.person_id): np.array([r.x, r.y]) for r in truth}
+        keys = sorted(set(out) & set(gt))
+        assert len(keys) > 20
+        errors.append(np.mean([np.linalg.norm(out[k] - gt[k]) for k in keys]))
+    assert errors[1] < errors[0] + 0.03 and errors[1] < 0.1, errors
