@@ -1,0 +1,145 @@
+"""camera_node + tracker_node in fusion mode over DDS: a camera node killed and restarted."""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+# a domain of our own, before any rclpy context creates a participant
+os.environ['ROS_DOMAIN_ID'] = str(30 + os.getpid() % 70)
+os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+
+from conftest import REPO  # noqa: E402
+
+KILL, BACK = 12, 18       # frames at which the camera node of DYING dies and comes back
+DYING = 'cam1'
+
+
+@pytest.fixture(scope='module')
+def recording(tmp_path_factory) -> Path:
+    from mbtrack_ros.synth.generator import generate
+    return generate('clear-room-short', tmp_path_factory.mktemp('rec') / 'room', seed=100,
+                    width=160, height=120)
+
+
+def camera_args(calibration: Path, camera: str) -> list[str]:
+    return ['--ros-args', '-r', f'__ns:=/{camera}', '-p', f'calibration_file:={calibration}',
+            '-p', f'camera:={camera}']
+
+
+def start_camera_process(calibration: Path, camera: str) -> subprocess.Popen:
+    return subprocess.Popen(
+        [sys.executable, '-m', 'mbtrack_ros.nodes.camera_node',
+         *camera_args(calibration, camera)],
+        cwd=REPO, env=dict(os.environ, PYTHONPATH=str(REPO)), stdout=subprocess.DEVNULL,
+        stderr=subprocess.STDOUT)
+
+
+def wait_for(condition, timeout: float) -> bool:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if condition():
+            return True
+        time.sleep(0.05)
+    return False
+
+
+@pytest.mark.ros
+def test_tracker_keeps_tracking_when_a_camera_node_dies_and_picks_it_up_again(
+        recording, context):
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+    from rclpy.executors import MultiThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import Image, PointCloud2
+
+    from mbtrack_ros.nodes.camera_node import CameraNode
+    from mbtrack_ros.nodes.conversions import rgb_to_image
+    from mbtrack_ros.nodes.messages import make_header
+    from mbtrack_ros.nodes.tracker_node import TrackerNode
+    from mbtrack_ros.recording.bag import RecordingReader
+
+    calibration = recording / 'calibration.yaml'
+    with RecordingReader(recording) as reader:
+        frame_sets = list(reader.frames())
+    cameras = sorted(frame_sets[0].images)
+    tracker = TrackerNode(context=context, cli_args=[
+        '--ros-args', '-p', f'calibration_file:={calibration}', '-p', 'input_mode:=foreground',
+        '-p', 'tracker.seed:=7', '-p', 'warm_up:=false', '-p', 'diagnostics_period:=0.05',
+        '-p', 'image_reliability:=reliable'])
+    stages = [CameraNode(context=context, cli_args=camera_args(calibration, c))
+              for c in cameras if c != DYING]
+    probe = Node('probe', context=context)
+    reliable = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
+    pubs = {c: probe.create_publisher(Image, f'/{c}/image_raw', reliable) for c in cameras}
+    tracks: dict[int, int] = {}     # stamp -> number of tracks
+    warned: dict[int, bool] = {}    # stamp -> DYING reported missing
+    lock = threading.Lock()
+
+    def on_tracks(msg):
+        with lock:
+            tracks[msg.header.stamp.sec * 10 ** 9 + msg.header.stamp.nanosec] = msg.width
+
+    def on_diag(msg):
+        main = msg.status[0]
+        with lock:
+            warned[msg.header.stamp.sec * 10 ** 9 + msg.header.stamp.nanosec] = (
+                main.level == DiagnosticStatus.WARN and DYING in main.message)
+
+    probe.create_subscription(PointCloud2, '/tracker_node/tracks', on_tracks, reliable)
+    probe.create_subscription(DiagnosticArray, '/diagnostics', on_diag, reliable)
+    executor = MultiThreadedExecutor(num_threads=4, context=context)
+    for node in [tracker, probe, *stages]:
+        executor.add_node(node)
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
+    dying = start_camera_process(calibration, DYING)
+    try:
+        assert wait_for(lambda: all(p.get_subscription_count() >= 1 for p in pubs.values()),
+                        60.0), 'camera nodes did not come up'
+        time.sleep(1.0)
+        for k, fs in enumerate(frame_sets):
+            if k == KILL:
+                dying.send_signal(signal.SIGKILL)
+                dying.wait(timeout=10)
+                assert wait_for(lambda: pubs[DYING].get_subscription_count() == 0, 20.0)
+            if k == BACK:
+                dying = start_camera_process(calibration, DYING)
+                assert wait_for(lambda: pubs[DYING].get_subscription_count() >= 1, 60.0)
+                time.sleep(1.0)
+            for c, pub in pubs.items():
+                pub.publish(rgb_to_image(fs.images[c],
+                                         make_header(fs.stamp_ns, f'{c}_optical_frame')))
+            time.sleep(0.25)
+        last = frame_sets[-1].stamp_ns
+        wait_for(lambda: last in tracks, 30.0)
+    finally:
+        if dying.poll() is None:
+            dying.send_signal(signal.SIGINT)
+            try:
+                dying.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                dying.kill()
+        executor.shutdown()
+        spinner.join(timeout=5)
+        for node in [tracker, probe, *stages]:
+            node.destroy_node()
+    stamps = [fs.stamp_ns for fs in frame_sets]
+    gap = stamps[KILL + 1:BACK]
+    with lock:
+        # the tracker went on without the camera: tracks on the frames of the gap, WARN
+        assert all(s in tracks for s in gap), sorted(set(gap) - set(tracks))
+        assert sum(tracks[s] > 0 for s in gap) >= len(gap) // 2
+        assert any(warned.get(s) for s in gap)
+        # and took it up again: the last frame sets are complete, with its foreground
+        assert last in tracks and not warned.get(last, True)
+    bank = tracker.tracker.detection.background
+    assert bank.models[DYING].ready, 'no foreground from the restarted camera node'
+    assert np.isfinite(tracker.tracker.last_stamp_ns)
