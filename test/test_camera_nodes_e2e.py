@@ -143,3 +143,35 @@ def test_tracker_keeps_tracking_when_a_camera_node_dies_and_picks_it_up_again(
     bank = tracker.tracker.detection.background
     assert bank.models[DYING].ready, 'no foreground from the restarted camera node'
     assert np.isfinite(tracker.tracker.last_stamp_ns)
+
+
+def test_fusion_launch_file_compiles(tmp_path):
+    import py_compile
+    py_compile.compile(str(REPO / 'launch' / 'fusion.launch.py'),
+                       cfile=str(tmp_path / 'launch.pyc'), doraise=True)
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize('args, message', [
+    ((), 'parameter calibration_file is required'),
+    (('-p', 'camera:=nope'), "parameter camera: 'nope' is not one of"),
+    (('-p', 'camera:=cam0', '-p', 'image_format:=gif'), "image_format: 'gif' is not one of"),
+])
+def test_camera_node_refuses_bad_parameters(args, message, recording, context):
+    from mbtrack_ros.nodes.camera_node import CameraNode, CameraParamsError
+
+    if args:
+        args = ('-p', f'calibration_file:={recording / "calibration.yaml"}', *args)
+    with pytest.raises(CameraParamsError, match=message):
+        CameraNode(context=context, worker=False, cli_args=['--ros-args', *args])
+
+
+@pytest.mark.ros
+def test_fusion_mode_parameter_refused_when_unknown(recording, context):
+    from mbtrack_ros.nodes.params import ParamsError
+    from mbtrack_ros.nodes.tracker_node import TrackerNode
+
+    with pytest.raises(ParamsError, match="input_mode: 'both' is not one of"):
+        TrackerNode(context=context, step_thread=False, cli_args=[
+            '--ros-args', '-p', f'calibration_file:={recording / "calibration.yaml"}',
+            '-p', 'input_mode:=both', '-p', 'warm_up:=false'])

@@ -136,6 +136,9 @@ class LiveResult:
     publish_spread_p50: float = float('nan')
     publish_spread_p95: float = float('nan')
     latency_series: tuple[tuple[float, float], ...] = ()  # (s since first frame, latency s)
+    camera_node_cpu_seconds: tuple[float, ...] = ()  # per camera node (--live-camera-nodes)
+    mask_bytes_per_frame: float = float('nan')       # mean PNG mask message data, bytes
+    image_bytes_per_frame: float = float('nan')      # working image data (raw rgb8), bytes
 
 
 def _diag_values(msg) -> dict:
@@ -145,8 +148,12 @@ def _diag_values(msg) -> dict:
 
 def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
              max_pending_sets: int = 15, timeout: float = 600.0, use_sim_time: bool = True,
-             ground_truth: bool = False, node_args: tuple[str, ...] = ()) -> LiveResult:
+             ground_truth: bool = False, node_args: tuple[str, ...] = (),
+             camera_nodes: bool = False) -> LiveResult:
     """Play ``recording`` to a tracker_node process and measure (see the module docstring).
+
+    ``camera_nodes``: one ``camera_node`` process per camera and the tracker in fusion mode
+    (``input_mode: foreground``); their CPU and the masks' bytes are measured too.
 
     ``ground_truth``: start tracks from the recording's ground truth (``init_ground_truth``)
     instead of the automatic detection.
@@ -162,6 +169,7 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
     from rclpy.executors import MultiThreadedExecutor
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import CompressedImage
 
     from mbtrack_ros.nodes.conversions import stamp_to_ns
     from mbtrack_ros.recording.bag import RecordingReader
@@ -212,6 +220,19 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
                                  callback_group=group)
     listener.create_subscription(DiagnosticArray, '/diagnostics', on_diag, qos,
                                  callback_group=group)
+    cams = ['cam0', 'cam1', 'cam2', 'cam3']
+    masks: list[int] = []
+
+    def on_mask(msg) -> None:
+        if msg.data:
+            with lock:
+                masks.append(len(msg.data))
+
+    if camera_nodes:
+        for cam in cams:
+            listener.create_subscription(CompressedImage, f'/{cam}/working/foreground',
+                                         on_mask, qos, callback_group=group)
+        node_args = ('-p', 'input_mode:=foreground', *node_args)
     executor = MultiThreadedExecutor(num_threads=3, context=context)
     executor.add_node(listener)
     spinner = threading.Thread(target=executor.spin, daemon=True)
@@ -227,6 +248,13 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
          '-p', f'use_sim_time:={str(use_sim_time).lower()}', *node_args],
         cwd=REPO, env=env, stdout=log, stderr=subprocess.STDOUT, text=True)
     player = None
+    stages = []
+    for cam in cams if camera_nodes else []:
+        stages.append(subprocess.Popen(
+            [sys.executable, '-m', 'mbtrack_ros.nodes.camera_node', '--ros-args',
+             '-r', f'__ns:=/{cam}', '-p', f'calibration_file:={recording / "calibration.yaml"}',
+             '-p', f'camera:={cam}', '-p', 'image_reliability:=reliable'],
+            cwd=REPO, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT, text=True))
     try:
         # the listener's subscriptions must be matched too: start the player once the
         # tracker's people publisher sees us (the node is up, its warm-up done: that can
@@ -247,6 +275,7 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
              '-p', f'clock_subscribers:={2 if use_sim_time else 1}'],
             cwd=REPO, env=env, stdout=player_log, stderr=subprocess.STDOUT, text=True)
         cpu0, wall0 = cpu_seconds(node.pid), time.monotonic()
+        stage0 = [cpu_seconds(p.pid) for p in stages]
         if player.wait(timeout=timeout) != 0:
             raise RuntimeError(f'bag_player exited with {player.returncode}')
         # the last frame sets: wait until no output has come for 1 s
@@ -258,8 +287,9 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
                 last_n, quiet = n, time.monotonic()
             time.sleep(0.1)
         cpu1, wall1 = cpu_seconds(node.pid), time.monotonic()
+        stage_cpu = tuple(cpu_seconds(p.pid) - c for p, c in zip(stages, stage0))
     finally:
-        for proc in (player, node):
+        for proc in (player, node, *stages):
             if proc is not None and proc.poll() is None:
                 proc.terminate()
                 try:
@@ -294,7 +324,10 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
         mean_tracks=float(np.mean(list(tracks.values()))) if tracks else 0.0,
         publish_spread_p50=float(burst['p50']) / 1e3 if burst else float('nan'),
         publish_spread_p95=float(burst['p95']) / 1e3 if burst else float('nan'),
-        latency_series=tuple(zip(((stamps - first) / 1e9).tolist(), lat.tolist())))
+        latency_series=tuple(zip(((stamps - first) / 1e9).tolist(), lat.tolist())),
+        camera_node_cpu_seconds=stage_cpu,
+        mask_bytes_per_frame=float(np.mean(masks)) if masks else float('nan'),
+        image_bytes_per_frame=float(320 * 240 * 3) if camera_nodes else float('nan'))
 
 
 def run_offline(recording: Path, *, seed: int = 0, ground_truth: bool = False,
@@ -344,6 +377,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--live-param', action='append', default=[], metavar='NAME:=VALUE',
                         help='a tracker_node parameter for the live run, as after ros-args '
                              '-p (repeatable), e.g. tracker.pipeline_search:=true')
+    parser.add_argument('--live-camera-nodes', action='store_true',
+                        help='one camera_node process per camera and tracker_node in fusion '
+                             'mode (input_mode foreground): their CPU, the masks\' bytes')
     parser.add_argument('--live-no-offline', action='store_true',
                         help='skip the offline replays after the live run')
 
@@ -382,7 +418,8 @@ def main_live(args: argparse.Namespace) -> int:
             make_recording(recording, frames=args.live_frames, seed=seed)
         load0 = os.getloadavg()
         live = run_live(recording, seed=seed, use_sim_time=not args.live_no_sim_time,
-                        ground_truth=args.live_ground_truth, node_args=node_args)
+                        ground_truth=args.live_ground_truth, node_args=node_args,
+                        camera_nodes=args.live_camera_nodes)
         load1 = os.getloadavg()
         offline = fast = quick = None
         if not args.live_no_offline:
@@ -423,6 +460,13 @@ def main_live(args: argparse.Namespace) -> int:
             print(f'offline replay ({name}): {off["frames"]} frames in '
                   f'{off["wall_seconds"]:.1f} s = {off["frames_per_second"]:.1f} frames/s = '
                   f'{off["x_real_time"]:.2f}x real time (CPU {off["cpu_seconds"]:.1f} s)')
+    if live.camera_node_cpu_seconds:
+        per = live.camera_node_cpu_seconds
+        print(f'camera_node CPU: {sum(per):.1f} s in all ({", ".join(f"{c:.1f}" for c in per)}'
+              f' s each) = {100.0 * sum(per) / max(live.wall_seconds, 1e-9):.0f} % of one '
+              f'core; per camera and frame: working image {live.image_bytes_per_frame / 1024:.1f}'
+              f' KiB (raw rgb8), foreground masks {live.mask_bytes_per_frame / 1024:.2f} KiB '
+              '(PNG)')
     print(f'load average before / after the live run: {load0[0]:.2f} / {load1[0]:.2f}')
     if args.json is not None:
         doc = {'live': asdict(live), 'offline': offline, 'offline_fast': fast,

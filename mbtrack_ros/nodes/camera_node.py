@@ -45,6 +45,7 @@ from mbtrack_ros.nodes.conversions import (
     ImageConversionError, compressed_to_rgb, image_to_rgb, rgb_to_compressed, rgb_to_image,
     stamp_to_ns)
 from mbtrack_ros.nodes.messages import make_header
+from mbtrack_ros.nodes.transport import use_large_shm_segment
 
 __all__ = ['CAMERA_PARAMETERS', 'CameraNode', 'cloud_columns', 'main']
 
@@ -66,6 +67,9 @@ CAMERA_PARAMETERS = {
     'camera': ('', 'name of this camera in the calibration (required)', {}),
     'image_topic': ('', 'camera image topic; empty = /<camera>/image_raw[/compressed]', {}),
     'image_transport': ('raw', 'raw | compressed: the camera topic\'s type', {}),
+    'image_reliability': ('best_effort', 'best_effort (sensor data QoS) | reliable: the '
+                          'camera subscription; reliable loses no frame of a replayed bag',
+                          {}),
     'time_offset': (0.0, 'seconds added to the camera\'s stamps (its clock against the '
                     'tracker\'s)', _fr(-3600.0, 3600.0)),
     'rescale_images': (False, 'resize images whose size differs from the calibration '
@@ -133,6 +137,7 @@ class CameraNode(Node):
             raise CameraParamsError(f'parameter camera: {name!r} is not one of '
                                     f'{", ".join(calibration.names)}')
         for key, allowed in (('image_transport', ('raw', 'compressed')),
+                             ('image_reliability', ('best_effort', 'reliable')),
                              ('image_format', ('raw', 'jpeg'))):
             if v[key] not in allowed:
                 raise CameraParamsError(f'parameter {key}: {v[key]!r} is not one of '
@@ -170,8 +175,10 @@ class CameraNode(Node):
                           self.create_publisher(Image, 'working/image', out_qos))
         self.pub_foreground = self.create_publisher(CompressedImage, 'working/foreground',
                                                     out_qos)
+        in_qos = qos_profile_sensor_data if v['image_reliability'] == 'best_effort' else \
+            QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         self.create_subscription(CompressedImage if compressed else Image, topic,
-                                 self._on_image, qos_profile_sensor_data)
+                                 self._on_image, in_qos)
         self.create_subscription(PointCloud2, str(v['tracks_topic']), self._on_tracks,
                                  out_qos)
         self.create_subscription(CompressedImage, 'working/regions', self._on_regions,
@@ -314,6 +321,7 @@ class CameraNode(Node):
 
 def main(args: list[str] | None = None) -> int:
     """Entry point ``camera_node``; exits 2 on bad parameters."""
+    use_large_shm_segment()  # before rclpy.init: it publishes working-size images
     rclpy.init(args=args)
     node = None
     code = 0
