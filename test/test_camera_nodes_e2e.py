@@ -175,3 +175,50 @@ def test_fusion_mode_parameter_refused_when_unknown(recording, context):
         TrackerNode(context=context, step_thread=False, cli_args=[
             '--ros-args', '-p', f'calibration_file:={recording / "calibration.yaml"}',
             '-p', 'input_mode:=both', '-p', 'warm_up:=false'])
+
+
+@pytest.mark.ros
+def test_camera_node_offsets_stamps_and_publishes_masks_of_the_stage(recording, context):
+    """time_offset moves the stamps; the published masks are the stage's (PNG round trip)."""
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import CompressedImage
+
+    from mbtrack_ros.core.detection.camera_stage import CameraStage, unpack_masks
+    from mbtrack_ros.nodes.camera_node import CameraNode
+    from mbtrack_ros.nodes.conversions import compressed_to_rgb, rgb_to_image, stamp_to_ns
+    from mbtrack_ros.nodes.messages import make_header
+    from mbtrack_ros.recording.bag import RecordingReader
+
+    node = CameraNode(context=context, worker=False, cli_args=[
+        *camera_args(recording / 'calibration.yaml', 'cam0'), '-p', 'time_offset:=-0.25'])
+    probe = Node('probe', context=context)
+    got = []
+    probe.create_subscription(CompressedImage, '/cam0/working/foreground', got.append,
+                              QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(probe)
+    assert wait_for(lambda: (executor.spin_once(timeout_sec=0.05),
+                             node.pub_foreground.get_subscription_count())[1] > 0, 20.0)
+    stage = CameraStage(node.camera)
+    with RecordingReader(recording) as reader:
+        frame_sets = list(reader.frames())[:9]
+    expected = []
+    for fs in frame_sets:
+        node._on_image(rgb_to_image(fs.images['cam0'], make_header(fs.stamp_ns, 'x')))
+        node.process_pending()
+        expected.append(stage.process(fs.images['cam0']))
+    wait_for(lambda: (executor.spin_once(timeout_sec=0.05), len(got))[1] >= len(frame_sets),
+             20.0)
+    node.destroy_node()
+    probe.destroy_node()
+    assert [stamp_to_ns(m.header.stamp) for m in got] == \
+        [fs.stamp_ns - 250_000_000 for fs in frame_sets]
+    assert got[0].format == 'bootstrap' and not got[0].data
+    shown = [(m, e) for m, e in zip(got, expected) if e.foreground is not None]
+    assert shown
+    for msg, exp in shown:
+        for a, b in zip(unpack_masks(compressed_to_rgb(msg)),
+                        (exp.foreground, exp.possible, exp.presence)):
+            np.testing.assert_array_equal(a, b)
