@@ -137,6 +137,7 @@ class LiveResult:
     publish_spread_p95: float = float('nan')
     latency_series: tuple[tuple[float, float], ...] = ()  # (s since first frame, latency s)
     camera_node_cpu_seconds: tuple[float, ...] = ()  # per camera node (--live-camera-nodes)
+    camera_node_logs: tuple[str, ...] = ()           # their counters at the end
     mask_bytes_per_frame: float = float('nan')       # mean PNG mask message data, bytes
     image_bytes_per_frame: float = float('nan')      # working image data (raw rgb8), bytes
 
@@ -249,12 +250,13 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
         cwd=REPO, env=env, stdout=log, stderr=subprocess.STDOUT, text=True)
     player = None
     stages = []
-    for cam in cams if camera_nodes else []:
+    stage_logs = [tempfile.TemporaryFile(mode='w+') for _ in cams] if camera_nodes else []
+    for cam, stage_log in zip(cams, stage_logs):
         stages.append(subprocess.Popen(
             [sys.executable, '-m', 'mbtrack_ros.nodes.camera_node', '--ros-args',
              '-r', f'__ns:=/{cam}', '-p', f'calibration_file:={recording / "calibration.yaml"}',
              '-p', f'camera:={cam}', '-p', 'image_reliability:=reliable'],
-            cwd=REPO, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT, text=True))
+            cwd=REPO, env=env, stdout=stage_log, stderr=subprocess.STDOUT, text=True))
     try:
         # the listener's subscriptions must be matched too: start the player once the
         # tracker's people publisher sees us (the node is up, its warm-up done: that can
@@ -301,6 +303,12 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
         listener.destroy_node()
         rclpy.try_shutdown(context=context)
         log.close()
+        stage_lines = []
+        for stage_log in stage_logs:
+            stage_log.seek(0)
+            lines = [ln for ln in stage_log.read().splitlines() if 'frames processed' in ln]
+            stage_lines += lines[-1:]
+            stage_log.close()
         player_log.seek(0)
         burst = _BURST.search(player_log.read())
         player_log.close()
@@ -325,7 +333,7 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
         publish_spread_p50=float(burst['p50']) / 1e3 if burst else float('nan'),
         publish_spread_p95=float(burst['p95']) / 1e3 if burst else float('nan'),
         latency_series=tuple(zip(((stamps - first) / 1e9).tolist(), lat.tolist())),
-        camera_node_cpu_seconds=stage_cpu,
+        camera_node_cpu_seconds=stage_cpu, camera_node_logs=tuple(stage_lines),
         mask_bytes_per_frame=float(np.mean(masks)) if masks else float('nan'),
         image_bytes_per_frame=float(320 * 240 * 3) if camera_nodes else float('nan'))
 
@@ -467,6 +475,8 @@ def main_live(args: argparse.Namespace) -> int:
               f'core; per camera and frame: working image {live.image_bytes_per_frame / 1024:.1f}'
               f' KiB (raw rgb8), foreground masks {live.mask_bytes_per_frame / 1024:.2f} KiB '
               '(PNG)')
+        for line in live.camera_node_logs:
+            print('  ' + line[line.find(']: ') + 3:] if ']: ' in line else line)
     print(f'load average before / after the live run: {load0[0]:.2f} / {load1[0]:.2f}')
     if args.json is not None:
         doc = {'live': asdict(live), 'offline': offline, 'offline_fast': fast,

@@ -83,6 +83,8 @@ CAMERA_PARAMETERS = {
                      {}),
     'region_wait': (1.0, 'seconds the first frame after the bootstrap waits for the '
                     'tracker\'s people-cue regions', _fr(0.0, 60.0)),
+    'warm_up': (True, 'run a throwaway stage on a few synthetic frames at start (loads the '
+                'compiled kernels before the first real frame)', {}),
     'max_pending': (15, 'frames queued for processing; the oldest is dropped beyond',
                     _ir(1, 300)),
 }
@@ -166,6 +168,8 @@ class CameraNode(Node):
         self.processed = 0
         self.dropped = 0
         self.seconds = 0.0  # processing time, wall clock
+        if v['warm_up']:
+            self._warm_up(background, float(v['tracker.image_scale']))
         compressed = v['image_transport'] == 'compressed'
         topic = str(v['image_topic']) or \
             f'/{name}/image_raw' + ('/compressed' if compressed else '')
@@ -190,6 +194,18 @@ class CameraNode(Node):
             self._worker.start()
         self.get_logger().info(f'{name}: {topic} -> working/image, working/foreground '
                                f'({self.stage.camera.width}x{self.stage.camera.height})')
+
+    def _warm_up(self, background, scale: float) -> None:
+        """Load the stage's compiled kernels (numba cache) on synthetic frames with a
+        throwaway stage, so the first real frames do not queue up behind the loading."""
+        stage = CameraStage(self.camera, background, image_scale=scale)
+        rng = np.random.default_rng(0)
+        base = rng.integers(0, 255, (self.camera.height, self.camera.width, 3), np.uint8)
+        for k in range(background.bootstrap_frames + 2):
+            image = base.copy()
+            image[:, 4 * k:4 * k + 8] = 255 - image[:, 4 * k:4 * k + 8]
+            stage.process(image)
+            stage.awaiting_regions = False
 
     def warn_once(self, cause: str, text: str) -> None:
         now = time.monotonic()
@@ -311,6 +327,10 @@ class CameraNode(Node):
         self.pub_foreground.publish(fg)
 
     def destroy_node(self) -> None:
+        self.get_logger().info(
+            f'{self.name}: {self.processed} frames processed '
+            f'({1e3 * self.seconds / max(self.processed, 1):.1f} ms each), '
+            f'{self.dropped} dropped')
         with self._lock:
             self._closing = True
             self._lock.notify_all()
