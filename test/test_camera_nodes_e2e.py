@@ -222,3 +222,79 @@ def test_camera_node_offsets_stamps_and_publishes_masks_of_the_stage(recording, 
         for a, b in zip(unpack_masks(compressed_to_rgb(msg)),
                         (exp.foreground, exp.possible, exp.presence)):
             np.testing.assert_array_equal(a, b)
+
+
+def _launch_module(monkeypatch):
+    """launch/fusion.launch.py with stand-ins for launch and launch_ros (not on the wheels
+    index): actions record their arguments."""
+    import importlib.util
+    import types
+
+    class Action:
+        def __init__(self, *args, **kwargs):
+            self.args, self.kwargs = args, kwargs
+
+    fake = {'launch': types.ModuleType('launch'),
+            'launch.actions': types.ModuleType('launch.actions'),
+            'launch_ros': types.ModuleType('launch_ros'),
+            'launch_ros.actions': types.ModuleType('launch_ros.actions')}
+    fake['launch'].LaunchDescription = Action
+    for name in ('DeclareLaunchArgument', 'GroupAction', 'OpaqueFunction'):
+        setattr(fake['launch.actions'], name, type(name, (Action,), {}))
+    for name in ('Node', 'PushRosNamespace'):
+        setattr(fake['launch_ros.actions'], name, type(name, (Action,), {}))
+    for name, module in fake.items():
+        monkeypatch.setitem(sys.modules, name, module)
+    spec = importlib.util.spec_from_file_location('fusion_launch',
+                                                  REPO / 'launch' / 'fusion.launch.py')
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _nodes(actions, namespace=()):
+    """(namespace, executable, parameters) of every Node in the action tree."""
+    out = []
+    for a in actions:
+        kind = type(a).__name__
+        if kind == 'GroupAction':
+            inner = a.args[0]
+            ns = namespace + tuple(x.args[0] for x in inner
+                                   if type(x).__name__ == 'PushRosNamespace')
+            out += _nodes([x for x in inner if type(x).__name__ != 'PushRosNamespace'], ns)
+        elif kind == 'Node':
+            params = {}
+            for p in a.kwargs['parameters']:
+                if isinstance(p, dict):
+                    params.update(p)
+            out.append(('/'.join(namespace), a.kwargs['executable'], params))
+    return out
+
+
+def test_fusion_launch_starts_each_host_its_group(monkeypatch, tmp_path):
+    module = _launch_module(monkeypatch)
+    hosts = tmp_path / 'hosts.yaml'
+    hosts.write_text('fusion: hostF\nhosts:\n  hostA: [cam0, cam1]\n  hostF: [cam2]\n')
+
+    def run(**given):
+        conf = {'calibration_file': 'room.yaml', 'cameras': '', 'hosts_file': str(hosts),
+                'host': '', 'room': '', 'params_file': '', 'image_scale': '0.5',
+                'image_transport': 'raw', **given}
+        context = type('Context', (), {'launch_configurations': conf})()
+        return _nodes(module._groups(context))
+
+    a = run(host='hostA')
+    assert [(ns, exe, p['camera']) for ns, exe, p in a] == [
+        ('cam0', 'camera_node', 'cam0'), ('cam1', 'camera_node', 'cam1')]
+    assert all(p['tracker.image_scale'] == 0.5 for _, _, p in a)
+    f = run(host='hostF', room='lab')
+    assert [(ns, exe) for ns, exe, _ in f] == [('lab/cam2', 'camera_node'),
+                                               ('lab', 'tracker_node')]
+    tracker = f[1][2]
+    assert tracker['input_mode'] == 'foreground' and tracker['cameras'] == [
+        'cam0', 'cam1', 'cam2']
+    assert tracker['camera.cam1.image_topic'] == '/lab/cam1/working/image'
+    assert tracker['camera.cam1.foreground_topic'] == '/lab/cam1/working/foreground'
+    assert f[0][2]['tracks_topic'] == '/lab/tracker_node/tracks'
+    one = run(hosts_file='', cameras='cam0,cam1')
+    assert [exe for _, exe, _ in one] == ['camera_node', 'camera_node', 'tracker_node']
