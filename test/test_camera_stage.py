@@ -9,8 +9,8 @@ import pytest
 
 from mbtrack_ros.core.detection.background import BackgroundModel
 from mbtrack_ros.core.detection.camera_stage import (
-    CameraStage, ReceivedForeground, pack_masks, unpack_masks)
-from mbtrack_ros.core.tracker import Tracker, TrackerConfig
+    CameraStage, pack_masks, unpack_masks)
+from mbtrack_ros.core.tracker import TrackerConfig
 
 FRAMES = 30
 
@@ -59,35 +59,11 @@ def test_fusion_gives_the_tracks_of_one_process(recording):
     the same ids on every frame but at most two (a release a frame apart), positions
     within 5 cm, mostly millimetres: the particle filter amplifies the update's one-frame
     latency."""
-    from mbtrack_ros.core.camera import RoomCalibration
-    from mbtrack_ros.recording.bag import RecordingReader
+    from mbtrack_ros.evaluation.fusion import fusion_vs_single
 
-    calibration = RoomCalibration.load(recording / 'calibration.yaml')
-    config = TrackerConfig(detection=True, seed=7)
-    single = Tracker(calibration, config)
-    fusion = Tracker(calibration, config)
-    bank = ReceivedForeground(fusion.detection.calibration,
-                              fusion.detection.config.background)
-    fusion.detection.background = bank
-    stages = {n: CameraStage(c, fusion.detection.config.background)
-              for n, c in calibration.cameras.items()}
-    same_ids, gaps, tracked = 0, [], 0
-    with RecordingReader(recording) as reader:
-        for fs in reader.frames():
-            a = single.step(fs.stamp_ns, fs.images)
-            frames = {n: stages[n].process(im) for n, im in fs.images.items()}
-            for n, regions in bank.receive(frames).items():
-                stages[n].set_regions(*regions)
-            b = fusion.step(fs.stamp_ns, {n: f.image for n, f in frames.items()})
-            for stage in stages.values():
-                stage.set_tracks(np.array([t.mean[:2] for t in b.tracks]).reshape(-1, 2),
-                                 np.array([t.mean[2:4] for t in b.tracks]).reshape(-1, 2),
-                                 np.array([t.height for t in b.tracks]))
-            xa = {t.track_id: t.mean[:2] for t in a.tracks}
-            xb = {t.track_id: t.mean[:2] for t in b.tracks}
-            same_ids += sorted(xa) == sorted(xb)
-            tracked += bool(xa)
-            gaps += [float(np.hypot(*(xa[i] - xb[i]))) for i in set(xa) & set(xb)]
+    got = fusion_vs_single(recording, TrackerConfig(detection=True, seed=7))
+    tracked, same_ids, gaps = got.tracked, got.same_ids, got.gaps
+    assert got.frames == FRAMES
     assert tracked >= 10   # people were tracked: the comparison says something
     assert same_ids >= FRAMES - 2
     assert max(gaps) < 0.05 and np.median(gaps) < 0.01
