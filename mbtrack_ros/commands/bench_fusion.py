@@ -28,10 +28,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              '(MOTA, ids, position gaps)')
     parser.add_argument('--fusion-seeds', type=int, nargs='+', default=[200, 201],
                         metavar='S', help='recording seeds of --fusion (default 200 201)')
+    parser.add_argument('--fusion-frames', type=int, default=None, metavar='N',
+                        help='frames of each --fusion recording (default: the preset\'s)')
 
 
 def main_fusion(args: argparse.Namespace) -> int:
-    """Run the comparison; 0 on success, 2 on a bad preset."""
+    """Run the comparison; 0 on success, 2 on a bad preset or frame count."""
+    if args.fusion_frames is not None and args.fusion_frames < 1:
+        print(f'{_PROG}: error: --fusion-frames must be >= 1, got {args.fusion_frames}',
+              file=sys.stderr)
+        return 2
     from mbtrack_ros.core.tracker import TrackerConfig
     from mbtrack_ros.evaluation.clear_mot import clear_mot
     from mbtrack_ros.evaluation.fusion import fusion_vs_single
@@ -45,7 +51,7 @@ def main_fusion(args: argparse.Namespace) -> int:
         for seed in args.fusion_seeds:
             rec = tmp / f'{args.fusion}-{seed}'
             try:
-                generate(args.fusion, rec, seed=seed)
+                generate(args.fusion, rec, seed=seed, frames=args.fusion_frames)
             except SynthError as err:
                 print(f'{_PROG}: error: {err}', file=sys.stderr)
                 return 2
