@@ -53,17 +53,22 @@ def test_stage_is_the_background_model_with_the_given_exclusion(room, rng):
         assert got.foreground.any()
 
 
-def test_fusion_gives_the_tracks_of_one_process(recording):
+@pytest.mark.parametrize('pipeline', [False, True])
+def test_fusion_gives_the_tracks_of_one_process(recording, pipeline):
     """Camera stages + a fusion tracker vs. one tracker on a room with people from its first
     frame (the bootstrap's people cue goes through the fusion node). Measured at 160x120:
     the same ids on every frame but at most two (a release a frame apart), positions
-    within 5 cm, mostly millimetres: the particle filter amplifies the update's one-frame
-    latency."""
+    within 5 cm (13 cm with ``pipeline_search``), mostly millimetres: the particle filter amplifies the update's one-frame
+    latency. With ``pipeline_search`` the search of a frame set reads its own masks while
+    the next set is received."""
     from mbtrack_ros.evaluation.fusion import fusion_vs_single
 
-    got = fusion_vs_single(recording, TrackerConfig(detection=True, seed=7))
+    got = fusion_vs_single(recording, TrackerConfig(detection=True, seed=7,
+                                                    pipeline_search=pipeline))
     tracked, same_ids, gaps = got.tracked, got.same_ids, got.gaps
     assert got.frames == FRAMES
     assert tracked >= 10   # people were tracked: the comparison says something
     assert same_ids >= FRAMES - 2
-    assert max(gaps) < 0.05 and np.median(gaps) < 0.01
+    # measured: max 39 mm, with pipeline_search one frame at 126 mm (the gaps start at 0
+    # and grow as the filter carries the update's differences on)
+    assert max(gaps) < (0.15 if pipeline else 0.05) and np.median(gaps) < 0.01

@@ -195,22 +195,27 @@ class CameraStage:
 
 
 class _Received:
-    """One camera's masks of the current frame, in the interface of a
-    :class:`BackgroundModel` the detection reads."""
+    """One camera's masks, in the interface of a :class:`BackgroundModel` the detection
+    reads: ``frame`` is the frame set's latest received, ``applied`` the one whose
+    foreground the detection took last (:meth:`ReceivedForeground.apply`); the masks read
+    after the foreground (possible foreground, presence) are those of ``applied``, so a
+    search still running on the detection's worker (``pipeline_search``) reads its own
+    frame's while the next frame set is received."""
 
     def __init__(self) -> None:
         self.frame: CameraFrame | None = None
+        self.applied: CameraFrame | None = None
 
     @property
     def possible_foreground_as_tested(self) -> np.ndarray:
-        f = self.frame
+        f = self.applied
         if f is None or f.possible is None:
             shape = () if f is None else f.image.shape[:2]
             return np.zeros(shape or (0, 0), bool)
         return f.possible
 
     def presence(self, level: float = 0.3) -> np.ndarray | None:
-        return None if self.frame is None else self.frame.presence
+        return None if self.applied is None else self.applied.presence
 
     @property
     def ready(self) -> bool:
@@ -255,7 +260,8 @@ class ReceivedForeground:
               ) -> dict[str, np.ndarray]:
         out = {}
         for name, image in images.items():
-            f = self.model(name).frame
+            model = self.model(name)
+            f = model.applied = model.frame
             if f is None or f.foreground is None:
                 continue
             if f.foreground.shape != image.shape[:2]:
