@@ -10,7 +10,7 @@ import pytest
 from mbtrack_ros.core.detection.background import BackgroundModel
 from mbtrack_ros.core.detection.camera_stage import (
     CameraStage, pack_masks, unpack_masks)
-from mbtrack_ros.core.tracker import TrackerConfig
+from mbtrack_ros.core.tracker import Tracker, TrackerConfig
 
 FRAMES = 30
 
@@ -72,3 +72,17 @@ def test_fusion_gives_the_tracks_of_one_process(recording, pipeline):
     # measured: max 39 mm, with pipeline_search one frame at 126 mm (the gaps start at 0
     # and grow as the filter carries the update's differences on)
     assert max(gaps) < (0.15 if pipeline else 0.05) and np.median(gaps) < 0.01
+
+
+def test_stage_works_at_the_trackers_scale(room, rng):
+    """With image_scale the stage resizes once, to the size of the tracker's cameras."""
+    tracker = Tracker(room, TrackerConfig(detection=True, image_scale=0.5))
+    stage = CameraStage(room.cameras['cam0'], tracker.detection.config.background,
+                        image_scale=0.5)
+    image = rng.integers(0, 255, (room.cameras['cam0'].height, room.cameras['cam0'].width, 3),
+                         dtype=np.uint8)
+    want = tracker.calibration.cameras['cam0']
+    got = stage.process(image)
+    assert got.image.shape == (want.height, want.width, 3)
+    np.testing.assert_array_equal(got.image, want.fit(image))
+    assert stage.camera.K.tolist() == want.K.tolist()

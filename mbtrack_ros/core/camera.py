@@ -196,6 +196,12 @@ class Camera:
             return ((x >= -0.5 - margin) & (x < self.width - 0.5 + margin)
                     & (y >= -0.5 - margin) & (y < self.height - 0.5 + margin))
 
+    def scaled_by(self, factor: float) -> Camera:
+        """This camera with its image resized by ``factor`` (each size rounded to whole
+        pixels, at least 1)."""
+        return self.scaled(max(1, round(self.width * factor)),
+                           max(1, round(self.height * factor)))
+
     def scaled(self, width: int, height: int) -> Camera:
         """The same camera with its image resized to ``width`` x ``height`` pixels."""
         sx, sy = width / self.width, height / self.height
@@ -453,9 +459,7 @@ class RoomCalibration:
     def scaled_by(self, factor: float) -> RoomCalibration:
         """Every camera with its image resized by ``factor`` (each size rounded to whole
         pixels); the room itself is unchanged."""
-        return replace(self, cameras={
-            n: c.scaled(max(1, round(c.width * factor)), max(1, round(c.height * factor)))
-            for n, c in self.cameras.items()})
+        return replace(self, cameras={n: c.scaled_by(factor) for n, c in self.cameras.items()})
 
     def to_dict(self) -> dict[str, Any]:
         x0, y0, x1, y1 = self.floor
