@@ -111,11 +111,12 @@ def cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
 
-def make_recording(path: Path, *, frames: int, seed: int = 0) -> Path:
-    """The benchmark recording: clear-room, 4 corner cameras, 320x240, 15 Hz."""
+def make_recording(path: Path, *, frames: int, seed: int = 0,
+                   size: tuple[int, int] = (320, 240)) -> Path:
+    """The benchmark recording: clear-room, 4 corner cameras, ``size`` (320x240), 15 Hz."""
     from mbtrack_ros.synth.generator import generate
-    return generate('clear-room', path, seed=seed, frames=frames, width=320, height=240,
-                    fps=FPS, ceiling=False)
+    return generate('clear-room', path, seed=seed, frames=frames, width=size[0],
+                    height=size[1], fps=FPS, ceiling=False)
 
 
 @dataclass
@@ -249,13 +250,21 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
          '-p', f'use_sim_time:={str(use_sim_time).lower()}', *node_args],
         cwd=REPO, env=env, stdout=log, stderr=subprocess.STDOUT, text=True)
     player = None
+    from mbtrack_ros.core.camera import RoomCalibration
+
+    scale = next((float(a.split(':=')[1]) for a in node_args
+                  if a.startswith('tracker.image_scale:=')), 1.0)
+    working = RoomCalibration.load(recording / 'calibration.yaml').scaled_by(scale).cameras
+    working_bytes = 3 * working['cam0'].width * working['cam0'].height
     stages = []
     stage_logs = [tempfile.TemporaryFile(mode='w+') for _ in cams] if camera_nodes else []
     for cam, stage_log in zip(cams, stage_logs):
         stages.append(subprocess.Popen(
             [sys.executable, '-m', 'mbtrack_ros.nodes.camera_node', '--ros-args',
              '-r', f'__ns:=/{cam}', '-p', f'calibration_file:={recording / "calibration.yaml"}',
-             '-p', f'camera:={cam}', '-p', 'image_reliability:=reliable'],
+             '-p', f'camera:={cam}', '-p', 'image_reliability:=reliable',
+             *[x for a in node_args if a.startswith('tracker.image_scale:=')
+               for x in ('-p', a)]],
             cwd=REPO, env=env, stdout=stage_log, stderr=subprocess.STDOUT, text=True))
     try:
         # the listener's subscriptions must be matched too: start the player once the
@@ -335,7 +344,7 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
         latency_series=tuple(zip(((stamps - first) / 1e9).tolist(), lat.tolist())),
         camera_node_cpu_seconds=stage_cpu, camera_node_logs=tuple(stage_lines),
         mask_bytes_per_frame=float(np.mean(masks)) if masks else float('nan'),
-        image_bytes_per_frame=float(320 * 240 * 3) if camera_nodes else float('nan'))
+        image_bytes_per_frame=float(working_bytes) if camera_nodes else float('nan'))
 
 
 def run_offline(recording: Path, *, seed: int = 0, ground_truth: bool = False,
@@ -363,6 +372,17 @@ def run_offline(recording: Path, *, seed: int = 0, ground_truth: bool = False,
             'params': None if params is None else str(params)}
 
 
+def _size(text: str) -> tuple[int, int]:
+    """``WxH`` -> (W, H), both 16-4096."""
+    try:
+        w, h = (int(v) for v in text.lower().split('x'))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'expected WxH, got {text!r}') from None
+    if not (16 <= w <= 4096 and 16 <= h <= 4096):
+        raise argparse.ArgumentTypeError(f'sizes must be 16-4096, got {text!r}')
+    return w, h
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The ``--live`` options of ``mbtrack bench``."""
     parser.add_argument('--live', action='store_true',
@@ -385,6 +405,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--live-param', action='append', default=[], metavar='NAME:=VALUE',
                         help='a tracker_node parameter for the live run, as after ros-args '
                              '-p (repeatable), e.g. tracker.pipeline_search:=true')
+    parser.add_argument('--live-size', type=_size, default=(320, 240), metavar='WxH',
+                        help='image size of a generated live recording (default 320x240)')
     parser.add_argument('--live-camera-nodes', action='store_true',
                         help='one camera_node process per camera and tracker_node in fusion '
                              'mode (input_mode foreground): their CPU, the masks\' bytes')
@@ -423,7 +445,8 @@ def main_live(args: argparse.Namespace) -> int:
                 recording = args.live_recording
             print(f'{_PROG}: generating {args.live_frames} frames of clear-room into '
                   f'{recording}', file=sys.stderr)
-            make_recording(recording, frames=args.live_frames, seed=seed)
+            make_recording(recording, frames=args.live_frames, seed=seed,
+                           size=args.live_size)
         load0 = os.getloadavg()
         live = run_live(recording, seed=seed, use_sim_time=not args.live_no_sim_time,
                         ground_truth=args.live_ground_truth, node_args=node_args,
