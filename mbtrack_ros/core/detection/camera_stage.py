@@ -36,7 +36,7 @@ from mbtrack_ros.core.detection.background import (
 from mbtrack_ros.core.shape import BodyShape, rasterize
 from mbtrack_ros.core.state import SIT, THETA, VX, VY, X, Y
 
-__all__ = ['BootstrapCue', 'CameraFrame', 'CameraStage', 'ReceivedForeground',
+__all__ = ['CameraFrame', 'CameraStage', 'ReceivedForeground', 'head_heights',
            'exclusion_mask', 'pack_masks', 'pack_regions', 'unpack_masks', 'unpack_regions']
 
 #: bit planes of a packed foreground image (values chosen to be visible as a grey image)

@@ -44,7 +44,7 @@ from mbtrack_ros.core.existence import (
 )
 from mbtrack_ros.core.resampling import systematic_indices
 from mbtrack_ros.core.shape import BodyShape, rasterize
-from mbtrack_ros.core.state import SIT, THETA, VX, VY, X, Y, TrackEstimate
+from mbtrack_ros.core.state import THETA, VX, VY, X, Y, TrackEstimate
 
 __all__ = ['AutoDetection', 'AutoDetectionConfig', 'Birth']
 
