@@ -298,3 +298,22 @@ def test_fusion_launch_starts_each_host_its_group(monkeypatch, tmp_path):
     assert f[0][2]['tracks_topic'] == '/lab/tracker_node/tracks'
     one = run(hosts_file='', cameras='cam0,cam1')
     assert [exe for _, exe, _ in one] == ['camera_node', 'camera_node', 'tracker_node']
+
+
+def test_cloud_columns_read_the_tracks_cloud():
+    """The camera node reads ~/tracks by the cloud's own field offsets."""
+    pytest.importorskip('rclpy')
+    from mbtrack_ros.core.state import FrameResult, TrackEstimate
+    from mbtrack_ros.nodes.camera_node import cloud_columns
+    from mbtrack_ros.nodes.messages import tracks_cloud
+
+    tracks = [TrackEstimate(track_id=i, mean=np.array([1.0 + i, 2.0 - i, 0.3 * i, -0.1, 0, 0]),
+                            covariance=np.eye(4), height=1.6 + 0.1 * i,
+                            visible_fraction={'cam0': 0.5}) for i in (1, 2, 3)]
+    cloud = tracks_cloud(FrameResult(stamp_ns=5, tracks=tracks), ['cam0', 'cam1'], 'room')
+    got = cloud_columns(cloud, ('x', 'y', 'vx', 'vy', 'height', 'id', 'nope'))
+    np.testing.assert_allclose(got['x'], [2, 3, 4], rtol=1e-6)
+    np.testing.assert_allclose(got['y'], [1, 0, -1], rtol=1e-6)
+    np.testing.assert_allclose(got['vx'], [0.3, 0.6, 0.9], rtol=1e-6)
+    np.testing.assert_allclose(got['height'], [1.7, 1.8, 1.9], rtol=1e-6)
+    assert got['id'].tolist() == [1, 2, 3] and np.isnan(got['nope']).all()

@@ -237,11 +237,19 @@ class CameraNode(Node):
 
     def _on_tracks(self, msg: PointCloud2) -> None:
         c = cloud_columns(msg, ('x', 'y', 'vx', 'vy', 'height'))
+        xy = np.stack([c['x'], c['y']], axis=1)
+        good = np.all(np.isfinite(xy), axis=1)
+        if not good.all() or (not len(xy) and msg.width * msg.height):
+            self.warn_once('tracks', f'{self.name}: track points without a finite x, y '
+                           'ignored (or a malformed cloud)')
         # renders, then swaps the stage's exclusion in one assignment: the next frame's
         # update takes the tracks whole, old or new
-        self.stage.set_tracks(np.stack([c['x'], c['y']], axis=1),
-                                  np.nan_to_num(np.stack([c['vx'], c['vy']], axis=1)),
-                                  c['height'])
+        try:
+            self.stage.set_tracks(xy[good],
+                                  np.nan_to_num(np.stack([c['vx'], c['vy']], axis=1)[good]),
+                                  c['height'][good])
+        except ValueError as err:  # ShapeError: an impossible shape
+            self.warn_once('tracks', f'{self.name}: tracks ignored: {err}')
 
     def _on_regions(self, msg: CompressedImage) -> None:
         try:
