@@ -55,6 +55,7 @@ setup(
             'mbtrack = mbtrack_ros.cli:main',
             'tracker_node = mbtrack_ros.nodes.tracker_node:main',
             'bag_player = mbtrack_ros.nodes.bag_player:main',
+            'camera_node = mbtrack_ros.nodes.camera_node:main',
         ],
     },
 )

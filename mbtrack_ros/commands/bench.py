@@ -242,6 +242,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     # -- live benchmark (mbtrack_ros.commands.bench_live) --
     from mbtrack_ros.commands.bench_live import add_arguments as _live_arguments
     _live_arguments(parser)
+    from mbtrack_ros.commands.bench_fusion import add_arguments as _fusion_arguments
+    _fusion_arguments(parser)
     return parser
 
 
@@ -282,6 +284,9 @@ def run(args: argparse.Namespace) -> int:
     if getattr(args, 'live', False):  # live benchmark over DDS (bench_live)
         from mbtrack_ros.commands.bench_live import main_live
         return main_live(args)
+    if getattr(args, 'fusion', None):  # one process vs camera stages (bench_fusion)
+        from mbtrack_ros.commands.bench_fusion import main_fusion
+        return main_fusion(args)
     frames = args.frames if args.frames is not None else (3 if args.quick else 8)
     if frames < 1:
         print(f'{_PROG}: error: --frames must be >= 1, got {frames}', file=sys.stderr)

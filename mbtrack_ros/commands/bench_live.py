@@ -124,12 +124,13 @@ def cpu_seconds(pid: int) -> float:
 
 
 def make_recording(path: Path, *, frames: int, seed: int = 0,
-                   compressed: bool = False) -> Path:
-    """The benchmark recording: clear-room, 4 corner cameras, 320x240, 15 Hz (``compressed``:
-    JPEG images, ~15 kB instead of 230 kB each, for long soaks)."""
+                   compressed: bool = False,
+                   size: tuple[int, int] = (320, 240)) -> Path:
+    """The benchmark recording: clear-room, 4 corner cameras, ``size`` (320x240), 15 Hz
+    (``compressed``: JPEG images, ~15 kB instead of 230 kB each, for long soaks)."""
     from mbtrack_ros.synth.generator import generate
-    return generate('clear-room', path, seed=seed, frames=frames, width=320, height=240,
-                    fps=FPS, ceiling=False, compressed=compressed)
+    return generate('clear-room', path, seed=seed, frames=frames, width=size[0],
+                    height=size[1], fps=FPS, ceiling=False, compressed=compressed)
 
 
 @dataclass
@@ -152,6 +153,10 @@ class LiveResult:
     latency_series: tuple[tuple[float, float], ...] = ()  # (s since first frame, latency s)
     injected_bad: int = 0  # bad images published on the soak camera
     rss_mb: tuple[tuple[float, float], ...] = ()  # (s since the player started, RSS MB)
+    camera_node_cpu_seconds: tuple[float, ...] = ()  # per camera node (--live-camera-nodes)
+    camera_node_logs: tuple[str, ...] = ()           # their counters at the end
+    mask_bytes_per_frame: float = float('nan')       # mean PNG mask message data, bytes
+    image_bytes_per_frame: float = float('nan')      # working image data (raw rgb8), bytes
 
 
 #: kinds of bad images the soak injects, in turn
@@ -214,8 +219,12 @@ def _diag_values(msg) -> dict:
 def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
              max_pending_sets: int = 15, timeout: float = 600.0, use_sim_time: bool = True,
              ground_truth: bool = False, node_args: tuple[str, ...] = (),
-             bad_rate: float = 0.0, bad_camera: str = 'cam0') -> LiveResult:
+             bad_rate: float = 0.0, bad_camera: str = 'cam0',
+             camera_nodes: bool = False) -> LiveResult:
     """Play ``recording`` to a tracker_node process and measure (see the module docstring).
+
+    ``camera_nodes``: one ``camera_node`` process per camera and the tracker in fusion mode
+    (``input_mode: foreground``); their CPU and the masks' bytes are measured too.
 
     ``ground_truth``: start tracks from the recording's ground truth (``init_ground_truth``)
     instead of the automatic detection. ``bad_rate``: share of the frame sets after whose
@@ -232,6 +241,7 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
     from rclpy.executors import MultiThreadedExecutor
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import CompressedImage
 
     from sensor_msgs.msg import CompressedImage, Image
 
@@ -314,6 +324,19 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
                                  callback_group=group)
     listener.create_subscription(DiagnosticArray, '/diagnostics', on_diag, qos,
                                  callback_group=group)
+    cams = ['cam0', 'cam1', 'cam2', 'cam3']
+    masks: list[int] = []
+
+    def on_mask(msg) -> None:
+        if msg.data:
+            with lock:
+                masks.append(len(msg.data))
+
+    if camera_nodes:
+        for cam in cams:
+            listener.create_subscription(CompressedImage, f'/{cam}/working/foreground',
+                                         on_mask, qos, callback_group=group)
+        node_args = ('-p', 'input_mode:=foreground', *node_args)
     executor = MultiThreadedExecutor(num_threads=3, context=context)
     executor.add_node(listener)
     spinner = threading.Thread(target=executor.spin, daemon=True)
@@ -329,6 +352,23 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
          '-p', f'use_sim_time:={str(use_sim_time).lower()}', *node_args],
         cwd=REPO, env=env, stdout=log, stderr=subprocess.STDOUT, text=True)
     player = None
+    from mbtrack_ros.core.camera import RoomCalibration
+
+    pixels = next((int(a.split(':=')[1]) for a in node_args
+                   if a.startswith('tracker.working_pixels:=')), 76_800)
+    working = {n: c.at_most(pixels) for n, c in
+               RoomCalibration.load(recording / 'calibration.yaml').cameras.items()}
+    working_bytes = 3 * working['cam0'].width * working['cam0'].height
+    stages = []
+    stage_logs = [tempfile.TemporaryFile(mode='w+') for _ in cams] if camera_nodes else []
+    for cam, stage_log in zip(cams, stage_logs):
+        stages.append(subprocess.Popen(
+            [sys.executable, '-m', 'mbtrack_ros.nodes.camera_node', '--ros-args',
+             '-r', f'__ns:=/{cam}', '-p', f'calibration_file:={recording / "calibration.yaml"}',
+             '-p', f'camera:={cam}', '-p', 'image_reliability:=reliable',
+             *[x for a in node_args if a.startswith('tracker.working_pixels:=')
+               for x in ('-p', a)]],
+            cwd=REPO, env=env, stdout=stage_log, stderr=subprocess.STDOUT, text=True))
     try:
         # the listener's subscriptions must be matched too: start the player once the
         # tracker's people publisher sees us (the node is up, its warm-up done: that can
@@ -361,6 +401,7 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
 
         sampler = threading.Thread(target=sample, daemon=True)
         sampler.start()
+        stage0 = [cpu_seconds(p.pid) for p in stages]
         if player.wait(timeout=timeout) != 0:
             raise RuntimeError(f'bag_player exited with {player.returncode}')
         # the last frame sets: wait until no output has come for 1 s
@@ -384,8 +425,9 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
             time.sleep(0.1)
         sampling.set()
         sampler.join(timeout=5)
+        stage_cpu = tuple(cpu_seconds(p.pid) - c for p, c in zip(stages, stage0))
     finally:
-        for proc in (player, node):
+        for proc in (player, node, *stages):
             if proc is not None and proc.poll() is None:
                 proc.terminate()
                 try:
@@ -397,6 +439,12 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
         listener.destroy_node()
         rclpy.try_shutdown(context=context)
         log.close()
+        stage_lines = []
+        for stage_log in stage_logs:
+            stage_log.seek(0)
+            lines = [ln for ln in stage_log.read().splitlines() if 'frames processed' in ln]
+            stage_lines += lines[-1:]
+            stage_log.close()
         player_log.seek(0)
         burst = _BURST.search(player_log.read())
         player_log.close()
@@ -421,7 +469,10 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
         publish_spread_p50=float(burst['p50']) / 1e3 if burst else float('nan'),
         publish_spread_p95=float(burst['p95']) / 1e3 if burst else float('nan'),
         latency_series=tuple(zip(((stamps - first) / 1e9).tolist(), lat.tolist())),
-        injected_bad=injected[0], rss_mb=tuple(rss))
+        injected_bad=injected[0], rss_mb=tuple(rss),
+        camera_node_cpu_seconds=stage_cpu, camera_node_logs=tuple(stage_lines),
+        mask_bytes_per_frame=float(np.mean(masks)) if masks else float('nan'),
+        image_bytes_per_frame=float(working_bytes) if camera_nodes else float('nan'))
 
 
 def run_offline(recording: Path, *, seed: int = 0, ground_truth: bool = False,
@@ -449,6 +500,17 @@ def run_offline(recording: Path, *, seed: int = 0, ground_truth: bool = False,
             'params': None if params is None else str(params)}
 
 
+def _size(text: str) -> tuple[int, int]:
+    """``WxH`` -> (W, H), both 16-4096."""
+    try:
+        w, h = (int(v) for v in text.lower().split('x'))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'expected WxH, got {text!r}') from None
+    if not (16 <= w <= 4096 and 16 <= h <= 4096):
+        raise argparse.ArgumentTypeError(f'sizes must be 16-4096, got {text!r}')
+    return w, h
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The ``--live`` options of ``mbtrack bench``."""
     parser.add_argument('--live', action='store_true',
@@ -471,6 +533,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--live-param', action='append', default=[], metavar='NAME:=VALUE',
                         help='a tracker_node parameter for the live run, as after ros-args '
                              '-p (repeatable), e.g. tracker.pipeline_search:=true')
+    parser.add_argument('--live-size', type=_size, default=(320, 240), metavar='WxH',
+                        help='image size of a generated live recording (default 320x240)')
+    parser.add_argument('--live-camera-nodes', action='store_true',
+                        help='one camera_node process per camera and tracker_node in fusion '
+                             'mode (input_mode foreground): their CPU, the masks\' bytes')
     parser.add_argument('--live-no-offline', action='store_true',
                         help='skip the offline replays after the live run')
     parser.add_argument('--live-bad-rate', type=float, default=0.0, metavar='P',
@@ -549,11 +616,12 @@ def main_live(args: argparse.Namespace) -> int:
             print(f'{_PROG}: generating {args.live_frames} frames of clear-room into '
                   f'{recording}', file=sys.stderr)
             make_recording(recording, frames=args.live_frames, seed=seed,
-                           compressed=args.live_compressed)
+                           compressed=args.live_compressed, size=args.live_size)
         load0 = os.getloadavg()
         live = run_live(recording, seed=seed, use_sim_time=not args.live_no_sim_time,
                         ground_truth=args.live_ground_truth, node_args=node_args,
                         bad_rate=args.live_bad_rate, bad_camera=args.live_bad_camera,
+                        camera_nodes=args.live_camera_nodes,
                         timeout=max(600.0, 2.0 * args.live_frames / FPS))
         load1 = os.getloadavg()
         offline = fast = quick = None
@@ -597,6 +665,15 @@ def main_live(args: argparse.Namespace) -> int:
             print(f'offline replay ({name}): {off["frames"]} frames in '
                   f'{off["wall_seconds"]:.1f} s = {off["frames_per_second"]:.1f} frames/s = '
                   f'{off["x_real_time"]:.2f}x real time (CPU {off["cpu_seconds"]:.1f} s)')
+    if live.camera_node_cpu_seconds:
+        per = live.camera_node_cpu_seconds
+        print(f'camera_node CPU: {sum(per):.1f} s in all ({", ".join(f"{c:.1f}" for c in per)}'
+              f' s each) = {100.0 * sum(per) / max(live.wall_seconds, 1e-9):.0f} % of one '
+              f'core; per camera and frame: working image {live.image_bytes_per_frame / 1024:.1f}'
+              f' KiB (raw rgb8), foreground masks {live.mask_bytes_per_frame / 1024:.2f} KiB '
+              '(PNG)')
+        for line in live.camera_node_logs:
+            print('  ' + line[line.find(']: ') + 3:] if ']: ' in line else line)
     print(f'load average before / after the live run: {load0[0]:.2f} / {load1[0]:.2f}')
     if args.json is not None:
         doc = {'live': asdict(live), 'offline': offline, 'offline_fast': fast,

@@ -384,6 +384,8 @@ def _track_rows(tracker: Tracker, reader: RecordingReader, index: _FrameIndex, s
         status['bag_error'] = str(err)
     finally:
         frames.close()  # stop the reader thread before the reader closes
+        sync = getattr(reader, 'sync', None)
+        status['unplaced'] = sync.counters.dropped_frames if sync is not None else 0
         for text in reader.warnings:
             print(f'{_PROG}: warning: {text}', file=sys.stderr)
         if outputs is not None and status.get('last_stamp') is not None:
@@ -398,10 +400,12 @@ def _track_rows(tracker: Tracker, reader: RecordingReader, index: _FrameIndex, s
 def _counts(status: dict) -> dict:
     """The replay's counts as ``DiagnosticsSnapshot`` fields (``/diagnostics`` of
     tracks.mcap): undecodable images are the bad images, frame sets dropped for a repeated
-    or earlier stamp the duplicates."""
+    or earlier stamp, and images the synchroniser could place in no set (a repeated stamp
+    on one camera, or later than its set), the dropped frames."""
     bad = sum(status['bad_images'].values())
     return dict(frame_sets=status['frames'], bad_images=bad, late_frames=status['skipped'],
-                dropped_frames=bad + status['skipped'], tracks=status.get('live_tracks', 0))
+                dropped_frames=bad + status['skipped'] + status.get('unplaced', 0),
+                tracks=status.get('live_tracks', 0))
 
 
 def _output_bag(out: Path, calibration: RoomCalibration):
@@ -545,6 +549,9 @@ def run(args: argparse.Namespace) -> int:
         if status['skipped']:
             print(f'{_PROG}: note: dropped {status["skipped"]} frame set(s) whose stamp was '
                   'not later than the last processed one', file=sys.stderr)
+        if status.get('unplaced'):
+            print(f'{_PROG}: note: dropped {status["unplaced"]} image(s) that fit no frame set '
+                  '(a repeated stamp on one camera, or later than its set)', file=sys.stderr)
         if status['bad_images']:
             print(f'{_PROG}: note: dropped {sum(status["bad_images"].values())} undecodable '
                   'image(s): ' + '; '.join(f'{cam}: {n} (first: {status["bad_reasons"][cam]})'

@@ -267,6 +267,21 @@ class Camera:
             return ((x >= -0.5 - margin) & (x < self.width - 0.5 + margin)
                     & (y >= -0.5 - margin) & (y < self.height - 0.5 + margin))
 
+    def scaled_by(self, factor: float) -> Camera:
+        """This camera with its image resized by ``factor`` (each size rounded to whole
+        pixels, at least 1)."""
+        return self.scaled(max(1, round(self.width * factor)),
+                           max(1, round(self.height * factor)))
+
+    def at_most(self, pixels: int) -> Camera:
+        """This camera at the size the tracker works on: resized by
+        ``sqrt(pixels / (w h))`` (sizes rounded) when it has more than ``pixels`` pixels,
+        else itself."""
+        if self.width * self.height <= pixels:
+            return self
+        f = float(np.sqrt(pixels / (self.width * self.height)))
+        return self.scaled(max(1, round(self.width * f)), max(1, round(self.height * f)))
+
     def scaled(self, width: int, height: int) -> Camera:
         """The same camera with its image resized to ``width`` x ``height`` pixels."""
         sx, sy = width / self.width, height / self.height
@@ -552,9 +567,7 @@ class RoomCalibration:
     def scaled_by(self, factor: float) -> RoomCalibration:
         """Every camera with its image resized by ``factor`` (each size rounded to whole
         pixels); the room itself is unchanged."""
-        return replace(self, cameras={
-            n: c.scaled(max(1, round(c.width * factor)), max(1, round(c.height * factor)))
-            for n, c in self.cameras.items()})
+        return replace(self, cameras={n: c.scaled_by(factor) for n, c in self.cameras.items()})
 
     def to_dict(self) -> dict[str, Any]:
         x0, y0, x1, y1 = self.floor

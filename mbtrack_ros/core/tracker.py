@@ -247,15 +247,8 @@ class TrackerConfig:
     def working_calibration(self, calibration: RoomCalibration) -> RoomCalibration:
         """The cameras at the size the tracker works on (``working_pixels``): each camera
         with more pixels resized by ``sqrt(working_pixels / (w h))``, sizes rounded."""
-        cams = {}
-        for name, cam in calibration.cameras.items():
-            pixels = cam.width * cam.height
-            if pixels <= self.working_pixels:
-                cams[name] = cam
-                continue
-            f = float(np.sqrt(self.working_pixels / pixels))
-            cams[name] = cam.scaled(max(1, round(cam.width * f)), max(1, round(cam.height * f)))
-        return replace(calibration, cameras=cams)
+        return replace(calibration, cameras={name: cam.at_most(self.working_pixels)
+                                             for name, cam in calibration.cameras.items()})
 
     def detection_config(self, length_scale: float = 1.0):
         """The automatic-detection parameters this configuration sets (003 §4), with its

@@ -8,13 +8,19 @@ name                            type       meaning (default)
 ==============================  =========  =================================================
 calibration_file                string     room calibration YAML (required)
 cameras                         string[]   cameras to use (default: all in the calibration)
+input_mode                      string     ``images`` (cameras' images, default) or
+                                           ``foreground`` (fusion: the camera nodes'
+                                           working images and foreground masks)
 image_transport                 string     ``raw`` or ``compressed`` for every camera (raw)
 image_reliability               string     ``best_effort`` (sensor data QoS) or ``reliable``
                                            (no frame lost when replaying a bag)
 qos_depth                       int        history depth of reliable image subscriptions
                                            and of every output publisher: a reliable
                                            peer lagging more messages loses the oldest (10)
-camera.<name>.image_topic       string     (``/<name>/image_raw``, ``.../compressed``)
+camera.<name>.image_topic       string     (``/<name>/image_raw``, ``.../compressed``;
+                                           foreground mode: ``/<name>/working/image``)
+camera.<name>.foreground_topic  string     foreground mode: the camera node's masks
+                                           (``/<name>/working/foreground``)
 camera.<name>.transport         string     per-camera override of ``image_transport``
 camera.<name>.camera_info_topic string     optional CameraInfo topic for a size check ('')
 sync.tolerance                  double     largest distance of an image's capture time
@@ -140,6 +146,7 @@ __all__ = ['EXECUTORS', 'RELIABILITIES', 'TRACKER_PARAMETERS', 'TRANSPORTS', 'Ca
            'NodeParams', 'ParamsError', 'declare_and_read']
 
 TRANSPORTS = ('raw', 'compressed')
+INPUT_MODES = ('images', 'foreground')
 RELIABILITIES = ('best_effort', 'reliable')
 EXECUTORS = ('events', 'single', 'multi')
 
@@ -183,6 +190,7 @@ class NodeParams:
     outputs_tf: bool = True
     frame_rate: float = 0.0
     time_offsets: dict[str, float] = field(default_factory=dict)
+    input_mode: str = 'images'
 
     @property
     def camera_names(self) -> list[str]:
@@ -203,6 +211,8 @@ _MOTION = MotionConfig()
 GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
     'calibration_file': ('', 'room calibration YAML (required)', {}),
     'cameras': ([''], 'camera names to use; empty = all cameras of the calibration', {}),
+    'input_mode': ('images', 'images | foreground: the cameras\' images, or (fusion) the '
+                   'camera nodes\' working images and foreground masks', {}),
     'image_transport': ('raw', 'raw | compressed: default image transport', {}),
     'image_reliability': ('best_effort', 'best_effort (sensor data QoS) | reliable: image '
                           'subscriptions; reliable loses no frame of a replayed bag', {}),
@@ -366,7 +376,8 @@ def declare_and_read(node: Node) -> tuple[NodeParams, RoomCalibration]:
             raise ParamsError(f'parameter camera.{cam}.transport: {transport!r} is not one '
                               f'of {", ".join(TRANSPORTS)}')
         suffix = '/compressed' if transport == 'compressed' else ''
-        topic = str(_declare(node, f'camera.{cam}.image_topic', f'/{cam}/image_raw{suffix}',
+        base = 'working/image' if v['input_mode'] == 'foreground' else 'image_raw'
+        topic = str(_declare(node, f'camera.{cam}.image_topic', f'/{cam}/{base}{suffix}',
                              f'image topic of {cam}', {}))
         info = str(_declare(node, f'camera.{cam}.camera_info_topic', '',
                             f'optional CameraInfo topic of {cam} (size check)', {}))
@@ -379,6 +390,9 @@ def declare_and_read(node: Node) -> tuple[NodeParams, RoomCalibration]:
                           _fr(-10.0, 10.0))
         if offset:
             offsets[cam] = float(offset)
+    if v['input_mode'] not in INPUT_MODES:
+        raise ParamsError(f'parameter input_mode: {v["input_mode"]!r} is not one of '
+                          f'{", ".join(INPUT_MODES)}')
     reliability = str(v['image_reliability'])
     if reliability not in RELIABILITIES:
         raise ParamsError(f'parameter image_reliability: {reliability!r} is not one of '
@@ -417,7 +431,8 @@ def declare_and_read(node: Node) -> tuple[NodeParams, RoomCalibration]:
         max_pending_sets=int(v['max_pending_sets']), executor=executor,
         warm_up=bool(v['warm_up']), qos_depth=int(v['qos_depth']),
         outputs_persons=bool(v['outputs.persons']),
-        outputs_detections=bool(v['outputs.detections']), outputs_tf=bool(v['outputs.tf']))
+        outputs_detections=bool(v['outputs.detections']), outputs_tf=bool(v['outputs.tf']),
+        input_mode=str(v['input_mode']))
     return params, calibration
 
 

@@ -259,7 +259,11 @@ class TrackerNode(Node):
         self._subs = []
         image_qos = qos_profile_sensor_data if p.image_reliability == 'best_effort' else \
             QoSProfile(depth=p.qos_depth, reliability=ReliabilityPolicy.RELIABLE)
-        for cam in p.cameras:
+        self._fusion = None
+        if p.input_mode == 'foreground':  # the camera nodes' streams (nodes/fusion_input.py)
+            from mbtrack_ros.nodes.fusion_input import FusionInput
+            self._fusion = FusionInput(self)
+        for cam in p.cameras if self._fusion is None else ():
             group = MutuallyExclusiveCallbackGroup()
             kind = CompressedImage if cam.transport == 'compressed' else Image
             self._subs.append(self.create_subscription(
@@ -495,6 +499,8 @@ class TrackerNode(Node):
 
     def process(self, fs: FrameSet) -> FrameResult:
         """Run one tracker step on a frame set and publish everything."""
+        if self._fusion is not None:  # camera nodes' frames: masks in, working images out
+            self._fusion.prepare(fs)
         if fs.after_reset or (self._last_stamp is not None and fs.stamp_ns < self._last_stamp):
             self.reset(fs.stamp_ns, 'image stamps jumped or went backwards '
                        f'(now {fs.stamp_ns} ns, before {self._last_stamp} ns)')

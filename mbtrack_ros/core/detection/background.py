@@ -43,7 +43,8 @@ from mbtrack_ros.core.camera import RoomCalibration
 from mbtrack_ros.core.detection import DetectionError
 from mbtrack_ros.core.detection.people import PeopleCue, PeopleCueConfig
 
-__all__ = ['BackgroundBank', 'BackgroundConfig', 'BackgroundModel', 'clean_mask']
+__all__ = ['BackgroundBank', 'BackgroundConfig', 'BackgroundModel', 'BootstrapCue',
+           'clean_mask']
 
 
 @dataclass(frozen=True)
@@ -590,6 +591,52 @@ class BackgroundModel:
         self._raw = None
 
 
+class BootstrapCue:
+    """The online bootstrap's people cue over consecutive frame sets (003 §4.2 with
+    :class:`~.people.PeopleCue`): keeps the last ``bootstrap_frames`` frame sets (every
+    ``bootstrap_stride``-th) and gives the not-yet-known regions of the cameras whose model
+    was just bootstrapped."""
+
+    def __init__(self, calibration: RoomCalibration | None, config: BackgroundConfig) -> None:
+        self.calibration = calibration
+        self.config = config
+        self._cue: PeopleCue | None = None
+        self.frames: list[dict[str, np.ndarray]] = []
+        self._seen = 0
+
+    @property
+    def enabled(self) -> bool:
+        return self.calibration is not None and self.config.people is not None
+
+    @property
+    def cue(self) -> PeopleCue | None:
+        """The people cue (built on first use: it rasterises a floor grid), or None."""
+        if self._cue is None and self.enabled:
+            self._cue = PeopleCue(self.calibration, self.config.people)
+        return self._cue
+
+    def keep(self, images: Mapping[str, np.ndarray], *, copy: bool = True) -> None:
+        """Keep a frame set (camera -> (H, W, 3) uint8) for the cue."""
+        cfg = self.config
+        if self._seen % cfg.bootstrap_stride == 0:
+            self.frames.append({n: np.array(im, copy=True) if copy else im
+                                for n, im in images.items()})
+        self._seen += 1
+        self.frames = self.frames[-cfg.bootstrap_frames:]
+
+    def regions(self, started: Sequence[str]
+                ) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """(region, body, core) masks (H, W) bool of each camera of ``started`` the cue
+        places people in (:meth:`PeopleCue.regions`), from the frame sets kept."""
+        if not started or not self.frames or self.cue is None:
+            return {}
+        regions = self.cue.regions(self.frames)
+        return {n: regions[n] for n in started if n in regions}
+
+    def clear(self) -> None:
+        self.frames = []
+
+
 class BackgroundBank:
     """One :class:`BackgroundModel` per camera, created on first sight of a camera.
 
@@ -605,17 +652,12 @@ class BackgroundBank:
         self.config = config or BackgroundConfig()
         self.models: dict[str, BackgroundModel] = {}
         self.calibration = calibration
-        self._cue: PeopleCue | None = None
-        self._frames: list[dict[str, np.ndarray]] = []   # bootstrap frame sets for the cue
-        self._seen = 0
+        self.bootstrap_cue = BootstrapCue(calibration, self.config)  # bootstrap frame sets
 
     @property
     def cue(self) -> PeopleCue | None:
         """The people cue (built on first use: it rasterises a floor grid), or None."""
-        if self._cue is None and self.calibration is not None \
-                and self.config.people is not None:
-            self._cue = PeopleCue(self.calibration, self.config.people)
-        return self._cue
+        return self.bootstrap_cue.cue
 
     def prepare(self) -> None:
         """Build the people cue now (a node at start) rather than at the bootstrap frame."""
@@ -649,22 +691,14 @@ class BackgroundBank:
                 out[name] = fg
             elif model.ready and not was_ready:
                 started.append(name)
-        if self.calibration is not None and self.config.people is not None \
-                and (started or not all(m.ready for m in self.models.values())):
+        cue = self.bootstrap_cue
+        if cue.enabled and (started or not all(m.ready for m in self.models.values())):
             # keep the frame sets the models' bootstrap medians are made of
-            cfg = self.config
-            if self._seen % cfg.bootstrap_stride == 0:
-                self._frames.append({n: np.array(im, copy=True) for n, im in images.items()})
-            self._seen += 1
-            self._frames = self._frames[-cfg.bootstrap_frames:]
-            if started:
-                regions = self.cue.regions(self._frames)
-                for name in started:
-                    if name in regions:
-                        region, body, core = regions[name]
-                        self.models[name].set_unknown(region, foreground=body, core=core)
+            cue.keep(images)
+            for name, (region, body, core) in cue.regions(started).items():
+                self.models[name].set_unknown(region, foreground=body, core=core)
             if all(m.ready for m in self.models.values()):
-                self._frames = []
+                cue.clear()
         return out
 
     def update_pending(self) -> None:

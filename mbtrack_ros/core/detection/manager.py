@@ -32,6 +32,7 @@ from mbtrack_ros.core.detection import DetectionError
 from mbtrack_ros.core.detection.acquisition import AcquisitionConfig, acquire
 from mbtrack_ros.core.detection.adaptation import AdaptationConfig, adapt_models
 from mbtrack_ros.core.detection.background import BackgroundBank, BackgroundConfig
+from mbtrack_ros.core.detection.camera_stage import exclusion_mask, head_heights
 from mbtrack_ros.core.detection.detector import (
     Detection, Detector, DetectorConfig, FrameEvidence, is_ceiling)
 from mbtrack_ros.core.detection.features import span_counts
@@ -43,7 +44,7 @@ from mbtrack_ros.core.existence import (
 )
 from mbtrack_ros.core.resampling import systematic_indices
 from mbtrack_ros.core.shape import BodyShape, rasterize
-from mbtrack_ros.core.state import SIT, THETA, VX, VY, X, Y, TrackEstimate
+from mbtrack_ros.core.state import THETA, VX, VY, X, Y, TrackEstimate
 
 __all__ = ['AutoDetection', 'AutoDetectionConfig', 'Birth']
 
@@ -641,14 +642,12 @@ class AutoDetection:
         # cameras together with the tracks (one rasterisation per camera)
         parts, owner, part_shapes = self._visibility_particles(tracks, models, shapes)
         part_sils = {}
-        # head height: sitting keeps the upper body above the chair (003 §2.1)
-        tops = np.array([sh.chair_height + (1.0 - sh.hip_fraction) * sh.height
-                         if m[SIT] >= 0.5 else sh.height for sh, m in zip(shapes, means)])
+        tops = head_heights(means, shapes)
         # 1. rendered tracks per camera
         sils, masks = {}, {}
         for n in names:
             cam = self.calibration.cameras[n]
-            mask = np.zeros((cam.height, cam.width), bool)
+            sil = None
             if len(tracks):
                 k = len(tracks)
                 if len(parts) and n in self.side:
@@ -658,17 +657,10 @@ class AutoDetection:
                 else:
                     sil = rasterize(cam, means, shapes)
                 sils[n] = sil
-                paint = mask.view(np.uint8)
-                _kernels.paint_spans(paint, sil.row, sil.x0, sil.x1, sil.part, 0,
-                                     int(sil.offsets[-1]), 1, False)
-                if is_ceiling(cam):
-                    # the outline degenerates to a line right below a top-down camera: the
-                    # model update must not learn a person standing there (the release
-                    # reads this camera's blob, 003 §4.3). Only there: the wider blob
-                    # everywhere also shields bootstrap ghosts under false tracks (cr2:
-                    # a screen track lived 450 instead of 100 frames; docs/detection.md)
-                    paint_blobs(mask, cam, means[:, :2], tops, outline_area=sil.area)
-            masks[n] = mask
+            # the update keeps off the tracks (the blob below a top-down camera too; only
+            # there: the wider blob everywhere also shields bootstrap ghosts under false
+            # tracks, docs/detection.md)
+            masks[n] = exclusion_mask(cam, means, shapes, tops, sil)
         t1 = time.perf_counter()
         # 2. background and foreground
         # the model update (and with it the motion the detector needs) waits for search()

@@ -1,0 +1,373 @@
+"""``camera_node``: the per-camera half of the pipeline, on the camera's host.
+
+One node per camera (:class:`~mbtrack_ros.core.detection.camera_stage.CameraStage`):
+subscribes to the camera (raw or compressed, ``qos_profile_sensor_data``), adds the
+camera's ``time_offset`` to the stamps, resizes once to the tracker's working size
+(``tracker.working_pixels``), runs the background model and the foreground test (003 §4.2),
+and publishes per frame, stamped with the (offset) input stamp and the camera's frame id:
+
+* ``working/image`` (``sensor_msgs/Image`` rgb8, or with ``image_format: jpeg``
+  ``working/image/compressed``): the working-size image;
+* ``working/foreground`` (``sensor_msgs/CompressedImage``, PNG ``mono8``): bit planes
+  0x80 foreground, 0x40 possible person of the bootstrap, 0x20 presence (foreground that
+  is no ghost); while the model bootstraps an empty message whose ``format`` is
+  ``bootstrap`` (``bootstrap started`` on the frame that completes it).
+
+It subscribes to the tracker's ``~/tracks`` (``tracks_topic``) and keeps the model update
+of each frame off the silhouettes of the latest tracks (one frame of latency: frame t's
+update uses frame t-1's tracks), and to ``working/regions`` (the people cue of the online
+bootstrap, which the fusion tracker computes from every camera; the first frame after the
+bootstrap waits for it at most ``region_wait`` seconds). Topic names are relative: start
+the node in the camera's namespace (``/<camera>``).
+"""
+from __future__ import annotations
+
+import sys
+import threading
+import time
+from collections import deque
+
+import cv2
+import numpy as np
+import rclpy
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from sensor_msgs.msg import CompressedImage, Image, PointCloud2
+
+from mbtrack_ros.core.camera import CalibrationError, RoomCalibration
+from mbtrack_ros.core.detection import DetectionError
+from mbtrack_ros.core.detection.camera_stage import (
+    CameraStage, pack_masks, unpack_regions)
+from mbtrack_ros.core.tracker import TrackerConfig, TrackerError, length_scale
+from mbtrack_ros.nodes.conversions import (
+    ImageConversionError, compressed_to_rgb, image_to_rgb, rgb_to_compressed, rgb_to_image,
+    stamp_to_ns)
+from mbtrack_ros.nodes.messages import make_header
+from mbtrack_ros.nodes.transport import use_large_shm_segment
+
+__all__ = ['CAMERA_PARAMETERS', 'CameraNode', 'cloud_columns', 'main']
+
+FOREGROUND_FORMAT = 'mono8; png compressed mono8'
+WARN_PERIOD_S = 10.0
+
+
+def _fr(lo: float, hi: float) -> dict:
+    return {'floating_point_range': [FloatingPointRange(from_value=lo, to_value=hi, step=0.0)]}
+
+
+def _ir(lo: int, hi: int) -> dict:
+    return {'integer_range': [IntegerRange(from_value=lo, to_value=hi, step=1)]}
+
+
+#: name -> (default, description, descriptor extras): every camera_node parameter
+CAMERA_PARAMETERS = {
+    'calibration_file': ('', 'room calibration YAML (required)', {}),
+    'camera': ('', 'name of this camera in the calibration (required)', {}),
+    'image_topic': ('', 'camera image topic; empty = /<camera>/image_raw[/compressed]', {}),
+    'image_transport': ('raw', 'raw | compressed: the camera topic\'s type', {}),
+    'image_reliability': ('best_effort', 'best_effort (sensor data QoS) | reliable: the '
+                          'camera subscription; reliable loses no frame of a replayed bag',
+                          {}),
+    'time_offset': (0.0, 'seconds added to the camera\'s stamps (its clock against the '
+                    'tracker\'s)', _fr(-3600.0, 3600.0)),
+    'rescale_images': (False, 'resize images whose size differs from the calibration '
+                       'instead of dropping them', {}),
+    'tracker.working_pixels': (76800, 'the tracker\'s working size, pixels per image: a '
+                               'larger image is resized once, here', _ir(4800, 100_000_000)),
+    'image_format': ('raw', 'raw | jpeg: the working image\'s encoding (raw: the tracks of '
+                     'one process; jpeg: about a tenth of the bandwidth)', {}),
+    'jpeg_quality': (90, 'JPEG quality of image_format jpeg', _ir(1, 100)),
+    'tracks_topic': ('/tracker_node/tracks', 'the fusion tracker\'s tracks (PointCloud2)',
+                     {}),
+    'region_wait': (1.0, 'seconds the first frame after the bootstrap waits for the '
+                    'tracker\'s people-cue regions', _fr(0.0, 60.0)),
+    'warm_up': (True, 'run a throwaway stage on a few synthetic frames at start (loads the '
+                'compiled kernels before the first real frame)', {}),
+    'max_pending': (15, 'frames queued for processing; the oldest is dropped beyond',
+                    _ir(1, 300)),
+}
+
+
+class CameraParamsError(ValueError):
+    """A missing or invalid camera_node parameter (one line)."""
+
+
+def cloud_columns(msg: PointCloud2, names: tuple[str, ...]) -> dict[str, np.ndarray]:
+    """The named float32/uint32 fields of a ``PointCloud2`` as (N,) float64 arrays (by the
+    message's own field offsets; a field missing from it is all NaN)."""
+    n = int(msg.width) * int(msg.height)
+    step = int(msg.point_step)
+    raw = np.frombuffer(bytes(msg.data), np.uint8)
+    if n == 0 or step == 0 or raw.size < n * step:
+        return {k: np.zeros(0) for k in names}
+    rows = raw[:n * step].reshape(n, step)
+    fields = {f.name: f for f in msg.fields}
+    out = {}
+    for k in names:
+        f = fields.get(k)
+        if f is None or f.datatype not in (6, 7) or f.offset + 4 > step:  # UINT32, FLOAT32
+            out[k] = np.full(n, np.nan)
+            continue
+        kind = '<u4' if f.datatype == 6 else '<f4'
+        out[k] = rows[:, f.offset:f.offset + 4].copy().view(kind).ravel().astype(np.float64)
+    return out
+
+
+class CameraNode(Node):
+    """The camera node (see the module docstring). Raises :class:`CameraParamsError`."""
+
+    def __init__(self, *, cli_args: list[str] | None = None, context=None,
+                 worker: bool = True) -> None:
+        super().__init__('camera_node', cli_args=cli_args, context=context)
+        v = {}
+        for name, (default, text, extra) in CAMERA_PARAMETERS.items():
+            try:
+                v[name] = self.declare_parameter(
+                    name, default, ParameterDescriptor(description=text, **extra)).value
+            except Exception as err:  # noqa: BLE001 - type or range: one line
+                raise CameraParamsError(f'parameter {name!r}: {err}') from err
+        if not v['calibration_file']:
+            raise CameraParamsError('parameter calibration_file is required')
+        try:
+            calibration = RoomCalibration.load(v['calibration_file'])
+        except (CalibrationError, OSError) as err:
+            raise CameraParamsError(f'calibration_file: {err}') from err
+        name = str(v['camera'])
+        if name not in calibration.cameras:
+            raise CameraParamsError(f'parameter camera: {name!r} is not one of '
+                                    f'{", ".join(calibration.names)}')
+        for key, allowed in (('image_transport', ('raw', 'compressed')),
+                             ('image_reliability', ('best_effort', 'reliable')),
+                             ('image_format', ('raw', 'jpeg'))):
+            if v[key] not in allowed:
+                raise CameraParamsError(f'parameter {key}: {v[key]!r} is not one of '
+                                        f'{", ".join(allowed)}')
+        try:
+            config = TrackerConfig(working_pixels=int(v['tracker.working_pixels']))
+            background = config.detection_config(length_scale(
+                config.working_calibration(calibration))).background
+        except TrackerError as err:
+            raise CameraParamsError(str(err)) from err
+        self.name = name
+        self.camera = calibration.cameras[name]
+        self.stage = CameraStage(self.camera, background,
+                                 working_pixels=int(v['tracker.working_pixels']))
+        self.offset_ns = int(round(float(v['time_offset']) * 1e9))
+        self.rescale = bool(v['rescale_images'])
+        self.jpeg = v['image_format'] == 'jpeg'
+        self.quality = int(v['jpeg_quality'])
+        self.region_wait = float(v['region_wait'])
+        self.max_pending = int(v['max_pending'])
+        self._lock = threading.Condition()
+        self._queue: deque = deque()
+        self._regions: tuple[int, np.ndarray] | None = None  # (stamp, packed) received
+        self._started_stamp: int | None = None
+        self._closing = False
+        self._warned: dict[str, float] = {}
+        self.processed = 0
+        self.dropped = 0
+        self.seconds = 0.0  # processing time, wall clock
+        if v['warm_up']:
+            self._warm_up(background, int(v['tracker.working_pixels']))
+        compressed = v['image_transport'] == 'compressed'
+        topic = str(v['image_topic']) or \
+            f'/{name}/image_raw' + ('/compressed' if compressed else '')
+        out_qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+        self.pub_image = (self.create_publisher(CompressedImage, 'working/image/compressed',
+                                                out_qos) if self.jpeg else
+                          self.create_publisher(Image, 'working/image', out_qos))
+        self.pub_foreground = self.create_publisher(CompressedImage, 'working/foreground',
+                                                    out_qos)
+        in_qos = qos_profile_sensor_data if v['image_reliability'] == 'best_effort' else \
+            QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+        self.create_subscription(CompressedImage if compressed else Image, topic,
+                                 self._on_image, in_qos)
+        self.create_subscription(PointCloud2, str(v['tracks_topic']), self._on_tracks,
+                                 out_qos)
+        self.create_subscription(CompressedImage, 'working/regions', self._on_regions,
+                                 out_qos)
+        self._worker = None
+        if worker:
+            self._worker = threading.Thread(target=self._loop, name='camera_stage',
+                                            daemon=True)
+            self._worker.start()
+        self.get_logger().info(f'{name}: {topic} -> working/image, working/foreground '
+                               f'({self.stage.camera.width}x{self.stage.camera.height})')
+
+    def _warm_up(self, background, working_pixels: int) -> None:
+        """Load the stage's compiled kernels (numba cache) on synthetic frames with a
+        throwaway stage, so the first real frames do not queue up behind the loading."""
+        stage = CameraStage(self.camera, background, working_pixels=working_pixels)
+        rng = np.random.default_rng(0)
+        base = rng.integers(0, 255, (self.camera.height, self.camera.width, 3), np.uint8)
+        for k in range(background.bootstrap_frames + 2):
+            image = base.copy()
+            image[:, 4 * k:4 * k + 8] = 255 - image[:, 4 * k:4 * k + 8]
+            stage.process(image)
+            stage.awaiting_regions = False
+
+    def warn_once(self, cause: str, text: str) -> None:
+        now = time.monotonic()
+        if now - self._warned.get(cause, -1e9) >= WARN_PERIOD_S:
+            self._warned[cause] = now
+            self.get_logger().warning(text)
+
+    # -- callbacks: convert and queue -----------------------------------------------------
+    def _on_image(self, msg) -> None:
+        try:
+            rgb = compressed_to_rgb(msg) if isinstance(msg, CompressedImage) \
+                else image_to_rgb(msg)
+        except ImageConversionError as err:
+            self.dropped += 1
+            self.warn_once('convert', f'{self.name}: dropping bad image: {err}')
+            return
+        if rgb.shape[:2] != (self.camera.height, self.camera.width) and not self.rescale:
+            self.dropped += 1
+            self.warn_once('size', f'{self.name}: image is {rgb.shape[1]}x{rgb.shape[0]}, '
+                           f'calibration {self.camera.width}x{self.camera.height}: dropped '
+                           '(set rescale_images to resize)')
+            return
+        with self._lock:
+            self._queue.append((stamp_to_ns(msg.header.stamp) + self.offset_ns, rgb))
+            while len(self._queue) > self.max_pending:
+                self._queue.popleft()
+                self.dropped += 1
+            self._lock.notify_all()
+
+    def _on_tracks(self, msg: PointCloud2) -> None:
+        c = cloud_columns(msg, ('x', 'y', 'vx', 'vy', 'height'))
+        xy = np.stack([c['x'], c['y']], axis=1)
+        good = np.all(np.isfinite(xy), axis=1)
+        if not good.all() or (not len(xy) and msg.width * msg.height):
+            self.warn_once('tracks', f'{self.name}: track points without a finite x, y '
+                           'ignored (or a malformed cloud)')
+        # renders, then swaps the stage's exclusion in one assignment: the next frame's
+        # update takes the tracks whole, old or new
+        try:
+            self.stage.set_tracks(xy[good],
+                                  np.nan_to_num(np.stack([c['vx'], c['vy']], axis=1)[good]),
+                                  c['height'][good])
+        except ValueError as err:  # ShapeError: an impossible shape
+            self.warn_once('tracks', f'{self.name}: tracks ignored: {err}')
+
+    def _on_regions(self, msg: CompressedImage) -> None:
+        try:
+            packed = compressed_to_rgb(msg)
+        except ImageConversionError as err:
+            self.warn_once('regions', f'{self.name}: bad regions message: {err}')
+            return
+        with self._lock:
+            self._regions = (stamp_to_ns(msg.header.stamp), packed)
+            self._lock.notify_all()
+
+    # -- the stage ------------------------------------------------------------------------
+    def _loop(self) -> None:
+        while True:
+            with self._lock:
+                while not self._queue and not self._closing:
+                    self._lock.wait()
+                if self._closing:
+                    return
+            self.process_pending()
+
+    def _take_regions(self) -> None:
+        """Apply the bootstrap regions the tracker sent for this model's start (waiting
+        for them at most ``region_wait`` s); without them the model goes on without."""
+        deadline = time.monotonic() + self.region_wait
+        with self._lock:
+            while not self._closing:
+                got = self._regions
+                if got is not None and got[0] >= self._started_stamp:
+                    self._regions = None
+                    region, body, core = unpack_regions(got[1])
+                    try:
+                        self.stage.set_regions(region, body, core)
+                    except DetectionError as err:
+                        self.warn_once('regions', f'{self.name}: regions refused: {err}')
+                    break
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    self.warn_once('regions', f'{self.name}: no bootstrap regions from '
+                                   f'the tracker within {self.region_wait} s')
+                    break
+                self._lock.wait(left)
+            self.stage.awaiting_regions = False
+
+    def process_pending(self) -> None:
+        """Process every queued frame, oldest first."""
+        while True:
+            with self._lock:
+                if not self._queue or self._closing:
+                    return
+                stamp, rgb = self._queue.popleft()
+            if self.stage.awaiting_regions:
+                self._take_regions()
+            t0 = time.perf_counter()
+            try:
+                frame = self.stage.process(rgb)
+            except DetectionError as err:
+                self.dropped += 1
+                self.warn_once('stage', f'{self.name}: frame dropped: {err}')
+                continue
+            if frame.started:
+                self._started_stamp = stamp
+            self.publish(stamp, frame)
+            self.seconds += time.perf_counter() - t0
+            self.processed += 1
+
+    def publish(self, stamp_ns: int, frame) -> None:
+        header = make_header(stamp_ns, self.camera.frame_id)
+        if self.jpeg:
+            image = rgb_to_compressed(frame.image, header, 'jpeg', quality=self.quality)
+        else:
+            image = rgb_to_image(frame.image, header)
+        fg = CompressedImage()
+        fg.header = header
+        if frame.foreground is None:
+            fg.format = 'bootstrap started' if frame.started else 'bootstrap'
+        else:
+            ok, data = cv2.imencode('.png', pack_masks(frame.foreground, frame.possible,
+                                                       frame.presence))
+            fg.format = FOREGROUND_FORMAT
+            fg.data = data.tobytes()
+        self.pub_image.publish(image)
+        self.pub_foreground.publish(fg)
+
+    def destroy_node(self) -> None:
+        self.get_logger().info(
+            f'{self.name}: {self.processed} frames processed '
+            f'({1e3 * self.seconds / max(self.processed, 1):.1f} ms each), '
+            f'{self.dropped} dropped')
+        with self._lock:
+            self._closing = True
+            self._lock.notify_all()
+        if self._worker is not None:
+            self._worker.join(timeout=10.0)
+        super().destroy_node()
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point ``camera_node``; exits 2 on bad parameters."""
+    use_large_shm_segment()  # before rclpy.init: it publishes working-size images
+    rclpy.init(args=args)
+    node = None
+    code = 0
+    try:
+        node = CameraNode()
+        rclpy.spin(node)
+    except CameraParamsError as err:
+        print(f'camera_node: error: {err}', file=sys.stderr)
+        code = 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return code
+
+
+if __name__ == '__main__':
+    sys.exit(main())

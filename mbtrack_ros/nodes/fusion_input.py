@@ -1,0 +1,127 @@
+"""The fusion tracker's input (``tracker_node`` with ``input_mode: foreground``).
+
+Instead of the cameras' images the tracker takes the camera nodes' streams
+(:mod:`mbtrack_ros.nodes.camera_node`): per camera the working-size image (``image_topic``,
+``sensor_msgs/Image`` or ``CompressedImage``) and its foreground masks
+(``camera.<name>.foreground_topic``), paired by stamp into a
+:class:`~mbtrack_ros.core.detection.camera_stage.CameraFrame` and handed to the node's
+frame-set synchroniser. Before each tracker step the frame set's masks go to the
+detection's :class:`~mbtrack_ros.core.detection.camera_stage.ReceivedForeground` (in place
+of the background models), and the bootstrap regions of the people cue, computed here from
+every camera's frames, go back to the cameras whose model just started
+(``<foreground_topic's namespace>/regions``, PNG bit planes). The filter, detection search,
+existence and release run as in one process.
+"""
+from __future__ import annotations
+
+from collections import OrderedDict
+
+import cv2
+from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from sensor_msgs.msg import CompressedImage, Image
+
+from mbtrack_ros.core.detection.camera_stage import (
+    CameraFrame, ReceivedForeground, pack_regions, unpack_masks)
+from mbtrack_ros.nodes.conversions import (
+    ImageConversionError, compressed_to_rgb, image_to_rgb, stamp_to_ns)
+from mbtrack_ros.nodes.messages import make_header
+
+__all__ = ['FusionInput']
+
+PAIRING = 30  # unpaired stamps kept per camera (2 s at 15 Hz)
+
+
+class FusionInput:
+    """Subscriptions and per-step work of a fusion tracker node (``node``: a
+    :class:`~mbtrack_ros.nodes.tracker_node.TrackerNode` being built)."""
+
+    def __init__(self, node) -> None:
+        self.node = node
+        p = node.params
+        detection = getattr(node.tracker, 'detection', None)
+        self.bank = None
+        if detection is not None:
+            self.bank = ReceivedForeground(detection.calibration,
+                                           detection.config.background)
+            self.bank.prepare()
+            detection.background = self.bank
+        self.cameras = node.tracker.calibration.cameras  # the working size
+        self._parts: dict[str, OrderedDict] = {c: OrderedDict() for c in p.camera_names}
+        self._regions = {}
+        qos = qos_profile_sensor_data if p.image_reliability == 'best_effort' else \
+            QoSProfile(depth=p.qos_depth, reliability=ReliabilityPolicy.RELIABLE)
+        reliable = QoSProfile(depth=p.qos_depth, reliability=ReliabilityPolicy.RELIABLE)
+        self.topics = {}
+        for cam in p.cameras:
+            fg_topic = str(node.declare_parameter(
+                f'camera.{cam.name}.foreground_topic',
+                f'/{cam.name}/working/foreground').value)
+            kind = CompressedImage if cam.transport == 'compressed' else Image
+            node.create_subscription(kind, cam.image_topic,
+                                     lambda m, c=cam.name: self._on_part(c, m, 0), qos)
+            node.create_subscription(CompressedImage, fg_topic,
+                                     lambda m, c=cam.name: self._on_part(c, m, 1), qos)
+            regions = fg_topic.rsplit('/', 1)[0] + '/regions'
+            self._regions[cam.name] = node.create_publisher(CompressedImage, regions,
+                                                            reliable)
+            self.topics[cam.name] = (cam.image_topic, fg_topic, regions)
+
+    def _on_part(self, camera: str, msg, which: int) -> None:
+        """An image (``which`` 0) or foreground message (1) of ``camera``: paired with the
+        other half of its stamp, the pair goes to the synchroniser."""
+        node = self.node
+        stamp = stamp_to_ns(msg.header.stamp)
+        try:
+            if which == 0:
+                part = compressed_to_rgb(msg) if isinstance(msg, CompressedImage) \
+                    else image_to_rgb(msg)
+                cam = self.cameras[camera]
+                if part.shape[:2] != (cam.height, cam.width):
+                    raise ImageConversionError(
+                        f'working image is {part.shape[1]}x{part.shape[0]}, the tracker '
+                        f'works at {cam.width}x{cam.height} (tracker.working_pixels)')
+            elif msg.format.startswith('bootstrap'):
+                part = msg.format == 'bootstrap started'
+            else:
+                part = unpack_masks(compressed_to_rgb(msg))
+        except ImageConversionError as err:
+            node._count_drop()
+            node.warn_once(f'{camera}:convert', f'{camera}: dropping bad input: {err}')
+            return
+        parts = self._parts[camera]
+        pair = parts.setdefault(stamp, [None, None])
+        pair[which] = part
+        while len(parts) > PAIRING:
+            parts.popitem(last=False)
+        if pair[0] is None or pair[1] is None:
+            return
+        del parts[stamp]
+        image, masks = pair
+        if isinstance(masks, bool):
+            frame = CameraFrame(image, started=masks)
+        else:
+            fg, possible, presence = masks
+            if fg.shape != image.shape[:2]:
+                node._count_drop()
+                node.warn_once(f'{camera}:size', f'{camera}: mask and image sizes differ')
+                return
+            frame = CameraFrame(image, fg, possible, presence)
+        with node._lock:
+            node._rate_window[camera].append(stamp)
+            node._queue(node.sync.add(camera, stamp, frame))
+
+    def prepare(self, fs) -> None:
+        """Before the tracker step of frame set ``fs`` (its images are
+        :class:`CameraFrame` s): masks to the detection, regions back to the cameras that
+        started their model; ``fs.images`` become the working images."""
+        frames = fs.images
+        if self.bank is not None:
+            for name, (region, body, core) in self.bank.receive(frames).items():
+                ok, data = cv2.imencode('.png', pack_regions(region, body, core))
+                msg = CompressedImage()
+                msg.header = make_header(fs.stamps.get(name, fs.stamp_ns),
+                                         self.cameras[name].frame_id)
+                msg.format = 'mono8; png compressed mono8'
+                msg.data = data.tobytes()
+                self._regions[name].publish(msg)
+        fs.images = {n: f.image for n, f in frames.items()}
