@@ -20,6 +20,16 @@ foreground (a possible person), the rest of the region as neither; and the blob'
 replaces motion as the proof, required of new people, that a detection is no ghost
 (:meth:`BackgroundModel.presence`).
 
+**Ghosts.** A person who stood still while the model was learnt is part of it; when he walks
+away, the place he revealed differs from the model and looks like foreground (a "ghost"),
+and a track placed on it would keep the model frozen there for ever. Ghosts are recognised
+by where the edges are (the border test of ghost detection): along the border of a real
+object the *frame* has a colour step (the object's outline), along the border of a ghost
+the *model* has it (the outline of whoever was learnt) and the frame shows the continuous
+room. A foreground component whose border gradient in the model exceeds that in the frame
+by ``ghost_edge_ratio``, for ``ghost_frames`` consecutive frames, is taken as background:
+the model is set to the frame there, whatever the tracks (:func:`ghost_components`).
+
 Foreground is a Y-Cb-Cr threshold test with separate luminance and chroma thresholds. The
 luminance and chroma offsets of the background are first rescaled by a global gain
 (median ratio I/B of the luminance), which makes the test robust to slow global
@@ -43,7 +53,8 @@ from mbtrack_ros.core.camera import RoomCalibration
 from mbtrack_ros.core.detection import DetectionError
 from mbtrack_ros.core.detection.people import PeopleCue, PeopleCueConfig
 
-__all__ = ['BackgroundBank', 'BackgroundConfig', 'BackgroundModel', 'clean_mask']
+__all__ = ['BackgroundBank', 'BackgroundConfig', 'BackgroundModel', 'clean_mask',
+           'ghost_components']
 
 
 @dataclass(frozen=True)
@@ -74,6 +85,12 @@ class BackgroundConfig:
         settle_frames: frames a not-yet-known pixel must keep a steady value other than its
             bootstrap one (no motion) to be learnt even under a track (the person who
             stood there has left, whatever a track does).
+        ghost_edge_ratio: a foreground component is a ghost when the mean colour gradient
+            along its border (in units of the foreground thresholds per pixel) is this many
+            times larger in the model than in the frame (:func:`ghost_components`); larger
+            is more cautious, 0 disables the test.
+        ghost_frames: consecutive frames a component must pass that test before the model
+            takes the frame there (at 15 Hz, 5 frames = 0.33 s).
         people: the person cue that marks not-yet-known pixels at the online bootstrap
             (:class:`~.people.PeopleCue`, used by :class:`BackgroundBank` when it has the
             calibration); ``None`` learns every pixel of the bootstrap frames.
@@ -96,6 +113,8 @@ class BackgroundConfig:
     static_alpha: float = 0.9
     unknown_frames: int = 15
     settle_frames: int = 20
+    ghost_edge_ratio: float = 1.5
+    ghost_frames: int = 5
     people: PeopleCueConfig | None = field(default_factory=PeopleCueConfig)
 
     def __post_init__(self) -> None:
@@ -111,6 +130,8 @@ class BackgroundConfig:
             raise DetectionError('motion_decay must be in [0, 1)')
         if self.unknown_frames < 1 or self.settle_frames < 1:
             raise DetectionError('unknown_frames and settle_frames must be >= 1')
+        if self.ghost_edge_ratio < 0 or self.ghost_frames < 1:
+            raise DetectionError('ghost_edge_ratio must be >= 0 and ghost_frames >= 1')
 
 
 # not-yet-known pixel flags: not learnt; counts as foreground; has been covered by a track
@@ -289,6 +310,69 @@ def _blend_kernel(bg: np.ndarray, ycc: np.ndarray, frozen: np.ndarray, fg: np.nd
                 bg[i, j, c] = a * bg[i, j, c] + (1.0 - a) * ycc[i, j, c]
 
 
+def _colour_gradient(ycc: np.ndarray, luma: float, chroma: float) -> np.ndarray:
+    """(H, W) float32 colour gradient magnitude of a Y-Cb-Cr image (H, W, 3) float32: the
+    Sobel magnitudes of Y, Cb and Cr, each divided by its foreground threshold, summed (one
+    unit = a step the size of the foreground test per pixel)."""
+    out = np.zeros(ycc.shape[:2], np.float32)
+    for c, scale in ((0, 1.0 / luma), (1, 1.0 / chroma), (2, 1.0 / chroma)):
+        plane = np.ascontiguousarray(ycc[..., c])
+        gx = cv2.Sobel(plane, cv2.CV_32F, 1, 0, ksize=3)
+        gy = cv2.Sobel(plane, cv2.CV_32F, 0, 1, ksize=3)
+        out += np.float32(0.125 * scale) * cv2.magnitude(gx, gy)
+    return out
+
+
+def ghost_components(fg: np.ndarray, ycc: np.ndarray, bg: np.ndarray, gain: float, *,
+                     luma: float, chroma: float, ratio: float, min_area: int,
+                     excluded: np.ndarray | None = None) -> np.ndarray:
+    """(H, W) bool pixels of the foreground components that are ghosts (border test).
+
+    A component (8-connected, of ``fg`` (H, W) bool) is a ghost when the summed colour
+    gradient (:func:`_colour_gradient`) over its border band (dilated minus eroded by one
+    pixel, 3 pixels wide across the border) is ``ratio`` times larger in the model ``bg``
+    (H, W, 3) float32 Y-Cb-Cr, scaled by the global ``gain`` as in the foreground test, than
+    in the frame ``ycc``: the outline is in the model, not in the frame. Components of fewer
+    than ``min_area`` pixels and components touching ``excluded`` (H, W) bool (pixels whose
+    model is not trusted) are never ghosts. Vectorised: per-component sums by ``bincount``.
+    """
+    if ratio <= 0 or not fg.any():
+        return np.zeros(fg.shape, bool)
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(fg.view(np.uint8)
+                                                           if fg.dtype == bool
+                                                           else fg.astype(np.uint8),
+                                                           connectivity=8)
+    if n <= 1:
+        return np.zeros(fg.shape, bool)
+    k3 = np.ones((3, 3), np.uint8)
+    grown = cv2.dilate(labels.astype(np.float32), k3)          # outer side of the border
+    inner = fg & ~cv2.erode(fg.view(np.uint8), k3).astype(bool)
+    band_label = np.where(inner, labels, np.where(fg, 0, grown.astype(np.int32)))
+    band = band_label > 0
+    scaled = bg.copy()
+    scaled[..., 0] *= gain
+    scaled[..., 1:] = 128.0 + gain * (scaled[..., 1:] - 128.0)
+    g_frame = _colour_gradient(ycc, luma, chroma)
+    g_model = _colour_gradient(scaled, luma, chroma)
+    lab = band_label[band]
+    frame_sum = np.bincount(lab, weights=g_frame[band], minlength=n)
+    model_sum = np.bincount(lab, weights=g_model[band], minlength=n)
+    ghost = (model_sum > ratio * frame_sum) & (stats[:, cv2.CC_STAT_AREA] >= min_area)
+    ghost[0] = False
+    if excluded is not None and excluded.any():
+        touched = np.bincount(labels[excluded], minlength=n) > 0
+        ghost &= ~touched
+    return ghost[labels]
+
+
+def _whole_components(mask: np.ndarray, seeds: np.ndarray) -> np.ndarray:
+    """(H, W) bool the 8-connected components of ``mask`` that contain a ``seeds`` pixel."""
+    n, labels = cv2.connectedComponents(mask.view(np.uint8), connectivity=8)
+    hit = np.bincount(labels[seeds & mask], minlength=n) > 0
+    hit[0] = False
+    return hit[labels]
+
+
 def _to_ycc(image: np.ndarray) -> np.ndarray:
     """RGB uint8 (H, W, 3) -> float32 (H, W, 3) with channels Y, Cb, Cr."""
     y, cr, cb = cv2.split(cv2.cvtColor(image, cv2.COLOR_RGB2YCrCb))
@@ -328,6 +412,8 @@ class BackgroundModel:
         self._unknown_age = 0                        # frames since pixels were marked
         self._changed: np.ndarray | None = None      # frames an unknown pixel kept a new value
         self._raw: np.ndarray | None = None          # the last foreground test before unknowns
+        self._ghost_age: np.ndarray | None = None    # consecutive frames judged a ghost
+        self._ghost: np.ndarray | None = None        # pixels the next update learns at once
         self._seen = 0                               # frames offered for bootstrapping
         self.gain: float = 1.0                       # luminance gain of the last frame
         self._deferred: tuple | None = None          # (ycc, exclude, fg) of apply(defer=True)
@@ -480,8 +566,36 @@ class BackgroundModel:
             fg[(self._unknown & _POSSIBLE) > 0] = 1
         h, w = fg.shape
         min_area = int(round(cfg.min_blob_area * (h * w) / (320.0 * 240.0)))
-        return clean_mask(fg, open_size=cfg.open_size, close_size=cfg.close_size,
-                          min_area=min_area)
+        fg = clean_mask(fg, open_size=cfg.open_size, close_size=cfg.close_size,
+                        min_area=min_area)
+        return self._drop_ghosts(fg, ycc)
+
+    def _drop_ghosts(self, fg: np.ndarray, ycc: np.ndarray) -> np.ndarray:
+        """The foreground ``fg`` without the components that have been ghosts for
+        ``ghost_frames`` frames (:func:`ghost_components`); those pixels are kept for the
+        next model update, which sets the model to the frame there."""
+        cfg = self.config
+        if cfg.ghost_edge_ratio <= 0:
+            return fg
+        h, w = fg.shape
+        excluded = None if self._unknown is None or not self._unknown.any() \
+            else self._unknown > 0
+        ghost = ghost_components(fg, ycc, self._bg, self.gain, luma=float(cfg.luma_threshold),
+                                 chroma=float(cfg.chroma_threshold),
+                                 ratio=float(cfg.ghost_edge_ratio),
+                                 min_area=int(round(60 * (h * w) / (320.0 * 240.0))),
+                                 excluded=excluded)
+        if self._ghost_age is None or self._ghost_age.shape != fg.shape:
+            self._ghost_age = np.zeros(fg.shape, np.int16)
+        self._ghost_age = np.where(ghost, np.minimum(self._ghost_age + 1, 32000), 0
+                                   ).astype(np.int16)
+        ripe = self._ghost_age >= cfg.ghost_frames
+        if not ripe.any():
+            self._ghost = None
+            return fg
+        # the whole component goes: a ripe pixel's component is a ghost this frame
+        self._ghost = _whole_components(ghost, ripe)
+        return fg & ~self._ghost
 
     def update(self, image: np.ndarray, *, exclude: np.ndarray | None = None) -> None:
         """Temporal filtering of the model on stable pixels only.
@@ -540,6 +654,23 @@ class BackgroundModel:
                       occupied, self._unknown_age >= cfg.unknown_frames, raw, moving,
                       self._changed, int(cfg.settle_frames))
         self._raw = None
+        self._learn_ghosts(ycc)
+
+    def _learn_ghosts(self, ycc: np.ndarray) -> None:
+        """Set the model to the frame on the ghost pixels found by the foreground test of
+        this frame (dilated by ``mask_dilation``: the blurred rim of the learnt outline),
+        whatever the tracks; they start afresh (no static count, no motion)."""
+        ghost, self._ghost = self._ghost, None
+        if ghost is None or ghost.shape != ycc.shape[:2] or not ghost.any():
+            return
+        k = _kernel(2 * self.config.mask_dilation + 1)
+        if k is not None:
+            ghost = cv2.dilate(ghost.view(np.uint8), k).astype(bool)
+        self._bg[ghost] = ycc[ghost]
+        if self._static is not None:
+            self._static[ghost] = 0
+        if self._ghost_age is not None:
+            self._ghost_age[ghost] = 0
 
     def apply(self, image: np.ndarray, *, exclude: np.ndarray | None = None,
               defer: bool = False) -> np.ndarray | None:
@@ -588,6 +719,7 @@ class BackgroundModel:
         would have consumed."""
         self._deferred = None
         self._raw = None
+        self._ghost = None
 
 
 class BackgroundBank:
