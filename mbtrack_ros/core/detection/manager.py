@@ -15,6 +15,7 @@ filter step when automatic detection is enabled:
 """
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -46,6 +47,8 @@ from mbtrack_ros.core.shape import BodyShape, rasterize
 from mbtrack_ros.core.state import SIT, THETA, VX, VY, X, Y, TrackEstimate
 
 __all__ = ['AutoDetection', 'AutoDetectionConfig', 'Birth']
+
+_log = logging.getLogger(__name__)
 
 _MID = np.array([0.5])     # offset of the systematic selection of visibility particles
 
@@ -1053,7 +1056,7 @@ class AutoDetection:
             reused = self._reusable(det, model, models, info, below=unlike)
             if reused is not None:
                 info['action'] = f'reuse {reused} (not {tid})'
-                self.decisions.append(info)
+                self._decide(info)
                 return Birth(model=model, state=state, detection=det, track_id=reused)
         beside = False
         if best is None and cfg.beside_support > 0:
@@ -1062,7 +1065,7 @@ class AutoDetection:
             beside = best is not None
         if best is None and near and det.score < cfg.beside_threshold:
             info['action'] = 'drop (weak beside a track)'
-            self.decisions.append(info)
+            self._decide(info)
             return None
         far = doubtful = False
         if best is None:
@@ -1089,11 +1092,11 @@ class AutoDetection:
                     # a track born or moved moments ago lags its person: the detection
                     # beside it that looks like it is that person, not a newcomer
                     info['action'] = f'drop (young look-alike {min(young)[1]})'
-                    self.decisions.append(info)
+                    self._decide(info)
                     return None
             if best is None:
                 info['action'] = 'birth' if reused is None else f'reuse {reused}'
-                self.decisions.append(info)
+                self._decide(info)
                 return Birth(model=model, state=state, detection=det, track_id=reused)
         tid = tracks[best[0]].track_id
         again = False
@@ -1102,7 +1105,7 @@ class AutoDetection:
                 and self._moved_again.get(tid) != self._placed.get(tid)
             if not again:
                 info['action'] = f'drop (track {tid} placed recently)'
-                self.decisions.append(info)
+                self._decide(info)
                 return None
             self._moved_again[tid] = int(stamp_ns)
         info['action'] = f'move {tid}' + (' (doubtful, far)' if doubtful
@@ -1110,13 +1113,24 @@ class AutoDetection:
                                           else ' (hidden)' if hidden
                                           else ' (beside)' if beside
                                           else ' (again)' if again else '')
-        self.decisions.append(info)
+        self._decide(info)
         self._placed[tid] = int(stamp_ns)
         self._shown_since[tid] = int(stamp_ns)
         moved.add(tid)
         self.releaser.forget(tid)
         self.aux[tid] = TrackAuxiliary(cfg.existence)
         return Birth(model=models[tid], state=state, detection=det, track_id=tid)
+
+    def _decide(self, info: dict) -> None:
+        """Record what happened to a confirmed detection (``decisions``) and log it at debug
+        level: the detection's place and score, the tracks compared (id, metres, gain in
+        nats per side camera, appearance distance), the support and the action taken."""
+        self.decisions.append(info)
+        if _log.isEnabledFor(logging.DEBUG):
+            _log.debug('detection at (%.2f, %.2f) score %.2f: %s; %s', *info['xy'],
+                       info['score'], info.get('action', '?'),
+                       ', '.join(f'{k}={v}' for k, v in info.items()
+                                 if k not in ('xy', 'score', 'action')))
 
     def _placed_recently(self, track_id: int, stamp_ns: int) -> bool:
         """The track was born or moved less than ``relocate_interval`` before ``stamp_ns``."""
