@@ -134,6 +134,10 @@ class BackgroundConfig:
             raise DetectionError('ghost_edge_ratio must be >= 0 and ghost_frames >= 1')
 
 
+# accumulated motion (decaying count of frame differences) above which a pixel moved
+# recently (a few frames at ``motion_decay`` 0.8); see BackgroundModel.recent_motion
+_RECENT_MOTION = 0.3
+
 # not-yet-known pixel flags: not learnt; counts as foreground; has been covered by a track
 _UNKNOWN, _POSSIBLE, _COVERED, _CORE = 1, 2, 4, 8
 
@@ -332,9 +336,10 @@ def ghost_components(fg: np.ndarray, ycc: np.ndarray, bg: np.ndarray, gain: floa
     gradient (:func:`_colour_gradient`) over its border band (dilated minus eroded by one
     pixel, 3 pixels wide across the border) is ``ratio`` times larger in the model ``bg``
     (H, W, 3) float32 Y-Cb-Cr, scaled by the global ``gain`` as in the foreground test, than
-    in the frame ``ycc``: the outline is in the model, not in the frame. Components of fewer
-    than ``min_area`` pixels and components touching ``excluded`` (H, W) bool (pixels whose
-    model is not trusted) are never ghosts. Vectorised: per-component sums by ``bincount``.
+    in the frame ``ycc``: the outline is in the model, not in the frame. Border pixels in
+    ``excluded`` (H, W) bool (whose model is not trusted) do not count, and a component
+    with less than half of its border trusted, or of fewer than ``min_area`` pixels, is
+    never a ghost. Vectorised: per-component sums by ``bincount``.
     """
     if ratio <= 0 or not fg.any():
         return np.zeros(fg.shape, bool)
@@ -349,6 +354,9 @@ def ghost_components(fg: np.ndarray, ycc: np.ndarray, bg: np.ndarray, gain: floa
     inner = fg & ~cv2.erode(fg.view(np.uint8), k3).astype(bool)
     band_label = np.where(inner, labels, np.where(fg, 0, grown.astype(np.int32)))
     band = band_label > 0
+    whole = np.bincount(band_label[band], minlength=n)
+    if excluded is not None and excluded.any():
+        band &= ~excluded
     scaled = bg.copy()
     scaled[..., 0] *= gain
     scaled[..., 1:] = 128.0 + gain * (scaled[..., 1:] - 128.0)
@@ -357,11 +365,10 @@ def ghost_components(fg: np.ndarray, ycc: np.ndarray, bg: np.ndarray, gain: floa
     lab = band_label[band]
     frame_sum = np.bincount(lab, weights=g_frame[band], minlength=n)
     model_sum = np.bincount(lab, weights=g_model[band], minlength=n)
-    ghost = (model_sum > ratio * frame_sum) & (stats[:, cv2.CC_STAT_AREA] >= min_area)
+    trusted = np.bincount(lab, minlength=n)
+    ghost = (model_sum > ratio * frame_sum) & (stats[:, cv2.CC_STAT_AREA] >= min_area) \
+        & (2 * trusted >= whole)
     ghost[0] = False
-    if excluded is not None and excluded.any():
-        touched = np.bincount(labels[excluded], minlength=n) > 0
-        ghost &= ~touched
     return ghost[labels]
 
 
@@ -506,7 +513,7 @@ class BackgroundModel:
             self._unknown = np.zeros(shape, np.uint8)
             self._changed = np.zeros(shape, np.int16)
 
-    def presence(self, level: float = 0.3) -> np.ndarray | None:
+    def presence(self, level: float = _RECENT_MOTION) -> np.ndarray | None:
         """(H, W) bool pixels whose foreground cannot be a ghost (a background change left by
         someone who stood there when the model was learnt): recent motion (see
         :meth:`recent_motion`) or possible foreground never learnt; None before the model
@@ -517,7 +524,7 @@ class BackgroundModel:
             return moving
         return moving | ((self._unknown & _CORE) > 0)
 
-    def recent_motion(self, level: float = 0.3) -> np.ndarray | None:
+    def recent_motion(self, level: float = _RECENT_MOTION) -> np.ndarray | None:
         """(H, W) bool pixels that moved in the last few frames (accumulated motion above
         ``level``), or None before the model exists."""
         self.update_pending()
@@ -573,18 +580,27 @@ class BackgroundModel:
     def _drop_ghosts(self, fg: np.ndarray, ycc: np.ndarray) -> np.ndarray:
         """The foreground ``fg`` without the components that have been ghosts for
         ``ghost_frames`` frames (:func:`ghost_components`); those pixels are kept for the
-        next model update, which sets the model to the frame there."""
+        next model update, which sets the model to the frame there.
+
+        Only the *still* foreground is tested (no recent motion, see
+        :meth:`recent_motion`): a ghost does not move, and a person walking past or in
+        front of it, whose outline is in the frame, would otherwise join its component.
+        The border pixels that moved or are not yet known do not count."""
         cfg = self.config
         if cfg.ghost_edge_ratio <= 0:
             return fg
         h, w = fg.shape
-        excluded = None if self._unknown is None or not self._unknown.any() \
-            else self._unknown > 0
-        ghost = ghost_components(fg, ycc, self._bg, self.gain, luma=float(cfg.luma_threshold),
+        untrusted = np.zeros(fg.shape, bool) if self._motion is None \
+            else self._motion >= _RECENT_MOTION
+        if self._unknown is not None and self._unknown.any():
+            untrusted |= self._unknown > 0
+        still = fg & ~untrusted
+        ghost = ghost_components(still, ycc, self._bg, self.gain,
+                                 luma=float(cfg.luma_threshold),
                                  chroma=float(cfg.chroma_threshold),
                                  ratio=float(cfg.ghost_edge_ratio),
                                  min_area=int(round(60 * (h * w) / (320.0 * 240.0))),
-                                 excluded=excluded)
+                                 excluded=untrusted)
         if self._ghost_age is None or self._ghost_age.shape != fg.shape:
             self._ghost_age = np.zeros(fg.shape, np.int16)
         self._ghost_age = np.where(ghost, np.minimum(self._ghost_age + 1, 32000), 0
@@ -593,7 +609,7 @@ class BackgroundModel:
         if not ripe.any():
             self._ghost = None
             return fg
-        # the whole component goes: a ripe pixel's component is a ghost this frame
+        # the whole (still) component goes: a ripe pixel's component is a ghost this frame
         self._ghost = _whole_components(ghost, ripe)
         return fg & ~self._ghost
 
