@@ -57,6 +57,10 @@ _MID = np.array([0.5])     # offset of the systematic selection of visibility pa
 class AutoDetectionConfig:
     """All parameters of the automatic detection pipeline.
 
+    Units: metres, seconds, nats (natural-log likelihood ratios) per side camera,
+    appearance distances in [0, 1] (``appearance.model_distance``), supports and coverages
+    as foreground fractions in [0, 1].
+
     Attributes:
         background, detector, release, acquisition, existence: per-stage parameters.
         adaptation: the slow appearance-model adaptation of confirmed tracks
@@ -65,244 +69,132 @@ class AutoDetectionConfig:
         clutter_distance: Bhattacharyya distance whose likelihood is the "not visible"
             clutter likelihood ``p_0`` (001 Eq. 23).
         visibility_particles: posterior particles used per track for ``p_1`` (001 Eq. 18).
-        side_weight: weight of the side cameras' evidence in the existence update when a
-            top-down camera exists.
+        side_weight: weight in [0, 1] of the side cameras' evidence in the existence update
+            when a top-down camera exists.
         report_hidden: also report tracks whose existence is below the report threshold.
-        relocate_radius: a confirmed detection this close (metres) to a current track is
+        relocate_radius: metres; a confirmed detection this close to a current track is
             compared with the track's appearance model before it may start a new track.
-        relocate_margin: mean log-likelihood gain per side camera (003 Eq. 3 under the
-            track's model) of the detection over the track's estimate above which the
+        relocate_margin: nats per side camera; mean log-likelihood gain (003 Eq. 3 under
+            the track's model) of the detection over the track's estimate above which the
             detection is the track's own person and the track is moved there instead of a
-            birth (see :meth:`AutoDetection._identify`); negative: "about as well".
-        weak_relocate_margin: the same margin for a detection scoring below
-            ``beside_threshold`` (the larger of the two applies; ``inf``: such a detection
-            moves no track by the gain). 1.5: on sixty clear-room runs (seeds 0-9, main
-            before this margin) the weak detections' moves with gain below 1.5 went to
-            another person 21 times out of 36, those above 2 times out of 19
-            (docs/detection.md, "Weak moves by their gain").
+            birth (:meth:`AutoDetection._identify`); negative means "about as well".
+            Lower moves tracks more readily (fewer duplicate births, more moves onto
+            another person).
+        weak_relocate_margin: nats per side camera; the same margin for a detection scoring
+            below ``beside_threshold`` (the larger of the two applies; ``inf``: such a
+            detection moves no track by the gain). Weak detections beside a track are often
+            a neighbour's fringe, so they need a clear gain.
         move_support: a track is moved by the gain only while the detection would leave it
-            spare: its exclusive support (the release's measure, see
-            :func:`~mbtrack_ros.core.detection.release.spare_tracks`) with the detection as
-            one more track must be below this. A track that keeps foreground of its own
-            beside the detection stands on a person of its own, and the detection is
-            somebody else (a newcomer walking in past a leaver at the door). 0.3: on sixty
-            clear-room runs (seeds 0-9) the moves of tracks left at 0.3 or more all went
-            to another person (10 of 10), those below to the track's own person 47 times
-            out of 52; on the held-out seeds 10-14 the tracks it kept back had followed
-            another person 4 times and the detection's 4 times (a lagging track in a door
-            crowd; docs/detection.md, "Moves of tracks on a person of their own").
-            Above 1: no track is kept from a move (the support is at most 1).
-        move_distance: a detection the gain would move a track to although the track's
-            model explains it worse than the track's own estimate (gain in
-            ``(relocate_margin, 0]``) must also look like the track: appearance distance
-            (``appearance.model_distance``) at most this; 1 lets the gain alone decide.
-            0.7: on ninety clear-room runs such moves had followed the detected person for
-            ten tracks (distances 0.41-0.65, and one at 0.89) and another person for six
-            (0.74-0.75, each a leaver's track at the door moved onto the newcomer entering
-            beside it, crnc2); with the gate 25 -> 15 switches (docs/detection.md,
-            "Doubtful moves need a look-alike"). 0.65 since the appearance models adapt
-            (``adaptation``): crnc2's door crowd then had a leaver's track moved at
-            distances 0.690-0.699 onto the newcomer (docs/detection.md, "The look-alike
-            gate for adapted models").
-        look_alike_slack: nats per side camera below ``relocate_margin`` down to which
-            the gain may still move a track that looks like the detection (appearance
-            distance at most ``move_distance``): a strong detection only
-            (``beside_threshold``), and not a track that would keep ``move_support`` or more
-            of its exclusive support beside the detection; 0: off. On the strip along the
-            door's wall a track left 0.5-0.95 m behind its person where she turned had
-            gains of -3.0 to -5.8 on her detection and a second track was born on her; 3:
-            on 150 clear-room runs 15 -> 8 switches, fewer on six runs, more on none; on
-            thirty fresh runs (tracker seeds 25-29) 7 either way (docs/detection.md,
-            "Look-alike tracks lagging at the wall").
-        relocate_interval: seconds after a track was born or moved during which such a
-            detection does not move it again but is dropped (in a crowd at the door a
-            young model explains several people about equally well: the track would hop).
-        move_again_gain: nats per side camera; a detection the appearance gain gives to a
-            track born or moved within ``relocate_interval`` moves it again, instead of
-            being dropped, when that track's gain is above this (its model explains the
-            detection better than its own place), once: not when its last placement was
-            such a move. inf: always dropped. 0: all 12 such drops on 152 clear-room runs
-            were of the track's own person (gains -5.3 to +7.2), and three of them came
-            before her second birth beside her track (a newcomer's young track left
-            behind, a relocated track gone off). On the 120 runs of tracker seeds 45-64 7
-            -> 3 switches, 115 -> 118 runs met; seeds 0-4 unchanged (docs/detection.md,
-            "A track placed moments ago moved again").
+            spare: its exclusive support (:func:`~.release.spare_tracks`) with the
+            detection as one more track must be below this fraction. A track that keeps
+            foreground of its own beside the detection stands on a person of its own and
+            the detection is somebody else. Above 1: no track is kept from a move.
+        move_distance: appearance distance; a detection the gain would move a track to
+            although the track's model explains it worse than the track's own estimate
+            (gain in ``(relocate_margin, 0]``) must look like the track: distance at most
+            this. 1 lets the gain alone decide.
+        look_alike_slack: nats per side camera below ``relocate_margin`` down to which the
+            gain may still move a look-alike track (distance at most ``move_distance``)
+            for a strong detection (``beside_threshold``) that would leave the track less
+            than ``move_support``; 0 is off. Catches tracks left behind where their person
+            turned.
+        relocate_interval: seconds after a track was born or moved during which a detection
+            does not move it again but is dropped (a young model explains several people
+            in a group about equally well: the track would hop between them).
+        move_again_gain: nats per side camera; within ``relocate_interval`` a detection
+            whose gain for that track is above this moves it again (once) instead of
+            being dropped. ``inf``: always dropped.
         relocate_hidden: a confirmed detection that would start a new track within
-            ``relocate_radius`` of a track that is not reported (existence below the
-            report threshold: it lost its person) moves that track instead, whatever the
-            appearance gain (the nearest such track not born or moved within
-            ``relocate_interval``; docs/detection.md: most identity switches on clear-room
-            were a birth beside a hidden track).
-        reuse_time, reuse_radius: a released track is *lost* for ``reuse_time`` seconds:
-            a new track born within ``reuse_radius`` metres of where it was released takes
-            its id (the released track's person re-found) when the two look alike
+            ``relocate_radius`` of a track that is not reported (existence below the report
+            threshold: it lost its person) moves that track instead, whatever the gain
+            (the nearest such track not placed within ``relocate_interval``).
+        reuse_time, reuse_radius: seconds, metres; a released track is *lost* for
+            ``reuse_time``: a new track born within ``reuse_radius`` of where it was
+            released takes its id (its person re-found) when the two look alike
             (``reuse_distance``). The id ends (:meth:`finished`) only when that time has
-            passed unused, so the ROS interface's promise holds: an id never comes back
-            after it ended. 0 ends released tracks at once. 3 s: a person who
-            stood up from a chair and stood still was re-found 2.4-2.9 s after her track's
-            release (docs/detection.md, "Weak moves; longer reuse"). 1.5 m (1 m before): a
-            track left 1.1-1.3 m behind a person turning along a wall is released as spare
-            and she is detected again that far from it; on ninety clear-room runs the
-            wider radius gave 39 ids back to their person against 28, to another person 1
-            against 1, and 70 switches against 83 (docs/detection.md, "Reuse radius").
-        reuse_distance: largest appearance distance (``appearance.model_distance``, in
-            [0, 1]) between a released track's model and a detection's for the detection
-            to take the released id; 1 accepts any. 0.55: on sixty clear-room runs the
-            released track had followed the detected person for 14 candidates (distances
-            0.20-0.75, median 0.48) and another person for 18 (0.64-0.77; docs/detection.md,
-            "Weak moves; longer reuse"). 0.5 before: on the thirteenth session's tree
-            other-person candidates went down to 0.41 ("Lost tracks").
+            passed unused, so an id never comes back after it ended. 0 ends released tracks
+            at once. The time should cover a person standing still after being lost (a few
+            seconds); the radius how far a lost track may lag its person.
+        reuse_distance: largest appearance distance between a released track's model and a
+            detection's for the detection to take the released id; 1 accepts any.
         reuse_in_entry_zones: a track released inside an entry zone is lost for
             ``reuse_time`` like any other; False: its id ends at once (its person is taken
-            to have left the room). On clear-room the tracks released in front of the door
-            are mostly those of a door crowd whose people are still in the room, and the
-            appearance gate keeps a leaver's id from a newcomer (docs/detection.md, "Reuse
-            in the entry zones").
-        reuse_before_moving: before a detection moves a track (by the appearance gain or
-            as a hidden track, ``relocate_hidden``), a lost track within ``reuse_radius``
-            whose model is nearer the detection's than the moved track's model is
-            (``appearance.model_distance``) takes its id back instead, and the track stays
-            where it is. A track left at the door's jamb when its person stepped past it
-            into the doorway otherwise took over the next person found there while that
-            person's own track was lost (crnc1; docs/detection.md, "Reuse before a
-            move": 44 -> 31 switches on ninety clear-room runs). The comparison is
-            between two ids for one detection, so ``reuse_distance`` does not gate it: in
-            the seven such decisions there the lost track was the detected person's own,
-            0.29-0.65 from her detection (five above ``reuse_distance``), the track that
-            would have moved 0.70-0.78. Not when that track was born or moved within
-            ``relocate_interval``: its move would not happen (the detection is dropped),
-            and on cr1 a newcomer's 0.4 s old track lagging her gave her detection to a
-            leaver's lost id (docs/detection.md, "No reuse instead of a move that would
-            not happen").
+            to have left the room).
+        reuse_before_moving: before a detection moves a track (by the gain or as a hidden
+            track), a lost track within ``reuse_radius`` whose model is nearer the
+            detection's than the moved track's model takes its id back instead, and the
+            track stays where it is. Not when that track was placed within
+            ``relocate_interval`` (its move would not happen).
         reuse_hidden: a detection that would start a new track moves instead the nearest
-            hidden track (not reported, not born or moved within ``relocate_interval``)
-            within ``reuse_radius`` whose model is within ``reuse_distance`` of the
-            detection's: a hidden track is given back its person like a lost one, beyond
-            ``relocate_radius`` too. On crnc2 a person who walked along the doorway and
-            turned back into the room left her track hidden 0.8 m behind her, more than
-            1 m from her detection, and was born again under a new id (docs/detection.md,
-            "Hidden tracks as far as lost ones").
-        reuse_doubtful: a reported track whose existence is below this counts as hidden
-            for ``reuse_hidden`` (logged "move N (doubtful, far)"); 0 disables. On crnc3 a
-            hidden track 1.05 m behind its person was shown again (existence 0.61) in the
-            frame her detection came, and she was born again beside it. On 201 clear-room
-            runs, of the reported tracks within ``reuse_radius`` of a birth, the 4 below
-            0.9 had followed the detected person once, others three times (appearance
-            distances 0.70-0.72, over ``reuse_distance``); the 72 from 0.9 to 0.999 never
-            the detected person (docs/detection.md, "A track shown again moments ago").
-            With ``report_hidden`` every hidden track is reported, so this level is what
-            lets ``reuse_hidden`` take them.
+            hidden track (not reported, not placed within ``relocate_interval``) within
+            ``reuse_radius`` whose model is within ``reuse_distance`` of the detection's:
+            a hidden track is given back its person like a lost one.
+        reuse_doubtful: existence probability below which a reported track counts as hidden
+            for ``reuse_hidden`` (logged "move N (doubtful, far)"); 0 disables. With
+            ``report_hidden`` every hidden track is reported, so this level is what lets
+            ``reuse_hidden`` take them.
         duplicate_by_reporting: of two tracks on one person (release ``merge_radius``,
             ``merge_time``) release the one reported without a break for the shorter time
-            (born, moved, hidden or inside an exit later) instead of the younger one. A
-            track whose estimate was in an exit may have lost its person there: back in
-            the room beside the track of somebody who stayed, it is the one to go (crnc2,
-            tracker seed 76: a leaver's track that came back from the doorway outranked
-            the track of the person it took over; docs/detection.md, "A leaver's track
-            back from the doorway").
-        duplicate_margin: of two such tracks keep the one whose appearance model explains
-            the image where they are better, when its mean log-likelihood per side camera
-            (003 Eq. 3, both models at the pair's midpoint) is higher by more than this
-            (nats): a track that stayed at the door when its person walked out and took
-            over somebody else is released, not that person's own track
-            (:meth:`AutoDetection._duplicate_judge`); inf disables. On thirty clear-room
-            runs the 45 pairs judged against the ground truth had gains of -16..+13 nats;
-            the rule alone kept the right track 38 times, 8 nats 41 (0 nats: 37, a model
-            acquired moments ago fits its own view best), and the switches fell from 76
-            to 50 (docs/detection.md, "Duplicates judged by appearance").
+            (born, moved, hidden or inside an exit later) instead of the younger one: a
+            track that was in an exit may have lost its person there.
+        duplicate_margin: nats per side camera; of two such tracks keep the one whose
+            appearance model explains the image where they are better (003 Eq. 3, both
+            models at the pair's midpoint) by more than this
+            (:meth:`AutoDetection._duplicate_judge`); ``inf`` disables. Large enough that
+            a model acquired moments ago (which fits its own view best) does not win alone.
         duplicate_own_support: of such a pair, the track to be released is kept while its
-            exclusive support (the release's measure of a spare track,
-            :func:`release.spare_tracks`, with every track present:
-            :meth:`Releaser.exclusive_support`) is at least ``spare_support``: two people passing
-            close at the door each explain foreground the other does not. Of the 25
-            duplicate releases on 180 clear-room runs, 10 were of two tracks on two people;
-            the released track's support was 0.21-0.61 there, at most 0.19 on the other 15
-            (docs/detection.md, "Two people passing close are not duplicates").
-        reach_radius, reach_directions: a track whose coverage evidence for existence is
-            negative at its mean is also judged at ``reach_directions`` places on each of
-            two rings around it (radius half and all of ``reach_radius``, metres), on the
-            foreground no other track's silhouette covers, and the best place counts: a
-            track that fell behind a person who started walking stays reported while the
-            person is within the detector's ``exclusion_radius`` (the same 0.5 m by
-            default), where the detector does not look for them (docs/detection.md,
-            "Lagging tracks and existence"); 0 disables.
+            exclusive support (:meth:`Releaser.exclusive_support`) is at least the
+            release's ``spare_support``: two people passing close each explain foreground
+            the other does not.
+        reach_radius, reach_directions: metres, count; a track whose coverage evidence for
+            existence is negative at its mean is also judged at ``reach_directions``
+            places on each of two rings around it (radius half and all of
+            ``reach_radius``), on the foreground no other track's silhouette covers, and
+            the best place counts: a track that fell behind a person who started walking
+            stays reported while the person is within the detector's ``exclusion_radius``
+            (where the detector does not look for them); 0 disables.
         reach_move: a track whose reach counted a place with positive coverage evidence
             is also restarted there (same id and velocity, :attr:`AutoDetection.reach_moves`;
             the tracker moves it after the frame's output), so that it catches up with its
             person instead of staying behind.
         catch_up: nats; a track older than ``reach_age`` whose coverage evidence at its
-            mean is not negative (its reach does not act) is still restarted at the best
-            place of its reach (``reach_moves``) when the free foreground there (the
-            reach's: no other track's, no bootstrap ghost) gives coverage evidence that is
-            positive and higher by more than this than the free foreground at its mean:
-            a track left 0.3-1 m behind a person who walked on keeps part of their
-            foreground (or a neighbour's) and stays reported, and the person is born again
-            beside it. Not where the reach touches an entry zone: in the crowds at the door
-            the free foreground beside a track is mostly a newcomer or a neighbour whose
-            track lags (on cr1 seed 0, 14 switches against 2 with the door included).
-            ``inf`` disables, the default: on the twenty-second session's tree 4 moved
-            tracks only towards their own person (275 of 275 on ninety clear-room runs)
-            and cut the switches away from the door (15 against 22), but not in all (62
-            either way: the door crowds went the other way; docs/detection.md, "Catching
-            up").
+            mean is not negative is still restarted at the best place of its reach when the
+            free foreground there gives coverage evidence higher by more than this than at
+            its mean (a track left behind a person keeps part of their foreground). Not
+            where the reach touches an entry zone (a newcomer's foreground is there).
+            ``inf`` disables (the default).
         reach_age: seconds a track must have existed before it has a reach: a false birth
             (a shadow, a ghost, the fringe of a person) would keep itself alive on what is
-            near it (on main's twelve clear-room runs 26 of 28 false births lived less
-            than 4 s).
-        exit_rescue: a track that the exit rule would release (its estimate deep in an
-            exit) is instead moved onto the floor, same id, when a place within
-            ``reach_radius`` of its estimate brought onto the floor shows a free person:
-            foreground that no other track's silhouette covers, mean coverage at least
-            ``exit_rescue`` in the door-wall cameras that watch the place (the doorway
-            rule's witnesses, which cannot see the corridor; elsewhere the corner
-            cameras). Its person still stands at the door (docs/detection.md, "Exit
-            releases at the door"). At most once per ``relocate_interval`` per track.
-            0 disables, the default: 0.5 took 18 of 20 rescued tracks back to their own
-            person on eighteen clear-room runs, but the switch counts of the door-crowd
-            recording moved the totals the other way (opt-in until more seeds say).
+            near it; false births mostly die within a few seconds.
+        exit_rescue: coverage fraction; a track that the exit rule would release is instead
+            moved onto the floor, same id, when a place within ``reach_radius`` of its
+            estimate brought onto the floor shows a free person with mean coverage at least
+            this in the cameras that watch the place (the doorway witnesses, elsewhere the
+            corner cameras). At most once per ``relocate_interval`` per track. 0 disables
+            (the default).
         beside_support: a confirmed detection that would start a new track next to a
-            reported track (within ``relocate_radius``, not spare, not moved within
-            ``relocate_interval``) moves that track there instead (same id) when,
-            with the detection as one more track, the track's exclusive support
-            (:func:`release.spare_tracks`) falls below this from above: the track had
-            fallen behind the detection's person and lived on their fringe
-            (:meth:`AutoDetection._lagging_beside`; docs/detection.md, "Births beside a
-            live track"); 0 disables, the default: 0.25 cut the switches on the twelve
-            clear-room runs of seeds 0/1 (89 -> 73) but not on seed 3 (40 -> 52).
+            reported track (within ``beside_radius``, not spare, not moved within
+            ``relocate_interval``) moves that track there instead (same id) when, with the
+            detection as one more track, the track's exclusive support falls below this
+            fraction from above: the track had fallen behind the detection's person and
+            lived on their fringe (:meth:`AutoDetection._lagging_beside`); 0 disables (the
+            default).
         beside_radius: metres; the track ``beside_support`` moves must be this close to
-            the detection (the count of tracks the detection would leave spare still
-            runs over ``relocate_radius``). 0.6: on the thirty clear-room runs of seeds
-            0-4 (twenty-sixth session, ``beside_support`` 0.25 within 1 m) the twelve
-            moves of a track that had followed the detected person were 0.45-0.57 m from
-            the detection, five of the six onto another person 0.73-0.92 m. With it the
-            rule's moves on ninety runs went to the track's own person 24 times of 25, yet
-            the switches rose from 15 to 20, so ``beside_support`` stays 0
-            (docs/detection.md, "Births beside a track, within 0.6 m").
-        beside_threshold: smallest detection score (combined log response) for a birth
-            within ``relocate_radius`` of a track that the detection did not move: weak
-            detections beside a track are mostly the fringe of that track's person or a
-            gap between people, not a new person (docs/detection.md, "Weak births beside a
-            track"); 0 keeps the detector's threshold alone.
+            the detection.
+        beside_threshold: smallest detection score (the detector's combined log response)
+            for a birth within ``relocate_radius`` of a track that the detection did not
+            move: weak detections beside a track are mostly the fringe of that track's
+            person or a gap between people; 0 keeps the detector's threshold alone.
         young_look_alike: a confirmed detection that would start a new track within
-            ``relocate_radius`` of a track born or moved within ``relocate_interval``
-            whose model looks like the detection's (``move_distance``) is dropped: a
-            young track lags its person for a few frames, and the detection beside it is
-            that person (the young track may not be moved). On 240 clear-room runs the
-            19 such births made a second track on the young track's person (4) or a
-            track on nobody (15; docs/detection.md, "No birth beside a young
-            look-alike").
+            ``relocate_radius`` of a track placed within ``relocate_interval`` whose model
+            looks like the detection's (``move_distance``) is dropped: a young track lags
+            its person for a few frames, and the detection beside it is that person.
         track_coverage: ``k`` of a foreground-coverage term ``k f_c`` per camera in the
-            tracking filter's particle weights (:meth:`MeasurementModel.set_foreground`;
-            the filter joins the frame's foreground once its colour kernels are done).
-            2: on the 120 clear-room runs of tracker seeds 0-19 the identity switches
-            went from 30 to 20, the runs within 0.1 switches per person from 110 to 115
-            and the mean MOTP from 67.1 to 59.9 mm (docs/detection.md, "Foreground
-            coverage in the particle weights"). 0: colour alone.
+            tracking filter's particle weights (:meth:`MeasurementModel.set_foreground`);
+            0: colour alone. Larger holds tracks on the foreground more firmly (better
+            MOTP, fewer switches) at the cost of the colour evidence's say.
         birth_exit_depth: metres; a confirmed detection deeper than this inside an exit
-            starts or moves no track (its person is in the doorway or beyond). 0.15 m, half
-            the exit release margin of before the fifteenth session, where it was tied to
-            that margin; kept when the margin became 0.6 (docs/detection.md,
-            "Orientation apart from velocity").
+            starts or moves no track (its person is in the doorway or beyond).
     """
 
     background: BackgroundConfig = field(default_factory=BackgroundConfig)
@@ -668,8 +560,8 @@ class AutoDetection:
                     # the outline degenerates to a line right below a top-down camera: the
                     # model update must not learn a person standing there (the release
                     # reads this camera's blob, 003 §4.3). Only there: the wider blob
-                    # everywhere also shields bootstrap ghosts under false tracks (cr2:
-                    # a screen track lived 450 instead of 100 frames; docs/detection.md)
+                    # everywhere would also shield bootstrap ghosts and screen changes under
+                    # false tracks, which then live several times longer
                     paint_blobs(mask, cam, means[:, :2], tops, outline_area=sil.area)
             masks[n] = mask
         t1 = time.perf_counter()
@@ -974,9 +866,9 @@ class AutoDetection:
         otherwise a new track is born. A track the detection would leave
         ``move_support`` or more of its exclusive support (foreground no other track
         covers) is not moved: it stands on a person of its own. The gain is a weak cue in
-        groups (on clear-room both right and wrong moves had gains from -3 to +12 nats per
-        camera, docs/detection.md); still, moving instead of a birth lowered the switches on every
-        clear-room recording measured, and the interval stops a track hopping through a
+        groups (right and wrong moves both have gains of a few nats either way per camera);
+        still, moving instead of a birth avoids most second tracks on one person, and the
+        interval stops a track hopping through a
         group. A gain in ``(relocate_margin, 0]`` moves only a track that looks like the
         detection (``move_distance``), and such a look-alike may be moved by a gain down to
         ``look_alike_slack`` below the margin. Of several tracks the gain would move, the
@@ -1404,9 +1296,9 @@ class AutoDetection:
         others are moved back onto a free person on the floor (``exit_rescue``).
 
         An estimate pushed into the exit while its person stands at the door leaves the
-        person untracked on the floor right beside it (docs/detection.md, "Exit releases
-        at the door"): the track's reach (:meth:`_reach_coverage`, centred on the estimate
-        brought onto the floor) looks for them there. A place counts when the cameras on
+        person untracked on the floor right beside it: the track's reach
+        (:meth:`_reach_coverage`, centred on the estimate brought onto the floor) looks for
+        them there. A place counts when the cameras on
         the door's wall, which see the doorway but not the corridor, find it covered by
         foreground that no other track explains (mean coverage at least ``exit_rescue``);
         of such places the one best covered in all cameras is taken (the door-wall cameras
