@@ -558,9 +558,9 @@ class BackgroundModel:
         """Cleaned foreground mask (H, W) bool of an RGB frame; does not update the model."""
         self.update_pending()
         _check_image(image, self.shape, f'camera {self.name!r}')
-        return self._foreground(_to_ycc(image))
+        return self._foreground(_to_ycc(image), judge_ghosts=False)
 
-    def _foreground(self, ycc: np.ndarray) -> np.ndarray:
+    def _foreground(self, ycc: np.ndarray, *, judge_ghosts: bool = True) -> np.ndarray:
         cfg = self.config
         bg = self.background_ycc
         # Global gain, robust to slow illumination changes: median I/B luminance ratio
@@ -581,6 +581,8 @@ class BackgroundModel:
         min_area = int(round(cfg.min_blob_area * (h * w) / (320.0 * 240.0)))
         fg = clean_mask(fg, open_size=cfg.open_size, close_size=cfg.close_size,
                         min_area=min_area)
+        if not judge_ghosts:     # a look at the frame: leave the ghost counts alone
+            return fg if self._ghost is None else fg & ~self._ghost
         return self._drop_ghosts(fg, ycc)
 
     def _drop_ghosts(self, fg: np.ndarray, ycc: np.ndarray) -> np.ndarray:
