@@ -138,6 +138,10 @@ class BackgroundConfig:
 # recently (a few frames at ``motion_decay`` 0.8); see BackgroundModel.recent_motion
 _RECENT_MOTION = 0.3
 
+# smallest foreground component the ghost border test judges, pixels at 320x240 (scaled
+# with the image): the smallest silhouette the detector considers (DetectorConfig.min_area)
+_GHOST_MIN_AREA = 60
+
 # not-yet-known pixel flags: not learnt; counts as foreground; has been covered by a track
 _UNKNOWN, _POSSIBLE, _COVERED, _CORE = 1, 2, 4, 8
 
@@ -601,7 +605,8 @@ class BackgroundModel:
                                  luma=float(cfg.luma_threshold),
                                  chroma=float(cfg.chroma_threshold),
                                  ratio=float(cfg.ghost_edge_ratio),
-                                 min_area=int(round(60 * (h * w) / (320.0 * 240.0))),
+                                 min_area=int(round(_GHOST_MIN_AREA * (h * w)
+                                                    / (320.0 * 240.0))),
                                  excluded=untrusted)
         if self._ghost_age is None or self._ghost_age.shape != fg.shape:
             self._ghost_age = np.zeros(fg.shape, np.int16)
