@@ -168,14 +168,14 @@ def test_a_newcomer_beside_a_tracked_person_is_born(caplog):
     res = _track_painted(tracker, calib, bgs, rng, 36, lambda k: [a])
     assert tracker.track_ids == [1]
     decisions = []
-    caplog.set_level(logging.DEBUG, logger='mbtrack_ros.core.detection.manager')
+    caplog.set_level(logging.DEBUG, logger='mbtrack_ros.core.detection.association')
     for k in range(36, 52):
         res = tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, [a, b(k)], rng))
         decisions += tracker.detection.decisions
     assert [d['action'] for d in decisions] == ['birth'], decisions
     assert decisions[0]['beside'][0][0] == 1 and decisions[0]['beside'][0][2] >= 0.25
     # one debug line per decision, with the detection's place, the action and the terms
-    lines = [r.getMessage() for r in caplog.records if r.name.endswith('manager')]
+    lines = [r.getMessage() for r in caplog.records if r.name.endswith('association')]
     assert len(lines) == 1 and ': birth;' in lines[0] and 'beside=' in lines[0], lines
     assert tracker.track_ids == [1, 2]
     final = {t.track_id: t.mean[:2] for t in res.tracks}
