@@ -108,8 +108,8 @@ def test_run_takes_scalar_detection_fields_and_refuses_others(detection_eval, mo
         with pytest.raises(SystemExit) as err:
             detection_eval.main(argv + ['--detection', bad])
         assert err.value.code == 2
-    # --release takes the scalar ReleaseConfig fields the same way (the thirty-ninth
-    # session's rule off: recover_time=0; the ceiling camera off: use_ceiling=0; min_area
+    # --release takes the scalar ReleaseConfig fields the same way (the spare-track
+    # recovery rule off: recover_time=0; the ceiling camera off: use_ceiling=0; min_area
     # a whole number) and refuses the others
     seen.clear()
     detection_eval.main(argv + ['--release', 'recover_time=0', '--release', 'use_ceiling=0',

@@ -14,7 +14,7 @@ from mbtrack_ros.core.detection.release import ReleaseConfig, Releaser
 from mbtrack_ros.core.dynamics import DynamicsError, MotionConfig, predict
 from mbtrack_ros.synth.presets import Preset
 
-FORMER_EXIT_MARGIN = 0.3   # m: ReleaseConfig.exit_margin before the fifteenth session
+FORMER_EXIT_MARGIN = 0.3   # m: a smaller ReleaseConfig.exit_margin than the default
 from mbtrack_ros.synth.room import default_room, make_calibration
 
 from conftest import make_room
@@ -199,7 +199,7 @@ def _leaver(crowd):
 def test_a_person_who_walks_out_is_released_within_1_5_s(ceiling, rules):
     """A short synth recording: the track is released within 1.5 s of the ground truth's
     last row (the person crossing the wall). ``exit``: the doorway rule off and the exit
-    margin of before the fifteenth session (0.3 m); with the ceiling camera the track
+    margin at 0.3 m; with the ceiling camera the track
     follows the person through the door and the exit rule releases it (without exits the
     person, visible in the corridor, held it at the floor edge; measured, docs/detection.md
     "Exits"). Without the ceiling camera (seed 4) the track loses the person at the door and
