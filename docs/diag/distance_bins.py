@@ -25,7 +25,7 @@ from scipy.stats import mannwhitneyu
 
 from _eval import detection_eval, run_context
 from mbtrack_ros.core.appearance import model_distance as fine_distance
-from mbtrack_ros.core.detection import manager
+from mbtrack_ros.core.detection import association
 from mbtrack_ros.recording.bag import RecordingReader
 
 
@@ -63,11 +63,11 @@ def run(rec: Path, seed: int, out: Path) -> None:
         rows.append((frame['index'], round(d, 3), round(coarse_distance(a, b), 3)))
         return d
 
-    RecordingReader.frames, manager.model_distance = counted, logged
+    RecordingReader.frames, association.model_distance = counted, logged
     try:
         detection_eval.run(rec, out, seed)
     finally:
-        RecordingReader.frames, manager.model_distance = read, fine_distance
+        RecordingReader.frames, association.model_distance = read, fine_distance
     (out / 'distances.json').write_text(json.dumps(rows), encoding='utf-8')
 
 
