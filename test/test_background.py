@@ -131,6 +131,11 @@ def test_ghost_components_equals_a_loop_over_the_components():
     assert want.any() and (~want & fg).any()   # both outcomes occur
     np.testing.assert_array_equal(got, want)
     np.testing.assert_array_equal(got_ex, want_ex)
+    # components below min_area are never ghosts (and only the others' box is looked at)
+    big = np.bincount(labels.ravel())[labels] >= 500
+    got_big = ghost_components(fg, frame, model, 1.1, luma=28.0, chroma=10.0, ratio=1.0,
+                               min_area=500)
+    np.testing.assert_array_equal(got_big, want & big)
 
 
 def test_temporal_filter_matches_formula_and_converges():

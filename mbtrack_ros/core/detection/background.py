@@ -351,8 +351,20 @@ def ghost_components(fg: np.ndarray, ycc: np.ndarray, bg: np.ndarray, gain: floa
                                                            if fg.dtype == bool
                                                            else fg.astype(np.uint8),
                                                            connectivity=8)
-    if n <= 1:
-        return np.zeros(fg.shape, bool)
+    out = np.zeros(fg.shape, bool)
+    area = stats[:, cv2.CC_STAT_AREA]
+    big = np.flatnonzero(area[1:] >= min_area) + 1
+    if not big.size:
+        return out
+    # only the bounding box of the components judged (with the border band and the
+    # Sobel support around it) is looked at: the same sums, a fraction of the pixels
+    h, w = fg.shape
+    left, top = stats[big, cv2.CC_STAT_LEFT], stats[big, cv2.CC_STAT_TOP]
+    x0, y0 = max(int(left.min()) - 3, 0), max(int(top.min()) - 3, 0)
+    x1 = min(int((left + stats[big, cv2.CC_STAT_WIDTH]).max()) + 3, w)
+    y1 = min(int((top + stats[big, cv2.CC_STAT_HEIGHT]).max()) + 3, h)
+    win = (slice(y0, y1), slice(x0, x1))
+    labels, fg = labels[win], np.ascontiguousarray(fg[win])
     k3 = np.ones((3, 3), np.uint8)
     grown = cv2.dilate(labels.astype(np.float32), k3)          # outer side of the border
     inner = fg & ~cv2.erode(fg.view(np.uint8), k3).astype(bool)
@@ -360,20 +372,20 @@ def ghost_components(fg: np.ndarray, ycc: np.ndarray, bg: np.ndarray, gain: floa
     band = band_label > 0
     whole = np.bincount(band_label[band], minlength=n)
     if excluded is not None and excluded.any():
-        band &= ~excluded
-    scaled = bg.copy()
+        band &= ~excluded[win]
+    scaled = bg[win].copy()
     scaled[..., 0] *= gain
     scaled[..., 1:] = 128.0 + gain * (scaled[..., 1:] - 128.0)
-    g_frame = _colour_gradient(ycc, luma, chroma)
+    g_frame = _colour_gradient(ycc[win], luma, chroma)
     g_model = _colour_gradient(scaled, luma, chroma)
     lab = band_label[band]
     frame_sum = np.bincount(lab, weights=g_frame[band], minlength=n)
     model_sum = np.bincount(lab, weights=g_model[band], minlength=n)
     trusted = np.bincount(lab, minlength=n)
-    ghost = (model_sum > ratio * frame_sum) & (stats[:, cv2.CC_STAT_AREA] >= min_area) \
-        & (2 * trusted >= whole)
+    ghost = (model_sum > ratio * frame_sum) & (area >= min_area) & (2 * trusted >= whole)
     ghost[0] = False
-    return ghost[labels]
+    out[win] = ghost[labels]
+    return out
 
 
 def _whole_components(mask: np.ndarray, seeds: np.ndarray) -> np.ndarray:
