@@ -17,9 +17,10 @@ START = (2.5, 2.5)
 
 
 def _track_on_a_ghost(ghost_edge_ratio: float, frames: int = 45) -> list[list[int]]:
-    """The ids of the reported tracks per frame: the background learnt with a person
-    standing at START, the frames show the empty room, and a track starts at START with
-    the appearance it has there (what a detection of the ghost would acquire)."""
+    """The ids of the reported tracks per frame from its birth: the background learnt with
+    a person standing at START, the frames show the empty room, and in the fourth frame a
+    track starts at START with the appearance it has there (what a detection of the ghost
+    would acquire)."""
     from mbtrack_ros.core.detection.acquisition import acquire
     from mbtrack_ros.core.detection.detector import Detection
     from mbtrack_ros.core.tracker import Tracker, TrackerConfig
@@ -39,12 +40,13 @@ def _track_on_a_ghost(ghost_edge_ratio: float, frames: int = 45) -> list[list[in
     state = np.array([*START, 0.0, 0.0, 0.0, 0.0])
     model = acquire(Detection(state, 1.8, 0.5, 5.0), empty, calib)
     assert model is not None
-    tracker.add_track(model, state, 0)
     out = []
     for k in range(frames):
+        if k == 3:      # born on the ghost after it appeared, like a confirmed detection
+            tracker.add_track(model, state, int(round(k * 1e9 / FPS)))
         res = tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, [], rng))
         out.append([t.track_id for t in res.tracks])
-    return out
+    return out[3:]
 
 
 @pytest.mark.parametrize('ratio', [1.5, 0.0])

@@ -26,7 +26,9 @@ and a track placed on it would keep the model frozen there for ever. Ghosts are 
 by where the edges are (the border test of ghost detection): along the border of a real
 object the *frame* has a colour step (the object's outline), along the border of a ghost
 the *model* has it (the outline of whoever was learnt) and the frame shows the continuous
-room. A foreground component whose border gradient in the model exceeds that in the frame
+room. A component most of whose pixels became foreground under a track is a tracked person
+who came there (sitting down in front of a chair whose edges are in the model), never a
+ghost. A foreground component whose border gradient in the model exceeds that in the frame
 by ``ghost_edge_ratio``, for ``ghost_frames`` consecutive frames, is taken as background:
 the model is set to the frame there, whatever the tracks (:func:`ghost_components`).
 
@@ -388,6 +390,16 @@ def ghost_components(fg: np.ndarray, ycc: np.ndarray, bg: np.ndarray, gain: floa
     return out
 
 
+def _mostly(mask: np.ndarray, flag: np.ndarray) -> np.ndarray:
+    """(H, W) bool the 8-connected components of ``mask`` at least half of whose pixels
+    have ``flag`` (H, W) bool set."""
+    n, labels = cv2.connectedComponents(mask.view(np.uint8), connectivity=8)
+    size = np.bincount(labels[mask], minlength=n)
+    hit = 2 * np.bincount(labels[mask & flag], minlength=n) >= np.maximum(size, 1)
+    hit[0] = False
+    return hit[labels]
+
+
 def _whole_components(mask: np.ndarray, seeds: np.ndarray) -> np.ndarray:
     """(H, W) bool the 8-connected components of ``mask`` that contain a ``seeds`` pixel."""
     n, labels = cv2.connectedComponents(mask.view(np.uint8), connectivity=8)
@@ -437,6 +449,8 @@ class BackgroundModel:
         self._raw: np.ndarray | None = None          # the last foreground test before unknowns
         self._ghost_age: np.ndarray | None = None    # consecutive frames judged a ghost
         self._ghost: np.ndarray | None = None        # pixels the next update learns at once
+        self._prev_fg: np.ndarray | None = None      # foreground of the last update
+        self._came_tracked: np.ndarray | None = None  # foreground that arrived under a track
         self._seen = 0                               # frames offered for bootstrapping
         self.gain: float = 1.0                       # luminance gain of the last frame
         self._deferred: tuple | None = None          # (ycc, exclude, fg) of apply(defer=True)
@@ -620,6 +634,10 @@ class BackgroundModel:
                                  min_area=int(round(_GHOST_MIN_AREA * (h * w)
                                                     / (320.0 * 240.0))),
                                  excluded=untrusted)
+        if self._came_tracked is not None and ghost.any():
+            # a component most of whose pixels arrived under a track is a tracked person
+            # who came there (seated on a chair whose edges are in the model), not a ghost
+            ghost &= ~_mostly(ghost, self._came_tracked)
         if self._ghost_age is None or self._ghost_age.shape != fg.shape:
             self._ghost_age = np.zeros(fg.shape, np.int16)
         self._ghost_age = np.where(ghost, np.minimum(self._ghost_age + 1, 32000), 0
@@ -678,6 +696,8 @@ class BackgroundModel:
         if self._static is None or self._static.shape != y.shape:
             self._static = np.zeros(y.shape, np.int16)
         use_fg = fg is not None
+        if use_fg:
+            self._note_arrivals(fg, occupied)
         fgu = fg.view(np.uint8) if use_fg else frozen
         self._ensure_unknown()
         # 003 §4.2: B_t = alpha B_{t-1} + (1 - alpha) I_t on the stable pixels only.
@@ -690,6 +710,20 @@ class BackgroundModel:
                       self._changed, int(cfg.settle_frames))
         self._raw = None
         self._learn_ghosts(ycc)
+
+    def _note_arrivals(self, fg: np.ndarray, occupied: np.ndarray) -> None:
+        """Remember, per foreground pixel, whether it became foreground under a track (the
+        dilated track silhouettes ``occupied``, (H, W) uint8): a tracked person who walks
+        somewhere and stands still brings his foreground with his track; the place a
+        learnt person reveals becomes foreground with no track over it (a track born on
+        it comes later)."""
+        if self._came_tracked is None or self._came_tracked.shape != fg.shape:
+            self._came_tracked = np.zeros(fg.shape, bool)
+            self._prev_fg = np.zeros(fg.shape, bool)
+        arrived = fg & ~self._prev_fg
+        self._came_tracked[arrived] = occupied.view(bool)[arrived]
+        self._came_tracked &= fg
+        self._prev_fg = fg.copy()
 
     def _learn_ghosts(self, ycc: np.ndarray) -> None:
         """Set the model to the frame on the ghost pixels found by the foreground test of
