@@ -60,7 +60,7 @@ def test_ghost_of_a_static_untracked_blob_is_absorbed():
     ghost[30:100, 60:85] = (200, 30, 40)       # in the bootstrap frames, then gone
     cfg = BackgroundConfig(alpha=0.99, static_frames=10, static_alpha=0.7)
     fast, slow = BackgroundModel(cfg), BackgroundModel(
-        BackgroundConfig(alpha=0.99, static_frames=0))
+        BackgroundConfig(alpha=0.99, static_frames=0, ghost_edge_ratio=0.0))
     fast.bootstrap([ghost])
     slow.bootstrap([ghost])
     for _ in range(30):
@@ -69,6 +69,102 @@ def test_ghost_of_a_static_untracked_blob_is_absorbed():
         fg_slow = slow.apply(f)
     assert fg_fast[30:100, 60:85].mean() < 0.05
     assert fg_slow[30:100, 60:85].mean() > 0.9
+
+
+def test_border_test_learns_a_tracked_ghost_but_keeps_a_tracked_person():
+    """A blob learnt into the model and gone from the frame (its outline is in the model) is
+    background within ``ghost_frames`` frames even under a track; a person standing still
+    under a track (his outline is in the frame) stays foreground."""
+    rng = np.random.default_rng(8)
+    bg = scene(rng)
+    person = bg.copy()
+    person[30:100, 60:85] = (200, 30, 40)
+    region = np.zeros((H, W), bool)
+    region[30:100, 60:85] = True
+    cfg = BackgroundConfig(alpha=0.99, static_frames=0, ghost_frames=4)
+    ghost, kept = BackgroundModel(cfg), BackgroundModel(cfg)
+    ghost.bootstrap([person])                  # the person was there while it was learnt
+    kept.bootstrap([bg])
+    seen = []
+    for k in range(16):
+        # a track is born on the ghost a few frames after it appeared (a confirmed
+        # detection); the person is tracked from the start (he walked in tracked)
+        seen.append(ghost.apply(noisy(bg, rng), exclude=region if k >= 3 else None
+                                )[region].mean())
+        fg_kept = kept.apply(noisy(person, rng), exclude=region)
+    # the revealed place moved (the frame changed there) and is tested once still: then
+    # foreground until the test has held 4 frames, then learnt although a track covers it
+    assert min(seen[:3]) > 0.9
+    assert max(seen[12:]) < 0.05
+    assert np.abs(ghost.background_ycc - _to_ycc(bg)).mean() < 3.0
+    assert fg_kept[region].mean() > 0.95
+
+
+def test_a_tracked_person_in_front_of_model_edges_is_no_ghost():
+    """A person who walked in under his track and stands still where the model has strong
+    edges of its own (a chair's outline along his border, so that the border test alone
+    calls him a ghost) stays foreground: his pixels arrived under a track. The same
+    foreground arrived with no track over it is learnt."""
+    rng = np.random.default_rng(11)
+    bg = scene(rng)
+    chair = bg.copy()
+    chair[28:102, 58:87] = (20, 20, 20)        # dark frame of a chair, in the model
+    chair[30:100, 60:85] = bg[30:100, 60:85]
+    person = chair.copy()
+    person[30:100, 60:85] = (30, 28, 26)       # dark clothes: hardly a step at the frame
+    region = np.zeros((H, W), bool)
+    region[30:100, 60:85] = True
+    cfg = BackgroundConfig(alpha=0.99, static_frames=0, ghost_frames=4)
+    tracked, untracked = BackgroundModel(cfg), BackgroundModel(cfg)
+    tracked.bootstrap([chair])
+    untracked.bootstrap([chair])
+    for _ in range(16):
+        frame = noisy(person, rng)
+        fg_tracked = tracked.apply(frame, exclude=region)
+        fg_untracked = untracked.apply(frame)
+    assert fg_tracked[region].mean() > 0.95
+    assert fg_untracked[region].mean() < 0.05   # the border test alone learns it
+
+
+def test_ghost_components_equals_a_loop_over_the_components():
+    """The vectorised border sums equal a plain per-component computation."""
+    from mbtrack_ros.core.detection.background import _colour_gradient, ghost_components
+
+    rng = np.random.default_rng(9)
+    frame, model = _to_ycc(scene(rng)), _to_ycc(scene(rng))
+    fg = np.zeros((H, W), bool)
+    fg[10:40, 10:30] = fg[50:90, 70:100] = fg[95:110, 120:150] = True
+    fg[60:70, 80:90] = False                   # a hole
+    got = ghost_components(fg, frame, model, 1.1, luma=28.0, chroma=10.0, ratio=1.0,
+                           min_area=1)
+    n, labels = cv2.connectedComponents(fg.astype(np.uint8), connectivity=8)
+    scaled = model.copy()
+    scaled[..., 0] *= 1.1
+    scaled[..., 1:] = 128.0 + 1.1 * (scaled[..., 1:] - 128.0)
+    gf, gm = _colour_gradient(frame, 28.0, 10.0), _colour_gradient(scaled, 28.0, 10.0)
+    want = np.zeros((H, W), bool)
+    excluded = np.zeros((H, W), bool)
+    excluded[:, :20] = True                    # untrusted: most of the first component's border
+    got_ex = ghost_components(fg, frame, model, 1.1, luma=28.0, chroma=10.0, ratio=1.0,
+                              min_area=1, excluded=excluded)
+    want_ex = np.zeros((H, W), bool)
+    for k in range(1, n):
+        comp = labels == k
+        inner = comp & ~cv2.erode(comp.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+        outer = cv2.dilate(comp.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool) & ~fg
+        band = inner | outer
+        want |= comp if gm[band].sum() > gf[band].sum() else False
+        ok = band & ~excluded
+        if 2 * ok.sum() >= band.sum() and gm[ok].sum() > gf[ok].sum():
+            want_ex |= comp
+    assert want.any() and (~want & fg).any()   # both outcomes occur
+    np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(got_ex, want_ex)
+    # components below min_area are never ghosts (and only the others' box is looked at)
+    big = np.bincount(labels.ravel())[labels] >= 500
+    got_big = ghost_components(fg, frame, model, 1.1, luma=28.0, chroma=10.0, ratio=1.0,
+                               min_area=500)
+    np.testing.assert_array_equal(got_big, want & big)
 
 
 def test_temporal_filter_matches_formula_and_converges():

@@ -3,6 +3,7 @@ behind its person moves that track instead of starting a second one on the perso
 newcomer next to a track on a person of its own is born."""
 from __future__ import annotations
 
+import logging
 from dataclasses import replace
 
 import numpy as np
@@ -147,7 +148,7 @@ def test_a_young_track_lagging_since_its_birth_is_moved_once(monkeypatch):
         assert 'birth' not in actions or not young_rule, actions
 
 
-def test_a_newcomer_beside_a_tracked_person_is_born():
+def test_a_newcomer_beside_a_tracked_person_is_born(caplog):
     """A second person, dressed like the first, walks up to 0.7 m beside a person tracked
     for 2.4 s: the tracked person's exclusive support stays above ``beside_support`` with
     the newcomer's detection as a track, so the newcomer is born and track 1 stays put.
@@ -166,11 +167,15 @@ def test_a_newcomer_beside_a_tracked_person_is_born():
     res = _track_painted(tracker, calib, bgs, rng, 36, lambda k: [a])
     assert tracker.track_ids == [1]
     decisions = []
+    caplog.set_level(logging.DEBUG, logger='mbtrack_ros.core.detection.association')
     for k in range(36, 52):
         res = tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, [a, b(k)], rng))
         decisions += tracker.detection.decisions
     assert [d['action'] for d in decisions] == ['birth'], decisions
     assert decisions[0]['beside'][0][0] == 1 and decisions[0]['beside'][0][2] >= 0.25
+    # one debug line per decision, with the detection's place, the action and the terms
+    lines = [r.getMessage() for r in caplog.records if r.name.endswith('association')]
+    assert len(lines) == 1 and ': birth;' in lines[0] and 'beside=' in lines[0], lines
     assert tracker.track_ids == [1, 2]
     final = {t.track_id: t.mean[:2] for t in res.tracks}
     assert np.linalg.norm(final[1] - [2.5, 2.5]) < 0.25

@@ -1417,11 +1417,11 @@ def test_the_reach_does_not_keep_a_track_alive_on_another_tracked_person(
     exclusion radius of another track ('radius'). Each alone keeps the ghost's existence
     from the person beside it, so that it falls below the report threshold; with none of
     them the person keeps it reported."""
-    from mbtrack_ros.core.detection import manager
+    from mbtrack_ros.core.detection import deleter
 
     if guard not in ('all', 'pixels'):   # the other track's pixels not set aside
-        counts = manager.span_counts
-        monkeypatch.setattr(manager, 'span_counts',
+        counts = deleter.span_counts
+        monkeypatch.setattr(deleter, 'span_counts',
                             lambda fg, spans, unknown=None: counts(fg, spans))
     ghost = _pinned_existence(0.5, ghost=True, spare_rule=guard in ('all', 'spare'),
                               exclusion=guard in ('all', 'radius'))

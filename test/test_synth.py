@@ -397,3 +397,45 @@ def test_clear_room_crowd_sits_enters_and_leaves():
     assert 2 <= max(counts) <= 5 and min(counts[15 * 20:]) >= 1
     gone = [i for i in ids if i not in {p.person_id for p in crowd.people()}]
     assert gone  # somebody left through the door
+
+
+def test_room_family_presets_have_their_cameras_doors_and_crowds():
+    """The presets for crowds, occupied starts, fewer cameras, a large room and two doors:
+    camera sets, doors and how many people the simulated crowd holds (no rendering)."""
+    from mbtrack_ros.synth.presets import get_preset, populate
+    from mbtrack_ros.synth.room import make_calibration
+
+    def cameras(name):
+        p = get_preset(name)
+        return sorted(make_calibration(p.room(), ceiling=p.ceiling, cameras=p.cameras).cameras)
+
+    assert cameras('two-cameras') == ['cam0', 'cam2']
+    assert cameras('three-cameras') == ['cam0', 'cam1', 'cam2']
+    assert len(cameras('large-room')) == 6 and 'cam4' not in cameras('large-room')
+    large = get_preset('large-room').room()
+    assert (large.width, large.depth) == (10.0, 8.0)
+    two = get_preset('two-doors')
+    calib = make_calibration(two.room())
+    assert len(calib.exits) == 2 and len(calib.entry_zones) == 2
+
+    def simulate(name, seconds, seed=3):
+        p = get_preset(name)
+        room = p.room()
+        crowd = populate(p, room, np.random.default_rng(seed))
+        counts, doors = [], set()
+        counts.append(sum(room.inside(np.array([q.x, q.y])) for q in crowd.people()))
+        for _ in range(int(seconds * 15)):
+            crowd.step(1.0 / 15)
+            counts.append(sum(room.inside(np.array([q.x, q.y])) for q in crowd.people()))
+            doors |= {w.door for w in crowd.walkers if w.in_door}
+        return counts, doors
+
+    counts, _ = simulate('crowd', 30)
+    assert counts[0] == 4 and 6 <= max(counts) <= 10
+    counts, _ = simulate('occupied', 30)
+    assert counts[0] >= 4 and min(counts) < counts[0]  # present at the start, some leave
+    _, doors = simulate('two-doors', 60)
+    assert doors == {0, 1}  # people come in through both doors
+    for name in ('crowd', 'occupied', 'two-cameras', 'three-cameras', 'large-room',
+                 'two-doors'):
+        assert get_preset(f'{name}-short').frames < get_preset(name).frames

@@ -32,7 +32,7 @@ from mbtrack_ros.synth.motion import PersonState
 from mbtrack_ros.synth.presets import Preset, get_preset, populate
 from mbtrack_ros.synth.raster import draw_ellipsoids, expose
 from mbtrack_ros.synth.shadows import cast_shadows
-from mbtrack_ros.synth.room import CameraView, Room, default_room, make_calibration
+from mbtrack_ros.synth.room import CameraView, Room, make_calibration
 
 __all__ = ['EPOCH_NS', 'SynthFrame', 'Synthesizer', 'generate', 'iter_frames',
            'render_view', 'visible_threshold']
@@ -165,10 +165,10 @@ class Synthesizer:
         self.period_ns = int(round(1e9 / self.fps))  # constant integer frame period
         self.seed = int(seed)
         self.width, self.height = int(width), int(height)
-        self.room = room or default_room()
+        self.room = room or self.preset.room()
         self.calibration: RoomCalibration = make_calibration(
-            self.room, width=self.width, height=self.height, ceiling=ceiling,
-            cameras=self.preset.cameras)
+            self.room, width=self.width, height=self.height,
+            ceiling=ceiling and self.preset.ceiling, cameras=self.preset.cameras)
         self.views = {n: CameraView.build(c, self.room)
                       for n, c in self.calibration.cameras.items()}
         self.rng = np.random.default_rng(self.seed)

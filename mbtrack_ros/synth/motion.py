@@ -98,6 +98,7 @@ class Walker:
     gone: bool = False
     patrol_index: int = 0
     sat_before: bool = False
+    door: int = 0  # index into Room.doors of the door it entered by or leaves through
 
     def state(self) -> PersonState:
         return PersonState(self.person_id, self.height, self.clothing, float(self.pos[0]),
@@ -176,15 +177,22 @@ class Crowd:
         self.arrivals = dict(gap=gap, visit=visit, max_people=max_people,
                              min_people=min_people, next=first)
 
+    def _pick_door(self) -> int:
+        """A door index, uniformly among the room's doors (no draw with a single door)."""
+        n = len(self.room.doors)
+        return int(self.rng.integers(n)) if n > 1 else 0
+
     def _spawn_at_door(self) -> None:
         a = self.arrivals
-        cx, depth = self.room.door_centre
+        door = self._pick_door()
+        cx, depth = self.room.door_centres()[door]
         spawn = np.array([cx, depth + 1.2])
         if any(np.linalg.norm(w.pos - spawn) < 1.0 for w in self.walkers if not w.gone):
             return
         w = self.add(tuple(spawn), behaviour='room', theta=-0.5 * np.pi,
                      leave_time=self.time + float(self.rng.uniform(*a['visit'])))
         w.in_door = True
+        w.door = door
         w.tasks = [['pause', 0.7], ['goto', np.array([cx, depth - 0.7]), 0.9, 'door']]
         a['next'] = self.time + float(self.rng.uniform(*a['gap']))
 
@@ -207,7 +215,8 @@ class Crowd:
             return
         # room behaviour
         if self.time >= w.leave_time:
-            cx, depth = self.room.door_centre
+            w.door = self._pick_door()
+            cx, depth = self.room.door_centres()[w.door]
             w.tasks = [['goto', np.array([cx, depth - 0.7]), float(rng.uniform(lo, hi))],
                        ['pause', 0.5], ['goto', np.array([cx, depth + 1.3]), 0.9, 'door'],
                        ['gone']]
@@ -371,7 +380,8 @@ class Crowd:
         # the floor for its last frame)
         if w.in_door or w.tasks and (w.tasks[0][0] == 'gone' or len(w.tasks[0]) > 3
                                      and w.tasks[0][3] == 'door'):
-            x0, x1 = room.door[0] + 0.3, room.door[1] - 0.3
+            door = room.doors[w.door]
+            x0, x1 = door[0] + 0.3, door[1] - 0.3
             if abs(w.pos[1] - room.depth) < 0.5:
                 inside = float(np.clip(w.pos[0], x0, x1))
                 # step sideways into the opening at SIDESTEP, not in one frame; the wall
@@ -381,7 +391,7 @@ class Crowd:
                 step = SIDESTEP * dt
                 w.pos[0] += float(np.clip(inside - w.pos[0], -step, step))
                 if abs(w.pos[0] - inside) > 1e-9 and before[1] < room.depth:
-                    beside = not room.door[0] <= w.pos[0] <= room.door[1]
+                    beside = not door[0] <= w.pos[0] <= door[1]
                     held = (max(room.walkable[3], min(before[1], room.depth - 1e-3))
                             if beside else room.depth - 1e-3)
                     w.pos[1] = min(w.pos[1], held)

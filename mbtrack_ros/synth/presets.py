@@ -6,14 +6,14 @@ preset ``NAME`` also exists as ``NAME-short`` (a few dozen frames, same characte
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from mbtrack_ros.synth.body import random_clothing
 from mbtrack_ros.synth.errors import SynthError
 from mbtrack_ros.synth.motion import Crowd
-from mbtrack_ros.synth.room import Room
+from mbtrack_ros.synth.room import Room, default_room, large_room, two_door_room
 
 __all__ = ['PRESETS', 'Preset', 'get_preset', 'populate']
 
@@ -25,8 +25,9 @@ _ACROSS = np.array([-_VIEW[1], _VIEW[0]])          # perpendicular to it on the 
 
 @dataclass(frozen=True)
 class Preset:
-    """A scenario: cameras (``None`` = all, ceiling optional), frames, crowd builder and
-    the image size (width, height) in pixels ``mbtrack synth`` renders by default."""
+    """A scenario: cameras (``None`` = all, ceiling optional), frames, crowd builder, the
+    image size (width, height) in pixels ``mbtrack synth`` renders by default, the room it
+    happens in and whether that room has a ceiling camera."""
 
     name: str
     description: str
@@ -34,6 +35,8 @@ class Preset:
     cameras: tuple[str, ...] | None
     populate: Callable[[Crowd], None]
     size: tuple[int, int] = (320, 240)
+    room: Callable[[], Room] = field(default=default_room)
+    ceiling: bool = True
 
 
 def _lanz_area(n_people: int, area: tuple[float, float, float, float]) -> Callable:
@@ -80,6 +83,45 @@ def _empty(crowd: Crowd) -> None:
     pass
 
 
+def _crowd(crowd: Crowd) -> None:
+    """A crowd of 6-10: four people present, the others arriving every few seconds."""
+    top = int(crowd.rng.integers(6, 11))
+    for _ in range(4):
+        crowd.add(tuple(crowd.random_free_point(min_gap=0.9)), behaviour='room',
+                  leave_time=float(crowd.rng.uniform(25.0, 60.0)))
+    crowd.schedule_arrivals(gap=(1.5, 4.0), visit=(20.0, 60.0), max_people=top,
+                            min_people=top, first=0.5)
+
+
+def _occupied(crowd: Crowd) -> None:
+    """Four or five people in the room from the first frame; some leave early, later a
+    few others come in."""
+    for _ in range(int(crowd.rng.integers(4, 6))):
+        crowd.add(tuple(crowd.random_free_point(min_gap=0.9)), behaviour='room',
+                  leave_time=float(crowd.rng.uniform(4.0, 40.0)))
+    crowd.schedule_arrivals(gap=(6.0, 15.0), visit=(15.0, 40.0), max_people=5,
+                            min_people=1, first=12.0)
+
+
+def _large(crowd: Crowd) -> None:
+    """Three people present, up to six in all over the visit."""
+    for _ in range(3):
+        crowd.add(tuple(crowd.random_free_point(min_gap=0.9)), behaviour='room',
+                  leave_time=float(crowd.rng.uniform(20.0, 60.0)))
+    crowd.schedule_arrivals(gap=(3.0, 10.0), visit=(20.0, 60.0), max_people=6,
+                            min_people=3, first=1.0)
+
+
+def _two_doors(crowd: Crowd) -> None:
+    """Two people present; others come in through either door and leave through either
+    (short visits, so that doorways see traffic)."""
+    for _ in range(2):
+        crowd.add(tuple(crowd.random_free_point(min_gap=0.9)), behaviour='room',
+                  leave_time=float(crowd.rng.uniform(8.0, 30.0)))
+    crowd.schedule_arrivals(gap=(3.0, 9.0), visit=(8.0, 25.0), max_people=5,
+                            min_people=2, first=0.5)
+
+
 # Lanz areas: rectangles elongated along the camera's line of sight (so that people often
 # line up in depth and occlude each other), 1.5-3.7 m from the camera.
 _ANGLE = float(np.arctan2(_VIEW[1], _VIEW[0]))
@@ -108,10 +150,27 @@ _BASE = (
            'free-running cameras, light changes, auto exposure, shadows from two ceiling '
            'lamps, a calibration off by 1 deg and 3 cm (300 frames, 20 s)', 300, None,
            _clear_room),
+    Preset('crowd', 'the clear-room room and cameras, 6-10 people: four present from the '
+           'start, the others arriving every 1.5-4 s (450 frames, 30 s)', 450, None, _crowd),
+    Preset('occupied', 'the clear-room room and cameras occupied from the first frame by '
+           '4-5 people who move and leave (some after 4 s); others come in later '
+           '(450 frames, 30 s)', 450, None, _occupied),
+    Preset('two-cameras', 'clear-room with only two opposite corner cameras (300 frames)',
+           300, ('cam0', 'cam2'), _clear_room),
+    Preset('three-cameras', 'clear-room with three corner cameras, no ceiling camera '
+           '(300 frames)', 300, ('cam0', 'cam1', 'cam2'), _clear_room),
+    Preset('large-room', 'a 10 x 8 m room with six cameras (four corners, two mid-wall), '
+           '3-6 people (450 frames, 30 s)', 450, None, _large, room=large_room,
+           ceiling=False),
+    Preset('two-doors', 'the clear-room room with a second doorway in the north wall: '
+           'people enter and leave through either (450 frames, 30 s)', 450, None,
+           _two_doors, room=two_door_room),
 )
 
 _SHORT_FRAMES = {'lanz-seq1': 40, 'lanz-seq2': 40, 'lanz-seq3': 30, 'lanz-seq4': 45,
-                 'clear-room': 45, 'empty-room': 10, 'real-room': 45}
+                 'clear-room': 45, 'empty-room': 10, 'real-room': 45, 'crowd': 45,
+                 'occupied': 45, 'two-cameras': 45, 'three-cameras': 45, 'large-room': 45,
+                 'two-doors': 45}
 
 PRESETS: dict[str, Preset] = {}
 for _p in _BASE:

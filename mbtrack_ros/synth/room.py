@@ -3,7 +3,9 @@
 The room is an axis-aligned box ``[0, 6] x [0, 5] x [0, 2.8]`` metres (floor z = 0) with
 tiled floor, textured walls, a poster, a table, a cabinet and three chairs along the west
 wall, a wall screen on the east wall whose content changes, and a door in the north wall
-that swings out into a corridor (people enter and leave through it).
+that swings out into a corridor (people enter and leave through it). A room may have more
+doors in the north wall (open doorways into their own corridors), another size, and wall
+cameras besides the four corner cameras (see :data:`~.presets.PRESETS`).
 
 Each camera's view of the static room is ray-cast once (:class:`CameraView`): per pixel the
 world ray (from :meth:`Camera.pixel_rays`, so lens distortion is included), the radiance of
@@ -12,7 +14,7 @@ pixels are remembered so that a frame only recomputes those small regions.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -20,7 +22,8 @@ from mbtrack_ros.core.camera import Camera, RoomCalibration, look_at
 from mbtrack_ros.synth.errors import SynthError
 from mbtrack_ros.synth.raster import hash01
 
-__all__ = ['Box', 'CameraView', 'Room', 'default_room', 'make_calibration']
+__all__ = ['Box', 'CameraView', 'Room', 'default_room', 'large_room', 'make_calibration',
+           'two_door_room']
 
 # surface ids of the static ray cast
 FLOOR, CEILING, WALL_W, WALL_E, WALL_S, WALL_N, SCREEN, DOOR, POSTER = range(1, 10)
@@ -43,8 +46,10 @@ class Room:
 
     ``chairs`` are seat centres ``(x, y, seat_height, facing)``: a seated person's pelvis is
     above ``(x, y)`` and faces ``facing`` (radians). ``door`` is ``(x0, x1, height)`` of the
-    opening in the north wall ``y = depth``; ``screen`` is ``(y0, y1, z0, z1)`` on the east
-    wall ``x = width``.
+    opening in the north wall ``y = depth``; ``extra_doors`` are more openings there, as
+    ``(x0, x1, height)``, without a door panel; ``screen`` is ``(y0, y1, z0, z1)`` on the
+    east wall ``x = width``. ``wall_cameras`` are floor points ``(x, y)`` on the walls where
+    cameras (2.6 m high, looking at the room centre) are mounted besides the four corners.
     """
 
     width: float = 6.0
@@ -61,24 +66,43 @@ class Room:
     chairs: tuple[tuple[float, float, float, float], ...] = ()
     walkable: tuple[float, float, float, float] = (0.3, 0.3, 5.7, 4.7)
     free_area: tuple[float, float, float, float] = (1.0, 1.3, 5.3, 4.3)
+    extra_doors: tuple[tuple[float, float, float], ...] = ()
+    wall_cameras: tuple[tuple[float, float], ...] = ()
+
+    @property
+    def doors(self) -> tuple[tuple[float, float, float], ...]:
+        """All openings ``(x0, x1, height)`` in the north wall, the panelled door first."""
+        return (self.door,) + tuple(self.extra_doors)
+
+    def door_centres(self) -> np.ndarray:
+        """(D, 2) floor points in the middle of each door opening, metres."""
+        return np.array([[0.5 * (d[0] + d[1]), self.depth] for d in self.doors])
 
     @property
     def door_centre(self) -> np.ndarray:
-        """(2,) floor point in the middle of the door opening, metres."""
-        return np.array([0.5 * (self.door[0] + self.door[1]), self.depth])
+        """(2,) floor point in the middle of the (first) door opening, metres."""
+        return self.door_centres()[0]
 
-    @property
-    def entry_zone(self) -> tuple[float, float, float, float]:
-        """Floor rectangle just inside the door (for the calibration's entry_zones)."""
-        return (self.door[0] - 0.2, self.depth - 0.9, self.door[1] + 0.2, self.depth)
+    def entry_zone_of(self, door: tuple[float, float, float]) -> tuple[float, ...]:
+        """Floor rectangle just inside a door (for the calibration's entry_zones)."""
+        return (door[0] - 0.2, self.depth - 0.9, door[1] + 0.2, self.depth)
 
-    @property
-    def exit_zone(self) -> tuple[float, float, float, float]:
-        """Rectangle beyond the door (for the calibration's exits): the door's x span, from
+    def exit_zone_of(self, door: tuple[float, float, float]) -> tuple[float, ...]:
+        """Rectangle beyond a door (for the calibration's exits): the door's x span, from
         the walkable floor's edge through the door into the corridor, 1.2 m beyond the
         wall (people who leave walk 1.3 m into the corridor before they disappear, see
         :mod:`mbtrack_ros.synth.motion`; the release margin is well inside it)."""
-        return (self.door[0], self.walkable[3], self.door[1], self.depth + 1.2)
+        return (door[0], self.walkable[3], door[1], self.depth + 1.2)
+
+    @property
+    def entry_zone(self) -> tuple[float, float, float, float]:
+        """Floor rectangle just inside the first door."""
+        return self.entry_zone_of(self.door)
+
+    @property
+    def exit_zone(self) -> tuple[float, float, float, float]:
+        """Rectangle beyond the first door (see :meth:`exit_zone_of`)."""
+        return self.exit_zone_of(self.door)
 
     def inside(self, xy: np.ndarray) -> np.ndarray:
         """Boolean (...,) of floor points (..., 2) strictly inside the room walls."""
@@ -105,13 +129,30 @@ def default_room() -> Room:
     return Room(boxes=tuple(boxes), chairs=tuple(chairs))
 
 
+def large_room() -> Room:
+    """A 10 x 8 x 2.8 m room with the default furniture, two cameras at the middle of the
+    long walls besides the four corners (six cameras, no ceiling camera needed)."""
+    base = default_room()
+    return replace(base, width=10.0, depth=8.0, door=(7.2, 8.1, 2.1),
+                   screen=(3.0, 4.8, 0.9, 2.0), light=(5.0, 4.0, 2.7),
+                   walkable=(0.3, 0.3, 9.7, 7.7), free_area=(1.0, 1.3, 9.3, 7.3),
+                   wall_cameras=((5.0, 0.1), (5.0, 7.9)))
+
+
+def two_door_room() -> Room:
+    """The default room with a second (open) doorway at the west end of the north wall."""
+    return replace(default_room(), extra_doors=((1.2, 2.1, 2.1),))
+
+
 def make_calibration(room: Room, *, width: int = 320, height: int = 240,
                      ceiling: bool = True, cameras: tuple[str, ...] | None = None,
                      ) -> RoomCalibration:
-    """Four upper-corner cameras (2.6 m, looking at the room centre) and a ceiling camera.
+    """Four upper-corner cameras (2.6 m, looking at the room centre), the room's wall
+    cameras and a ceiling camera.
 
     Lens distortion is barrel (k1 < 0, k2 > 0), monotonic over the image. ``cameras``
-    selects a subset by name (``cam0`` .. ``cam3``, ``cam4`` = ceiling).
+    selects a subset by name (``cam0`` .. ``cam3`` the corners, ``cam4`` = ceiling,
+    ``cam5`` ... the wall cameras in the order of ``room.wall_cameras``).
     """
     if width < 16 or height < 16 or width > 4096 or height > 4096:
         raise SynthError(f'image size {width}x{height} outside 16..4096 pixels')
@@ -126,13 +167,20 @@ def make_calibration(room: Room, *, width: int = 320, height: int = 240,
         K = [[f, 0, 159.5 + 1.5 * (k - 1.5)], [0, f, 119.5 - (k - 1.5)], [0, 0, 1]]
         dist = [-0.16 - 0.01 * k, 0.025, 0.0005 * (k - 1.5), -0.0004 * (k - 1.5), 0.0]
         cams[f'cam{k}'] = Camera(f'cam{k}', 320, 240, K, dist, R, t)
+    for k, (x, y) in enumerate(room.wall_cameras):
+        R, t = look_at((x, y, 2.6), target)
+        f = 170.0 + 4.0 * k
+        K = [[f, 0, 159.5], [0, f, 119.5], [0, 0, 1]]
+        cams[f'cam{5 + k}'] = Camera(f'cam{5 + k}', 320, 240, K, [-0.15, 0.02, 0.0, 0.0, 0.0],
+                                     R, t)
     if ceiling:
         R, t = look_at((0.5 * room.width, 0.5 * room.depth, room.height - 0.05),
                        (0.5 * room.width, 0.5 * room.depth, 0.0), up=(0.0, 1.0, 0.0))
         K = [[120.0, 0, 159.5], [0, 120.0, 119.5], [0, 0, 1]]
         cams['cam4'] = Camera('cam4', 320, 240, K, [-0.2, 0.04, 0.0, 0.0, 0.0], R, t)
-    calib = RoomCalibration(cameras=cams, floor=room.walkable, entry_zones=(room.entry_zone,),
-                            exits=(room.exit_zone,))
+    calib = RoomCalibration(cameras=cams, floor=room.walkable,
+                            entry_zones=tuple(room.entry_zone_of(d) for d in room.doors),
+                            exits=tuple(room.exit_zone_of(d) for d in room.doors))
     if cameras is not None:
         calib = calib.subset(cameras)
     return calib.scaled(width, height) if (width, height) != (320, 240) else calib
@@ -316,6 +364,13 @@ class CameraView:
         corr_rad, corr_depth = _corridor(room, C, door_rays)
         radiance[door_index] = corr_rad
         best[door_index] = corr_depth
+        for extra in room.extra_doors:  # open doorways: their corridor is static
+            ex0, ex1, ez = extra
+            sel = ((surface == WALL_N) & (p[:, 0] > ex0) & (p[:, 0] < ex1) & (p[:, 2] < ez))
+            surface[sel] = DOOR
+            rad, dep = _corridor(room, C, rays[sel], extra)
+            radiance[sel] = rad
+            best[sel] = dep
         view = cls(camera=camera, room=room, rays=rays.reshape(H, W, 3),
                    radiance=radiance.reshape(H, W, 3).astype(np.float32),
                    depth=best.reshape(H, W).astype(np.float32),
@@ -366,10 +421,14 @@ class CameraView:
         return rad, depth
 
 
-def _corridor(room: Room, C: np.ndarray, rays: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Radiance (M, 3) and depth (M,) of rays through the door into the corridor box."""
+def _corridor(room: Room, C: np.ndarray, rays: np.ndarray,
+              door: tuple[float, float, float] | None = None
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """Radiance (M, 3) and depth (M,) of rays through a door (default: the first) into the
+    corridor box behind it."""
+    door = room.door if door is None else door
     y0, y1 = room.depth, room.depth + room.corridor
-    x0, x1, h = room.door[0] - 2.0, room.door[1] + 2.0, 2.4
+    x0, x1, h = door[0] - 2.0, door[1] + 2.0, 2.4
     m = rays.shape[0]
     best = np.full(m, np.inf)
     kind = np.zeros(m, dtype=int)

@@ -2,7 +2,8 @@
 visibility/existence auxiliary processes (001 §3) in :mod:`mbtrack_ros.core.existence`.
 
 * :mod:`.background` - per-camera Y-Cb-Cr background model and foreground masks, with
-  *not yet known* places for rooms that are never empty;
+  *not yet known* places for rooms that are never empty and the border test that learns
+  ghosts (places revealed by people who were learnt into the model);
 * :mod:`.people` - a background-independent multi-view people cue (motion in several
   views, contour and colour symmetry) that marks those places at the online bootstrap;
 * :mod:`.features` - single-view detection features: foreground coverage, contour
@@ -11,8 +12,12 @@ visibility/existence auxiliary processes (001 §3) in :mod:`mbtrack_ros.core.exi
   non-maximum suppression and confirmation over consecutive frames;
 * :mod:`.acquisition` - key-view appearance model of a newly detected person;
 * :mod:`.release` - termination of tracks without foreground support;
+* :mod:`.config` - :class:`~.config.AutoDetectionConfig`, the pipeline's parameters;
+* :mod:`.association` - what a confirmed detection is: a birth, a track's person re-found
+  (move), a lost track's person (reuse) or nothing (drop);
+* :mod:`.deleter` - existence evidence of the tracks, duplicates, exits;
 * :mod:`.manager` - :class:`~.manager.AutoDetection`, the per-frame pipeline the tracker
-  calls when ``TrackerConfig.detection`` is set (docs/detection.md).
+  calls when ``TrackerConfig.detection`` is set.
 """
 from __future__ import annotations
 

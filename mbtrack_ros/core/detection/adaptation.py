@@ -42,9 +42,9 @@ class AdaptationConfig:
     """Parameters of the appearance adaptation.
 
     Attributes:
-        rate: blending rate alpha per accepted observation (0 disables the adaptation;
-            docs/detection.md, "Appearance adaptation" and "Appearance adaptation, again",
-            where 0.05 became the default).
+        rate: blending rate alpha per accepted observation, dimensionless in [0, 1]: the
+            share of the new observation in the model (0 disables the adaptation; 0.05 =
+            a memory of about 20 accepted observations).
         min_free: fraction of the track's full silhouette that must be inside the image and
             not covered by closer tracks' silhouettes.
         min_visibility: visibility probability ``xi_v`` (001 §3.1) the track needs in the
@@ -58,8 +58,7 @@ class AdaptationConfig:
         interval: seconds between two adaptations of one track (slow, and cheap).
         min_travel: metres the track's estimate must have been from where it was first
             seen: a false track on something static (a changing screen, a bootstrap
-            ghost) would learn its changes and live on (clear-room: such tracks lived
-            2-3 times longer without this).
+            ghost) would otherwise learn its changes and keep itself alive.
     """
 
     rate: float = 0.05

@@ -20,6 +20,18 @@ foreground (a possible person), the rest of the region as neither; and the blob'
 replaces motion as the proof, required of new people, that a detection is no ghost
 (:meth:`BackgroundModel.presence`).
 
+**Ghosts.** A person who stood still while the model was learnt is part of it; when he walks
+away, the place he revealed differs from the model and looks like foreground (a "ghost"),
+and a track placed on it would keep the model frozen there for ever. Ghosts are recognised
+by where the edges are (the border test of ghost detection): along the border of a real
+object the *frame* has a colour step (the object's outline), along the border of a ghost
+the *model* has it (the outline of whoever was learnt) and the frame shows the continuous
+room. A component most of whose pixels became foreground under a track is a tracked person
+who came there (sitting down in front of a chair whose edges are in the model), never a
+ghost. A foreground component whose border gradient in the model exceeds that in the frame
+by ``ghost_edge_ratio``, for ``ghost_frames`` consecutive frames, is taken as background:
+the model is set to the frame there, whatever the tracks (:func:`ghost_components`).
+
 Foreground is a Y-Cb-Cr threshold test with separate luminance and chroma thresholds. The
 luminance and chroma offsets of the background are first rescaled by a global gain
 (median ratio I/B of the luminance), which makes the test robust to slow global
@@ -44,7 +56,7 @@ from mbtrack_ros.core.detection import DetectionError
 from mbtrack_ros.core.detection.people import PeopleCue, PeopleCueConfig
 
 __all__ = ['BackgroundBank', 'BackgroundConfig', 'BackgroundModel', 'BootstrapCue',
-           'clean_mask']
+           'clean_mask', 'ghost_components']
 
 
 @dataclass(frozen=True)
@@ -75,6 +87,12 @@ class BackgroundConfig:
         settle_frames: frames a not-yet-known pixel must keep a steady value other than its
             bootstrap one (no motion) to be learnt even under a track (the person who
             stood there has left, whatever a track does).
+        ghost_edge_ratio: a foreground component is a ghost when the mean colour gradient
+            along its border (in units of the foreground thresholds per pixel) is this many
+            times larger in the model than in the frame (:func:`ghost_components`); larger
+            is more cautious, 0 disables the test.
+        ghost_frames: consecutive frames a component must pass that test before the model
+            takes the frame there (at 15 Hz, 5 frames = 0.33 s).
         people: the person cue that marks not-yet-known pixels at the online bootstrap
             (:class:`~.people.PeopleCue`, used by :class:`BackgroundBank` when it has the
             calibration); ``None`` learns every pixel of the bootstrap frames.
@@ -97,6 +115,8 @@ class BackgroundConfig:
     static_alpha: float = 0.9
     unknown_frames: int = 15
     settle_frames: int = 20
+    ghost_edge_ratio: float = 1.5
+    ghost_frames: int = 5
     people: PeopleCueConfig | None = field(default_factory=PeopleCueConfig)
 
     def __post_init__(self) -> None:
@@ -112,7 +132,17 @@ class BackgroundConfig:
             raise DetectionError('motion_decay must be in [0, 1)')
         if self.unknown_frames < 1 or self.settle_frames < 1:
             raise DetectionError('unknown_frames and settle_frames must be >= 1')
+        if self.ghost_edge_ratio < 0 or self.ghost_frames < 1:
+            raise DetectionError('ghost_edge_ratio must be >= 0 and ghost_frames >= 1')
 
+
+# accumulated motion (decaying count of frame differences) above which a pixel moved
+# recently (a few frames at ``motion_decay`` 0.8); see BackgroundModel.recent_motion
+_RECENT_MOTION = 0.3
+
+# smallest foreground component the ghost border test judges, pixels at 320x240 (scaled
+# with the image): the smallest silhouette the detector considers (DetectorConfig.min_area)
+_GHOST_MIN_AREA = 60
 
 # not-yet-known pixel flags: not learnt; counts as foreground; has been covered by a track
 _UNKNOWN, _POSSIBLE, _COVERED, _CORE = 1, 2, 4, 8
@@ -290,6 +320,94 @@ def _blend_kernel(bg: np.ndarray, ycc: np.ndarray, frozen: np.ndarray, fg: np.nd
                 bg[i, j, c] = a * bg[i, j, c] + (1.0 - a) * ycc[i, j, c]
 
 
+def _colour_gradient(ycc: np.ndarray, luma: float, chroma: float) -> np.ndarray:
+    """(H, W) float32 colour gradient magnitude of a Y-Cb-Cr image (H, W, 3) float32: the
+    Sobel magnitudes of Y, Cb and Cr, each divided by its foreground threshold, summed (one
+    unit = a step the size of the foreground test per pixel)."""
+    out = np.zeros(ycc.shape[:2], np.float32)
+    for c, scale in ((0, 1.0 / luma), (1, 1.0 / chroma), (2, 1.0 / chroma)):
+        plane = np.ascontiguousarray(ycc[..., c])
+        gx = cv2.Sobel(plane, cv2.CV_32F, 1, 0, ksize=3)
+        gy = cv2.Sobel(plane, cv2.CV_32F, 0, 1, ksize=3)
+        out += np.float32(0.125 * scale) * cv2.magnitude(gx, gy)
+    return out
+
+
+def ghost_components(fg: np.ndarray, ycc: np.ndarray, bg: np.ndarray, gain: float, *,
+                     luma: float, chroma: float, ratio: float, min_area: int,
+                     excluded: np.ndarray | None = None) -> np.ndarray:
+    """(H, W) bool pixels of the foreground components that are ghosts (border test).
+
+    A component (8-connected, of ``fg`` (H, W) bool) is a ghost when the summed colour
+    gradient (:func:`_colour_gradient`) over its border band (dilated minus eroded by one
+    pixel, 3 pixels wide across the border) is ``ratio`` times larger in the model ``bg``
+    (H, W, 3) float32 Y-Cb-Cr, scaled by the global ``gain`` as in the foreground test, than
+    in the frame ``ycc``: the outline is in the model, not in the frame. Border pixels in
+    ``excluded`` (H, W) bool (whose model is not trusted) do not count, and a component
+    with less than half of its border trusted, or of fewer than ``min_area`` pixels, is
+    never a ghost. Vectorised: per-component sums by ``bincount``.
+    """
+    if ratio <= 0 or not fg.any():
+        return np.zeros(fg.shape, bool)
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(fg.view(np.uint8)
+                                                           if fg.dtype == bool
+                                                           else fg.astype(np.uint8),
+                                                           connectivity=8)
+    out = np.zeros(fg.shape, bool)
+    area = stats[:, cv2.CC_STAT_AREA]
+    big = np.flatnonzero(area[1:] >= min_area) + 1
+    if not big.size:
+        return out
+    # only the bounding box of the components judged (with the border band and the
+    # Sobel support around it) is looked at: the same sums, a fraction of the pixels
+    h, w = fg.shape
+    left, top = stats[big, cv2.CC_STAT_LEFT], stats[big, cv2.CC_STAT_TOP]
+    x0, y0 = max(int(left.min()) - 3, 0), max(int(top.min()) - 3, 0)
+    x1 = min(int((left + stats[big, cv2.CC_STAT_WIDTH]).max()) + 3, w)
+    y1 = min(int((top + stats[big, cv2.CC_STAT_HEIGHT]).max()) + 3, h)
+    win = (slice(y0, y1), slice(x0, x1))
+    labels, fg = labels[win], np.ascontiguousarray(fg[win])
+    k3 = np.ones((3, 3), np.uint8)
+    grown = cv2.dilate(labels.astype(np.float32), k3)          # outer side of the border
+    inner = fg & ~cv2.erode(fg.view(np.uint8), k3).astype(bool)
+    band_label = np.where(inner, labels, np.where(fg, 0, grown.astype(np.int32)))
+    band = band_label > 0
+    whole = np.bincount(band_label[band], minlength=n)
+    if excluded is not None and excluded.any():
+        band &= ~excluded[win]
+    scaled = bg[win].copy()
+    scaled[..., 0] *= gain
+    scaled[..., 1:] = 128.0 + gain * (scaled[..., 1:] - 128.0)
+    g_frame = _colour_gradient(ycc[win], luma, chroma)
+    g_model = _colour_gradient(scaled, luma, chroma)
+    lab = band_label[band]
+    frame_sum = np.bincount(lab, weights=g_frame[band], minlength=n)
+    model_sum = np.bincount(lab, weights=g_model[band], minlength=n)
+    trusted = np.bincount(lab, minlength=n)
+    ghost = (model_sum > ratio * frame_sum) & (area >= min_area) & (2 * trusted >= whole)
+    ghost[0] = False
+    out[win] = ghost[labels]
+    return out
+
+
+def _mostly(mask: np.ndarray, flag: np.ndarray) -> np.ndarray:
+    """(H, W) bool the 8-connected components of ``mask`` at least half of whose pixels
+    have ``flag`` (H, W) bool set."""
+    n, labels = cv2.connectedComponents(mask.view(np.uint8), connectivity=8)
+    size = np.bincount(labels[mask], minlength=n)
+    hit = 2 * np.bincount(labels[mask & flag], minlength=n) >= np.maximum(size, 1)
+    hit[0] = False
+    return hit[labels]
+
+
+def _whole_components(mask: np.ndarray, seeds: np.ndarray) -> np.ndarray:
+    """(H, W) bool the 8-connected components of ``mask`` that contain a ``seeds`` pixel."""
+    n, labels = cv2.connectedComponents(mask.view(np.uint8), connectivity=8)
+    hit = np.bincount(labels[seeds & mask], minlength=n) > 0
+    hit[0] = False
+    return hit[labels]
+
+
 def _to_ycc(image: np.ndarray) -> np.ndarray:
     """RGB uint8 (H, W, 3) -> float32 (H, W, 3) with channels Y, Cb, Cr."""
     y, cr, cb = cv2.split(cv2.cvtColor(image, cv2.COLOR_RGB2YCrCb))
@@ -329,6 +447,10 @@ class BackgroundModel:
         self._unknown_age = 0                        # frames since pixels were marked
         self._changed: np.ndarray | None = None      # frames an unknown pixel kept a new value
         self._raw: np.ndarray | None = None          # the last foreground test before unknowns
+        self._ghost_age: np.ndarray | None = None    # consecutive frames judged a ghost
+        self._ghost: np.ndarray | None = None        # pixels the next update learns at once
+        self._prev_fg: np.ndarray | None = None      # foreground of the last update
+        self._came_tracked: np.ndarray | None = None  # foreground that arrived under a track
         self._seen = 0                               # frames offered for bootstrapping
         self.gain: float = 1.0                       # luminance gain of the last frame
         self._deferred: tuple | None = None          # (ycc, exclude, fg) of apply(defer=True)
@@ -421,7 +543,7 @@ class BackgroundModel:
             self._unknown = np.zeros(shape, np.uint8)
             self._changed = np.zeros(shape, np.int16)
 
-    def presence(self, level: float = 0.3) -> np.ndarray | None:
+    def presence(self, level: float = _RECENT_MOTION) -> np.ndarray | None:
         """(H, W) bool pixels whose foreground cannot be a ghost (a background change left by
         someone who stood there when the model was learnt): recent motion (see
         :meth:`recent_motion`) or possible foreground never learnt; None before the model
@@ -432,7 +554,7 @@ class BackgroundModel:
             return moving
         return moving | ((self._unknown & _CORE) > 0)
 
-    def recent_motion(self, level: float = 0.3) -> np.ndarray | None:
+    def recent_motion(self, level: float = _RECENT_MOTION) -> np.ndarray | None:
         """(H, W) bool pixels that moved in the last few frames (accumulated motion above
         ``level``), or None before the model exists."""
         self.update_pending()
@@ -460,9 +582,9 @@ class BackgroundModel:
         """Cleaned foreground mask (H, W) bool of an RGB frame; does not update the model."""
         self.update_pending()
         _check_image(image, self.shape, f'camera {self.name!r}')
-        return self._foreground(_to_ycc(image))
+        return self._foreground(_to_ycc(image), judge_ghosts=False)
 
-    def _foreground(self, ycc: np.ndarray) -> np.ndarray:
+    def _foreground(self, ycc: np.ndarray, *, judge_ghosts: bool = True) -> np.ndarray:
         cfg = self.config
         bg = self.background_ycc
         # Global gain, robust to slow illumination changes: median I/B luminance ratio
@@ -481,8 +603,52 @@ class BackgroundModel:
             fg[(self._unknown & _POSSIBLE) > 0] = 1
         h, w = fg.shape
         min_area = int(round(cfg.min_blob_area * (h * w) / (320.0 * 240.0)))
-        return clean_mask(fg, open_size=cfg.open_size, close_size=cfg.close_size,
-                          min_area=min_area)
+        fg = clean_mask(fg, open_size=cfg.open_size, close_size=cfg.close_size,
+                        min_area=min_area)
+        if not judge_ghosts:     # a look at the frame: leave the ghost counts alone
+            return fg if self._ghost is None else fg & ~self._ghost
+        return self._drop_ghosts(fg, ycc)
+
+    def _drop_ghosts(self, fg: np.ndarray, ycc: np.ndarray) -> np.ndarray:
+        """The foreground ``fg`` without the components that have been ghosts for
+        ``ghost_frames`` frames (:func:`ghost_components`); those pixels are kept for the
+        next model update, which sets the model to the frame there.
+
+        Only the *still* foreground is tested (no recent motion, see
+        :meth:`recent_motion`): a ghost does not move, and a person walking past or in
+        front of it, whose outline is in the frame, would otherwise join its component.
+        The border pixels that moved or are not yet known do not count."""
+        cfg = self.config
+        if cfg.ghost_edge_ratio <= 0:
+            return fg
+        h, w = fg.shape
+        untrusted = np.zeros(fg.shape, bool) if self._motion is None \
+            else self._motion >= _RECENT_MOTION
+        if self._unknown is not None and self._unknown.any():
+            untrusted |= self._unknown > 0
+        still = fg & ~untrusted
+        ghost = ghost_components(still, ycc, self._bg, self.gain,
+                                 luma=float(cfg.luma_threshold),
+                                 chroma=float(cfg.chroma_threshold),
+                                 ratio=float(cfg.ghost_edge_ratio),
+                                 min_area=int(round(_GHOST_MIN_AREA * (h * w)
+                                                    / (320.0 * 240.0))),
+                                 excluded=untrusted)
+        if self._came_tracked is not None and ghost.any():
+            # a component most of whose pixels arrived under a track is a tracked person
+            # who came there (seated on a chair whose edges are in the model), not a ghost
+            ghost &= ~_mostly(ghost, self._came_tracked)
+        if self._ghost_age is None or self._ghost_age.shape != fg.shape:
+            self._ghost_age = np.zeros(fg.shape, np.int16)
+        self._ghost_age = np.where(ghost, np.minimum(self._ghost_age + 1, 32000), 0
+                                   ).astype(np.int16)
+        ripe = self._ghost_age >= cfg.ghost_frames
+        if not ripe.any():
+            self._ghost = None
+            return fg
+        # the whole (still) component goes: a ripe pixel's component is a ghost this frame
+        self._ghost = _whole_components(ghost, ripe)
+        return fg & ~self._ghost
 
     def update(self, image: np.ndarray, *, exclude: np.ndarray | None = None) -> None:
         """Temporal filtering of the model on stable pixels only.
@@ -530,6 +696,8 @@ class BackgroundModel:
         if self._static is None or self._static.shape != y.shape:
             self._static = np.zeros(y.shape, np.int16)
         use_fg = fg is not None
+        if use_fg:
+            self._note_arrivals(fg, occupied)
         fgu = fg.view(np.uint8) if use_fg else frozen
         self._ensure_unknown()
         # 003 §4.2: B_t = alpha B_{t-1} + (1 - alpha) I_t on the stable pixels only.
@@ -541,6 +709,37 @@ class BackgroundModel:
                       occupied, self._unknown_age >= cfg.unknown_frames, raw, moving,
                       self._changed, int(cfg.settle_frames))
         self._raw = None
+        self._learn_ghosts(ycc)
+
+    def _note_arrivals(self, fg: np.ndarray, occupied: np.ndarray) -> None:
+        """Remember, per foreground pixel, whether it became foreground under a track (the
+        dilated track silhouettes ``occupied``, (H, W) uint8): a tracked person who walks
+        somewhere and stands still brings his foreground with his track; the place a
+        learnt person reveals becomes foreground with no track over it (a track born on
+        it comes later)."""
+        if self._came_tracked is None or self._came_tracked.shape != fg.shape:
+            self._came_tracked = np.zeros(fg.shape, bool)
+            self._prev_fg = np.zeros(fg.shape, bool)
+        arrived = fg & ~self._prev_fg
+        self._came_tracked[arrived] = occupied.view(bool)[arrived]
+        self._came_tracked &= fg
+        self._prev_fg = fg.copy()
+
+    def _learn_ghosts(self, ycc: np.ndarray) -> None:
+        """Set the model to the frame on the ghost pixels found by the foreground test of
+        this frame (dilated by ``mask_dilation``: the blurred rim of the learnt outline),
+        whatever the tracks; they start afresh (no static count, no motion)."""
+        ghost, self._ghost = self._ghost, None
+        if ghost is None or ghost.shape != ycc.shape[:2] or not ghost.any():
+            return
+        k = _kernel(2 * self.config.mask_dilation + 1)
+        if k is not None:
+            ghost = cv2.dilate(ghost.view(np.uint8), k).astype(bool)
+        self._bg[ghost] = ycc[ghost]
+        if self._static is not None:
+            self._static[ghost] = 0
+        if self._ghost_age is not None:
+            self._ghost_age[ghost] = 0
 
     def apply(self, image: np.ndarray, *, exclude: np.ndarray | None = None,
               defer: bool = False) -> np.ndarray | None:
@@ -589,6 +788,7 @@ class BackgroundModel:
         would have consumed."""
         self._deferred = None
         self._raw = None
+        self._ghost = None
 
 
 class BootstrapCue:

@@ -75,9 +75,8 @@ class DetectorConfig:
             them (dark clothes against the corridor, a model that learnt the person while
             they stood beyond the open door), and it must not hide them from the others.
             Only there and only alone: elsewhere, and beside tracked people, the excuse
-            let hypotheses between people through. Off by default: on the 18 clear-room
-            evaluation runs it made entries earlier but cost mean MOTA (docs/detection.md,
-            h-enter).
+            let hypotheses between people through. Off by default: it makes entries
+            earlier but lets more false hypotheses through.
         excuse_radius: metres; see ``excuse_weakest``.
         min_views: cameras that must see a hypothesis (in image, mostly not hidden by
             tracks, at least ``min_area`` pixels).
@@ -100,9 +99,8 @@ class DetectorConfig:
         min_speed, max_speed: m/s; a confirmed detection faster than ``min_speed`` over
             its confirming frames gets its walking direction as body orientation; one
             faster than ``max_speed`` gets no velocity: its places jumped (a neighbour,
-            the fringe of a group), nobody walked there (a clipped velocity sent a
-            relocated track off at 2 m/s the wrong way on cr1, docs/detection.md, "No
-            velocity from a detection that jumped").
+            the fringe of a group), nobody walked there (a clipped velocity would send
+            the new track off the wrong way).
         edge_min_pixels, edge_neighbourhood: edge validation of the contour feature,
             pixels (:meth:`EdgeMap.from_image`: smallest edge component, foreground
             neighbourhood searched).

@@ -37,10 +37,13 @@ foreground: a person-sized blob the detector can localise) and its core (a narro
 hypothesis that covers the core in every view stands where the cue's person stands; one
 that combines the blobs of two people from different views does not).
 
-Measured on the real Pose2Sim clip (docs/real_data.md): the contour/symmetry z-score alone
-ranks the subject only 3rd-30th of the floor places in a frame; motion over the first six
-frames (0.1 s) singles him out, and the rendered woman of the composite barely moves but
-still passes at ``min_motion = 0.03``.
+On real footage the contour/symmetry z-score alone ranks a person anywhere among the
+first few dozen floor places of a frame (furniture and posters are person-like too);
+motion over the first frames (0.1 s) singles him out, and a person who barely moves still
+passes at ``min_motion = 0.03``. A person who stands perfectly still during the bootstrap is
+not found by this cue; he is learnt into the background, found when he moves, and the
+place he reveals is recognised as a ghost by the background's border test
+(:func:`~.background.ghost_components`).
 
 OpenCV's HOG people detector (``cv2.HOGDescriptor``) would be the obvious single-view cue,
 but OpenCV 5 moved it out of the main package (``opencv-python-headless`` 5.0 has no
@@ -327,9 +330,8 @@ class PeopleCue:
         The greedy choice explains away a chosen place's whole region (a 1 m wide body, to
         keep the places on its lines of sight out); in a camera where two people stand side
         by side in the image, that region also takes the second person's near half, whose
-        smallest moving fraction over the cameras then peaks off him (0.43 m on the first
-        frames of ``mbtrack synth clear-room --seed 2``, 0.09 m refined;
-        ``docs/diag/cue_places.py``)."""
+        smallest moving fraction over the cameras then peaks off him (by up to about
+        0.4 m; the refinement brings it back to the grid's spacing)."""
         cfg = self.config
         if cfg.refine_radius <= 0:
             return xy[chosen]

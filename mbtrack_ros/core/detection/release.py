@@ -25,12 +25,12 @@ unsupported time.
 ``RoomCalibration.exits``) a track whose estimate is inside one and more than
 ``exit_margin`` from the floor is released at once (:meth:`Releaser.exited`): its person
 walked out. Without exits a person who leaves holds the track at the floor edge while
-they stay visible through the open door, and the timeout only starts after that
-(docs/detection.md, "Exits"). The estimate of a person who stands at the door can be
-pushed into the exit too; ``AutoDetection`` then looks for that person on the floor
-beside it before it lets the track go (``AutoDetectionConfig.exit_rescue``).
+they stay visible through the open door, and the timeout only starts after that. The
+estimate of a person who stands at the door can be pushed into the exit too;
+``AutoDetection`` then looks for that person on the floor beside it before it lets the
+track go (``AutoDetectionConfig.exit_rescue``).
 
-**Doorways** (h-rel). Seen from a camera facing the door, a track standing in the doorway
+**Doorways**. Seen from a camera facing the door, a track standing in the doorway
 lies in front of the corridor: the person who just walked out is still foreground behind
 it, and so is a track left on the floor edge, which keeps it "supported" for seconds
 after its person has gone (the ceiling camera's blob of such a track reaches into the
@@ -41,7 +41,7 @@ support (003 §4.3: the release follows the foreground that the person explains)
 of them sees the track the ordinary rule applies. A track they see and do not cover ends
 after ``doorway_timeout``; one they cover keeps the ordinary ``timeout`` even when it
 counts as unsupported for another reason (spare, low existence): in a crowd at the door
-such a track usually still stands on its person (h-rel2, docs/detection.md).
+such a track usually still stands on its person.
 """
 from __future__ import annotations
 
@@ -228,20 +228,13 @@ class ReleaseConfig:
             that overlaps another one is spare and counts as unsupported (module
             docstring, :func:`spare_tracks`); 0 disables. ``spare_radius``: only a track
             with another track this close on the floor (metres) can be spare, when the
-            caller gives the states. Measured on the tracks of main 74aa73e on cr1 (door
-            crowd), tracker seed 0: 5th percentile / median 0.27 / 0.66 for tracks matched
-            to a person, 0.06 / 0.26 for unmatched (false positive) ones. 0.25 (not 0.18)
-            had the better totals on six clear-room recordings x two tracker seeds
-            (docs/detection.md, "Spare tracks and release").
+            caller gives the states. Dimensionless (a foreground fraction): tracks on a
+            person typically reach 0.3-0.7, tracks on nobody stay below about 0.25.
         exit_margin: metres from the floor rectangle beyond which a track inside one of the
             calibration's exits is released at once (module docstring); people standing in
-            a doorway stay within it. 0.6 (0.3 m past the synth's door, 0.3 earlier): a
-            track whose velocity follows its person
-            (``MotionConfig.orientation_follows_velocity`` off) overshoots into the exit
-            when its person stops in the doorway, and at 0.3 the rule released 67 tracks
-            of people still in the room on thirty clear-room runs (17 with the coupled
-            motion); at 0.6 the switches were 61 against 95 (docs/detection.md,
-            "Orientation apart from velocity").
+            a doorway stay within it. It must exceed the overshoot of a track whose person
+            stops in the doorway (a track keeps some of its velocity for a few frames);
+            smaller releases people still in the room, larger keeps leavers longer.
         doorway_band: metres in front of an exit's border (and inside the exit) within
             which a track is supported only by the cameras on the door's wall (module
             docstring, "Doorways"); 0 disables. ``doorway_timeout``: seconds after which
@@ -250,11 +243,8 @@ class ReleaseConfig:
         recover_time: seconds a track that was spare during its unsupported time must be
             supported in a row before that time starts again from zero (one supported
             frame does for others; 0: for all). A track that lost its person in a crowd is
-            spare most of the time with a supported frame or two in between (crnc2,
-            tracker seed 69: spare on 28 of the 32 frames after it left the doorway, at
-            most 13 in a row), which kept it alive to take over somebody else
-            (docs/detection.md, "A leaver's track back from the doorway; a supported frame
-            or two does not save a spare track").
+            spare most of the time with a supported frame or two in between; without this
+            those frames would keep it alive until it takes over somebody else.
     """
 
     timeout: float = 1.0

@@ -1,0 +1,289 @@
+"""Parameters of the automatic detection pipeline (:class:`AutoDetectionConfig`) and what it
+hands the tracker (:class:`Birth`)."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from mbtrack_ros.core.appearance import PersonModel
+from mbtrack_ros.core.detection import DetectionError
+from mbtrack_ros.core.detection.acquisition import AcquisitionConfig
+from mbtrack_ros.core.detection.adaptation import AdaptationConfig
+from mbtrack_ros.core.detection.background import BackgroundConfig
+from mbtrack_ros.core.detection.detector import Detection, DetectorConfig
+from mbtrack_ros.core.detection.release import ReleaseConfig
+from mbtrack_ros.core.existence import AuxiliaryConfig
+
+__all__ = ['AutoDetectionConfig', 'Birth']
+
+
+@dataclass(frozen=True)
+class AutoDetectionConfig:
+    """All parameters of the automatic detection pipeline.
+
+    Units: metres, seconds, nats (natural-log likelihood ratios) per side camera,
+    appearance distances in [0, 1] (``appearance.model_distance``), supports and coverages
+    as foreground fractions in [0, 1].
+
+    Attributes:
+        background, detector, release, acquisition, existence: per-stage parameters.
+        adaptation: the slow appearance-model adaptation of confirmed tracks
+            (:mod:`~mbtrack_ros.core.detection.adaptation`; ``rate`` 0 is off).
+        sigma: appearance likelihood width (003 Eq. 3), as the tracker's.
+        clutter_distance: Bhattacharyya distance whose likelihood is the "not visible"
+            clutter likelihood ``p_0`` (001 Eq. 23).
+        visibility_particles: posterior particles used per track for ``p_1`` (001 Eq. 18).
+        side_weight: weight in [0, 1] of the side cameras' evidence in the existence update
+            when a top-down camera exists.
+        report_hidden: also report tracks whose existence is below the report threshold.
+        relocate_radius: metres; a confirmed detection this close to a current track is
+            compared with the track's appearance model before it may start a new track.
+        relocate_margin: nats per side camera; mean log-likelihood gain (003 Eq. 3 under
+            the track's model) of the detection over the track's estimate above which the
+            detection is the track's own person and the track is moved there instead of a
+            birth (:meth:`AutoDetection._identify`); negative means "about as well".
+            Lower moves tracks more readily (fewer duplicate births, more moves onto
+            another person).
+        weak_relocate_margin: nats per side camera; the same margin for a detection scoring
+            below ``beside_threshold`` (the larger of the two applies; ``inf``: such a
+            detection moves no track by the gain). Weak detections beside a track are often
+            a neighbour's fringe, so they need a clear gain.
+        move_support: a track is moved by the gain only while the detection would leave it
+            spare: its exclusive support (:func:`~.release.spare_tracks`) with the
+            detection as one more track must be below this fraction. A track that keeps
+            foreground of its own beside the detection stands on a person of its own and
+            the detection is somebody else. Above 1: no track is kept from a move.
+        move_distance: appearance distance; a detection the gain would move a track to
+            although the track's model explains it worse than the track's own estimate
+            (gain in ``(relocate_margin, 0]``) must look like the track: distance at most
+            this. 1 lets the gain alone decide.
+        look_alike_slack: nats per side camera below ``relocate_margin`` down to which the
+            gain may still move a look-alike track (distance at most ``move_distance``)
+            for a strong detection (``beside_threshold``) that would leave the track less
+            than ``move_support``; 0 is off. Catches tracks left behind where their person
+            turned.
+        relocate_interval: seconds after a track was born or moved during which a detection
+            does not move it again but is dropped (a young model explains several people
+            in a group about equally well: the track would hop between them).
+        move_again_gain: nats per side camera; within ``relocate_interval`` a detection
+            whose gain for that track is above this moves it again (once) instead of
+            being dropped. ``inf``: always dropped.
+        relocate_hidden: a confirmed detection that would start a new track within
+            ``relocate_radius`` of a track that is not reported (existence below the report
+            threshold: it lost its person) moves that track instead, whatever the gain
+            (the nearest such track not placed within ``relocate_interval``).
+        reuse_time, reuse_radius: seconds, metres; a released track is *lost* for
+            ``reuse_time``: a new track born within ``reuse_radius`` of where it was
+            released takes its id (its person re-found) when the two look alike
+            (``reuse_distance``). The id ends (:meth:`finished`) only when that time has
+            passed unused, so an id never comes back after it ended. 0 ends released tracks
+            at once. The time should cover a person standing still after being lost (a few
+            seconds); the radius how far a lost track may lag its person.
+        reuse_distance: largest appearance distance between a released track's model and a
+            detection's for the detection to take the released id; 1 accepts any.
+        reuse_in_entry_zones: a track released inside an entry zone is lost for
+            ``reuse_time`` like any other; False: its id ends at once (its person is taken
+            to have left the room).
+        reuse_before_moving: before a detection moves a track (by the gain or as a hidden
+            track), a lost track within ``reuse_radius`` whose model is nearer the
+            detection's than the moved track's model takes its id back instead, and the
+            track stays where it is. Not when that track was placed within
+            ``relocate_interval`` (its move would not happen).
+        reuse_hidden: a detection that would start a new track moves instead the nearest
+            hidden track (not reported, not placed within ``relocate_interval``) within
+            ``reuse_radius`` whose model is within ``reuse_distance`` of the detection's:
+            a hidden track is given back its person like a lost one.
+        reuse_doubtful: existence probability below which a reported track counts as hidden
+            for ``reuse_hidden`` (logged "move N (doubtful, far)"); 0 disables. With
+            ``report_hidden`` every hidden track is reported, so this level is what lets
+            ``reuse_hidden`` take them.
+        duplicate_by_reporting: of two tracks on one person (release ``merge_radius``,
+            ``merge_time``) release the one reported without a break for the shorter time
+            (born, moved, hidden or inside an exit later) instead of the younger one: a
+            track that was in an exit may have lost its person there.
+        duplicate_margin: nats per side camera; of two such tracks keep the one whose
+            appearance model explains the image where they are better (003 Eq. 3, both
+            models at the pair's midpoint) by more than this
+            (:meth:`AutoDetection._duplicate_judge`); ``inf`` disables. Large enough that
+            a model acquired moments ago (which fits its own view best) does not win alone.
+        duplicate_own_support: of such a pair, the track to be released is kept while its
+            exclusive support (:meth:`Releaser.exclusive_support`) is at least the
+            release's ``spare_support``: two people passing close each explain foreground
+            the other does not.
+        reach_radius, reach_directions: metres, count; a track whose coverage evidence for
+            existence is negative at its mean is also judged at ``reach_directions``
+            places on each of two rings around it (radius half and all of
+            ``reach_radius``), on the foreground no other track's silhouette covers, and
+            the best place counts: a track that fell behind a person who started walking
+            stays reported while the person is within the detector's ``exclusion_radius``
+            (where the detector does not look for them); 0 disables.
+        reach_move: a track whose reach counted a place with positive coverage evidence
+            is also restarted there (same id and velocity, :attr:`AutoDetection.reach_moves`;
+            the tracker moves it after the frame's output), so that it catches up with its
+            person instead of staying behind.
+        catch_up: nats; a track older than ``reach_age`` whose coverage evidence at its
+            mean is not negative is still restarted at the best place of its reach when the
+            free foreground there gives coverage evidence higher by more than this than at
+            its mean (a track left behind a person keeps part of their foreground). Not
+            where the reach touches an entry zone (a newcomer's foreground is there).
+            ``inf`` disables (the default).
+        reach_age: seconds a track must have existed before it has a reach: a false birth
+            (a shadow, a ghost, the fringe of a person) would keep itself alive on what is
+            near it; false births mostly die within a few seconds.
+        exit_rescue: coverage fraction; a track that the exit rule would release is instead
+            moved onto the floor, same id, when a place within ``reach_radius`` of its
+            estimate brought onto the floor shows a free person with mean coverage at least
+            this in the cameras that watch the place (the doorway witnesses, elsewhere the
+            corner cameras). At most once per ``relocate_interval`` per track. 0 disables
+            (the default).
+        beside_support: a confirmed detection that would start a new track next to a
+            reported track (within ``beside_radius``, not spare, not moved within
+            ``relocate_interval``) moves that track there instead (same id) when, with the
+            detection as one more track, the track's exclusive support falls below this
+            fraction from above: the track had fallen behind the detection's person and
+            lived on their fringe (:meth:`AutoDetection._lagging_beside`); 0 disables (the
+            default).
+        beside_radius: metres; the track ``beside_support`` moves must be this close to
+            the detection.
+        beside_threshold: smallest detection score (the detector's combined log response)
+            for a birth within ``relocate_radius`` of a track that the detection did not
+            move: weak detections beside a track are mostly the fringe of that track's
+            person or a gap between people; 0 keeps the detector's threshold alone.
+        young_look_alike: a confirmed detection that would start a new track within
+            ``relocate_radius`` of a track placed within ``relocate_interval`` whose model
+            looks like the detection's (``move_distance``) is dropped: a young track lags
+            its person for a few frames, and the detection beside it is that person.
+        track_coverage: ``k`` of a foreground-coverage term ``k f_c`` per camera in the
+            tracking filter's particle weights (:meth:`MeasurementModel.set_foreground`);
+            0: colour alone. Larger holds tracks on the foreground more firmly (better
+            MOTP, fewer switches) at the cost of the colour evidence's say.
+        birth_exit_depth: metres; a confirmed detection deeper than this inside an exit
+            starts or moves no track (its person is in the doorway or beyond).
+    """
+
+    background: BackgroundConfig = field(default_factory=BackgroundConfig)
+    detector: DetectorConfig = field(default_factory=DetectorConfig)
+    release: ReleaseConfig = field(default_factory=ReleaseConfig)
+    acquisition: AcquisitionConfig = field(default_factory=AcquisitionConfig)
+    existence: AuxiliaryConfig = field(default_factory=AuxiliaryConfig)
+    adaptation: AdaptationConfig = field(default_factory=AdaptationConfig)
+    sigma: float = 0.12
+    clutter_distance: float = 0.5
+    visibility_particles: int = 6
+    side_weight: float = 0.3
+    report_hidden: bool = False
+    relocate_radius: float = 1.0
+    relocate_margin: float = -3.0
+    weak_relocate_margin: float = 1.5
+    move_support: float = 0.3
+    move_distance: float = 0.65
+    look_alike_slack: float = 3.0
+    relocate_interval: float = 2.0
+    move_again_gain: float = 0.0
+    relocate_hidden: bool = True
+    reuse_time: float = 3.0
+    reuse_radius: float = 1.5
+    reuse_distance: float = 0.55
+    reuse_in_entry_zones: bool = True
+    reuse_before_moving: bool = True
+    reuse_hidden: bool = True
+    reuse_doubtful: float = 0.9
+    duplicate_by_reporting: bool = True
+    duplicate_margin: float = 8.0
+    duplicate_own_support: bool = True
+    reach_radius: float = 0.5
+    reach_directions: int = 8
+    reach_move: bool = True
+    reach_age: float = 4.0
+    catch_up: float = float('inf')
+    exit_rescue: float = 0.0
+    beside_support: float = 0.0
+    beside_radius: float = 0.6
+    beside_threshold: float = 3.0
+    young_look_alike: bool = True
+    birth_exit_depth: float = 0.15
+    track_coverage: float = 2.0
+
+    def looks_alike(self, unlike: float) -> bool:
+        """Whether a track whose model is ``unlike`` (appearance distance) from a
+        detection's looks like it (``move_distance``)."""
+        return unlike <= self.move_distance
+
+    def gain_gate(self, score: float, gain: float, unlike: float) -> str | None:
+        """Whether the appearance gain (003 Eq. 3, nats per side camera) lets a detection
+        of ``score`` move a track whose model is ``unlike`` (appearance distance) from the
+        detection's: 'move'; 'unlike' when the gain is in the doubtful band (margin, 0]
+        and the track does not look like the detection (``move_distance`` keeps it back);
+        None when the gain is too low. The margin is ``relocate_margin``, the stricter
+        ``weak_relocate_margin`` below ``beside_threshold``; a strong detection may move
+        a look-alike ``look_alike_slack`` below it (:meth:`AutoDetection._identify`)."""
+        strong = score >= self.beside_threshold
+        margin = self.relocate_margin if strong \
+            else max(self.relocate_margin, self.weak_relocate_margin)
+        alike_margin = self.relocate_margin - self.look_alike_slack if strong else margin
+        looks_alike = self.looks_alike(unlike)
+        if margin < gain <= 0.0 and not looks_alike:
+            return 'unlike'
+        return 'move' if gain > margin or (looks_alike and gain > alike_margin) else None
+
+    def __post_init__(self) -> None:
+        if not self.relocate_radius >= 0 or not np.isfinite(self.relocate_margin):
+            raise DetectionError('relocate_radius must be >= 0 and relocate_margin finite')
+        if np.isnan(self.weak_relocate_margin) or self.weak_relocate_margin == -np.inf:
+            raise DetectionError(f'weak_relocate_margin must be a number or inf, got '
+                                 f'{self.weak_relocate_margin}')
+        if np.isnan(self.move_again_gain) or self.move_again_gain == -np.inf:
+            raise DetectionError(f'move_again_gain must be a number or inf, got '
+                                 f'{self.move_again_gain}')
+        if not (np.isfinite(self.look_alike_slack) and self.look_alike_slack >= 0):
+            raise DetectionError(f'look_alike_slack must be a finite number >= 0, got '
+                                 f'{self.look_alike_slack}')
+        if not 0.0 <= self.move_distance <= 1.0:
+            raise DetectionError(f'move_distance must be in [0, 1], got {self.move_distance}')
+        if not self.move_support >= 0:
+            raise DetectionError(f'move_support must be >= 0, got {self.move_support}')
+        if not self.duplicate_margin >= 0:
+            raise DetectionError(f'duplicate_margin must be >= 0, got {self.duplicate_margin}')
+        if not (self.reuse_time >= 0 and self.reuse_radius >= 0
+                and 0 <= self.reuse_distance <= 1):
+            raise DetectionError('reuse_time and reuse_radius must be >= 0, reuse_distance '
+                                 'in [0, 1]')
+        if not 0.0 <= self.reuse_doubtful <= 1.0:
+            raise DetectionError(f'reuse_doubtful must be in [0, 1], got {self.reuse_doubtful}')
+        if not self.sigma > 0 or not self.clutter_distance > 0:
+            raise DetectionError('sigma and clutter_distance must be > 0')
+        if not self.beside_support >= 0:
+            raise DetectionError('beside_support must be >= 0')
+        if not (np.isfinite(self.track_coverage) and self.track_coverage >= 0):
+            raise DetectionError(f'track_coverage must be a finite number >= 0, got '
+                                 f'{self.track_coverage}')
+        if not self.beside_radius >= 0:
+            raise DetectionError(f'beside_radius must be >= 0, got {self.beside_radius}')
+        if not (np.isfinite(self.beside_threshold) and self.beside_threshold >= 0):
+            raise DetectionError(f'beside_threshold must be a finite number >= 0, got '
+                                 f'{self.beside_threshold}')
+        if self.visibility_particles < 1:
+            raise DetectionError('visibility_particles must be >= 1')
+        if not (self.catch_up >= 0):
+            raise DetectionError(f'catch_up must be >= 0 (inf: off), got {self.catch_up}')
+        if not (self.reach_radius >= 0 and self.reach_directions >= 1
+                and self.reach_age >= 0):
+            raise DetectionError('reach_radius and reach_age must be >= 0 and '
+                                 'reach_directions >= 1')
+        if not 0.0 <= self.exit_rescue <= 1.0:
+            raise DetectionError(f'exit_rescue must be in [0, 1], got {self.exit_rescue}')
+        if not (np.isfinite(self.birth_exit_depth) and self.birth_exit_depth >= 0):
+            raise DetectionError(f'birth_exit_depth must be a finite number >= 0, got '
+                                 f'{self.birth_exit_depth}')
+
+
+@dataclass
+class Birth:
+    """A new person to add to the tracker, or (``track_id`` set) a current track that
+    drifted off its person and must be restarted at the detection, keeping its id."""
+
+    model: PersonModel
+    state: np.ndarray
+    detection: Detection
+    track_id: int | None = None

@@ -1,0 +1,344 @@
+"""Track deletion evidence of the automatic detection: existence, duplicates, exits.
+
+:class:`TrackDeleter` computes, per frame, each track's evidence for the existence and
+visibility processes (001 §3: appearance likelihood of a few posterior particles against a
+clutter likelihood, coverage of the rendered silhouette, also a little around the track:
+its reach), judges two tracks on one person (which one the image supports), rescues a
+track the exit rule would release while its person still stands at the door, and keeps
+the bookkeeping of reported and released ("lost") tracks. It is a part of
+:class:`~mbtrack_ros.core.detection.manager.AutoDetection` and works on its state.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+
+import numpy as np
+
+from mbtrack_ros.core import _kernels
+from mbtrack_ros.core.appearance import PersonModel, key_view_loglik, key_view_stack, view_weights
+from mbtrack_ros.core.detection.detector import FrameEvidence, is_ceiling
+from mbtrack_ros.core.detection.features import span_counts
+from mbtrack_ros.core.detection.release import blob_coverage, paint_blobs
+from mbtrack_ros.core.existence import TrackAuxiliary, coverage_log_ratio, predictive_loglik
+from mbtrack_ros.core.resampling import systematic_indices
+from mbtrack_ros.core.shape import BodyShape, rasterize
+from mbtrack_ros.core.state import VX, VY, X, Y, TrackEstimate
+
+__all__ = ['TrackDeleter']
+
+_MID = np.array([0.5])     # offset of the systematic selection of visibility particles
+
+
+class TrackDeleter:
+    """The deletion part of :class:`~.manager.AutoDetection` (see the module)."""
+
+    def _note_reporting(self, stamp_ns: int, tracks: Sequence[TrackEstimate],
+                        means: np.ndarray, ended: Sequence[int],
+                        models: Mapping[int, PersonModel]) -> None:
+        """After a frame's release: where the released tracks were (``reuse_time``) and
+        the tracks not reported now or inside an exit (reported without a break since,
+        for the duplicate rule)."""
+        self._remember_released(stamp_ns, tracks, means, ended, models)
+        depth = self.calibration.exit_depth(means[:, [X, Y]]) if len(tracks) \
+            else np.zeros(0)
+        for k, t in enumerate(tracks):
+            if t.track_id not in ended and (not self.reported(t.track_id)
+                                            or depth[k] > 0.0):
+                self._shown_since[t.track_id] = int(stamp_ns)
+
+    def _remember_released(self, stamp_ns: int, tracks: Sequence[TrackEstimate],
+                           means: np.ndarray, ended: Sequence[int],
+                           models: Mapping[int, PersonModel]) -> None:
+        """Keep where and when the tracks released this frame were, for ``reuse_time``
+        (not those released in an entry zone unless ``reuse_in_entry_zones``)."""
+        horizon = int(self.config.reuse_time * 1e9)
+        expired = [t for t, v in self._released.items() if int(stamp_ns) - v[0] >= horizon]
+        for t in expired:
+            del self._released[t]
+        self._lost_ended.extend(expired)
+        if horizon <= 0:
+            return
+        for k, t in enumerate(tracks):
+            if t.track_id not in ended:
+                continue
+            # without reuse_in_entry_zones a track released in front of the door is its
+            # person's exit: the id ends at once
+            if not self.config.reuse_in_entry_zones \
+                    and self.calibration.in_entry_zone(means[k, [X, Y]])[0]:
+                continue
+            self._released[int(t.track_id)] = (int(stamp_ns), means[k, [X, Y]],
+                                               models.get(t.track_id))
+
+    def _duplicate_judge(self, tracks: Sequence[TrackEstimate], means: np.ndarray,
+                         models: Mapping[int, PersonModel],
+                         evidence: Mapping[str, FrameEvidence]
+                         ) -> Callable[[int, int], int | None]:
+        """The ``prefer`` of :meth:`Releaser.duplicates`: of two tracks on one place, the
+        one whose model explains the image there better by ``duplicate_margin`` nats per
+        side camera (003 Eq. 3, each model at the pair's midpoint with its own orientation,
+        cameras where both silhouettes are at least half inside the image), or None. Each
+        call is kept in ``duplicate_checks`` with both tracks' exclusive support."""
+        index = {t.track_id: k for k, t in enumerate(tracks)}
+
+        def prefer(a: int, b: int) -> int | None:
+            ka, kb = index[a], index[b]
+            ma, mb = models.get(a), models.get(b)
+            fits = []
+            if ma is not None and mb is not None and ma.view_angles.size \
+                    and mb.view_angles.size:
+                states = np.stack([means[ka], means[kb]]).astype(np.float64)
+                states[:, [X, Y]] = 0.5 * (means[ka, [X, Y]] + means[kb, [X, Y]])
+                fits = self._pair_logliks(states, (ma, mb), evidence)
+            gain = float(np.mean([f[0] - f[1] for f in fits])) if fits else 0.0
+            keep = (a if gain > 0 else b) if abs(gain) > self.config.duplicate_margin \
+                else None
+            own = self.releaser.exclusive_support()     # this frame's, all tracks present
+            support = [round(float(own[k]), 3) if k < len(own) and np.isfinite(own[k])
+                       else None for k in (ka, kb)]
+            self.duplicate_checks.append({'ids': (int(a), int(b)), 'gain': round(gain, 3),
+                                          'cameras': len(fits), 'keep': keep,
+                                          'support': support})
+            return keep
+        return prefer
+
+    def _rescue_exits(self, stamp_ns: int, tracks: Sequence[TrackEstimate],
+                      exited: list[int], evidence: Mapping[str, FrameEvidence],
+                      sils: Mapping[str, object], means: np.ndarray,
+                      shapes: Sequence[BodyShape], tops: np.ndarray) -> list[int]:
+        """Of the tracks the exit rule would release, those to release (returned); the
+        others are moved back onto a free person on the floor (``exit_rescue``).
+
+        An estimate pushed into the exit while its person stands at the door leaves the
+        person untracked on the floor right beside it: the track's reach
+        (:meth:`_reach_coverage`, centred on the estimate brought onto the floor) looks for
+        them there. A place counts when the cameras on
+        the door's wall, which see the doorway but not the corridor, find it covered by
+        foreground that no other track explains (mean coverage at least ``exit_rescue``);
+        of such places the one best covered in all cameras is taken (the door-wall cameras
+        look along the wall and place a person poorly along it). The track restarts there
+        with zero velocity (``reach_moves``, same id) and its estimate of this frame is
+        moved there too; ``exit_checks`` keeps each decision."""
+        cfg = self.config
+        x0, y0, x1, y1 = self.calibration.floor
+        index = {t.track_id: k for k, t in enumerate(tracks)}
+        out = []
+        for tid in exited:
+            k = index[tid]
+            last = self._rescued.get(tid)
+            centre = means.copy()
+            centre[k, X] = np.clip(means[k, X], x0, x1)
+            centre[k, Y] = np.clip(means[k, Y], y0, y1)
+            places, rings = self._reach_coverage(k, evidence, sils, centre, shapes, tops)
+            on_floor = (places[:, 0] >= x0) & (places[:, 0] <= x1) \
+                & (places[:, 1] >= y0) & (places[:, 1] <= y1)
+            places, rings = places[on_floor], [r for r, f in zip(rings, on_floor) if f]
+            witnesses = self.calibration.doorway_witnesses(places, cfg.release.doorway_band)
+            # the door-wall cameras decide whether someone is there (they cannot see the
+            # corridor) but look along the wall; where, all cameras together tell
+            best, where, fit = 0.0, None, -1.0
+            for i, (place, ring) in enumerate(zip(places, rings)):
+                cams = [n for n, w in witnesses.items() if w[i] and n in ring] \
+                    or [n for n in self.side if n in ring]
+                score = float(np.mean([ring[n] for n in cams])) if cams else 0.0
+                best = max(best, score)
+                overall = float(np.mean(list(ring.values())))
+                if score >= cfg.exit_rescue and overall > fit:
+                    where, fit = place, overall
+            rescue = where is not None and (
+                last is None or (int(stamp_ns) - last) / 1e9 >= cfg.relocate_interval)
+            self.exit_checks.append({'id': int(tid), 'coverage': round(best, 3),
+                                     'overall': round(fit, 3),
+                                     'place': None if where is None else
+                                     (float(where[0]), float(where[1])),
+                                     'rescued': bool(rescue)})
+            if not rescue:
+                out.append(tid)
+                continue
+            self._rescued[tid] = int(stamp_ns)
+            self.reach_moves[tid] = where
+            mean = tracks[k].mean.copy()
+            mean[[X, Y]] = where
+            mean[[VX, VY]] = 0.0
+            tracks[k].mean = mean
+        return out
+
+    def _reach_coverage(self, k: int, evidence: Mapping[str, FrameEvidence],
+                        sils: Mapping[str, object], means: np.ndarray,
+                        shapes: Sequence[BodyShape], tops: np.ndarray, *,
+                        centre: bool = False
+                        ) -> tuple[np.ndarray, list[dict[str, float]]]:
+        """The places (M, 2) of track k's reach (``reach_directions`` places on each of
+        the rings of radius ``reach_radius`` / 2 and ``reach_radius`` around its mean, but
+        none within the detector's ``exclusion_radius`` of another track) and per place:
+        camera -> coverage of its silhouette there (top-down cameras: the
+        release's blob, doubled as in :meth:`Releaser.support`), counting only foreground
+        that no other track's silhouette (blob) at its mean covers and that is not a
+        possible person of the bootstrap (the background's not-yet-known foreground), over
+        the whole area: a track beside a tracked person finds no support in that person,
+        a track that lost its person at the start no support in their old place. With
+        ``centre`` the track's mean itself comes first (whoever is near it), then those
+        places (``catch_up`` compares them with it)."""
+        cfg = self.config
+        if cfg.reach_radius <= 0:
+            return np.zeros((0, 2)), []
+        angle = np.tile(2.0 * np.pi * np.arange(cfg.reach_directions) / cfg.reach_directions,
+                        2)
+        radius = np.repeat([0.5 * cfg.reach_radius, cfg.reach_radius], cfg.reach_directions)
+        ring = np.repeat(means[k][None], len(angle), axis=0)
+        ring[:, X] += radius * np.cos(angle)
+        ring[:, Y] += radius * np.sin(angle)
+        others = np.delete(np.arange(len(means)), k)
+        if len(others) and cfg.detector.exclusion_radius > 0:
+            # another track's neighbourhood is its own (as for the detector)
+            gap = np.linalg.norm(ring[:, None, :2] - means[None, others, :2], axis=2)
+            ring = ring[gap.min(axis=1) > cfg.detector.exclusion_radius]
+        if centre:      # the mean itself first, whoever is near
+            ring = np.concatenate([means[k][None], ring])
+        m = len(ring)
+        if m == 0:
+            return np.zeros((0, 2)), []
+        out: list[dict[str, float]] = [{} for _ in range(m)]
+        for n, sil in sils.items():
+            if n not in evidence:
+                continue
+            cam = self.calibration.cameras[n]
+            # pixels that are not the track's support: other tracks', bootstrap ghosts
+            taken = self.background.model(n).possible_foreground_as_tested.copy()
+            if taken.shape != evidence[n].foreground.shape:
+                taken = np.zeros(evidence[n].foreground.shape, bool)
+            if is_ceiling(cam):
+                paint_blobs(taken, cam, means[others, :2], tops[others])
+                cov, _ = blob_coverage(cam, evidence[n].foreground & ~taken, ring[:, :2],
+                                       np.full(m, tops[k]))
+                cov = np.minimum(2.0 * cov, 1.0)
+            else:
+                paint = taken.view(np.uint8)
+                for j in others:
+                    _kernels.paint_spans(paint, sil.row, sil.x0, sil.x1, sil.part,
+                                         int(sil.offsets[j]), int(sil.offsets[j + 1]), 1,
+                                         False)
+                fg_free, _, area = span_counts(evidence[n].foreground,
+                                               rasterize(cam, ring, shapes[k]), unknown=taken)
+                cov = np.where(area > 0, fg_free / np.maximum(area, 1.0), 0.0)
+            for i in range(m):
+                out[i][n] = float(cov[i])
+        return ring[:, [X, Y]], out
+
+    def _ring_evidence(self, ring: Mapping[str, float], cov: Mapping[str, float],
+                       weights: Mapping[str, float]) -> tuple[dict[str, float], float]:
+        """A reach place's coverages on the track's cameras (those of ``cov``; 0 where the
+        place is not seen) and their existence evidence (:func:`coverage_log_ratio`)."""
+        on = {n: ring.get(n, 0.0) for n in cov}
+        return on, coverage_log_ratio(on, weights, self.config.existence.support_gain)
+
+    def _catch_up(self, t: TrackEstimate, k: int, cov: Mapping[str, float],
+                  weights: Mapping[str, float],
+                  reach: Callable[..., tuple[np.ndarray, list[dict[str, float]]]]) -> None:
+        """``AutoDetectionConfig.catch_up`` for supported track ``t`` (index ``k``;
+        ``cov``, ``weights``: its cameras' coverage and evidence weights): restart it at the
+        best place of its reach (``reach_moves``, logged in ``catch_ups``) when the free
+        foreground there gives positive coverage evidence, better by more than
+        ``catch_up`` than the free foreground at its mean. Not when the track or a place
+        of its reach lies in an entry zone (a door crowd)."""
+        if self.calibration.in_entry_zone(t.mean[[X, Y]])[0]:
+            return              # before the reach is computed: most door tracks stop here
+        places, rings = reach(k, centre=True)   # the mean first, then its reach
+        if len(places) < 2 or self.calibration.in_entry_zone(places[1:]).any():
+            return
+        free = [self._ring_evidence(r, cov, weights)[1] for r in rings]
+        j = 1 + int(np.argmax(free[1:]))
+        if free[j] > 0.0 and free[j] - free[0] > self.config.catch_up:
+            self.reach_moves[t.track_id] = places[j]
+            self.catch_ups.append({'id': int(t.track_id), 'xy': [float(v) for v in places[j]],
+                                   'gain': round(free[j] - free[0], 3)})
+
+    def _visibility_particles(self, tracks: Sequence[TrackEstimate],
+                              models: Mapping[int, PersonModel], shapes: Sequence[BodyShape]
+                              ) -> tuple[np.ndarray, np.ndarray, list[BodyShape]]:
+        """A few posterior particles (P, 6) of every track with a model (001 Eq. 18: particle
+        average), the index (P,) of their track and their shapes."""
+        cfg = self.config
+        rows, owner, part_shapes = [], [], []
+        for k, t in enumerate(tracks):
+            model = models.get(t.track_id)
+            if model is None or not getattr(model, 'view_angles', np.zeros(0)).size:
+                continue
+            if t.particles is not None and len(t.particles):
+                p = t.particles
+                w = t.weights if t.weights is not None else np.full(len(p), 1.0 / len(p))
+                # systematic selection at the weights' quantiles (no draw: a shared
+                # generator would tie every track's sample to the number of tracks)
+                idx = systematic_indices(w[None], np.array([w.sum()]), _MID,
+                                         min(cfg.visibility_particles, len(p)))[0]
+                rows.append(p[idx])
+            else:
+                rows.append(t.mean[None])
+            owner.extend([k] * len(rows[-1]))
+            part_shapes.extend([shapes[k]] * len(rows[-1]))
+        parts = np.concatenate(rows) if rows else np.zeros((0, 6))
+        return parts, np.asarray(owner, dtype=np.int64), part_shapes
+
+    def _auxiliary(self, dt: float, colour: Callable[[str], np.ndarray | None],
+                   tracks: Sequence[TrackEstimate],
+                   models: Mapping[int, PersonModel], parts: np.ndarray, owner_arr: np.ndarray,
+                   part_sils: Mapping[str, object], coverage: Mapping[str, np.ndarray],
+                   reach: Callable[[int], tuple[np.ndarray, list[dict[str, float]]]] | None
+                   = None) -> None:
+        """Visibility and existence of every track (001) from the appearance likelihood of
+        its particles ``parts`` (``owner_arr``: their track) rasterised in ``part_sils``;
+        ``colour(camera)`` gives the frame's colour bins of a side camera; ``reach(k)`` the
+        coverages of track k's reach ring (:meth:`_reach_coverage`)."""
+        cfg = self.config
+        hidden = -cfg.clutter_distance ** 2 / (2.0 * cfg.sigma ** 2)    # 001 Eq. 23
+        has_particles = len(parts) > 0
+        loglik: dict[str, np.ndarray] = {}
+        if has_particles:
+            cams = [n for n in self.side if n in part_sils and colour(n) is not None]
+            # the tracks' key views, interpolated lazily per particle and camera at the
+            # relative viewing angles (003 Eq. 1-2), as in the filter's likelihood
+            with_model, target = np.unique(owner_arr, return_inverse=True)
+            refs = [models[tracks[k].track_id] for k in with_model]
+            key = key_view_stack(refs)
+            va, vb, wa = view_weights([self.calibration.cameras[n] for n in cams], parts,
+                                      target.ravel(), refs)
+            for c, n in enumerate(cams):
+                sil = part_sils[n]
+                ll = key_view_loglik(colour(n), sil, key, target.ravel(), va[c], vb[c], wa[c],
+                                     sigma=cfg.sigma)
+                loglik[n] = np.where(sil.area > 0, ll, -np.inf)
+        for k, t in enumerate(tracks):
+            aux = self.aux.setdefault(t.track_id, TrackAuxiliary(cfg.existence))
+            vis: dict[str, float] = {}
+            hid: dict[str, float] = {}
+            if has_particles:
+                sel = owner_arr == k
+                if sel.any():
+                    for n, ll in loglik.items():
+                        if np.isfinite(ll[sel]).any():
+                            vis[n] = predictive_loglik(ll[sel])              # 001 Eq. 18
+                            hid[n] = hidden
+            cov = {n: float(c[k]) for n, c in coverage.items() if np.isfinite(c[k])}
+            # evidence weights: w* of the tracking cameras (top-down cameras are not used by
+            # the filter and weigh 1); with a top-down camera, which decides the release,
+            # the side cameras' support counts less (their silhouettes are more sensitive
+            # to position errors and occlusion)
+            side_w = cfg.side_weight if self.ceiling else 1.0
+            weights = {n: (float(t.visible_fraction.get(n, 1.0)) * side_w
+                           if n in self.side else 1.0) for n in set(cov) | set(vis)}
+            best = (coverage_log_ratio(cov, weights, cfg.existence.support_gain)
+                    if reach is not None and cov else 0.0)
+            if best < 0.0:
+                # the track's reach: its best place counts (AutoDetectionConfig.reach_radius)
+                places, rings = reach(k)
+                for place, ring in zip(places, rings):
+                    ring, evidence = self._ring_evidence(ring, cov, weights)
+                    if evidence > best:
+                        cov, best = ring, evidence
+                        if cfg.reach_move and evidence > 0.0:
+                            self.reach_moves[t.track_id] = place
+            elif cfg.reach_move and np.isfinite(cfg.catch_up) and cov and reach is not None:
+                self._catch_up(t, k, cov, weights, reach)
+            aux.update(dt, loglik_visible=vis, loglik_hidden=hid, coverage=cov,
+                       visible_fraction=weights)
+            t.visibility = dict(aux.visibility)
+            t.existence = float(aux.existence)
