@@ -81,8 +81,8 @@ class Benchmark:
 
 # ---------------------------------------------------------------------------- helpers
 
-def _cli(argv: Sequence[str]) -> int:
-    """Run an ``mbtrack`` subcommand in this process, its printout swallowed."""
+def _cli(argv: Sequence[str]) -> str:
+    """Run an ``mbtrack`` subcommand in this process; its printout, swallowed, is returned."""
     from mbtrack_ros.cli import main
 
     sink = io.StringIO()
@@ -91,7 +91,7 @@ def _cli(argv: Sequence[str]) -> int:
     if code != 0:
         tail = sink.getvalue().strip().splitlines()[-1:] or ['(no output)']
         raise RuntimeError(f'mbtrack {" ".join(map(str, argv[:2]))} failed: {tail[0]}')
-    return code
+    return sink.getvalue()
 
 
 def _render(workdir: Path, preset: str, seed: int, frames: int | None,
@@ -453,6 +453,156 @@ def _real_report(results: list[dict], out: Path) -> Report:
     return Report('\n'.join(lines), ('real_clip.png',))
 
 
+# ------------------------------------------------------------------ room calibration
+
+_CAL_BOARD = 'charuco:5:4:0.25:0.19:DICT_4X4_50'
+_CAL_ROOM = ['--floor', '0.3,0.3,5.7,4.7', '--entry-zone', '4.0,4.1,5.3,5.0',
+             '--exit', '4.2,4.7,5.1,6.2']
+# issue 52's acceptance bounds: (rotation deg, centre m) per resolution; focal length 0.5 %
+_CAL_BOUNDS = {(640, 480): (0.6, 0.04), (1280, 720): (0.2, 0.01)}
+_CAL_FOCAL_BOUND = 0.005
+_CAL_MOTA_BOUND = 0.01
+
+
+def _calibration_jobs(quick: bool) -> list[Job]:
+    if quick:
+        return [Job('calibration', 'r480', {'width': 480, 'height': 360, 'views': 9,
+                                            'camera_height': 2.5, 'cameras': ['cam0'],
+                                            'supersample': 2, 'picture': True})]
+    return [Job('calibration', 'r640', {'width': 640, 'height': 480, 'views': 20,
+                                        'camera_height': 2.5, 'picture': True}),
+            Job('calibration', 'r1280', {'width': 1280, 'height': 720, 'views': 20,
+                                         'camera_height': 2.5}),
+            Job('calibration', 'replay640', {'width': 640, 'height': 480, 'views': 20,
+                                             'camera_height': None, 'seed': FRESH_SEED,
+                                             'frames': 300})]
+
+
+def _calibrate_synthetic(workdir: Path, p: dict) -> tuple[Path, Path, dict]:
+    """Render the board as ``mbtrack synth-board`` does (one placement centred in the room,
+    ``p['views']`` views in front of each camera; only ``p['cameras']`` when given), then
+    ``mbtrack calibrate intrinsics`` and ``extrinsics`` on the pictures: (true calibration,
+    recovered calibration, per-camera RMS of the extrinsics in px)."""
+    from mbtrack_ros.calibration.board import BoardPose, parse_board
+    from mbtrack_ros.synth.board import rig_calibration, write_board_images
+
+    boards = workdir / 'boards'
+    rig = rig_calibration(p['width'], p['height'], camera_height=p['camera_height'])
+    if p.get('cameras'):
+        rig = replace(rig, cameras={n: rig.cameras[n] for n in p['cameras']})
+    write_board_images(boards, rig, [(parse_board(_CAL_BOARD), BoardPose(2.375, 3.0, 0.0))],
+                       intrinsics_views=p['views'], supersample=p.get('supersample', 3))
+    names = rig.names
+    _cli(['calibrate', 'intrinsics', workdir / 'intrinsics.yaml', '--board', _CAL_BOARD,
+          *[f'{n}={boards / "intrinsics" / n}' for n in names]])
+    printout = _cli(['calibrate', 'extrinsics', workdir / 'calibration.yaml', '--intrinsics',
+                     workdir / 'intrinsics.yaml', '--board', _CAL_BOARD, '--board-pose',
+                     '2.375,3,0', *_CAL_ROOM,
+                     *[f'{n}={boards / "floor" / n}.png' for n in names]])
+    rms = {}
+    for line in printout.splitlines():   # "cam0: 12 corners (boards 1), RMS 0.19 px, ..."
+        head, _, rest = line.partition(': ')
+        if head in names and ' RMS ' in rest:
+            rms[head] = float(rest.split(' RMS ')[1].split()[0])
+    return boards / 'calibration.yaml', workdir / 'calibration.yaml', rms
+
+
+def _calibration_errors(truth_yaml: Path, recovered_yaml: Path) -> dict:
+    """Per camera: rotation error (deg), camera-centre error (m), focal-length error
+    (relative), as ``mbtrack calibrate compare`` prints them."""
+    from mbtrack_ros.core.camera import RoomCalibration
+
+    ref, cal = RoomCalibration.load(truth_yaml), RoomCalibration.load(recovered_yaml)
+    out = {}
+    for name in cal.names:
+        a, b = ref.cameras[name], cal.cameras[name]
+        cos = (np.trace(b.R @ a.R.T) - 1.0) / 2.0
+        out[name] = {'rotation_deg': float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))),
+                     'centre_m': float(np.linalg.norm(b.center - a.center)),
+                     'focal': float(b.focal / a.focal - 1.0)}
+    return out
+
+
+def _calibration_run(job: Job, workdir: Path) -> dict:
+    import yaml
+
+    p = job.params
+    truth, recovered, rms = _calibrate_synthetic(workdir, p)
+    intrinsics = yaml.safe_load((workdir / 'intrinsics.yaml').read_text(encoding='utf-8'))
+    errors = _calibration_errors(truth, recovered)
+    for cam in intrinsics['cameras']:
+        errors[cam['camera_name']]['intrinsics_rms_px'] = cam['rms_px']
+        errors[cam['camera_name']]['extrinsics_rms_px'] = rms.get(cam['camera_name'])
+    result = {'job': job.name, 'width': p['width'], 'height': p['height'],
+              'camera_height': p['camera_height'], 'cameras': errors}
+    if p.get('picture'):
+        names = sorted(errors)
+        _cli(['calibrate', 'check', recovered,
+              *[f'{n}={workdir / "boards" / "floor" / n}.png' for n in names],
+              '--out', workdir / 'check'])
+        result['picture'] = str(workdir / 'check')
+    if 'frames' in p:
+        result.update(_calibration_replays(workdir, p, recovered))
+    return result
+
+
+def _calibration_replays(workdir: Path, p: dict, recovered_yaml: Path) -> dict:
+    """MOTA of one ``clear-room`` recording replayed with its true calibration and with the
+    recovered cameras (scaled to the recording's image size; same floor, zones, exits)."""
+    import yaml
+
+    from mbtrack_ros.core.camera import RoomCalibration
+
+    rec = _render(workdir, 'clear-room', p['seed'], p['frames'])
+    true_cal = RoomCalibration.load(rec / 'calibration.yaml')
+    rendered = RoomCalibration.load(workdir / 'boards' / 'calibration.yaml')
+    found = RoomCalibration.load(recovered_yaml)
+    for name, cam in true_cal.cameras.items():   # the boards were seen by the same cameras
+        if np.linalg.norm(rendered.cameras[name].center - cam.center) > 1e-3:
+            raise RuntimeError(f'{name} of the board pictures is not the recording\'s camera')
+    cams = {n: found.cameras[n].scaled(c.width, c.height) for n, c in true_cal.cameras.items()}
+    config = workdir / 'recovered_room.yaml'
+    config.write_text(yaml.safe_dump(replace(true_cal, cameras=cams).to_dict(),
+                                     sort_keys=False), encoding='utf-8')
+    out = {'seed': p['seed'], 'frames': p['frames']}
+    for label, extra in (('true', []), ('recovered', ['--config', config])):
+        _cli(['replay', rec, '--out', workdir / label, '--seed', 0, *extra])
+        out[f'mota_{label}'] = _scores(workdir / label / 'tracks.csv',
+                                       rec / 'ground_truth.csv', label)['mota']
+    return out
+
+
+def _calibration_report(results: list[dict], out: Path) -> Report:
+    import shutil
+
+    lines = ['| images | corner cameras | worst rotation error | worst centre error | '
+             'worst focal length error | lens RMS | floor RMS | MOTA true / recovered |',
+             '| --- | --- |' + ' ---: |' * 6]
+    for r in results:
+        cams = r['cameras'].values()
+        worst = {k: max(abs(c[k]) for c in cams if c.get(k) is not None)
+                 for k in ('rotation_deg', 'centre_m', 'focal', 'intrinsics_rms_px',
+                           'extrinsics_rms_px')}
+        mota = (f'{_pct(r["mota_true"])} / {_pct(r["mota_recovered"])}' if 'mota_true' in r
+                else '-')
+        height = f'{r["camera_height"]:g} m' if r['camera_height'] else '2.6 m (replay)'
+        lines.append(f'| {r["width"]}x{r["height"]} | {height} | '
+                     f'{worst["rotation_deg"]:.3f} deg | {100 * worst["centre_m"]:.2f} cm | '
+                     f'{100 * worst["focal"]:.3f} % | {worst["intrinsics_rms_px"]:.3f} px | '
+                     f'{worst["extrinsics_rms_px"]:.2f} px | {mota} |')
+    (r640, c640), (r1280, c1280) = _CAL_BOUNDS[640, 480], _CAL_BOUNDS[1280, 720]
+    lines.append(f'| acceptance (issue 52): 640x480 / 1280x720 | | <= {r640:g} / {r1280:g} deg | '
+                 f'<= {100 * c640:g} / {100 * c1280:g} cm | <= {100 * _CAL_FOCAL_BOUND:g} % | | | '
+                 f'within {100 * _CAL_MOTA_BOUND:g} point |')
+    picture = next((r['picture'] for r in results if r.get('picture')), None)
+    if picture:
+        shutil.copyfile(Path(picture) / 'cam0.png', out / 'calibration_cam0.png')
+        shutil.copyfile(Path(picture) / 'top.png', out / 'calibration_top.png')
+    plots = tuple(n for n in ('calibration_cam0.png', 'calibration_top.png')
+                  if (out / n).exists())   # kept by --report-only
+    return Report('\n'.join(lines), plots)
+
+
 # ---------------------------------------------------------------------------- registry
 
 BENCHMARKS: list[Benchmark] = [
@@ -490,6 +640,22 @@ BENCHMARKS: list[Benchmark] = [
         'with automatic detection from the first frame (the room is never seen empty). The '
         'error is the floor distance from the nearest track to the reference hip midpoint.',
         _real_jobs, _real_run, _real_report),
+    Benchmark(
+        'calibration', 'Room calibration from rendered board pictures',
+        '`mbtrack synth-board` renders the 5 x 4 ChArUco board of 25 cm squares '
+        '(`charuco:5:4:0.25:0.19:DICT_4X4_50`) through the distorted cameras of the synthetic '
+        '6 x 5 m room: 20 views held in front of each camera and one placement lying in the '
+        'middle of the floor; `mbtrack calibrate intrinsics` and `mbtrack calibrate extrinsics '
+        '--board-pose 2.375,3,0` recover the calibration, compared with the true one as '
+        '`mbtrack calibrate compare` does (worst of the five cameras: four corner cameras and '
+        'a ceiling camera). Lens RMS: reprojection error of the intrinsics; floor RMS: of the '
+        'board corners on the floor. The replay row renders the board in the room of '
+        '`mbtrack synth clear-room` (corner cameras at 2.6 m), then tracks `clear-room --seed '
+        '200 --frames 300` (320x240) with its true calibration and with the recovered cameras. '
+        'The pictures are `mbtrack calibrate check` of the 640x480 room: the floor grid, '
+        'floor, entry zone, exit and the other cameras over cam0\'s picture, and the room '
+        'from above.',
+        _calibration_jobs, _calibration_run, _calibration_report),
     Benchmark(
         'speed', 'Speed of one tracker step',
         'Time of one tracker step (`mbtrack bench`\'s `run_config`: painted people on 4 '

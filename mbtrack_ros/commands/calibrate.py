@@ -26,7 +26,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     """Register ``calibrate`` and its actions."""
     parser = subparsers.add_parser(
         'calibrate', help='calibrate the cameras against the floor with a printed board',
-        description='Calibrate a room\'s cameras with a printed board (docs/calibrate.md): '
+        description='Calibrate a room\'s cameras with a printed board (docs/user_guide.md, '
+                    '"Calibrate your room"): '
                     'board -> print it; intrinsics -> each camera\'s lens; extrinsics -> the '
                     'cameras in the room frame of the board on the floor, plus the room; '
                     'check -> pictures to verify it by eye.')
