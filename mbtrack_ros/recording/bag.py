@@ -372,15 +372,22 @@ class RecordingReader:
         """Why the bag could only be read up to a damaged part, or None if it is intact."""
         return self._damaged
 
-    def _decode(self, msgtype: str, raw: bytes, camera: str = '') -> tuple[int, np.ndarray]:
+    def _decode(self, msgtype: str, raw: bytes,
+                camera: str = '') -> tuple[int, np.ndarray | None, str | None]:
+        """``(stamp_ns, image, error)`` of an image message: the image, or ``None`` and why
+        it cannot be decoded (the stamp of a readable header is kept either way, so that an
+        undecodable image takes its own place in its frame set)."""
         msg = typestore.deserialize_cdr(raw, msgtype)
         limit = dict(expected=self._sizes.get(camera), max_scale=self._max_scale)
-        if msgtype == IMAGE:
-            image = decode_raw(msg.encoding, msg.height, msg.width, msg.step, msg.data,
-                               **limit)
-        else:
-            image = decode_compressed(msg.format, msg.data, **limit)
-        return _stamp_ns(msg.header), image
+        try:
+            if msgtype == IMAGE:
+                image = decode_raw(msg.encoding, msg.height, msg.width, msg.step, msg.data,
+                                   **limit)
+            else:
+                image = decode_compressed(msg.format, msg.data, **limit)
+        except ImageConversionError as err:
+            return _stamp_ns(msg.header), None, str(err)
+        return _stamp_ns(msg.header), image, None
 
     def frames(self) -> Iterator[FrameSet]:
         """Yield frame sets in time order.
@@ -434,8 +441,7 @@ class RecordingReader:
             cam = self._by_topic[topic]
             read[topic] = read.get(topic, 0) + 1
             try:
-                stamp, image = self._decode(msgtype, raw, cam)
-                error = None
+                stamp, image, error = self._decode(msgtype, raw, cam)
             except ImageConversionError as err:
                 stamp, image, error = None, None, str(err)
             except Exception as err:  # undecodable CDR
