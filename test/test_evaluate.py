@@ -94,8 +94,8 @@ def test_list_names_every_benchmark(capsys):
     assert listed == [b.name for b in BENCHMARKS]
 
 
-def test_ghosts_are_tracks_matched_to_nobody_for_more_than_two_seconds():
-    from mbtrack_ros.commands.benchmarks import _ghosts
+def test_ghosts_and_people_found_at_the_start():
+    from mbtrack_ros.commands.benchmarks import _found_at_start, _ghosts
     from mbtrack_ros.evaluation import clear_mot
     from mbtrack_ros.recording.csvfiles import GroundTruthRow, TrackRow
 
@@ -106,6 +106,12 @@ def test_ghosts_are_tracks_matched_to_nobody_for_more_than_two_seconds():
     tracks += [TrackRow(f * step, f, 2, 4.0, 3.0) for f in range(5, 35)]   # 2.9 s, nobody
     tracks += [TrackRow(f * step, f, 3, 2.0, 4.0) for f in range(0, 15)]   # 1.4 s, nobody
     tracks += [TrackRow(f * step, f, 4, 1.0 + 0.2 * f, 1.0) for f in range(40)]  # passes by
+    # a second person, present from the start, whose track starts 2 s late
+    truth += [GroundTruthRow(f * step, f, 2, 5.0, 1.0, 1.7, False, ('cam0',))
+              for f in range(40)]
+    tracks += [TrackRow(f * step, f, 5, 5.0, 1.1) for f in range(20, 40)]
     result = clear_mot(tracks, truth)
     assert _ghosts(tracks, result, 2.0) == 1
     assert _ghosts(tracks, result, 1.0) == 2
+    assert _found_at_start(result, 1.0) == {'start_people': 2, 'start_found': 1}
+    assert _found_at_start(result, 2.5) == {'start_people': 2, 'start_found': 2}
