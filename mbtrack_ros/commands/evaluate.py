@@ -33,8 +33,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         description='Render fresh recordings, track them, score them and write one markdown '
                     'table per benchmark (OUT/NAME.md) with its PNG plots: the synthetic '
                     'clear room, the HJS paper\'s experiments, the association baselines, '
-                    'the real clip, the room families, the real-room conditions and the '
-                    'speed.')
+                    'the real clip and the speed.')
     parser.add_argument('--out', type=Path, default=Path('docs/results'), metavar='DIR',
                         help='where the tables and plots go (default docs/results)')
     parser.add_argument('--quick', action='store_true',
