@@ -48,13 +48,22 @@ def test_quick_evaluate_writes_a_table_and_plots_per_benchmark(tmp_path, capsys)
     assert clear['persons'] >= 1 and 0.0 < clear['mota'] <= 1.0
     real = {r['clip']: r for r in raw['real_clip']}
     assert real['started_off']['ids'] == 1
+    room = raw['rooms'][0]   # HJS and the separable filter on one recording, with IDF1
+    assert 0.0 < room['idf1'] <= 1.0 and room['ghosts'] >= 0
+    assert set(room['separable']) == {'mota', 'motp_mm', 'idf1', 'mismatches'}
+    conditions = [row['condition'] for r in raw['real_room'] for row in r['rows']]
+    assert conditions.count('none') == 1 and 'calibration error' in conditions
+    curve = [(row['degrees'], row['metres']) for r in raw['real_room'] for row in r['rows']
+             if row['condition'] == 'curve']
+    assert sorted(curve) == [(0.0, 0.0), (0.5, 0.0)]
 
     # --report-only writes the same tables from results.json; --fill quotes them in a page
     before = {b.name: (out / f'{b.name}.md').read_text() for b in BENCHMARKS}
     for b in BENCHMARKS:
         (out / f'{b.name}.md').unlink()
     page = tmp_path / 'page.md'
-    page.write_text('intro\n<!-- results: clear_room -->\nold\n<!-- /results -->\nend\n')
+    page.write_text('intro\n<!-- results: clear_room -->\nold\n<!-- /results -->\n'
+                    '<!-- results: rooms -->\n<!-- /results -->\nend\n')
     assert main(['evaluate', '--quick', '--report-only', '--out', str(out),
                  '--fill', str(page)]) == 0, capsys.readouterr().err
     assert {b.name: (out / f'{b.name}.md').read_text() for b in BENCHMARKS} == before
@@ -62,6 +71,10 @@ def test_quick_evaluate_writes_a_table_and_plots_per_benchmark(tmp_path, capsys)
     assert 'old' not in filled and filled.startswith('intro\n') and filled.endswith('end\n')
     assert '| `clear-room --seed 200` |' in filled
     assert '`mbtrack evaluate --quick --only clear_room`' in filled
+    # the notes under a table (the targets) come with it, the plots do not
+    rooms = filled[filled.index('<!-- results: rooms -->'):]
+    assert '| `clear-room` | 1 |' in rooms and '\nTargets: MOTA >= 92 %' in rooms
+    assert '![' not in rooms and '`mbtrack evaluate --quick --only rooms`' in rooms
 
 
 @pytest.mark.parametrize('argv,message', [
@@ -79,3 +92,26 @@ def test_list_names_every_benchmark(capsys):
     assert main(['evaluate', '--list']) == 0
     listed = [line.split()[0] for line in capsys.readouterr().out.splitlines()]
     assert listed == [b.name for b in BENCHMARKS]
+
+
+def test_ghosts_and_people_found_at_the_start():
+    from mbtrack_ros.commands.benchmarks import _found_at_start, _ghosts
+    from mbtrack_ros.evaluation import clear_mot
+    from mbtrack_ros.recording.csvfiles import GroundTruthRow, TrackRow
+
+    step = 100_000_000   # 10 Hz: 40 frames = 4 s
+    truth = [GroundTruthRow(f * step, f, 1, 1.0, 1.0, 1.7, False, ('cam0',))
+             for f in range(40)]
+    tracks = [TrackRow(f * step, f, 1, 1.1, 1.0) for f in range(40)]       # the person
+    tracks += [TrackRow(f * step, f, 2, 4.0, 3.0) for f in range(5, 35)]   # 2.9 s, nobody
+    tracks += [TrackRow(f * step, f, 3, 2.0, 4.0) for f in range(0, 15)]   # 1.4 s, nobody
+    tracks += [TrackRow(f * step, f, 4, 1.0 + 0.2 * f, 1.0) for f in range(40)]  # passes by
+    # a second person, present from the start, whose track starts 2 s late
+    truth += [GroundTruthRow(f * step, f, 2, 5.0, 1.0, 1.7, False, ('cam0',))
+              for f in range(40)]
+    tracks += [TrackRow(f * step, f, 5, 5.0, 1.1) for f in range(20, 40)]
+    result = clear_mot(tracks, truth)
+    assert _ghosts(tracks, result, 2.0) == 1
+    assert _ghosts(tracks, result, 1.0) == 2
+    assert _found_at_start(result, 1.0) == {'start_people': 2, 'start_found': 1}
+    assert _found_at_start(result, 2.5) == {'start_people': 2, 'start_found': 2}

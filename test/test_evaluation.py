@@ -112,6 +112,9 @@ def test_identity_switch_is_one_mismatch():
     m = r.matches_detail
     p1 = m.person_id == 1
     assert list(m.track_id[p1]) == [11] * 5 + [12] * 5
+    # IDF1: person 1 keeps track 11 for 5 of its 10 frames, person 2 track 20 for all 10
+    assert (r.id_true_positives, r.id_false_positives, r.id_false_negatives) == (15, 5, 5)
+    assert r.idf1 == pytest.approx(30 / 40)
 
 
 def test_track_rows_at_stamps_absent_from_truth_are_ignored_and_counted():
@@ -226,6 +229,22 @@ def test_clear_mot_equals_brute_force_on_random_scenes(seed):
     assert r.matches + r.misses == r.gt_objects == len(truth)
     m = r.matches_detail
     assert np.nanmean(m.error_m) * 1000 == pytest.approx(r.motp_mm)
+    # IDF1 by brute force: one track per person for the whole sequence, chosen to maximise
+    # the frames where they are within the threshold (every one-to-one assignment tried)
+    import itertools
+    people = sorted({t.person_id for t in truth})
+    ids = sorted({t.track_id for t in tracks})
+    near = {(p, h): 0 for p in people for h in ids}
+    where = {(t.stamp_ns, t.track_id): (t.x, t.y) for t in tracks}
+    for g in truth:
+        for h in ids:
+            xy = where.get((g.stamp_ns, h))
+            if xy is not None and np.hypot(g.x - xy[0], g.y - xy[1]) <= 0.5:
+                near[g.person_id, h] += 1
+    idtp = max(sum(near[p, h] for p, h in zip(people, chosen) if h is not None)
+               for chosen in itertools.permutations(ids + [None] * len(people), len(people)))
+    assert r.id_true_positives == idtp
+    assert r.idf1 == pytest.approx(2 * idtp / (len(truth) + len(tracks)))
 
 
 def test_evaluate_many_sums_counts_and_weights_motp():
@@ -239,6 +258,8 @@ def test_evaluate_many_sums_counts_and_weights_motp():
     assert o.gt_objects == 30 and o.misses == 10 and o.matches == 20
     assert o.mota == pytest.approx(1 - 10 / 30)
     assert o.motp_mm == pytest.approx((10 * 100 + 10 * 300) / 20)
+    assert (a.idf1, b.idf1) == (pytest.approx(1.0), pytest.approx(20 / 30))
+    assert o.idf1 == pytest.approx(2 * 20 / (30 + 20))
     text = format_table(table.rows())
     lines = text.splitlines()
     assert len(lines) == 5 and lines[-1].startswith('overall')

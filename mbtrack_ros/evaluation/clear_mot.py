@@ -7,7 +7,11 @@ within the threshold, the remaining pairs are assigned with the Hungarian algori
 
 * MOTP = mean Euclidean distance of the matched pairs (reported in **millimetres**),
 * MOTA = 1 - (misses + false positives + mismatches) / ground-truth objects,
-* miss rate, false-positive rate, mismatch rate = the counts / ground-truth objects.
+* miss rate, false-positive rate, mismatch rate = the counts / ground-truth objects,
+* IDF1 = 2 IDTP / (2 IDTP + IDFP + IDFN) (Ristani et al. 2016): the share of person-frames
+  matched to the one track assigned to that person over the whole sequence (a global
+  one-to-one assignment of tracks to people), which, unlike MOTA, counts every frame an
+  identity is wrong, not only the frame it switches.
 
 Frames are the ground-truth stamps plus the empty frames (nobody present) where tracks were
 reported. Track rows are matched to ground-truth rows by ``stamp_ns``; track rows at stamps
@@ -33,7 +37,7 @@ __all__ = [
 
 _MM_METRICS = ('mota', 'motp', 'num_misses', 'num_false_positives', 'num_switches',
                'num_objects', 'num_frames', 'num_detections', 'num_predictions',
-               'num_unique_objects')
+               'num_unique_objects', 'idtp', 'idfp', 'idfn')
 
 
 @dataclass(frozen=True)
@@ -114,9 +118,19 @@ class ClearMotResult:
     persons: int
     ignored_track_rows: int
     threshold_m: float
+    id_true_positives: int = 0
+    id_false_positives: int = 0
+    id_false_negatives: int = 0
     per_person: tuple[PersonStats, ...] = ()
     per_track: tuple[TrackStats, ...] = ()
     matches_detail: PersonFrameMatches | None = field(default=None, repr=False)
+
+    @property
+    def idf1(self) -> float:
+        """IDF1 = 2 IDTP / (2 IDTP + IDFP + IDFN), a fraction; NaN with neither tracks nor
+        truth."""
+        den = 2 * self.id_true_positives + self.id_false_positives + self.id_false_negatives
+        return 2 * self.id_true_positives / den if den else float('nan')
 
     @property
     def summed_error_mm(self) -> float:
@@ -128,8 +142,9 @@ class ClearMotResult:
         out = {k: getattr(self, k) for k in (
             'name', 'mota', 'motp_mm', 'miss_rate', 'false_positive_rate', 'mismatch_rate',
             'misses', 'false_positives', 'mismatches', 'gt_objects', 'frames', 'matches',
-            'track_rows', 'tracks', 'persons', 'ignored_track_rows', 'threshold_m')}
-        for k in ('mota', 'motp_mm', 'miss_rate', 'false_positive_rate', 'mismatch_rate'):
+            'track_rows', 'tracks', 'persons', 'ignored_track_rows', 'threshold_m', 'idf1')}
+        for k in ('mota', 'motp_mm', 'miss_rate', 'false_positive_rate', 'mismatch_rate',
+                  'idf1'):
             out[k] = _json_float(out[k])
         if details:
             out['per_person'] = [_json_clean(asdict(p)) for p in self.per_person]
@@ -320,7 +335,9 @@ def clear_mot(tracks: Sequence[TrackRow], truth: Sequence[GroundTruthRow], *,
         gt_objects=gt_objects, frames=n_frames, matches=int(s['num_detections']),
         track_rows=int(s['num_predictions']), tracks=int(np.unique(t_tid).shape[0]),
         persons=int(s['num_unique_objects']), ignored_track_rows=ignored,
-        threshold_m=threshold_m, per_person=tuple(per_person), per_track=tuple(per_track),
+        threshold_m=threshold_m, id_true_positives=int(s['idtp']),
+        id_false_positives=int(s['idfp']), id_false_negatives=int(s['idfn']),
+        per_person=tuple(per_person), per_track=tuple(per_track),
         matches_detail=detail)
 
 
@@ -328,7 +345,8 @@ def combine_results(results: Sequence[ClearMotResult], *,
                     name: str = 'overall') -> ClearMotResult:
     """Overall scores of several sequences: counts summed, MOTP weighted by matches.
 
-    Per-person and per-track tables are not merged (ids are per sequence).
+    Per-person and per-track tables are not merged (ids are per sequence); the IDF1 counts
+    are summed (each sequence's identities assigned on their own).
     """
     if not results:
         raise EvaluationError('no sequences to combine')
@@ -337,7 +355,8 @@ def combine_results(results: Sequence[ClearMotResult], *,
         raise EvaluationError(f'sequences scored with different thresholds {sorted(thresholds)}')
     tot = {k: sum(getattr(r, k) for r in results) for k in (
         'misses', 'false_positives', 'mismatches', 'gt_objects', 'frames', 'matches',
-        'track_rows', 'tracks', 'persons', 'ignored_track_rows')}
+        'track_rows', 'tracks', 'persons', 'ignored_track_rows', 'id_true_positives',
+        'id_false_positives', 'id_false_negatives')}
     g = tot['gt_objects']
     err = sum(r.summed_error_mm for r in results)
     return ClearMotResult(
