@@ -119,7 +119,7 @@ def test_tracker_keeps_tracking_when_a_camera_node_dies_and_picks_it_up_again(
                                          make_header(fs.stamp_ns, f'{c}_optical_frame')))
             time.sleep(0.25)
         last = frame_sets[-1].stamp_ns
-        wait_for(lambda: last in tracks, 30.0)
+        wait_for(lambda: last in tracks, 90.0)  # generous: a loaded machine lags
     finally:
         if dying.poll() is None:
             dying.send_signal(signal.SIGINT)
