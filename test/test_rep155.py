@@ -69,13 +69,15 @@ class Rep155Consumer(Node):
                 continue
             self.confidence.setdefault(pid, [])
             base = f'/humans/persons/{pid}'
+            # the publisher's latched value on subscribing, then a queue that drops nothing
+            latched = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                                 durability=DurabilityPolicy.TRANSIENT_LOCAL)
             self._subs[pid] = (
                 self.create_subscription(Float32, f'{base}/location_confidence',
-                                         lambda m, p=pid: self.on_confidence(p, m), self.qos),
+                                         lambda m, p=pid: self.on_confidence(p, m), latched),
                 self.create_subscription(
                     Bool, f'{base}/anonymous', lambda m, p=pid: self.on_anonymous(p, m),
-                    QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                               durability=DurabilityPolicy.TRANSIENT_LOCAL)))
+                    latched))
 
     def on_confidence(self, pid: str, msg) -> None:
         with self.lock:
@@ -206,8 +208,8 @@ def test_rep155_consumer_follows_the_tracks(recording, tmp_path):
     for _, ids in consumer.tracked:
         for pid in ids:
             listed[pid] = listed.get(pid, 0) + 1
-    # a person listed in the last frame sets only may have no value yet: a REP-155
-    # consumer subscribes once it sees the id (volatile topics keep no history)
+    # a REP-155 consumer subscribes once it sees the id; location_confidence is latched, so
+    # it gets the value current then and every later one
     persons = sorted(pid for pid, n in listed.items() if n >= 5)
     assert len(persons) >= 2, listed
     ended = []

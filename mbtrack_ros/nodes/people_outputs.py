@@ -257,8 +257,10 @@ class PeopleOutputs:
     Args:
         node: the publishing node.
         builder: what to publish (its ``enabled`` outputs).
-        qos: QoS of ``/humans/persons/tracked``, ``location_confidence`` and
-            ``~/detections`` (``/tf`` uses tf2's: reliable, depth 100).
+        qos: QoS of ``/humans/persons/tracked`` and ``~/detections`` (``/tf`` uses tf2's:
+            reliable, depth 100; a person's ``location_confidence`` and ``anonymous`` are
+            latched, transient local with depth 1, so that a consumer that subscribes when
+            it first sees the id gets the current value at once).
     """
 
     def __init__(self, node, builder: PeopleFrameBuilder, qos) -> None:
@@ -297,7 +299,7 @@ class PeopleOutputs:
                 base = f'/humans/persons/{pid}'
                 self._person_pubs[pid] = (
                     self.node.create_publisher(Float32, f'{base}/location_confidence',
-                                               self.qos),
+                                               self._latched),
                     self.node.create_publisher(Bool, f'{base}/anonymous', self._latched))
             self._person_pubs[pid][1].publish(Bool(data=True))
         if frame.tracked is not None:
