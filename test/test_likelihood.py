@@ -808,3 +808,92 @@ def test_hand_made_two_person_scene_background_term_is_the_occluders_evidence():
     assert dbg.bc[1] == pytest.approx(r * f_a, abs=1e-12)
     beside_mask = mm.render_labels('cam', beside[0], models[1]) > 0
     assert not (beside_mask & mask_a).any() and dbg.bc[2] == 0.0
+
+
+def test_hjs_marginal_equals_the_product_belief_expectation_over_all_nine_joint_states():
+    """000 Eq. 22-23 and 36-38 by enumeration: two targets with three particles each, their
+    clouds interleaved in depth (the incremental near-to-far visit meets both targets in
+    turn). For every one of the 3 x 3 joint states the joint log-likelihood is built
+    from binary visibility masks (Eq. 20, 26); the HJS marginal of particle i of target k
+    is its expectation under the other target's prior, restricted to the visual cone of
+    x^k (Eq. 36-37): sum_j q(j) [F_k(wbar_ij) + [x^h_j nearer] r(x^h_j, x^k_i) F_h(x^h_j)].
+    With one colour over the image, each part's d of Eq. 26 does not depend on which of its
+    pixels are visible, F is linear in w and the first-order step of Eq. 31 is exact, so
+    the code's fc + bc, its log-likelihoods (Eq. 19) and its normalised weights all equal
+    the enumeration. The full joint likelihood (``MeasurementModel.joint``, checked against
+    the same enumeration) adds what the cone leaves out: the evidence of the target
+    behind x^k (the charge for hiding it) and of the front target outside x^k's cone."""
+    cam = _camera('cam', (0.0, -3.5, 1.2))
+    sigma = 0.12
+    mm = MeasurementModel(_room(cam), LikelihoodConfig(
+        sigma=sigma, d_occ=D_OCC, min_visible_pixels=1, min_inside_share=0.0,
+        min_visible_share=0.0))
+    image = np.zeros((cam.height, cam.width, 3), np.uint8)
+    image[:] = (150, 90, 60)
+    mm.set_images({'cam': image})
+    bins = quantize(image)
+    rng = np.random.default_rng(3)
+    models = [_random_model(rng, 1.65), _random_model(rng, 1.8)]
+    particles = [np.zeros((3, 6)), np.zeros((3, 6))]
+    particles[0][:, X] = [-0.05, 0.1, -0.15]
+    particles[0][:, Y] = [-0.6, 0.3, 1.1]
+    particles[1][:, X] = [0.15, -0.1, 0.05]
+    particles[1][:, Y] = [-0.2, 0.7, 1.5]
+    particles[0][:, THETA] = [0.3, -1.0, 2.0]
+    particles[1][:, THETA] = [1.2, 0.1, -2.5]
+    priors = [np.array([0.5, 0.3, 0.2]), np.array([0.2, 0.45, 0.35])]
+
+    states = np.concatenate(particles)
+    rel = relative_angle(states[:, THETA], cam.viewing_angle(states[:, :2]))
+    hists = [models[k].interpolate(rel[3 * k:3 * k + 3]) for k in range(2)]
+    labels = [[mm.render_labels('cam', particles[k][i], models[k]) for i in range(3)]
+              for k in range(2)]
+    dist = [[float(cam.distance(np.r_[particles[k][i, :2], models[k].height / 2]))
+             for i in range(3)] for k in range(2)]
+    assert all(lab.sum() > 30 for row in labels for lab in row)        # all in view
+
+    def F(k, i, w):
+        return _F(bins, labels[k][i], w, hists[k][i])
+
+    ones = np.ones((cam.height, cam.width))
+    cone = np.zeros((2, 3))         # HJS marginal by enumeration (reduced observation space)
+    full = np.zeros((2, 3))         # marginal of the full joint log-likelihood (Eq. 22)
+    joint_states = np.zeros((9, 2, 6))
+    joint_l = np.zeros(9)
+    front_back = set()
+    for n, (i, j) in enumerate(itertools.product(range(3), range(3))):
+        joint_states[n] = particles[0][i], particles[1][j]
+        idx = ((0, i), (1, j))
+        masks = [labels[k][p] > 0 for k, p in idx]
+        near = 0 if dist[0][i] < dist[1][j] else 1
+        far = 1 - near
+        front_back.add(near)
+        w = [ones, ones]
+        w[far] = (~masks[near]).astype(float)                      # Eq. 28
+        f = [F(k, p, w[k]) for k, p in idx]
+        joint_l[n] = f[0] + f[1]                                    # Eq. 21
+        r = (masks[near] & masks[far]).sum() / masks[near].sum()    # Eq. 37
+        for k, p in idx:
+            h = 1 - k
+            q = priors[h][idx[h][1]]
+            full[k, p] += q * joint_l[n]
+            cone[k, p] += q * (f[k] + (r * f[h] if k == far else 0.0))
+    assert front_back == {0, 1}                       # each target is in front somewhere
+
+    # the code's joint likelihood is the enumerated one
+    np.testing.assert_allclose(mm.joint(joint_states, models), -joint_l / (2 * sigma ** 2),
+                               rtol=1e-12)
+    # HJS fc + bc (incremental, Algorithm 1) against the enumeration
+    dbg = mm.hjs_debug('cam', particles, priors, models)
+    np.testing.assert_allclose(dbg.fc + dbg.bc, cone.ravel(), rtol=0, atol=1e-12)
+    assert np.any(dbg.bc > 0) and np.any((dbg.bc == 0) & (dbg.fc > 0))
+    # Eq. 19 and the normalised weights
+    loglik = mm.hjs(particles, priors, models).loglik
+    for k in range(2):
+        want = -cone[k] / (2 * sigma ** 2)
+        np.testing.assert_allclose(loglik[k], want, rtol=1e-12)
+        got_w = np.exp(loglik[k] - loglik[k].max())
+        want_w = np.exp(want - want.max())
+        np.testing.assert_allclose(got_w / got_w.sum(), want_w / want_w.sum(), rtol=1e-9)
+    # what the cone restriction leaves out of the full joint marginal: not zero here
+    assert np.abs(full - cone).max() > 0.01
