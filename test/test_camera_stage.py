@@ -87,3 +87,24 @@ def test_stage_works_at_the_trackers_scale(room, rng):
     assert got.image.shape == (want.height, want.width, 3)
     np.testing.assert_array_equal(got.image, want.fit(image))
     assert stage.camera.K.tolist() == want.K.tolist()
+
+
+def test_fusion_bench_tracks_in_one_process_as_replay_does(recording, tmp_path):
+    """``mbtrack bench --fusion``'s one-process run is ``mbtrack replay REC --seed S``:
+    the same tracker configuration and frame-set synchroniser give the same track rows."""
+    from mbtrack_ros.cli import main
+    from mbtrack_ros.commands.replay import sync_options
+    from mbtrack_ros.core.camera import RoomCalibration
+    from mbtrack_ros.evaluation.fusion import fusion_vs_single
+    from mbtrack_ros.recording.csvfiles import read_tracks
+
+    assert main(['replay', str(recording), '--out', str(tmp_path), '--seed', '7']) == 0
+    replayed = read_tracks(tmp_path / 'tracks.csv')
+    config = TrackerConfig.from_dict({'seed': 7, 'detection': True})
+    calibration = RoomCalibration.load(recording / 'calibration.yaml')
+    got = fusion_vs_single(recording, config, sync_options(recording, calibration))
+    single = got.rows['single']
+    assert len(replayed) >= 10 and len(single) == len(replayed)
+    for a, b in zip(single, replayed):
+        assert (a.stamp_ns, a.track_id) == (b.stamp_ns, b.track_id)
+        assert abs(a.x - b.x) < 1e-3 and abs(a.y - b.y) < 1e-3

@@ -1,8 +1,11 @@
 """``mbtrack bench --fusion``: one process against camera stages + a fusion tracker.
 
-Generates fresh recordings of a preset (one per ``--fusion-seeds`` seed), tracks each both
-ways (:func:`mbtrack_ros.evaluation.fusion.fusion_vs_single`) and prints per recording
-the CLEAR MOT scores of both, the frames with the same ids, and the position gaps.
+Generates fresh recordings of a preset (one per ``--fusion-seeds`` seed) at the preset's
+image size (as ``mbtrack synth`` renders it), tracks each both ways
+(:func:`mbtrack_ros.evaluation.fusion.fusion_vs_single`) with the tracker configuration and
+frame-set synchroniser of ``mbtrack replay REC --seed S`` (so that the one-process MOTA is
+the replay's), and prints per recording the CLEAR MOT scores of both, the frames with the
+same ids, and the position gaps.
 """
 from __future__ import annotations
 
@@ -38,24 +41,33 @@ def main_fusion(args: argparse.Namespace) -> int:
         print(f'{_PROG}: error: --fusion-frames must be >= 1, got {args.fusion_frames}',
               file=sys.stderr)
         return 2
+    from mbtrack_ros.commands.replay import sync_options
+    from mbtrack_ros.core.camera import RoomCalibration
     from mbtrack_ros.core.tracker import TrackerConfig
     from mbtrack_ros.evaluation.clear_mot import clear_mot
     from mbtrack_ros.evaluation.fusion import fusion_vs_single
     from mbtrack_ros.recording.csvfiles import read_ground_truth
     from mbtrack_ros.synth.errors import SynthError
     from mbtrack_ros.synth.generator import generate
+    from mbtrack_ros.synth.presets import get_preset
 
     tmp = Path(tempfile.mkdtemp(prefix='mbtrack_fusion_'))
     doc = []
     try:
         for seed in args.fusion_seeds:
             rec = tmp / f'{args.fusion}-{seed}'
-            try:
-                generate(args.fusion, rec, seed=seed, frames=args.fusion_frames)
+            try:   # at the preset's image size, as mbtrack synth renders it
+                width, height = get_preset(args.fusion).size
+                generate(args.fusion, rec, seed=seed, frames=args.fusion_frames,
+                         width=width, height=height)
             except SynthError as err:
                 print(f'{_PROG}: error: {err}', file=sys.stderr)
                 return 2
-            got = fusion_vs_single(rec, TrackerConfig(detection=True, seed=args.seed))
+            # what `mbtrack replay REC --seed S` runs: its default tracker configuration
+            # and frame-set synchroniser
+            config = TrackerConfig.from_dict({'seed': args.seed, 'detection': True})
+            calibration = RoomCalibration.load(rec / 'calibration.yaml')
+            got = fusion_vs_single(rec, config, sync_options(rec, calibration))
             truth = read_ground_truth(rec / 'ground_truth.csv')
             m = {k: clear_mot(rows, truth) for k, rows in got.rows.items()}
             gaps = np.array(got.gaps or [0.0])

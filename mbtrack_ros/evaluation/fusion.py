@@ -43,10 +43,13 @@ class FusionComparison:
         default_factory=lambda: {'single': [], 'fusion': []})
 
 
-def fusion_vs_single(recording: str | Path, config: TrackerConfig | None = None
-                     ) -> FusionComparison:
+def fusion_vs_single(recording: str | Path, config: TrackerConfig | None = None,
+                     reader_options: dict | None = None) -> FusionComparison:
     """Track ``recording`` (a recording directory) both ways; see the module docstring.
-    ``config`` must enable detection (default: ``TrackerConfig(detection=True, seed=0)``)."""
+    ``config`` must enable detection (default: ``TrackerConfig(detection=True, seed=0)``,
+    what ``mbtrack replay`` runs without options); ``reader_options``: keyword arguments
+    of the :class:`~mbtrack_ros.recording.bag.RecordingReader` (its frame-set
+    synchroniser's settings; ``mbtrack replay`` takes the recording's frame rate)."""
     from mbtrack_ros.recording.bag import RecordingReader
 
     recording = Path(recording)
@@ -59,13 +62,14 @@ def fusion_vs_single(recording: str | Path, config: TrackerConfig | None = None
     stages = {n: CameraStage(c, background, working_pixels=config.working_pixels)
               for n, c in calibration.cameras.items()}
     out = FusionComparison()
-    with RecordingReader(recording) as reader:
+    with RecordingReader(recording, **(reader_options or {})) as reader:
         for fs in reader.frames():
-            a = single.step(fs.stamp_ns, fs.images)
+            a = single.step(fs.stamp_ns, fs.images, stamps=fs.stamps)
             frames = {n: stages[n].process(im) for n, im in fs.images.items()}
             for n, regions in bank.receive(frames).items():
                 stages[n].set_regions(*regions)
-            b = fusion.step(fs.stamp_ns, {n: f.image for n, f in frames.items()})
+            b = fusion.step(fs.stamp_ns, {n: f.image for n, f in frames.items()},
+                            stamps=fs.stamps)
             xy = np.array([t.mean[:2] for t in b.tracks]).reshape(-1, 2)
             velocity = np.array([t.mean[2:4] for t in b.tracks]).reshape(-1, 2)
             heights = np.array([t.height for t in b.tracks])
