@@ -65,6 +65,44 @@ def test_cpu_seconds_reads_proc_like_os_times():
     assert abs(cpu_seconds(os.getpid()) - (t.user + t.system)) < 0.05
 
 
+def test_thread_cpu_seconds_name_the_thread_that_burnt_the_cpu():
+    """Per-thread CPU (/proc/<pid>/task): a Python thread that burns CPU shows in
+    ``python threads`` of :func:`thread_split`, the main thread in ``main``; the threads
+    add up to the process (while all are alive)."""
+    import threading
+
+    from mbtrack_ros.commands.bench_live import cpu_seconds, thread_cpu_seconds, thread_split
+
+    def burn():
+        x = 0.0
+        for i in range(5_000_000):
+            x += i ** 0.5
+
+    def work(done: threading.Event):
+        burn()
+        done.set()
+        release.wait(30)
+
+    release, done = threading.Event(), threading.Event()
+    before = thread_cpu_seconds(os.getpid())
+    worker = threading.Thread(target=work, args=(done,))
+    worker.start()
+    try:
+        done.wait(30)
+        after = thread_cpu_seconds(os.getpid())
+        total = cpu_seconds(os.getpid())
+    finally:
+        release.set()
+        worker.join()
+    split = dict(thread_split(before, after, os.getpid()))
+    assert split['python threads'] > 0.05 and split['main'] < split['python threads']
+    assert abs(sum(after.values()) - total) < 0.1
+    before = thread_cpu_seconds(os.getpid())
+    burn()
+    split = dict(thread_split(before, thread_cpu_seconds(os.getpid()), os.getpid()))
+    assert split['main'] > 0.05 and split.get('python threads', 0.0) < 0.02
+
+
 def test_bench_live_bad_frames_is_a_one_line_error(capsys):
     from mbtrack_ros.cli import main
     assert main(['bench', '--live', '--live-frames', '5']) == 2

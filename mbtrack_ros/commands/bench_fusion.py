@@ -33,12 +33,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         metavar='S', help='recording seeds of --fusion (default 200 201)')
     parser.add_argument('--fusion-frames', type=int, default=None, metavar='N',
                         help='frames of each --fusion recording (default: the preset\'s)')
+    parser.add_argument('--fusion-jpeg', type=int, default=None, metavar='Q',
+                        help='the camera stages send their working images JPEG-coded at '
+                             'quality Q (1-100; camera_node image_format jpeg, jpeg_quality '
+                             'Q) instead of raw')
 
 
 def main_fusion(args: argparse.Namespace) -> int:
     """Run the comparison; 0 on success, 2 on a bad preset or frame count."""
     if args.fusion_frames is not None and args.fusion_frames < 1:
         print(f'{_PROG}: error: --fusion-frames must be >= 1, got {args.fusion_frames}',
+              file=sys.stderr)
+        return 2
+    if args.fusion_jpeg is not None and not 1 <= args.fusion_jpeg <= 100:
+        print(f'{_PROG}: error: --fusion-jpeg must be 1-100, got {args.fusion_jpeg}',
               file=sys.stderr)
         return 2
     from mbtrack_ros.commands.replay import sync_options
@@ -67,17 +75,19 @@ def main_fusion(args: argparse.Namespace) -> int:
             # and frame-set synchroniser
             config = TrackerConfig.from_dict({'seed': args.seed, 'detection': True})
             calibration = RoomCalibration.load(rec / 'calibration.yaml')
-            got = fusion_vs_single(rec, config, sync_options(rec, calibration))
+            got = fusion_vs_single(rec, config, sync_options(rec, calibration),
+                                   jpeg_quality=args.fusion_jpeg)
             truth = read_ground_truth(rec / 'ground_truth.csv')
             m = {k: clear_mot(rows, truth) for k, rows in got.rows.items()}
             gaps = np.array(got.gaps or [0.0])
-            print(f'{args.fusion} seed {seed}: MOTA one process {100 * m["single"].mota:.1f} '
+            codec = 'raw' if args.fusion_jpeg is None else f'JPEG {args.fusion_jpeg}'
+            print(f'{args.fusion} seed {seed} (working images {codec}): MOTA one process {100 * m["single"].mota:.1f} '
                   f'/ fusion {100 * m["fusion"].mota:.1f}, MOTP {m["single"].motp_mm:.0f} / '
                   f'{m["fusion"].motp_mm:.0f} mm, switches {m["single"].mismatches} / '
                   f'{m["fusion"].mismatches}; same ids on {got.same_ids}/{got.frames} frame '
                   f'sets; position gap median {1e3 * np.median(gaps):.1f} mm, max '
                   f'{1e3 * gaps.max():.1f} mm', flush=True)
-            doc.append({'seed': seed, 'mota': {k: v.mota for k, v in m.items()},
+            doc.append({'seed': seed, 'jpeg_quality': args.fusion_jpeg, 'mota': {k: v.mota for k, v in m.items()},
                         'motp_mm': {k: v.motp_mm for k, v in m.items()},
                         'same_ids': got.same_ids, 'frames': got.frames,
                         'gap_median_m': float(np.median(gaps)), 'gap_max_m': float(gaps.max())})

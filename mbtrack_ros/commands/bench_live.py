@@ -261,13 +261,16 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
              max_pending_sets: int = 15, timeout: float = 600.0, use_sim_time: bool = True,
              ground_truth: bool = False, node_args: tuple[str, ...] = (),
              bad_rate: float = 0.0, bad_camera: str = 'cam0',
-             camera_nodes: bool = False, image_format: str = 'raw') -> LiveResult:
+             camera_nodes: bool = False, image_format: str = 'raw',
+             cameras: int | None = None) -> LiveResult:
     """Play ``recording`` to a tracker_node process and measure (see the module docstring).
 
     ``camera_nodes``: one ``camera_node`` process per camera and the tracker in fusion mode
     (``input_mode: foreground``); their CPU and the masks' and working images' bytes are
     measured too. ``image_format``: the camera nodes' working images, ``raw``
     (``sensor_msgs/Image``) or ``jpeg`` (``CompressedImage``, decoded in the tracker).
+    ``cameras``: track with the first ``cameras`` cameras of the calibration only (the
+    player plays only theirs; default all).
 
     ``ground_truth``: start tracks from the recording's ground truth (``init_ground_truth``)
     instead of the automatic detection. ``bad_rate``: share of the frame sets after whose
@@ -369,7 +372,7 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
                                  callback_group=group)
     listener.create_subscription(DiagnosticArray, '/diagnostics', on_diag, qos,
                                  callback_group=group)
-    cams = RoomCalibration.load(recording / 'calibration.yaml').names
+    cams = RoomCalibration.load(recording / 'calibration.yaml').names[:cameras]
     masks: list[int] = []
     jpegs: list[int] = []
 
@@ -442,7 +445,8 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
              '-p', 'wait_for_subscribers:=true', '-p', 'start_delay:=1.0',
              # our /clock reader too: a listener that missed the first /clock messages timed
              # only later frames and took a later frame for frame 0
-             '-p', f'clock_subscribers:={2 if use_sim_time else 1}'],
+             '-p', f'clock_subscribers:={2 if use_sim_time else 1}',
+             '-p', f'topics:=[{",".join(image_topic(c, compressed) for c in cams)}]'],
             cwd=REPO, env=env, stdout=player_log, stderr=subprocess.STDOUT, text=True)
         cpu0, wall0 = cpu_seconds(node.pid), time.monotonic()
         threads0 = thread_cpu_seconds(node.pid)
@@ -601,6 +605,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help='synth preset of a generated live recording, without its '
                              'ceiling camera (default clear-room: 4 corner cameras; '
                              'eight-cameras, twelve-cameras: 8 and 12 cameras at 640x480)')
+    parser.add_argument('--live-cameras', type=int, default=None, metavar='N',
+                        help='track with the first N cameras of the recording only (the '
+                             'same people seen by fewer cameras; default all)')
     parser.add_argument('--live-image-format', choices=('raw', 'jpeg'), default='raw',
                         help='with --live-camera-nodes: the working images the camera '
                              'nodes send the tracker (camera_node image_format; default '
@@ -690,6 +697,9 @@ def main_live(args: argparse.Namespace) -> int:
             names = RoomCalibration.load(recording / 'calibration.yaml').names
         except CalibrationError as err:
             return _error(str(err).splitlines()[0])
+        if args.live_cameras is not None and not 1 <= args.live_cameras <= len(names):
+            return _error(f'--live-cameras must be 1-{len(names)}, got {args.live_cameras}')
+        names = names[:args.live_cameras]
         if args.live_bad_rate > 0 and args.live_bad_camera not in names:
             return _error(f'--live-bad-camera must be one of {", ".join(names)}, got '
                           f'{args.live_bad_camera!r}')
@@ -698,7 +708,7 @@ def main_live(args: argparse.Namespace) -> int:
                         ground_truth=args.live_ground_truth, node_args=node_args,
                         bad_rate=args.live_bad_rate, bad_camera=args.live_bad_camera,
                         camera_nodes=args.live_camera_nodes,
-                        image_format=args.live_image_format,
+                        image_format=args.live_image_format, cameras=args.live_cameras,
                         timeout=max(600.0, 2.0 * args.live_frames / FPS))
         load1 = os.getloadavg()
         offline = fast = quick = None

@@ -19,6 +19,7 @@ from mbtrack_ros.core.camera import RoomCalibration
 from mbtrack_ros.core.detection.camera_stage import CameraStage, ReceivedForeground
 from mbtrack_ros.core.tracker import Tracker, TrackerConfig
 from mbtrack_ros.recording.csvfiles import TrackRow
+from mbtrack_ros.recording.images import decode_compressed, encode_compressed
 
 __all__ = ['FusionComparison', 'fusion_vs_single']
 
@@ -44,12 +45,15 @@ class FusionComparison:
 
 
 def fusion_vs_single(recording: str | Path, config: TrackerConfig | None = None,
-                     reader_options: dict | None = None) -> FusionComparison:
+                     reader_options: dict | None = None,
+                     jpeg_quality: int | None = None) -> FusionComparison:
     """Track ``recording`` (a recording directory) both ways; see the module docstring.
     ``config`` must enable detection (default: ``TrackerConfig(detection=True, seed=0)``,
     what ``mbtrack replay`` runs without options); ``reader_options``: keyword arguments
     of the :class:`~mbtrack_ros.recording.bag.RecordingReader` (its frame-set
-    synchroniser's settings; ``mbtrack replay`` takes the recording's frame rate)."""
+    synchroniser's settings; ``mbtrack replay`` takes the recording's frame rate).
+    ``jpeg_quality``: the working images reach the fusion tracker JPEG-coded at this
+    quality (``camera_node`` ``image_format: jpeg``), as it decodes them; None: raw."""
     from mbtrack_ros.recording.bag import RecordingReader
 
     recording = Path(recording)
@@ -66,6 +70,10 @@ def fusion_vs_single(recording: str | Path, config: TrackerConfig | None = None,
         for fs in reader.frames():
             a = single.step(fs.stamp_ns, fs.images, stamps=fs.stamps)
             frames = {n: stages[n].process(im) for n, im in fs.images.items()}
+            if jpeg_quality is not None:   # what a JPEG working image decodes to
+                for f in frames.values():
+                    fmt, data = encode_compressed(f.image, 'jpeg', quality=jpeg_quality)
+                    f.image = decode_compressed(fmt, data)
             for n, regions in bank.receive(frames).items():
                 stages[n].set_regions(*regions)
             b = fusion.step(fs.stamp_ns, {n: f.image for n, f in frames.items()},
