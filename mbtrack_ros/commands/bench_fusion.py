@@ -5,7 +5,9 @@ image size (as ``mbtrack synth`` renders it), tracks each both ways
 (:func:`mbtrack_ros.evaluation.fusion.fusion_vs_single`) with the tracker configuration and
 frame-set synchroniser of ``mbtrack replay REC --seed S`` (so that the one-process MOTA is
 the replay's), and prints per recording the CLEAR MOT scores of both, the frames with the
-same ids, and the position gaps.
+same ids, the position gaps, and the CPU time per frame set of the one process, the camera
+stages and the fusion tracker (run one after another in this process), with the share of
+the fusion tracker's step in its filter and its detection.
 """
 from __future__ import annotations
 
@@ -87,9 +89,20 @@ def main_fusion(args: argparse.Namespace) -> int:
                   f'{m["fusion"].mismatches}; same ids on {got.same_ids}/{got.frames} frame '
                   f'sets; position gap median {1e3 * np.median(gaps):.1f} mm, max '
                   f'{1e3 * gaps.max():.1f} mm', flush=True)
+            ms = {k: 1e3 * v / max(got.frames, 1) for k, v in got.cpu.items()}
+            ft = got.fusion_timings
+            share = {k: 100 * v / max(ft['total'], 1e-9) for k, v in ft.items()}
+            print(f'  CPU per frame set ({len(calibration.cameras)} cameras): one process '
+                  f'{ms["single"]:.1f} ms; camera stages {ms["stages"]:.1f} ms '
+                  f'({ms["stages"] / len(calibration.cameras):.1f} ms per camera); fusion '
+                  f'tracker {ms["fusion"]:.1f} ms = {ms["fusion"] / max(ms["single"], 1e-9):.2f}'
+                  f' of one process; its step: filter {share["filter"]:.0f} %, search for '
+                  f'new people {share["detect_search"]:.0f} %, other detection '
+                  f'{share["detect"] - share["detect_search"]:.0f} %', flush=True)
             doc.append({'seed': seed, 'jpeg_quality': args.fusion_jpeg, 'mota': {k: v.mota for k, v in m.items()},
                         'motp_mm': {k: v.motp_mm for k, v in m.items()},
                         'same_ids': got.same_ids, 'frames': got.frames,
+                        'cpu_ms_per_frame_set': ms, 'fusion_step_share_percent': share,
                         'gap_median_m': float(np.median(gaps)), 'gap_max_m': float(gaps.max())})
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
