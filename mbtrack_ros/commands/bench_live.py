@@ -605,6 +605,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help='synth preset of a generated live recording, without its '
                              'ceiling camera (default clear-room: 4 corner cameras; '
                              'eight-cameras, twelve-cameras: 8 and 12 cameras at 640x480)')
+    parser.add_argument('--live-rate', type=float, default=1.0, metavar='R',
+                        help='play at R times real time (default 1: 15 Hz; 0.5: 7.5 Hz, '
+                             'to measure the CPU per frame set of a set-up the machine '
+                             'cannot run at 15 Hz)')
     parser.add_argument('--live-cameras', type=int, default=None, metavar='N',
                         help='track with the first N cameras of the recording only (the '
                              'same people seen by fewer cameras; default all)')
@@ -665,6 +669,8 @@ def main_live(args: argparse.Namespace) -> int:
     """``mbtrack bench --live``: run, print a summary, optionally write JSON."""
     if args.live_frames < 30:
         return _error(f'--live-frames must be >= 30, got {args.live_frames}')
+    if not 0.05 <= args.live_rate <= 4.0:
+        return _error(f'--live-rate must be in [0.05, 4], got {args.live_rate}')
     if not 0.0 <= args.live_bad_rate <= 1.0:
         return _error(f'--live-bad-rate must be in [0, 1], got {args.live_bad_rate}')
     bad = [p for p in args.live_param if ':=' not in p or p.startswith(':=')]
@@ -704,12 +710,12 @@ def main_live(args: argparse.Namespace) -> int:
             return _error(f'--live-bad-camera must be one of {", ".join(names)}, got '
                           f'{args.live_bad_camera!r}')
         load0 = os.getloadavg()
-        live = run_live(recording, seed=seed, use_sim_time=not args.live_no_sim_time,
+        live = run_live(recording, seed=seed, rate=args.live_rate, use_sim_time=not args.live_no_sim_time,
                         ground_truth=args.live_ground_truth, node_args=node_args,
                         bad_rate=args.live_bad_rate, bad_camera=args.live_bad_camera,
                         camera_nodes=args.live_camera_nodes,
                         image_format=args.live_image_format, cameras=args.live_cameras,
-                        timeout=max(600.0, 2.0 * args.live_frames / FPS))
+                        timeout=max(600.0, 2.0 * args.live_frames / FPS / args.live_rate))
         load1 = os.getloadavg()
         offline = fast = quick = None
         if not args.live_no_offline:
@@ -728,7 +734,8 @@ def main_live(args: argparse.Namespace) -> int:
             shutil.rmtree(tmp, ignore_errors=True)
     d = live.diagnostics
     a, b, c = live.latency_all, live.latency_after_1s, live.latency_after_5s
-    print(f'live: {live.frames} frames, {live.people_messages} PoseArrays '
+    print(f'live: {live.frames} frames at {FPS * args.live_rate:g} Hz, '
+          f'{live.people_messages} PoseArrays '
           f'({live.frames - live.people_messages} frame sets without output), '
           f'{live.mean_people_truth:.2f} people / {live.mean_tracks:.2f} tracks on average')
     print(f'latency image -> people: p50 {1e3 * a.p50:.1f} ms, p95 {1e3 * a.p95:.1f} ms, '
@@ -744,7 +751,9 @@ def main_live(args: argparse.Namespace) -> int:
           'of a stamp)')
     print(f'tracker_node CPU: {live.cpu_seconds:.1f} s over {live.wall_seconds:.1f} s '
           f'= {live.cpu_percent:.0f} % of one core = {1e3 * live.cpu_seconds / live.frames:.1f} '
-          f'ms per frame set ({live.cameras} cameras); by thread: '
+          f'ms per frame set played ({live.cameras} cameras; '
+          f'{1e3 * live.cpu_seconds / max(live.people_messages, 1):.1f} ms per frame set '
+          'answered); by thread: '
           + ', '.join(f'{k} {v:.1f} s' for k, v in live.tracker_threads if v >= 0.05))
     if args.live_bad_rate > 0:
         print(soak_summary(live, args.live_bad_camera))
@@ -770,6 +779,7 @@ def main_live(args: argparse.Namespace) -> int:
                'offline_profile': quick,
                'loadavg_before': load0,
                'loadavg_after': load1, 'seed': seed, 'preset': args.live_preset,
+               'rate': args.live_rate, 'cameras': live.cameras,
                'use_sim_time': not args.live_no_sim_time,
                'ground_truth': bool(args.live_ground_truth),
                'warm_up': not args.live_no_warm_up, 'node_params': list(args.live_param)}
