@@ -289,3 +289,19 @@ def test_short_soak_counts_every_injected_bad_image(recording):
     assert f'frame sets processed {FRAMES} of {FRAMES}' in text
     assert f'injected on cam0: {live.injected_bad}; /diagnostics dropped images (bad): ' \
            f'{live.injected_bad}' in text
+
+
+def test_live_with_camera_nodes_sending_jpeg_answers_every_frame_set(recording):
+    """``bench --live --live-camera-nodes --live-image-format jpeg --live-cameras 2``: two
+    camera_node processes send JPEG working images to the fusion tracker_node, which
+    answers every frame set; the bench measures the JPEG bytes (a fraction of the raw
+    image's) and splits the tracker's CPU by thread."""
+    from mbtrack_ros.commands.bench_live import run_live
+    live = run_live(recording, seed=SEED, camera_nodes=True, image_format='jpeg', cameras=2,
+                    node_args=('-p', 'warm_up:=false'), timeout=300.0)
+    assert live.cameras == 2 and len(live.camera_node_cpu_seconds) == 2
+    assert all(c > 0 for c in live.camera_node_cpu_seconds)
+    assert live.people_messages == FRAMES
+    assert 0 < live.image_bytes_per_frame < 0.5 * 160 * 120 * 3
+    threads = dict(live.tracker_threads)
+    assert threads['main'] > 0 and threads['python threads'] > 0
