@@ -67,8 +67,8 @@ def test_cpu_seconds_reads_proc_like_os_times():
 
 def test_thread_cpu_seconds_name_the_thread_that_burnt_the_cpu():
     """Per-thread CPU (/proc/<pid>/task): a Python thread that burns CPU shows in
-    ``python threads`` of :func:`thread_split`, the main thread in ``main``; the threads
-    add up to the process (while all are alive)."""
+    ``python threads`` of :func:`thread_split`, the main thread in ``main``; the live
+    threads' times never exceed the process's (which keeps the ended threads' too)."""
     import threading
 
     from mbtrack_ros.commands.bench_live import cpu_seconds, thread_cpu_seconds, thread_split
@@ -96,11 +96,11 @@ def test_thread_cpu_seconds_name_the_thread_that_burnt_the_cpu():
         worker.join()
     split = dict(thread_split(before, after, os.getpid()))
     assert split['python threads'] > 0.05 and split['main'] < split['python threads']
-    assert abs(sum(after.values()) - total) < 0.1
+    assert sum(after.values()) <= total + 0.05
     before = thread_cpu_seconds(os.getpid())
     burn()
     split = dict(thread_split(before, thread_cpu_seconds(os.getpid()), os.getpid()))
-    assert split['main'] > 0.05 and split.get('python threads', 0.0) < 0.02
+    assert split['main'] > 0.05 and split.get('python threads', 0.0) < split['main']
 
 
 def test_bench_live_bad_frames_is_a_one_line_error(capsys):
