@@ -65,6 +65,44 @@ def test_cpu_seconds_reads_proc_like_os_times():
     assert abs(cpu_seconds(os.getpid()) - (t.user + t.system)) < 0.05
 
 
+def test_thread_cpu_seconds_name_the_thread_that_burnt_the_cpu():
+    """Per-thread CPU (/proc/<pid>/task): a Python thread that burns CPU shows in
+    ``python threads`` of :func:`thread_split`, the main thread in ``main``; the live
+    threads' times never exceed the process's (which keeps the ended threads' too)."""
+    import threading
+
+    from mbtrack_ros.commands.bench_live import cpu_seconds, thread_cpu_seconds, thread_split
+
+    def burn():
+        x = 0.0
+        for i in range(5_000_000):
+            x += i ** 0.5
+
+    def work(done: threading.Event):
+        burn()
+        done.set()
+        release.wait(30)
+
+    release, done = threading.Event(), threading.Event()
+    before = thread_cpu_seconds(os.getpid())
+    worker = threading.Thread(target=work, args=(done,))
+    worker.start()
+    try:
+        done.wait(30)
+        after = thread_cpu_seconds(os.getpid())
+        total = cpu_seconds(os.getpid())
+    finally:
+        release.set()
+        worker.join()
+    split = dict(thread_split(before, after, os.getpid()))
+    assert split['python threads'] > 0.05 and split['main'] < split['python threads']
+    assert sum(after.values()) <= total + 0.05
+    before = thread_cpu_seconds(os.getpid())
+    burn()
+    split = dict(thread_split(before, thread_cpu_seconds(os.getpid()), os.getpid()))
+    assert split['main'] > 0.05 and split.get('python threads', 0.0) < split['main']
+
+
 def test_bench_live_bad_frames_is_a_one_line_error(capsys):
     from mbtrack_ros.cli import main
     assert main(['bench', '--live', '--live-frames', '5']) == 2
@@ -251,3 +289,19 @@ def test_short_soak_counts_every_injected_bad_image(recording):
     assert f'frame sets processed {FRAMES} of {FRAMES}' in text
     assert f'injected on cam0: {live.injected_bad}; /diagnostics dropped images (bad): ' \
            f'{live.injected_bad}' in text
+
+
+def test_live_with_camera_nodes_sending_jpeg_answers_every_frame_set(recording):
+    """``bench --live --live-camera-nodes --live-image-format jpeg --live-cameras 2``: two
+    camera_node processes send JPEG working images to the fusion tracker_node, which
+    answers every frame set; the bench measures the JPEG bytes (a fraction of the raw
+    image's) and splits the tracker's CPU by thread."""
+    from mbtrack_ros.commands.bench_live import run_live
+    live = run_live(recording, seed=SEED, camera_nodes=True, image_format='jpeg', cameras=2,
+                    node_args=('-p', 'warm_up:=false'), timeout=300.0)
+    assert live.cameras == 2 and len(live.camera_node_cpu_seconds) == 2
+    assert all(c > 0 for c in live.camera_node_cpu_seconds)
+    assert live.people_messages == FRAMES
+    assert 0 < live.image_bytes_per_frame < 0.5 * 160 * 120 * 3
+    threads = dict(live.tracker_threads)
+    assert threads['main'] > 0 and threads['python threads'] > 0

@@ -414,6 +414,13 @@ def test_room_family_presets_have_their_cameras_doors_and_crowds():
     assert len(cameras('large-room')) == 6 and 'cam4' not in cameras('large-room')
     large = get_preset('large-room').room()
     assert (large.width, large.depth) == (10.0, 8.0)
+    eight, twelve = cameras('eight-cameras'), cameras('twelve-cameras')
+    assert len(eight) == 8 and len(twelve) == 12 and set(eight) < set(twelve)
+    assert 'cam4' not in twelve and get_preset('eight-cameras').size == (640, 480)
+    hall = get_preset('twelve-cameras')
+    calib = make_calibration(hall.room(), ceiling=False)
+    centres = np.array([c.center for c in calib.cameras.values()])
+    assert len(np.unique(np.round(centres, 3), axis=0)) == 12   # twelve places, no doubles
     two = get_preset('two-doors')
     calib = make_calibration(two.room())
     assert len(calib.exits) == 2 and len(calib.entry_zones) == 2
@@ -436,6 +443,8 @@ def test_room_family_presets_have_their_cameras_doors_and_crowds():
     assert counts[0] >= 4 and min(counts) < counts[0]  # present at the start, some leave
     _, doors = simulate('two-doors', 60)
     assert doors == {0, 1}  # people come in through both doors
+    counts, _ = simulate('eight-cameras', 12)
+    assert counts[0] == 4 and max(counts) == 8
     for name in ('crowd', 'occupied', 'two-cameras', 'three-cameras', 'large-room',
-                 'two-doors'):
+                 'eight-cameras', 'twelve-cameras', 'two-doors'):
         assert get_preset(f'{name}-short').frames < get_preset(name).frames

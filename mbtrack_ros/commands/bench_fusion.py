@@ -1,8 +1,13 @@
 """``mbtrack bench --fusion``: one process against camera stages + a fusion tracker.
 
-Generates fresh recordings of a preset (one per ``--fusion-seeds`` seed), tracks each both
-ways (:func:`mbtrack_ros.evaluation.fusion.fusion_vs_single`) and prints per recording
-the CLEAR MOT scores of both, the frames with the same ids, and the position gaps.
+Generates fresh recordings of a preset (one per ``--fusion-seeds`` seed) at the preset's
+image size (as ``mbtrack synth`` renders it), tracks each both ways
+(:func:`mbtrack_ros.evaluation.fusion.fusion_vs_single`) with the tracker configuration and
+frame-set synchroniser of ``mbtrack replay REC --seed S`` (so that the one-process MOTA is
+the replay's), and prints per recording the CLEAR MOT scores of both, the frames with the
+same ids, the position gaps, and the CPU time per frame set of the one process, the camera
+stages and the fusion tracker (run one after another in this process), with the share of
+the fusion tracker's step in its filter and its detection.
 """
 from __future__ import annotations
 
@@ -30,6 +35,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         metavar='S', help='recording seeds of --fusion (default 200 201)')
     parser.add_argument('--fusion-frames', type=int, default=None, metavar='N',
                         help='frames of each --fusion recording (default: the preset\'s)')
+    parser.add_argument('--fusion-jpeg', type=int, default=None, metavar='Q',
+                        help='the camera stages send their working images JPEG-coded at '
+                             'quality Q (1-100; camera_node image_format jpeg, jpeg_quality '
+                             'Q) instead of raw')
 
 
 def main_fusion(args: argparse.Namespace) -> int:
@@ -38,36 +47,62 @@ def main_fusion(args: argparse.Namespace) -> int:
         print(f'{_PROG}: error: --fusion-frames must be >= 1, got {args.fusion_frames}',
               file=sys.stderr)
         return 2
+    if args.fusion_jpeg is not None and not 1 <= args.fusion_jpeg <= 100:
+        print(f'{_PROG}: error: --fusion-jpeg must be 1-100, got {args.fusion_jpeg}',
+              file=sys.stderr)
+        return 2
+    from mbtrack_ros.commands.replay import sync_options
+    from mbtrack_ros.core.camera import RoomCalibration
     from mbtrack_ros.core.tracker import TrackerConfig
     from mbtrack_ros.evaluation.clear_mot import clear_mot
     from mbtrack_ros.evaluation.fusion import fusion_vs_single
     from mbtrack_ros.recording.csvfiles import read_ground_truth
     from mbtrack_ros.synth.errors import SynthError
     from mbtrack_ros.synth.generator import generate
+    from mbtrack_ros.synth.presets import get_preset
 
     tmp = Path(tempfile.mkdtemp(prefix='mbtrack_fusion_'))
     doc = []
     try:
         for seed in args.fusion_seeds:
             rec = tmp / f'{args.fusion}-{seed}'
-            try:
-                generate(args.fusion, rec, seed=seed, frames=args.fusion_frames)
+            try:   # at the preset's image size, as mbtrack synth renders it
+                width, height = get_preset(args.fusion).size
+                generate(args.fusion, rec, seed=seed, frames=args.fusion_frames,
+                         width=width, height=height)
             except SynthError as err:
                 print(f'{_PROG}: error: {err}', file=sys.stderr)
                 return 2
-            got = fusion_vs_single(rec, TrackerConfig(detection=True, seed=args.seed))
+            # what `mbtrack replay REC --seed S` runs: its default tracker configuration
+            # and frame-set synchroniser
+            config = TrackerConfig.from_dict({'seed': args.seed, 'detection': True})
+            calibration = RoomCalibration.load(rec / 'calibration.yaml')
+            got = fusion_vs_single(rec, config, sync_options(rec, calibration),
+                                   jpeg_quality=args.fusion_jpeg)
             truth = read_ground_truth(rec / 'ground_truth.csv')
             m = {k: clear_mot(rows, truth) for k, rows in got.rows.items()}
             gaps = np.array(got.gaps or [0.0])
-            print(f'{args.fusion} seed {seed}: MOTA one process {100 * m["single"].mota:.1f} '
+            codec = 'raw' if args.fusion_jpeg is None else f'JPEG {args.fusion_jpeg}'
+            print(f'{args.fusion} seed {seed} (working images {codec}): MOTA one process {100 * m["single"].mota:.1f} '
                   f'/ fusion {100 * m["fusion"].mota:.1f}, MOTP {m["single"].motp_mm:.0f} / '
                   f'{m["fusion"].motp_mm:.0f} mm, switches {m["single"].mismatches} / '
                   f'{m["fusion"].mismatches}; same ids on {got.same_ids}/{got.frames} frame '
                   f'sets; position gap median {1e3 * np.median(gaps):.1f} mm, max '
                   f'{1e3 * gaps.max():.1f} mm', flush=True)
-            doc.append({'seed': seed, 'mota': {k: v.mota for k, v in m.items()},
+            ms = {k: 1e3 * v / max(got.frames, 1) for k, v in got.cpu.items()}
+            ft = got.fusion_timings
+            share = {k: 100 * v / max(ft['total'], 1e-9) for k, v in ft.items()}
+            print(f'  CPU per frame set ({len(calibration.cameras)} cameras): one process '
+                  f'{ms["single"]:.1f} ms; camera stages {ms["stages"]:.1f} ms '
+                  f'({ms["stages"] / len(calibration.cameras):.1f} ms per camera); fusion '
+                  f'tracker {ms["fusion"]:.1f} ms = {ms["fusion"] / max(ms["single"], 1e-9):.2f}'
+                  f' of one process; its step: filter {share["filter"]:.0f} %, search for '
+                  f'new people {share["detect_search"]:.0f} %, other detection '
+                  f'{share["detect"] - share["detect_search"]:.0f} %', flush=True)
+            doc.append({'seed': seed, 'jpeg_quality': args.fusion_jpeg, 'mota': {k: v.mota for k, v in m.items()},
                         'motp_mm': {k: v.motp_mm for k, v in m.items()},
                         'same_ids': got.same_ids, 'frames': got.frames,
+                        'cpu_ms_per_frame_set': ms, 'fusion_step_share_percent': share,
                         'gap_median_m': float(np.median(gaps)), 'gap_max_m': float(gaps.max())})
     finally:
         shutil.rmtree(tmp, ignore_errors=True)

@@ -124,12 +124,16 @@ def cpu_seconds(pid: int) -> float:
 
 
 def make_recording(path: Path, *, frames: int, seed: int = 0,
-                   compressed: bool = False,
-                   size: tuple[int, int] = (320, 240)) -> Path:
-    """The benchmark recording: clear-room, 4 corner cameras, ``size`` (320x240), 15 Hz
-    (``compressed``: JPEG images, ~15 kB instead of 230 kB each, for long soaks)."""
+                   compressed: bool = False, size: tuple[int, int] | None = None,
+                   preset: str = 'clear-room') -> Path:
+    """The benchmark recording: ``preset`` (clear-room: 4 corner cameras) without a ceiling
+    camera, ``size`` (default: the preset's, 320x240 for clear-room), 15 Hz
+    (``compressed``: JPEG images, ~15 kB instead of 230 kB each at 320x240, for long
+    soaks). Raises :class:`~mbtrack_ros.synth.errors.SynthError` on an unknown preset."""
     from mbtrack_ros.synth.generator import generate
-    return generate('clear-room', path, seed=seed, frames=frames, width=size[0],
+    from mbtrack_ros.synth.presets import get_preset
+    size = size or get_preset(preset).size
+    return generate(preset, path, seed=seed, frames=frames, width=size[0],
                     height=size[1], fps=FPS, ceiling=False, compressed=compressed)
 
 
@@ -156,7 +160,10 @@ class LiveResult:
     camera_node_cpu_seconds: tuple[float, ...] = ()  # per camera node (--live-camera-nodes)
     camera_node_logs: tuple[str, ...] = ()           # their counters at the end
     mask_bytes_per_frame: float = float('nan')       # mean PNG mask message data, bytes
-    image_bytes_per_frame: float = float('nan')      # working image data (raw rgb8), bytes
+    image_bytes_per_frame: float = float('nan')      # mean working image data, bytes
+    image_format: str = 'raw'                        # of the working images: raw | jpeg
+    cameras: int = 4
+    tracker_threads: tuple[tuple[str, float], ...] = ()  # (thread, CPU s) of the tracker
 
 
 #: kinds of bad images the soak injects, in turn
@@ -193,6 +200,40 @@ def bad_image(kind: str, stamp_ns: int, camera: str, width: int, height: int, *,
     return msg
 
 
+def thread_cpu_seconds(pid: int) -> dict[tuple[int, str], float]:
+    """User + system CPU time, seconds, of each thread ``(tid, name)`` of process ``pid``
+    (``/proc/<pid>/task/<tid>/stat``); threads that ended meanwhile are left out."""
+    out = {}
+    for task in Path(f'/proc/{pid}/task').iterdir():
+        try:
+            text = (task / 'stat').read_text()
+        except OSError:
+            continue
+        name = text[text.index('(') + 1:text.rindex(')')]
+        fields = text[text.rindex(')') + 2:].split()
+        out[(int(task.name), name)] = (int(fields[11]) + int(fields[12])) \
+            / os.sysconf('SC_CLK_TCK')
+    return out
+
+
+def thread_split(before: dict, after: dict, pid: int) -> tuple[tuple[str, float], ...]:
+    """CPU seconds spent between two :func:`thread_cpu_seconds` readings, grouped: the main
+    thread (``main``: the executor's callbacks, message conversion), the other Python
+    threads (``python threads``: the tracker step and its workers), and the middleware's
+    threads by name (digits dropped, e.g. ``dds.shm.``), largest first."""
+    groups: dict[str, float] = {}
+    for (tid, name), cpu in after.items():
+        used = cpu - before.get((tid, name), 0.0)
+        if tid == pid:
+            key = 'main'
+        elif name.startswith('python'):
+            key = 'python threads'
+        else:
+            key = re.sub(r'\d+', '', name)
+        groups[key] = groups.get(key, 0.0) + used
+    return tuple(sorted(groups.items(), key=lambda kv: -kv[1]))
+
+
 def rss_megabytes(pid: int) -> float:
     """Resident set size of process ``pid``, MB (``/proc/<pid>/status`` VmRSS)."""
     for line in Path(f'/proc/{pid}/status').read_text().splitlines():
@@ -220,11 +261,16 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
              max_pending_sets: int = 15, timeout: float = 600.0, use_sim_time: bool = True,
              ground_truth: bool = False, node_args: tuple[str, ...] = (),
              bad_rate: float = 0.0, bad_camera: str = 'cam0',
-             camera_nodes: bool = False) -> LiveResult:
+             camera_nodes: bool = False, image_format: str = 'raw',
+             cameras: int | None = None) -> LiveResult:
     """Play ``recording`` to a tracker_node process and measure (see the module docstring).
 
     ``camera_nodes``: one ``camera_node`` process per camera and the tracker in fusion mode
-    (``input_mode: foreground``); their CPU and the masks' bytes are measured too.
+    (``input_mode: foreground``); their CPU and the masks' and working images' bytes are
+    measured too. ``image_format``: the camera nodes' working images, ``raw``
+    (``sensor_msgs/Image``) or ``jpeg`` (``CompressedImage``, decoded in the tracker).
+    ``cameras``: track with the first ``cameras`` cameras of the calibration only (the
+    player plays only theirs; default all).
 
     ``ground_truth``: start tracks from the recording's ground truth (``init_ground_truth``)
     instead of the automatic detection. ``bad_rate``: share of the frame sets after whose
@@ -256,7 +302,9 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
         # a recording of JPEG images: the node subscribes to the compressed topics
         compressed = reader.topics.get(image_topic('cam0', True)) == COMPRESSED \
             and image_topic('cam0') not in reader.topics
-    if compressed:
+    if compressed and not camera_nodes:
+        node_args = ('-p', 'image_transport:=compressed', *node_args)
+    if camera_nodes and image_format == 'jpeg':  # the working images the tracker takes
         node_args = ('-p', 'image_transport:=compressed', *node_args)
     soak_cam = RoomCalibration.load(recording / 'calibration.yaml').cameras[bad_camera] \
         if bad_rate > 0 else None
@@ -324,18 +372,27 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
                                  callback_group=group)
     listener.create_subscription(DiagnosticArray, '/diagnostics', on_diag, qos,
                                  callback_group=group)
-    cams = ['cam0', 'cam1', 'cam2', 'cam3']
+    cams = RoomCalibration.load(recording / 'calibration.yaml').names[:cameras]
     masks: list[int] = []
+    jpegs: list[int] = []
 
     def on_mask(msg) -> None:
         if msg.data:
             with lock:
                 masks.append(len(msg.data))
 
+    def on_jpeg(msg) -> None:
+        with lock:
+            jpegs.append(len(msg.data))
+
     if camera_nodes:
         for cam in cams:
             listener.create_subscription(CompressedImage, f'/{cam}/working/foreground',
                                          on_mask, qos, callback_group=group)
+            if image_format == 'jpeg':
+                listener.create_subscription(CompressedImage,
+                                             f'/{cam}/working/image/compressed', on_jpeg,
+                                             qos, callback_group=group)
         node_args = ('-p', 'input_mode:=foreground', *node_args)
     executor = MultiThreadedExecutor(num_threads=3, context=context)
     executor.add_node(listener)
@@ -346,7 +403,7 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
     node = subprocess.Popen(
         [sys.executable, '-m', 'mbtrack_ros.nodes.tracker_node', '--ros-args',
          '-p', f'calibration_file:={recording / "calibration.yaml"}',
-         '-p', 'cameras:=[cam0,cam1,cam2,cam3]', '-p', 'detection.enabled:=true',
+         '-p', f'cameras:=[{",".join(cams)}]', '-p', 'detection.enabled:=true',
          '-p', f'tracker.seed:={seed}', '-p', 'image_reliability:=reliable',
          '-p', f'max_pending_sets:={max_pending_sets}',
          '-p', f'use_sim_time:={str(use_sim_time).lower()}', *node_args],
@@ -366,6 +423,8 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
             [sys.executable, '-m', 'mbtrack_ros.nodes.camera_node', '--ros-args',
              '-r', f'__ns:=/{cam}', '-p', f'calibration_file:={recording / "calibration.yaml"}',
              '-p', f'camera:={cam}', '-p', 'image_reliability:=reliable',
+             '-p', f'image_format:={image_format}',
+             '-p', f'image_transport:={"compressed" if compressed else "raw"}',
              *[x for a in node_args if a.startswith('tracker.working_pixels:=')
                for x in ('-p', a)]],
             cwd=REPO, env=env, stdout=stage_log, stderr=subprocess.STDOUT, text=True))
@@ -386,9 +445,11 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
              '-p', 'wait_for_subscribers:=true', '-p', 'start_delay:=1.0',
              # our /clock reader too: a listener that missed the first /clock messages timed
              # only later frames and took a later frame for frame 0
-             '-p', f'clock_subscribers:={2 if use_sim_time else 1}'],
+             '-p', f'clock_subscribers:={2 if use_sim_time else 1}',
+             '-p', f'topics:=[{",".join(image_topic(c, compressed) for c in cams)}]'],
             cwd=REPO, env=env, stdout=player_log, stderr=subprocess.STDOUT, text=True)
         cpu0, wall0 = cpu_seconds(node.pid), time.monotonic()
+        threads0 = thread_cpu_seconds(node.pid)
         rss: list[tuple[float, float]] = []
         sampling = threading.Event()
 
@@ -413,6 +474,7 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
                 last_n, quiet = n, time.monotonic()
             time.sleep(0.1)
         cpu1, wall1 = cpu_seconds(node.pid), time.monotonic()
+        threads1 = thread_cpu_seconds(node.pid)
         # the final counts: the node publishes /diagnostics on a wall-clock period once no
         # frame set forms; wait for one sent after the last output
         with lock:
@@ -472,7 +534,10 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
         injected_bad=injected[0], rss_mb=tuple(rss),
         camera_node_cpu_seconds=stage_cpu, camera_node_logs=tuple(stage_lines),
         mask_bytes_per_frame=float(np.mean(masks)) if masks else float('nan'),
-        image_bytes_per_frame=float(working_bytes) if camera_nodes else float('nan'))
+        image_bytes_per_frame=(float(np.mean(jpegs)) if jpegs else float('nan'))
+        if image_format == 'jpeg' else float(working_bytes) if camera_nodes else float('nan'),
+        image_format=image_format, cameras=len(cams),
+        tracker_threads=thread_split(threads0, threads1, node.pid))
 
 
 def run_offline(recording: Path, *, seed: int = 0, ground_truth: bool = False,
@@ -533,8 +598,24 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--live-param', action='append', default=[], metavar='NAME:=VALUE',
                         help='a tracker_node parameter for the live run, as after ros-args '
                              '-p (repeatable), e.g. tracker.pipeline_search:=true')
-    parser.add_argument('--live-size', type=_size, default=(320, 240), metavar='WxH',
-                        help='image size of a generated live recording (default 320x240)')
+    parser.add_argument('--live-size', type=_size, default=None, metavar='WxH',
+                        help="image size of a generated live recording (default: the "
+                             "preset's, 320x240 for clear-room)")
+    parser.add_argument('--live-preset', default='clear-room', metavar='PRESET',
+                        help='synth preset of a generated live recording, without its '
+                             'ceiling camera (default clear-room: 4 corner cameras; '
+                             'eight-cameras, twelve-cameras: 8 and 12 cameras at 640x480)')
+    parser.add_argument('--live-rate', type=float, default=1.0, metavar='R',
+                        help='play at R times real time (default 1: 15 Hz; 0.5: 7.5 Hz, '
+                             'to measure the CPU per frame set of a set-up the machine '
+                             'cannot run at 15 Hz)')
+    parser.add_argument('--live-cameras', type=int, default=None, metavar='N',
+                        help='track with the first N cameras of the recording only (the '
+                             'same people seen by fewer cameras; default all)')
+    parser.add_argument('--live-image-format', choices=('raw', 'jpeg'), default='raw',
+                        help='with --live-camera-nodes: the working images the camera '
+                             'nodes send the tracker (camera_node image_format; default '
+                             'raw)')
     parser.add_argument('--live-camera-nodes', action='store_true',
                         help='one camera_node process per camera and tracker_node in fusion '
                              'mode (input_mode foreground): their CPU, the masks\' bytes')
@@ -588,11 +669,10 @@ def main_live(args: argparse.Namespace) -> int:
     """``mbtrack bench --live``: run, print a summary, optionally write JSON."""
     if args.live_frames < 30:
         return _error(f'--live-frames must be >= 30, got {args.live_frames}')
+    if not 0.05 <= args.live_rate <= 4.0:
+        return _error(f'--live-rate must be in [0.05, 4], got {args.live_rate}')
     if not 0.0 <= args.live_bad_rate <= 1.0:
         return _error(f'--live-bad-rate must be in [0, 1], got {args.live_bad_rate}')
-    if args.live_bad_camera not in ('cam0', 'cam1', 'cam2', 'cam3'):
-        return _error(f'--live-bad-camera must be one of cam0..cam3, got '
-                      f'{args.live_bad_camera!r}')
     bad = [p for p in args.live_param if ':=' not in p or p.startswith(':=')]
     if bad:
         return _error(f'--live-param must be NAME:=VALUE, got {bad[0]!r}')
@@ -613,16 +693,29 @@ def main_live(args: argparse.Namespace) -> int:
                 recording = tmp / 'clear-room'
             else:
                 recording = args.live_recording
-            print(f'{_PROG}: generating {args.live_frames} frames of clear-room into '
-                  f'{recording}', file=sys.stderr)
+            print(f'{_PROG}: generating {args.live_frames} frames of {args.live_preset} '
+                  f'into {recording}', file=sys.stderr)
             make_recording(recording, frames=args.live_frames, seed=seed,
-                           compressed=args.live_compressed, size=args.live_size)
+                           compressed=args.live_compressed, size=args.live_size,
+                           preset=args.live_preset)
+        from mbtrack_ros.core.camera import CalibrationError, RoomCalibration
+        try:
+            names = RoomCalibration.load(recording / 'calibration.yaml').names
+        except CalibrationError as err:
+            return _error(str(err).splitlines()[0])
+        if args.live_cameras is not None and not 1 <= args.live_cameras <= len(names):
+            return _error(f'--live-cameras must be 1-{len(names)}, got {args.live_cameras}')
+        names = names[:args.live_cameras]
+        if args.live_bad_rate > 0 and args.live_bad_camera not in names:
+            return _error(f'--live-bad-camera must be one of {", ".join(names)}, got '
+                          f'{args.live_bad_camera!r}')
         load0 = os.getloadavg()
-        live = run_live(recording, seed=seed, use_sim_time=not args.live_no_sim_time,
+        live = run_live(recording, seed=seed, rate=args.live_rate, use_sim_time=not args.live_no_sim_time,
                         ground_truth=args.live_ground_truth, node_args=node_args,
                         bad_rate=args.live_bad_rate, bad_camera=args.live_bad_camera,
                         camera_nodes=args.live_camera_nodes,
-                        timeout=max(600.0, 2.0 * args.live_frames / FPS))
+                        image_format=args.live_image_format, cameras=args.live_cameras,
+                        timeout=max(600.0, 2.0 * args.live_frames / FPS / args.live_rate))
         load1 = os.getloadavg()
         offline = fast = quick = None
         if not args.live_no_offline:
@@ -641,7 +734,8 @@ def main_live(args: argparse.Namespace) -> int:
             shutil.rmtree(tmp, ignore_errors=True)
     d = live.diagnostics
     a, b, c = live.latency_all, live.latency_after_1s, live.latency_after_5s
-    print(f'live: {live.frames} frames, {live.people_messages} PoseArrays '
+    print(f'live: {live.frames} frames at {FPS * args.live_rate:g} Hz, '
+          f'{live.people_messages} PoseArrays '
           f'({live.frames - live.people_messages} frame sets without output), '
           f'{live.mean_people_truth:.2f} people / {live.mean_tracks:.2f} tracks on average')
     print(f'latency image -> people: p50 {1e3 * a.p50:.1f} ms, p95 {1e3 * a.p95:.1f} ms, '
@@ -656,7 +750,11 @@ def main_live(args: argparse.Namespace) -> int:
           f'ms, p95 {1e3 * live.publish_spread_p95:.1f} ms (its own log: first to last message '
           'of a stamp)')
     print(f'tracker_node CPU: {live.cpu_seconds:.1f} s over {live.wall_seconds:.1f} s '
-          f'= {live.cpu_percent:.0f} % of one core')
+          f'= {live.cpu_percent:.0f} % of one core = {1e3 * live.cpu_seconds / live.frames:.1f} '
+          f'ms per frame set played ({live.cameras} cameras; '
+          f'{1e3 * live.cpu_seconds / max(live.people_messages, 1):.1f} ms per frame set '
+          'answered); by thread: '
+          + ', '.join(f'{k} {v:.1f} s' for k, v in live.tracker_threads if v >= 0.05))
     if args.live_bad_rate > 0:
         print(soak_summary(live, args.live_bad_camera))
     for name, off in (('default', offline), (f'fast profile {FAST_PROFILE.name}', fast),
@@ -669,9 +767,10 @@ def main_live(args: argparse.Namespace) -> int:
         per = live.camera_node_cpu_seconds
         print(f'camera_node CPU: {sum(per):.1f} s in all ({", ".join(f"{c:.1f}" for c in per)}'
               f' s each) = {100.0 * sum(per) / max(live.wall_seconds, 1e-9):.0f} % of one '
-              f'core; per camera and frame: working image {live.image_bytes_per_frame / 1024:.1f}'
-              f' KiB (raw rgb8), foreground masks {live.mask_bytes_per_frame / 1024:.2f} KiB '
-              '(PNG)')
+              f'core = {1e3 * sum(per) / len(per) / live.frames:.1f} ms per camera and frame; '
+              f'per camera and frame: working image {live.image_bytes_per_frame / 1024:.1f}'
+              f' KiB ({"JPEG" if live.image_format == "jpeg" else "raw rgb8"}), foreground '
+              f'masks {live.mask_bytes_per_frame / 1024:.2f} KiB (PNG)')
         for line in live.camera_node_logs:
             print('  ' + line[line.find(']: ') + 3:] if ']: ' in line else line)
     print(f'load average before / after the live run: {load0[0]:.2f} / {load1[0]:.2f}')
@@ -679,7 +778,9 @@ def main_live(args: argparse.Namespace) -> int:
         doc = {'live': asdict(live), 'offline': offline, 'offline_fast': fast,
                'offline_profile': quick,
                'loadavg_before': load0,
-               'loadavg_after': load1, 'seed': seed, 'use_sim_time': not args.live_no_sim_time,
+               'loadavg_after': load1, 'seed': seed, 'preset': args.live_preset,
+               'rate': args.live_rate, 'cameras': live.cameras,
+               'use_sim_time': not args.live_no_sim_time,
                'ground_truth': bool(args.live_ground_truth),
                'warm_up': not args.live_no_warm_up, 'node_params': list(args.live_param)}
         try:

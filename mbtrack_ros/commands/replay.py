@@ -223,6 +223,14 @@ def _sync_options(args: argparse.Namespace, bag: Path,
     tolerance = args.sync_tolerance
     if tolerance is not None and not (0 <= tolerance <= 1.0):
         raise _UserError(f'--sync-tolerance must be in [0, 1] seconds, got {tolerance}')
+    return sync_options(bag, calibration, tolerance)
+
+
+def sync_options(bag: Path, calibration: RoomCalibration,
+                 tolerance: float | None = None) -> dict:
+    """:class:`RecordingReader` keyword arguments of a replay of ``bag`` (a recording or
+    bag directory): ``tolerance`` seconds (None: half the measured frame period), the
+    frame rate of recording.yaml and the calibration's ``time_offset`` s."""
     fps = 0.0
     meta = bag / 'recording.yaml'
     if meta.is_file():

@@ -10,6 +10,7 @@ frame of latency of the update). No DDS: the comparison isolates the split itsel
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -19,6 +20,7 @@ from mbtrack_ros.core.camera import RoomCalibration
 from mbtrack_ros.core.detection.camera_stage import CameraStage, ReceivedForeground
 from mbtrack_ros.core.tracker import Tracker, TrackerConfig
 from mbtrack_ros.recording.csvfiles import TrackRow
+from mbtrack_ros.recording.images import decode_compressed, encode_compressed
 
 __all__ = ['FusionComparison', 'fusion_vs_single']
 
@@ -33,6 +35,14 @@ class FusionComparison:
         tracked: frame sets where one process reported a track.
         gaps: floor distance, metres, between the two estimates of every id both reported.
         rows: ``'single'`` / ``'fusion'`` -> track rows (for CLEAR MOT).
+        cpu: CPU time of this process, seconds, spent in ``'single'`` (the one-process
+            tracker's steps), ``'stages'`` (all camera stages, with the JPEG coding of
+            ``jpeg_quality``) and ``'fusion'`` (the fusion tracker: the masks handed over,
+            JPEG decoding, its steps); the three run one after another.
+        fusion_timings: the fusion tracker's step timings summed, wall seconds:
+            ``'filter'`` (prediction, likelihood in every camera, MRF), ``'detect_search'``
+            (the search for new people), ``'detect'`` (all detection work, the search
+            included), ``'total'``.
     """
 
     frames: int = 0
@@ -41,12 +51,23 @@ class FusionComparison:
     gaps: list[float] = field(default_factory=list)
     rows: dict[str, list[TrackRow]] = field(
         default_factory=lambda: {'single': [], 'fusion': []})
+    cpu: dict[str, float] = field(
+        default_factory=lambda: {'single': 0.0, 'stages': 0.0, 'fusion': 0.0})
+    fusion_timings: dict[str, float] = field(
+        default_factory=lambda: dict.fromkeys(('filter', 'detect_search', 'detect', 'total'),
+                                              0.0))
 
 
-def fusion_vs_single(recording: str | Path, config: TrackerConfig | None = None
-                     ) -> FusionComparison:
+def fusion_vs_single(recording: str | Path, config: TrackerConfig | None = None,
+                     reader_options: dict | None = None,
+                     jpeg_quality: int | None = None) -> FusionComparison:
     """Track ``recording`` (a recording directory) both ways; see the module docstring.
-    ``config`` must enable detection (default: ``TrackerConfig(detection=True, seed=0)``)."""
+    ``config`` must enable detection (default: ``TrackerConfig(detection=True, seed=0)``,
+    what ``mbtrack replay`` runs without options); ``reader_options``: keyword arguments
+    of the :class:`~mbtrack_ros.recording.bag.RecordingReader` (its frame-set
+    synchroniser's settings; ``mbtrack replay`` takes the recording's frame rate).
+    ``jpeg_quality``: the working images reach the fusion tracker JPEG-coded at this
+    quality (``camera_node`` ``image_format: jpeg``), as it decodes them; None: raw."""
     from mbtrack_ros.recording.bag import RecordingReader
 
     recording = Path(recording)
@@ -59,18 +80,35 @@ def fusion_vs_single(recording: str | Path, config: TrackerConfig | None = None
     stages = {n: CameraStage(c, background, working_pixels=config.working_pixels)
               for n, c in calibration.cameras.items()}
     out = FusionComparison()
-    with RecordingReader(recording) as reader:
+    with RecordingReader(recording, **(reader_options or {})) as reader:
         for fs in reader.frames():
-            a = single.step(fs.stamp_ns, fs.images)
+            t0 = time.process_time()
+            a = single.step(fs.stamp_ns, fs.images, stamps=fs.stamps)
+            t1 = time.process_time()
             frames = {n: stages[n].process(im) for n, im in fs.images.items()}
+            coded = {}
+            if jpeg_quality is not None:
+                coded = {n: encode_compressed(f.image, 'jpeg', quality=jpeg_quality)
+                         for n, f in frames.items()}
+            t2 = time.process_time()
+            for n, (fmt, data) in coded.items():   # what a JPEG working image decodes to
+                frames[n].image = decode_compressed(fmt, data)
             for n, regions in bank.receive(frames).items():
                 stages[n].set_regions(*regions)
-            b = fusion.step(fs.stamp_ns, {n: f.image for n, f in frames.items()})
+            b = fusion.step(fs.stamp_ns, {n: f.image for n, f in frames.items()},
+                            stamps=fs.stamps)
+            t3 = time.process_time()
+            out.cpu['single'] += t1 - t0
+            out.cpu['fusion'] += t3 - t2
+            for key in out.fusion_timings:
+                out.fusion_timings[key] += b.timings.get(key, 0.0)
             xy = np.array([t.mean[:2] for t in b.tracks]).reshape(-1, 2)
             velocity = np.array([t.mean[2:4] for t in b.tracks]).reshape(-1, 2)
             heights = np.array([t.height for t in b.tracks])
+            t4 = time.process_time()
             for stage in stages.values():      # what ~/tracks gives a camera node
                 stage.set_tracks(xy, velocity, heights)
+            out.cpu['stages'] += t2 - t1 + time.process_time() - t4
             xa = {t.track_id: t.mean[:2] for t in a.tracks}
             xb = {t.track_id: t.mean[:2] for t in b.tracks}
             out.frames += 1

@@ -13,7 +13,7 @@ import numpy as np
 from mbtrack_ros.synth.body import random_clothing
 from mbtrack_ros.synth.errors import SynthError
 from mbtrack_ros.synth.motion import Crowd
-from mbtrack_ros.synth.room import Room, default_room, large_room, two_door_room
+from mbtrack_ros.synth.room import Room, default_room, hall_room, large_room, two_door_room
 
 __all__ = ['PRESETS', 'Preset', 'get_preset', 'populate']
 
@@ -112,6 +112,15 @@ def _large(crowd: Crowd) -> None:
                             min_people=3, first=1.0)
 
 
+def _hall(crowd: Crowd) -> None:
+    """Four people present, four more arriving every 1-2.5 s: eight within ten seconds."""
+    for _ in range(4):
+        crowd.add(tuple(crowd.random_free_point(min_gap=0.9)), behaviour='room',
+                  leave_time=float(crowd.rng.uniform(40.0, 90.0)))
+    crowd.schedule_arrivals(gap=(1.0, 2.5), visit=(40.0, 90.0), max_people=8,
+                            min_people=4, first=0.3)
+
+
 def _two_doors(crowd: Crowd) -> None:
     """Two people present; others come in through either door and leave through either
     (short visits, so that doorways see traffic)."""
@@ -162,6 +171,14 @@ _BASE = (
     Preset('large-room', 'a 10 x 8 m room with six cameras (four corners, two mid-wall), '
            '3-6 people (450 frames, 30 s)', 450, None, _large, room=large_room,
            ceiling=False),
+    Preset('eight-cameras', 'the 10 x 8 m large room with eight cameras (four corners, four '
+           'mid-wall) at 640x480, eight people: four present, four arriving in the first '
+           '10 s (300 frames, 20 s)', 300,
+           ('cam0', 'cam1', 'cam2', 'cam3', 'cam5', 'cam6', 'cam7', 'cam8'), _hall,
+           (640, 480), room=hall_room, ceiling=False),
+    Preset('twelve-cameras', 'eight-cameras with four more wall cameras at the thirds of '
+           'the long walls: twelve cameras at 640x480 (300 frames, 20 s)', 300, None, _hall,
+           (640, 480), room=hall_room, ceiling=False),
     Preset('two-doors', 'the clear-room room with a second doorway in the north wall: '
            'people enter and leave through either (450 frames, 30 s)', 450, None,
            _two_doors, room=two_door_room),
@@ -170,7 +187,7 @@ _BASE = (
 _SHORT_FRAMES = {'lanz-seq1': 40, 'lanz-seq2': 40, 'lanz-seq3': 30, 'lanz-seq4': 45,
                  'clear-room': 45, 'empty-room': 10, 'real-room': 45, 'crowd': 45,
                  'occupied': 45, 'two-cameras': 45, 'three-cameras': 45, 'large-room': 45,
-                 'two-doors': 45}
+                 'eight-cameras': 45, 'twelve-cameras': 45, 'two-doors': 45}
 
 PRESETS: dict[str, Preset] = {}
 for _p in _BASE:

@@ -22,8 +22,8 @@ from mbtrack_ros.core.camera import Camera, RoomCalibration, look_at
 from mbtrack_ros.synth.errors import SynthError
 from mbtrack_ros.synth.raster import hash01
 
-__all__ = ['Box', 'CameraView', 'Room', 'default_room', 'large_room', 'make_calibration',
-           'two_door_room']
+__all__ = ['Box', 'CameraView', 'Room', 'default_room', 'hall_room', 'large_room',
+           'make_calibration', 'two_door_room']
 
 # surface ids of the static ray cast
 FLOOR, CEILING, WALL_W, WALL_E, WALL_S, WALL_N, SCREEN, DOOR, POSTER = range(1, 10)
@@ -137,6 +137,15 @@ def large_room() -> Room:
                    screen=(3.0, 4.8, 0.9, 2.0), light=(5.0, 4.0, 2.7),
                    walkable=(0.3, 0.3, 9.7, 7.7), free_area=(1.0, 1.3, 9.3, 7.3),
                    wall_cameras=((5.0, 0.1), (5.0, 7.9)))
+
+
+def hall_room() -> Room:
+    """The 10 x 8 x 2.8 m room of :func:`large_room` with eight wall cameras besides the
+    four corners: first the middle of each wall (south, north, west, east), then the thirds
+    of the long walls (south, then north); twelve cameras in all, no ceiling camera."""
+    return replace(large_room(), wall_cameras=(
+        (5.0, 0.1), (5.0, 7.9), (0.1, 4.0), (9.9, 4.0),
+        (3.3, 0.1), (6.7, 0.1), (3.3, 7.9), (6.7, 7.9)))
 
 
 def two_door_room() -> Room:
