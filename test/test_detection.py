@@ -1462,54 +1462,13 @@ def test_a_lagging_track_is_moved_to_the_place_its_reach_found(move):
         assert not any(moved) and lag > 0.25, lag
 
 
-@pytest.mark.parametrize('catch_up, entry, caught', [
-    (4.0, False, True), (np.inf, False, False), (4.0, True, False)])
-def test_a_supported_track_behind_its_walking_person_catches_up(catch_up, entry, caught):
-    """A track put 0.3 m behind its walking person once still covers enough of them for
-    positive coverage evidence at its mean, so its reach does not act. With ``catch_up``
-    the free foreground its reach finds ahead is better by more than that: it is restarted
-    there and is within 0.08 m of them a frame later. Without it, or where its reach
-    touches an entry zone (a door crowd), the filter alone is still more than 0.12 m
-    behind."""
-    from dataclasses import replace
-
-    rng = np.random.default_rng(5)
-    calib = make_room(ceiling=False)
-    if entry:       # the whole walk inside an entry zone
-        calib = replace(calib, entry_zones=((1.0, 2.0, 3.5, 3.2),))
-    bgs = backgrounds(calib)
-    tracker = _detecting_tracker(calib, bgs, seed=4)
-    tracker.detection.config = replace(tracker.detection.config, reach_age=0.0,
-                                       catch_up=catch_up)
-
-    def walker(k):
-        return [person(1.5 + 0.06 * k, 2.6, theta=0.0)]
-    _track_painted(tracker, calib, bgs, rng, 16, walker)
-    assert tracker.track_ids == [1]
-    tracker.relocate_track(1, np.array([1.5 + 0.06 * 15 - 0.3, 2.6, 0.0, 0.0, 0.0, 0.0]))
-    moved, logged = [], []
-    for k in (16, 17):
-        res = tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, walker(k), rng))
-        moved.append(1 in tracker.detection.reach_moves)
-        logged.extend(tracker.detection.catch_ups)
-        assert res.tracks[0].existence > 0.9      # supported all along: no reach of before
-    lag = 1.5 + 0.06 * 17 - res.tracks[0].mean[0]
-    assert tracker.track_ids == [1]
-    if caught:
-        assert moved[0] and abs(lag) < 0.08, lag
-        assert [c['id'] for c in logged] == [1] and logged[0]['gain'] > catch_up
-    else:
-        assert not any(moved) and lag > 0.12 and not logged, lag
-
-
 def test_reach_counts_foreground_only_where_no_other_track_is():
     """The reach ring's coverage, side and top-down cameras: a place on an untracked
     person's foreground is covered; the same place is not when another track's silhouette
     (blob) at its mean covers that person, nor when the person's pixels are a possible
     person of the bootstrap (a ghost: the background's not-yet-known foreground); with the
-    detector's exclusion radius there is no place near the other track at all; with
-    ``centre`` (catch_up's call) the track's mean comes first, less covered than the
-    person's place, and the other places are the same; bad settings raise."""
+    detector's exclusion radius there is no place near the other track at all; bad
+    settings raise."""
     from mbtrack_ros.core.detection.manager import AutoDetection
     from mbtrack_ros.core.detection.release import paint_blobs
 
@@ -1545,19 +1504,11 @@ def test_reach_counts_foreground_only_where_no_other_track_is():
         at = int(np.argmin(np.linalg.norm(places - person_xy, axis=1)))
         assert np.allclose(places[at], person_xy)
         covered[case] = rings[at]
-        if case == 'free':      # catch_up's call: the mean first, then the same places
-            with_mean, with_rings = det._reach_coverage(
-                0, evidence, sils, means, [shape] * len(means), np.full(len(means), 1.8),
-                centre=True)
-            assert np.allclose(with_mean[0], me[:2]) and np.allclose(with_mean[1:], places)
-            assert with_rings[1:] == rings and all(     # the person is 0.5 m from the mean
-                with_rings[0][n] < rings[at][n] for n in calib.cameras), with_rings[0]
     for n in calib.cameras:
         assert covered['free'][n] > 0.8, (n, covered)
         assert covered['tracked'][n] < 0.1, (n, covered)
         assert covered['ghost'][n] < 0.1, (n, covered)
-    for bad in ({'reach_radius': -0.1}, {'reach_directions': 0}, {'reach_age': -1.0},
-                {'catch_up': -1.0}, {'catch_up': float('nan')}):
+    for bad in ({'reach_radius': -0.1}, {'reach_directions': 0}, {'reach_age': -1.0}):
         with pytest.raises(DetectionError):
             AutoDetectionConfig(**bad)
 

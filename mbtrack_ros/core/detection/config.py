@@ -122,30 +122,9 @@ class AutoDetectionConfig:
             is also restarted there (same id and velocity, :attr:`AutoDetection.reach_moves`;
             the tracker moves it after the frame's output), so that it catches up with its
             person instead of staying behind.
-        catch_up: nats; a track older than ``reach_age`` whose coverage evidence at its
-            mean is not negative is still restarted at the best place of its reach when the
-            free foreground there gives coverage evidence higher by more than this than at
-            its mean (a track left behind a person keeps part of their foreground). Not
-            where the reach touches an entry zone (a newcomer's foreground is there).
-            ``inf`` disables (the default).
         reach_age: seconds a track must have existed before it has a reach: a false birth
             (a shadow, a ghost, the fringe of a person) would keep itself alive on what is
             near it; false births mostly die within a few seconds.
-        exit_rescue: coverage fraction; a track that the exit rule would release is instead
-            moved onto the floor, same id, when a place within ``reach_radius`` of its
-            estimate brought onto the floor shows a free person with mean coverage at least
-            this in the cameras that watch the place (the doorway witnesses, elsewhere the
-            corner cameras). At most once per ``relocate_interval`` per track. 0 disables
-            (the default).
-        beside_support: a confirmed detection that would start a new track next to a
-            reported track (within ``beside_radius``, not spare, not moved within
-            ``relocate_interval``) moves that track there instead (same id) when, with the
-            detection as one more track, the track's exclusive support falls below this
-            fraction from above: the track had fallen behind the detection's person and
-            lived on their fringe (:meth:`AutoDetection._lagging_beside`); 0 disables (the
-            default).
-        beside_radius: metres; the track ``beside_support`` moves must be this close to
-            the detection.
         beside_threshold: smallest detection score (the detector's combined log response)
             for a birth within ``relocate_radius`` of a track that the detection did not
             move: weak detections beside a track are mostly the fringe of that track's
@@ -196,10 +175,6 @@ class AutoDetectionConfig:
     reach_directions: int = 8
     reach_move: bool = True
     reach_age: float = 4.0
-    catch_up: float = float('inf')
-    exit_rescue: float = 0.0
-    beside_support: float = 0.0
-    beside_radius: float = 0.6
     beside_threshold: float = 3.0
     young_look_alike: bool = True
     birth_exit_depth: float = 0.15
@@ -253,26 +228,18 @@ class AutoDetectionConfig:
             raise DetectionError(f'reuse_doubtful must be in [0, 1], got {self.reuse_doubtful}')
         if not self.sigma > 0 or not self.clutter_distance > 0:
             raise DetectionError('sigma and clutter_distance must be > 0')
-        if not self.beside_support >= 0:
-            raise DetectionError('beside_support must be >= 0')
         if not (np.isfinite(self.track_coverage) and self.track_coverage >= 0):
             raise DetectionError(f'track_coverage must be a finite number >= 0, got '
                                  f'{self.track_coverage}')
-        if not self.beside_radius >= 0:
-            raise DetectionError(f'beside_radius must be >= 0, got {self.beside_radius}')
         if not (np.isfinite(self.beside_threshold) and self.beside_threshold >= 0):
             raise DetectionError(f'beside_threshold must be a finite number >= 0, got '
                                  f'{self.beside_threshold}')
         if self.visibility_particles < 1:
             raise DetectionError('visibility_particles must be >= 1')
-        if not (self.catch_up >= 0):
-            raise DetectionError(f'catch_up must be >= 0 (inf: off), got {self.catch_up}')
         if not (self.reach_radius >= 0 and self.reach_directions >= 1
                 and self.reach_age >= 0):
             raise DetectionError('reach_radius and reach_age must be >= 0 and '
                                  'reach_directions >= 1')
-        if not 0.0 <= self.exit_rescue <= 1.0:
-            raise DetectionError(f'exit_rescue must be in [0, 1], got {self.exit_rescue}')
         if not (np.isfinite(self.birth_exit_depth) and self.birth_exit_depth >= 0):
             raise DetectionError(f'birth_exit_depth must be a finite number >= 0, got '
                                  f'{self.birth_exit_depth}')

@@ -90,7 +90,6 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
         self.decisions: list[dict] = []    # per frame: what happened to confirmed detections
         # per frame: track id -> floor place (x, y) its reach found it a person at
         self.reach_moves: dict[int, np.ndarray] = {}
-        self.catch_ups: list[dict] = []  # per frame: the reach moves made by catch_up
         self._first_seen: dict[int, int] = {}  # track id -> stamp of its first update
         self._placed: dict[int, int] = {}  # track id -> stamp of its birth or last move
         self._moved_again: dict[int, int] = {}  # track id -> stamp of its move_again_gain move
@@ -98,8 +97,6 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
         self._released: dict[int, tuple[int, np.ndarray, PersonModel | None]] = {}
         self._lost_ended: list[int] = []  # released ids whose reuse_time passed unreused
         self._shown_since: dict[int, int] = {}  # id -> birth, move, last hidden or exit stamp
-        self._rescued: dict[int, int] = {}  # id -> stamp of its last exit rescue
-        self.exit_checks: list[dict] = []  # per frame: the exit rescue's view of each exit
         self.duplicate_checks: list[dict] = []  # per frame: the duplicate judge's calls
         self.adaptations: list[dict] = []  # per frame: the appearance adaptation's decisions
         self._adapted: dict[int, int] = {}  # track id -> stamp of its last model adaptation
@@ -133,14 +130,12 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
                 pass
         self.aux.clear()
         self.reach_moves = {}
-        self.catch_ups = []
         self._first_seen.clear()
         self._placed.clear()
         self._moved_again.clear()
         self._released.clear()
         self._lost_ended.clear()
         self._shown_since.clear()
-        self._rescued.clear()
         self._adapted.clear()
         self._first_xy.clear()
         self._travelled.clear()
@@ -243,8 +238,6 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
         cfg = self.config
         t0 = time.perf_counter()
         self.reach_moves = {}
-        self.catch_ups = []
-        self.exit_checks = []
         self.duplicate_checks = []
         self.adaptations = []
         self._first_seen = {t.track_id: self._first_seen.get(t.track_id, int(stamp_ns))
@@ -286,9 +279,7 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
         det = self.config.detector
         evidence = {n: FrameEvidence(images[n], fg[n], masks[n], _bins=known_bins.get(n),
                                      edge_min_pixels=det.edge_min_pixels,
-                                     edge_neighbourhood=det.edge_neighbourhood,
-                                     ghost=self.background.model(n).possible_foreground_as_tested
-                                     if cfg.beside_support > 0 else None)
+                                     edge_neighbourhood=det.edge_neighbourhood)
                     for n in fg}
         t2 = time.perf_counter()
         # 3. support, visibility and existence
@@ -312,16 +303,14 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
 
             spare = self.releaser.spare if evidence else np.zeros(len(tracks), bool)
 
-            def reach(k: int, centre: bool = False
-                      ) -> tuple[np.ndarray, list[dict[str, float]]]:
+            def reach(k: int) -> tuple[np.ndarray, list[dict[str, float]]]:
                 """Places (M, 2) of track k's reach and its silhouette's coverages there
                 (none for a spare track: the others explain its foreground; none for a
-                track younger than ``reach_age``); ``centre``: the mean first."""
+                track younger than ``reach_age``)."""
                 age = (int(stamp_ns) - self._first_seen[tracks[k].track_id]) / 1e9
                 if (k < len(spare) and spare[k]) or age < cfg.reach_age:
                     return np.zeros((0, 2)), []
-                return self._reach_coverage(k, evidence, sils, means, shapes, tops,
-                                            centre=centre)
+                return self._reach_coverage(k, evidence, sils, means, shapes, tops)
 
             self._auxiliary(dt, colour, tracks, models, parts, owner, part_sils, coverage,
                             reach)
@@ -329,9 +318,6 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
             if evidence:  # 4. release (only once the background exists)
                 ids = [t.track_id for t in tracks]
                 ended = self.releaser.exited(ids, means[:, [X, Y]])
-                if ended and cfg.exit_rescue > 0:
-                    ended = self._rescue_exits(stamp_ns, tracks, ended, evidence, sils,
-                                               means, shapes, tops)
                 if ended:            # the others go on; the releaser forgets the exited
                     keep = [k for k, i in enumerate(ids) if i not in ended]
                     ended += self.releaser.update(stamp_ns, [ids[k] for k in keep],
@@ -355,7 +341,6 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
             self._placed.pop(tid, None)
             self._moved_again.pop(tid, None)
             self._shown_since.pop(tid, None)
-            self._rescued.pop(tid, None)
             self._adapted.pop(tid, None)
             self._first_xy.pop(tid, None)
             self._travelled.discard(tid)
