@@ -1431,19 +1431,16 @@ def test_the_reach_does_not_keep_a_track_alive_on_another_tracked_person(
         assert np.all(ghost[:6] >= 0.5), ghost
 
 
-@pytest.mark.parametrize('move', [True, False])
-def test_a_lagging_track_is_moved_to_the_place_its_reach_found(move):
-    """A track put 0.45 m behind its walking person once: with ``reach_move`` it is
-    restarted where its reach found the person and is within 0.2 m of them two frames
-    later; without, the filter alone is still more than 0.25 m behind."""
+def test_a_lagging_track_is_moved_to_the_place_its_reach_found():
+    """A track put 0.45 m behind its walking person once is restarted where its reach
+    found the person and is within 0.2 m of them two frames later."""
     from dataclasses import replace
 
     rng = np.random.default_rng(5)
     calib = make_room(ceiling=False)
     bgs = backgrounds(calib)
     tracker = _detecting_tracker(calib, bgs, seed=4)
-    tracker.detection.config = replace(tracker.detection.config, reach_move=move,
-                                       reach_age=0.0)
+    tracker.detection.config = replace(tracker.detection.config, reach_age=0.0)
 
     def walker(k):
         return [person(1.5 + 0.06 * k, 2.6, theta=0.0)]
@@ -1456,10 +1453,7 @@ def test_a_lagging_track_is_moved_to_the_place_its_reach_found(move):
         moved.append(1 in tracker.detection.reach_moves)
     lag = 1.5 + 0.06 * 17 - res.tracks[0].mean[0]
     assert tracker.track_ids == [1]
-    if move:
-        assert moved[0] and abs(lag) < 0.2, lag
-    else:
-        assert not any(moved) and lag > 0.25, lag
+    assert moved[0] and abs(lag) < 0.2, lag
 
 
 def test_reach_counts_foreground_only_where_no_other_track_is():
@@ -1514,15 +1508,13 @@ def test_reach_counts_foreground_only_where_no_other_track_is():
 
 
 @pytest.mark.parametrize('how', ['hidden', 'gain', 'young'])
-@pytest.mark.parametrize('rule', [True, False])
 def test_a_lost_track_that_looks_like_the_person_is_reused_before_another_is_moved(
-        monkeypatch, how, rule):
+        monkeypatch, how):
     """Blue's track (1) is released while she is away; yellow's track (2) is either hidden
     (not reported, ``relocate_hidden``) or left behind when yellow walks off (a move by the
     appearance gain, margin lowered and ``move_distance`` off so that any gain moves).
-    Blue comes back 0.75 m from track 2: with ``reuse_before_moving`` she takes her lost
-    id back (her model fits her, track 2's is yellow's) and track 2 stays; without it
-    track 2 is moved onto her. With ``reuse_distance`` 0 no released id is reused by a
+    Blue comes back 0.75 m from track 2: she takes her lost id back (her model fits her,
+    track 2's is yellow's) and track 2 stays. With ``reuse_distance`` 0 no released id is reused by a
     birth: the comparison of the two models alone gives blue her id back. When track 2
     was placed within ``relocate_interval`` ('young') the move would not happen (the
     detection is dropped), and neither does the reuse in its place."""
@@ -1530,7 +1522,7 @@ def test_a_lost_track_that_looks_like_the_person_is_reused_before_another_is_mov
 
     rng = np.random.default_rng(5)
     calib, bgs, tracker = _painted_room_tracker(
-        4, reuse_before_moving=rule, reach_radius=0.0, reuse_distance=0.0,
+        4, reach_radius=0.0, reuse_distance=0.0,
         relocate_margin=1e9 if how == 'hidden' else -1e9, move_distance=1.0)
     if how == 'young':      # the gain's move, onto a track placed moments ago
         placed = AutoDetection._placed_recently
@@ -1563,11 +1555,9 @@ def test_a_lost_track_that_looks_like_the_person_is_reused_before_another_is_mov
         assert 'drop (track 2 placed recently)' in actions, actions
         assert 'reuse 1 (not 2)' not in actions and moved not in actions, actions
         assert 1 not in tracker.track_ids
-    elif rule:
+    else:
         assert 'reuse 1 (not 2)' in actions and moved not in actions, actions
         assert on_blue == [1]
-    else:
-        assert moved in actions and 1 not in tracker.track_ids, actions
 
 
 @pytest.mark.parametrize('rule, who, moved', [(True, 'same', True), (False, 'same', False),
@@ -1774,19 +1764,16 @@ def test_of_two_tracks_a_detection_could_move_the_one_that_looks_like_it_is_move
     assert 'move 1' in actions and 'move 2' not in actions, actions
 
 
-@pytest.mark.parametrize('rule, who, born', [(True, 'same', False), (False, 'same', True),
-                                             (True, 'other', True)])
-def test_no_birth_beside_a_young_track_that_looks_like_the_detection(
-        monkeypatch, rule, who, born):
+@pytest.mark.parametrize('who, born', [('same', False), ('other', True)])
+def test_no_birth_beside_a_young_track_that_looks_like_the_detection(monkeypatch, who, born):
     """Track 1 follows a person in blue; from frame 40 it counts as placed moments ago
     (``relocate_interval``) and somebody stands 0.75 m from it, its gain there too low to
     move it. A look-alike ('same': blue) is taken for track 1's own person, whom a young
-    track lags: with ``young_look_alike`` her detection is dropped, without it a second
-    track is born. Somebody dressed in yellow ('other') is born either way."""
+    track lags: her detection is dropped. Somebody dressed in yellow ('other') is born either way."""
     from mbtrack_ros.core.detection.manager import AutoDetection
 
     rng = np.random.default_rng(5)
-    calib, bgs, tracker = _painted_room_tracker(4, young_look_alike=rule, reach_radius=0.0,
+    calib, bgs, tracker = _painted_room_tracker(4, reach_radius=0.0,
                                                 relocate_hidden=False, reuse_hidden=False)
     here = person(2.0, 2.5, theta=0.0)
     there = person(2.75, 2.5, theta=0.0, **({} if who == 'same' else {'colours': YELLOW}))

@@ -65,12 +65,14 @@ class DetectionAssociator:
         within ``relocate_radius`` it is not born either: weak detections there are mostly
         the fringe of that track's person or a gap between people. Before a track is
         moved (by the gain or hidden), a lost track whose model is nearer the detection's
-        takes its id back instead (``reuse_before_moving``); before a birth, a released
+        takes its id back instead, and the track stays where it is (not instead of a track
+        placed within ``relocate_interval``: its move would not happen); before a birth, a released
         track and then a hidden one within ``reuse_radius`` that look alike are given
         back their person (``reuse_time``, ``reuse_hidden``; a reported track of doubtful
         existence counts as hidden, ``reuse_doubtful``); a detection that would still
         be born beside a look-alike track born or moved within ``relocate_interval`` is
-        dropped (``young_look_alike``).
+        dropped: a young track lags its person for a few frames, and the detection beside
+        it that looks like it (``move_distance``) is that person.
         """
         cfg = self.config
         state = det.state.copy()
@@ -120,8 +122,7 @@ class DetectionAssociator:
         if best is None and cfg.relocate_hidden:
             best = self._nearest_hidden(det, tracks, keep, means, models, moved, stamp_ns)
             hidden = best is not None
-        if best is not None and cfg.reuse_before_moving \
-                and not self._placed_recently(tracks[best[0]].track_id, stamp_ns):
+        if best is not None and not self._placed_recently(tracks[best[0]].track_id, stamp_ns):
             # a lost track that looks more like the detection than the track about to be
             # moved takes its id back; that track stays where it is. Not instead of a
             # track placed within relocate_interval: that move would not happen (the
@@ -158,7 +159,7 @@ class DetectionAssociator:
                     # (id, metres, appearance distance, existence) of the track moved
                     info['far'] = (int(tid), round(best[1], 2), round(likeness[tid], 3),
                                    round(float(self.aux[tid].existence), 3))
-            if best is None and reused is None and cfg.young_look_alike:
+            if best is None and reused is None:
                 young = [(n[1], n[0]) for n in near
                          if cfg.looks_alike(n[3]) and self._placed_recently(n[0], stamp_ns)]
                 if young:
@@ -289,7 +290,7 @@ class DetectionAssociator:
         """The id of the track released nearest the detection, within ``reuse_radius``
         metres and ``reuse_time`` seconds, not live, whose appearance model is within
         ``reuse_distance`` of the detection's - or, when ``below`` is given, nearer than
-        ``below`` (``reuse_before_moving``) - (and forgets it), or None; each candidate's
+        ``below`` (a lost track nearer in appearance than the track to be moved) - (and forgets it), or None; each candidate's
         distance and model distance go to ``info['reuse']``."""
         best = None
         for tid, (_, xy, old) in self._released.items():

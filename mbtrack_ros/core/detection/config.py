@@ -85,11 +85,6 @@ class AutoDetectionConfig:
         reuse_in_entry_zones: a track released inside an entry zone is lost for
             ``reuse_time`` like any other; False: its id ends at once (its person is taken
             to have left the room).
-        reuse_before_moving: before a detection moves a track (by the gain or as a hidden
-            track), a lost track within ``reuse_radius`` whose model is nearer the
-            detection's than the moved track's model takes its id back instead, and the
-            track stays where it is. Not when that track was placed within
-            ``relocate_interval`` (its move would not happen).
         reuse_hidden: a detection that would start a new track moves instead the nearest
             hidden track (not reported, not placed within ``relocate_interval``) within
             ``reuse_radius`` whose model is within ``reuse_distance`` of the detection's:
@@ -98,30 +93,21 @@ class AutoDetectionConfig:
             for ``reuse_hidden`` (logged "move N (doubtful, far)"); 0 disables. With
             ``report_hidden`` every hidden track is reported, so this level is what lets
             ``reuse_hidden`` take them.
-        duplicate_by_reporting: of two tracks on one person (release ``merge_radius``,
-            ``merge_time``) release the one reported without a break for the shorter time
-            (born, moved, hidden or inside an exit later) instead of the younger one: a
-            track that was in an exit may have lost its person there.
         duplicate_margin: nats per side camera; of two such tracks keep the one whose
             appearance model explains the image where they are better (003 Eq. 3, both
             models at the pair's midpoint) by more than this
             (:meth:`AutoDetection._duplicate_judge`); ``inf`` disables. Large enough that
             a model acquired moments ago (which fits its own view best) does not win alone.
-        duplicate_own_support: of such a pair, the track to be released is kept while its
-            exclusive support (:meth:`Releaser.exclusive_support`) is at least the
-            release's ``spare_support``: two people passing close each explain foreground
-            the other does not.
         reach_radius, reach_directions: metres, count; a track whose coverage evidence for
             existence is negative at its mean is also judged at ``reach_directions``
             places on each of two rings around it (radius half and all of
             ``reach_radius``), on the foreground no other track's silhouette covers, and
             the best place counts: a track that fell behind a person who started walking
             stays reported while the person is within the detector's ``exclusion_radius``
-            (where the detector does not look for them); 0 disables.
-        reach_move: a track whose reach counted a place with positive coverage evidence
-            is also restarted there (same id and velocity, :attr:`AutoDetection.reach_moves`;
-            the tracker moves it after the frame's output), so that it catches up with its
-            person instead of staying behind.
+            (where the detector does not look for them), and when that place has positive
+            coverage evidence the track is restarted there (same id and velocity,
+            :attr:`AutoDetection.reach_moves`; the tracker moves it after the frame's
+            output) so that it catches up with its person; 0 disables.
         reach_age: seconds a track must have existed before it has a reach: a false birth
             (a shadow, a ghost, the fringe of a person) would keep itself alive on what is
             near it; false births mostly die within a few seconds.
@@ -129,10 +115,6 @@ class AutoDetectionConfig:
             for a birth within ``relocate_radius`` of a track that the detection did not
             move: weak detections beside a track are mostly the fringe of that track's
             person or a gap between people; 0 keeps the detector's threshold alone.
-        young_look_alike: a confirmed detection that would start a new track within
-            ``relocate_radius`` of a track placed within ``relocate_interval`` whose model
-            looks like the detection's (``move_distance``) is dropped: a young track lags
-            its person for a few frames, and the detection beside it is that person.
         track_coverage: ``k`` of a foreground-coverage term ``k f_c`` per camera in the
             tracking filter's particle weights (:meth:`MeasurementModel.set_foreground`);
             0: colour alone. Larger holds tracks on the foreground more firmly (better
@@ -165,18 +147,13 @@ class AutoDetectionConfig:
     reuse_radius: float = 1.5
     reuse_distance: float = 0.55
     reuse_in_entry_zones: bool = True
-    reuse_before_moving: bool = True
     reuse_hidden: bool = True
     reuse_doubtful: float = 0.9
-    duplicate_by_reporting: bool = True
     duplicate_margin: float = 8.0
-    duplicate_own_support: bool = True
     reach_radius: float = 0.5
     reach_directions: int = 8
-    reach_move: bool = True
     reach_age: float = 4.0
     beside_threshold: float = 3.0
-    young_look_alike: bool = True
     birth_exit_depth: float = 0.15
     track_coverage: float = 2.0
 

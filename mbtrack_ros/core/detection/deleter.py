@@ -246,7 +246,7 @@ class TrackDeleter:
                     ring, evidence = self._ring_evidence(ring, cov, weights)
                     if evidence > best:
                         cov, best = ring, evidence
-                        if cfg.reach_move and evidence > 0.0:
+                        if evidence > 0.0:
                             self.reach_moves[t.track_id] = place
             aux.update(dt, loglik_visible=vis, loglik_hidden=hid, coverage=cov,
                        visible_fraction=weights)

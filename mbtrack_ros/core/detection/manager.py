@@ -328,13 +328,17 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
                 else:
                     ended = self.releaser.update(stamp_ns, ids, supported, existence,
                                                  self.releaser.doorway, self.releaser.spare)
-                shown = [self._shown_since.get(i, 0) if cfg.duplicate_by_reporting else 0
-                         for i in ids]
+                # of two tracks on one person the one reported without a break for the
+                # shorter time goes (born, moved, hidden or inside an exit later): a track
+                # that was in an exit may have lost its person there; and not while it
+                # keeps exclusive support (two people passing close each explain
+                # foreground the other does not)
+                shown = [self._shown_since.get(i, 0) for i in ids]
                 judge = None if np.isinf(cfg.duplicate_margin) else self._duplicate_judge(
                     tracks, means, models, evidence)
                 ended += [i for i in self.releaser.duplicates(
                     stamp_ns, ids, means[:, [X, Y]], shown, judge,
-                    self.releaser.exclusive_support if cfg.duplicate_own_support else None)
+                    self.releaser.exclusive_support)
                     if i not in ended]
         for tid in ended:
             self.aux.pop(tid, None)
