@@ -126,6 +126,35 @@ def test_a_tracked_person_in_front_of_model_edges_is_no_ghost():
     assert fg_untracked[region].mean() < 0.05   # the border test alone learns it
 
 
+@pytest.mark.parametrize('track_stays', [False, True])
+def test_the_place_a_learnt_person_leaves_under_his_track_is_learnt_once_the_track_left(
+        track_stays):
+    """A person learnt into the model walks away under his own track: the place he reveals
+    becomes foreground under that track. Once the track has gone with him (and even if
+    another track is born on the place later) the place is a ghost and is learnt within a
+    few frames; while the track stays on it (a person who came there tracked and stands
+    still) it is no ghost."""
+    rng = np.random.default_rng(12)
+    bg = scene(rng)
+    person = bg.copy()
+    person[30:100, 60:85] = (200, 30, 40)
+    region = np.zeros((H, W), bool)
+    region[30:100, 60:85] = True
+    model = BackgroundModel(BackgroundConfig(alpha=0.99, static_frames=0, ghost_frames=4))
+    model.bootstrap([person])
+    seen = []
+    for k in range(20):
+        # frames 0-2: his track over the place; then gone, a new track on it from frame 8
+        over = k < 3 or track_stays or k >= 8
+        seen.append(model.apply(noisy(bg, rng), exclude=region if over else None)[region]
+                    .mean())
+    assert min(seen[:3]) > 0.9
+    if track_stays:
+        assert min(seen) > 0.9, seen
+    else:
+        assert max(seen[12:]) < 0.05, seen
+
+
 def test_ghost_components_equals_a_loop_over_the_components():
     """The vectorised border sums equal a plain per-component computation."""
     from mbtrack_ros.core.detection.background import _colour_gradient, ghost_components

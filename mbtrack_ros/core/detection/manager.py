@@ -65,6 +65,7 @@ class _Found(NamedTuple):
 
     acquired: list[tuple[Detection, PersonModel]]
     timings: dict[str, float]
+    ghosts: list[tuple[Detection, float, float]] = []  # (detection, model, frame gradient)
 
 
 class AutoDetection(DetectionAssociator, TrackDeleter):
@@ -411,6 +412,7 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
         the detector, so it may run on the worker while the next frame is filtered."""
         t0 = time.perf_counter()
         acquired: list[tuple[Detection, PersonModel]] = []
+        ghosts: list[tuple[Detection, float, float]] = []
         if pending.evidence:
             keep = [k for k, t in enumerate(pending.tracks) if t.track_id not in pending.ended]
             others = pending.means[keep]
@@ -421,13 +423,57 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
             confirmed = self.detector.step(pending.evidence, track_xy=others[:, [X, Y]],
                                            stamp_ns=pending.stamp_ns)
             for det in confirmed:
+                outline = self._ghost_outline(det, pending.evidence)
+                if outline is not None:
+                    ghosts.append((det, *outline))
+                    continue
                 model = acquire(det, pending.images, self.calibration, others=others,
                                 other_shapes=other_shapes, config=self.config.acquisition)
                 if model is None:
                     self.detector.requeue(det)
                 else:
                     acquired.append((det, model))
-        return _Found(acquired, {'detect_find': time.perf_counter() - t0})
+        return _Found(acquired, {'detect_find': time.perf_counter() - t0}, ghosts)
+
+    def _ghost_outline(self, det: Detection, evidence: Mapping[str, FrameEvidence]
+                       ) -> tuple[float, float] | None:
+        """(model, frame) outline gradients of a confirmed detection that is a ghost, or
+        None; the ghost's silhouettes are learnt into the background at its next update.
+
+        The background's border test (:func:`~.background.ghost_components`) applied to
+        the foreground of the detection's silhouette (within 4 pixels at 320x240) instead
+        of a whole foreground component: summed over the side cameras that have a
+        background model, the colour gradient along that foreground's outline (other
+        tracks' silhouettes left out) is ``ghost_edge_ratio`` times larger in the model
+        than in the frame - the outline is that of somebody learnt into the model who has
+        left, not of somebody in the frame. The component test misses such a ghost when
+        its foreground touches a person standing beside it (their outline is in the
+        frame)."""
+        ratio = self.config.background.ghost_edge_ratio
+        if ratio <= 0:
+            return None
+        shape = BodyShape(det.height, det.width)
+        model_sum = frame_sum = 0.0
+        masks = {}
+        for n in self.side:
+            ev = evidence.get(n)
+            bank = self.background.models.get(n)
+            if ev is None or bank is None or not bank.ready:
+                continue
+            cam = self.calibration.cameras[n]
+            mask = rasterize(cam, det.state[None].astype(np.float64), shape).mask(0) > 0
+            width = max(2, int(round(4.0 * np.sqrt(cam.width * cam.height / 76800.0))))
+            g_model, g_frame, share = bank.outline_gradients(ev.image, ev.foreground, mask,
+                                                             width=width, exclude=ev.tracks)
+            if share >= 0.5:
+                model_sum += g_model
+                frame_sum += g_frame
+                masks[n] = mask
+        if not masks or not model_sum > ratio * frame_sum:
+            return None
+        for n, mask in masks.items():
+            self.background.models[n].learn_next(mask)
+        return model_sum, frame_sum
 
     def _settle(self, pending: _Pending, found: _Found) -> list[Birth]:
         """Births and moves from the detections of :meth:`_find` (:meth:`_identify`), in
@@ -441,6 +487,10 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
             moved: set[int] = set()
             # no birth or move deep in an exit: a person in the doorway or beyond
             limit = self.config.birth_exit_depth
+            for det, g_model, g_frame in found.ghosts:
+                self._decide({'xy': (float(det.xy[0]), float(det.xy[1])),
+                              'score': float(det.score), 'action': 'drop (ghost)',
+                              'outline': (round(g_model, 1), round(g_frame, 1))})
             for det, model in found.acquired:
                 if self.calibration.exit_depth(det.xy)[0] > limit:
                     continue
