@@ -155,6 +155,42 @@ def test_the_place_a_learnt_person_leaves_under_his_track_is_learnt_once_the_tra
         assert max(seen[12:]) < 0.05, seen
 
 
+def test_outline_gradients_find_a_ghost_that_touches_a_person():
+    """A person learnt into the model has left (a ghost) and another stands right beside
+    his place: their foreground is one component whose border holds the newcomer's outline
+    in the frame, so the component test calls none of it a ghost. Cut out around the
+    ghost's silhouette, the outline is in the model (sum over its border larger than in
+    the frame by far); around the newcomer it is in the frame."""
+    from mbtrack_ros.core.detection.background import ghost_components
+
+    rng = np.random.default_rng(13)
+    bg = scene(rng)
+    learnt = bg.copy()
+    learnt[30:100, 50:75] = (200, 30, 40)          # stood there while the model was learnt
+    now = bg.copy()
+    now[30:100, 75:100] = (40, 170, 60)            # beside the ghost, touching it
+    ghost_sil = np.zeros((H, W), bool)
+    ghost_sil[30:100, 50:75] = True
+    person_sil = np.zeros((H, W), bool)
+    person_sil[30:100, 75:100] = True
+    model = BackgroundModel(BackgroundConfig(static_frames=0))
+    model.bootstrap([learnt])
+    frame = noisy(now, rng, amp=2)
+    fg = model.foreground(frame)
+    assert fg[ghost_sil].mean() > 0.9 and fg[person_sil].mean() > 0.9
+    whole = ghost_components(fg, _to_ycc(frame), model.background_ycc, 1.0, luma=28.0,
+                             chroma=10.0, ratio=1.5, min_area=1)
+    assert not whole[ghost_sil].any()              # one component, the newcomer's outline
+    g_model, g_frame, share = model.outline_gradients(frame, fg, ghost_sil, width=4)
+    assert share > 0.9 and g_model > 3.0 * g_frame, (g_model, g_frame)
+    g_model, g_frame, share = model.outline_gradients(frame, fg, person_sil, width=4)
+    assert share > 0.9 and g_frame > 3.0 * g_model, (g_model, g_frame)
+    # the learnt place goes into the model at the next update
+    model.learn_next(ghost_sil)
+    model.update(frame)
+    assert not model.foreground(noisy(now, rng, amp=2))[ghost_sil].any()
+
+
 def test_ghost_components_equals_a_loop_over_the_components():
     """The vectorised border sums equal a plain per-component computation."""
     from mbtrack_ros.core.detection.background import _colour_gradient, ghost_components

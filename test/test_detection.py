@@ -1764,12 +1764,17 @@ def test_of_two_tracks_a_detection_could_move_the_one_that_looks_like_it_is_move
     assert 'move 1' in actions and 'move 2' not in actions, actions
 
 
-@pytest.mark.parametrize('who, born', [('same', False), ('other', True)])
-def test_no_birth_beside_a_young_track_that_looks_like_the_detection(monkeypatch, who, born):
+@pytest.mark.parametrize('who, both, born', [('same', False, False), ('same', True, True),
+                                             ('other', True, True)])
+def test_no_birth_beside_a_young_track_that_looks_like_the_detection(monkeypatch, who, both,
+                                                                      born):
     """Track 1 follows a person in blue; from frame 40 it counts as placed moments ago
     (``relocate_interval``) and somebody stands 0.75 m from it, its gain there too low to
-    move it. A look-alike ('same': blue) is taken for track 1's own person, whom a young
-    track lags: her detection is dropped. Somebody dressed in yellow ('other') is born either way."""
+    move it. When she went there (not ``both``), the look-alike ('same': blue) is taken
+    for track 1's own person, whom a young track lags: her detection is dropped. When
+    track 1's person is still where it is (``both``), the track keeps its exclusive
+    support and the look-alike is a second person: born, as is somebody dressed in
+    yellow ('other')."""
     from mbtrack_ros.core.detection.manager import AutoDetection
 
     rng = np.random.default_rng(5)
@@ -1786,7 +1791,8 @@ def test_no_birth_beside_a_young_track_that_looks_like_the_detection(monkeypatch
             monkeypatch.setattr(AutoDetection, '_placed_recently', lambda self, tid, stamp:
                                 tid == 1 or placed(self, tid, stamp))
         tracker.step(int(round(k * 1e9 / FPS)),
-                     paint(calib, bgs, [here] + ([there] if k >= 40 else []), rng))
+                     paint(calib, bgs, ([here] if k < 40 or both else [])
+                           + ([there] if k >= 40 else []), rng))
         if k >= 40:
             actions += [d['action'] for d in tracker.detection.decisions]
     assert ('birth' in actions) == born, actions

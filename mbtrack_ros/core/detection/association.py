@@ -72,7 +72,9 @@ class DetectionAssociator:
         existence counts as hidden, ``reuse_doubtful``); a detection that would still
         be born beside a look-alike track born or moved within ``relocate_interval`` is
         dropped: a young track lags its person for a few frames, and the detection beside
-        it that looks like it (``move_distance``) is that person.
+        it that looks like it (``move_distance``) is that person - unless the young track
+        keeps ``move_support`` of its exclusive support with the detection as one more
+        track (it stands on a person of its own).
         """
         cfg = self.config
         state = det.state.copy()
@@ -162,6 +164,16 @@ class DetectionAssociator:
             if best is None and reused is None:
                 young = [(n[1], n[0]) for n in near
                          if cfg.looks_alike(n[3]) and self._placed_recently(n[0], stamp_ns)]
+                if young:
+                    # ... unless the young track keeps move_support of its exclusive
+                    # support with the detection as one more track: it stands on a person
+                    # of its own, and the detection is somebody else
+                    if support is None:
+                        support = self._exclusive_support(det, model, tracks, keep, means,
+                                                          models, evidence)
+                    left = {int(tracks[k].track_id): float(support[1][j])
+                            for j, k in enumerate(keep)}
+                    young = [y for y in young if not left.get(y[1], 0.0) >= cfg.move_support]
                 if young:
                     # a track born or moved moments ago lags its person: the detection
                     # beside it that looks like it is that person, not a newcomer
