@@ -126,6 +126,71 @@ def test_a_tracked_person_in_front_of_model_edges_is_no_ghost():
     assert fg_untracked[region].mean() < 0.05   # the border test alone learns it
 
 
+@pytest.mark.parametrize('track_stays', [False, True])
+def test_the_place_a_learnt_person_leaves_under_his_track_is_learnt_once_the_track_left(
+        track_stays):
+    """A person learnt into the model walks away under his own track: the place he reveals
+    becomes foreground under that track. Once the track has gone with him (and even if
+    another track is born on the place later) the place is a ghost and is learnt within a
+    few frames; while the track stays on it (a person who came there tracked and stands
+    still) it is no ghost."""
+    rng = np.random.default_rng(12)
+    bg = scene(rng)
+    person = bg.copy()
+    person[30:100, 60:85] = (200, 30, 40)
+    region = np.zeros((H, W), bool)
+    region[30:100, 60:85] = True
+    model = BackgroundModel(BackgroundConfig(alpha=0.99, static_frames=0, ghost_frames=4))
+    model.bootstrap([person])
+    seen = []
+    for k in range(20):
+        # frames 0-2: his track over the place; then gone, a new track on it from frame 8
+        over = k < 3 or track_stays or k >= 8
+        seen.append(model.apply(noisy(bg, rng), exclude=region if over else None)[region]
+                    .mean())
+    assert min(seen[:3]) > 0.9
+    if track_stays:
+        assert min(seen) > 0.9, seen
+    else:
+        assert max(seen[12:]) < 0.05, seen
+
+
+def test_outline_gradients_find_a_ghost_that_touches_a_person():
+    """A person learnt into the model has left (a ghost) and another stands right beside
+    his place: their foreground is one component whose border holds the newcomer's outline
+    in the frame, so the component test calls none of it a ghost. Cut out around the
+    ghost's silhouette, the outline is in the model (sum over its border larger than in
+    the frame by far); around the newcomer it is in the frame."""
+    from mbtrack_ros.core.detection.background import ghost_components
+
+    rng = np.random.default_rng(13)
+    bg = scene(rng)
+    learnt = bg.copy()
+    learnt[30:100, 50:75] = (200, 30, 40)          # stood there while the model was learnt
+    now = bg.copy()
+    now[30:100, 75:100] = (40, 170, 60)            # beside the ghost, touching it
+    ghost_sil = np.zeros((H, W), bool)
+    ghost_sil[30:100, 50:75] = True
+    person_sil = np.zeros((H, W), bool)
+    person_sil[30:100, 75:100] = True
+    model = BackgroundModel(BackgroundConfig(static_frames=0))
+    model.bootstrap([learnt])
+    frame = noisy(now, rng, amp=2)
+    fg = model.foreground(frame)
+    assert fg[ghost_sil].mean() > 0.9 and fg[person_sil].mean() > 0.9
+    whole = ghost_components(fg, _to_ycc(frame), model.background_ycc, 1.0, luma=28.0,
+                             chroma=10.0, ratio=1.5, min_area=1)
+    assert not whole[ghost_sil].any()              # one component, the newcomer's outline
+    g_model, g_frame, share = model.outline_gradients(frame, fg, ghost_sil, width=4)
+    assert share > 0.9 and g_model > 3.0 * g_frame, (g_model, g_frame)
+    g_model, g_frame, share = model.outline_gradients(frame, fg, person_sil, width=4)
+    assert share > 0.9 and g_frame > 3.0 * g_model, (g_model, g_frame)
+    # the learnt place goes into the model at the next update
+    model.learn_next(ghost_sil)
+    model.update(frame)
+    assert not model.foreground(noisy(now, rng, amp=2))[ghost_sil].any()
+
+
 def test_ghost_components_equals_a_loop_over_the_components():
     """The vectorised border sums equal a plain per-component computation."""
     from mbtrack_ros.core.detection.background import _colour_gradient, ghost_components

@@ -98,3 +98,23 @@ def test_projection_matches_opencv_project_points_bit_for_bit(room, rng):
         assert np.isnan(got).any() and np.isfinite(got).any()
         assert np.array_equal(cam.project(pts.reshape(50, 100, 3)), got.reshape(50, 100, 2),
                               equal_nan=True)
+
+
+def test_pixel_rays_project_back_onto_their_pixels_in_wide_angle_corners():
+    """The wide ceiling camera of the synthetic rooms (f = 120 px at 320x240, k1 = -0.2,
+    k2 = 0.04): OpenCV's fixed-point undistortion alone leaves its corner rays pixels off;
+    with the Newton polish every pixel's ray projects back onto it."""
+    import cv2
+
+    R, t = look_at((3.0, 2.5, 3.0), (3.0, 2.51, 0.0))
+    cam = Camera('ceiling', 320, 240, [[120, 0, 159.5], [0, 120, 119.5], [0, 0, 1]],
+                 [-0.2, 0.04, 0.0, 0.0, 0.0], R, t)
+    u, v = np.meshgrid(np.arange(0, 320, 7.5), np.arange(0, 240, 7.5))
+    pix = np.stack([u.ravel(), v.ravel()], axis=1).astype(np.float64)
+    back = cam.project(cam.center + 2.0 * cam.pixel_rays(pix))
+    assert np.abs(back - pix).max() < 1e-5
+    # what the polish corrects: the fixed point alone is off by more than a pixel there
+    plain = cv2.undistortPoints(pix.reshape(-1, 1, 2), cam.K, cam.dist).reshape(-1, 2)
+    rays = np.concatenate([plain, np.ones((len(plain), 1))], axis=1) @ cam.R
+    off = np.abs(cam.project(cam.center + rays) - pix).max()
+    assert off > 1.0, off

@@ -25,41 +25,11 @@ from scipy.optimize import least_squares
 from mbtrack_ros.calibration.board import Board
 from mbtrack_ros.core.camera import Camera
 
-__all__ = ['exact_rays', 'refine_corners']
+__all__ = ['refine_corners']
 
 _TEXTURE_PPM = 1000.0  # board reflectance map, pixels per metre
 _MAX_SHIFT_PX = 1.5    # refined corners further than this (RMS) from the detected: rejected
 _MAX_PIXELS = 8000     # board pixels used at most
-
-
-def exact_rays(camera: Camera, pixels: np.ndarray, iterations: int = 4) -> np.ndarray:
-    """Unit world rays (N, 3) of pixels (N, 2): :meth:`Camera.pixel_rays` polished by Newton
-    steps on :meth:`Camera.project` (finite-difference Jacobian), so that projecting a ray
-    gives its pixel back to 1e-6 px also near the corners of wide-angle images, where OpenCV's
-    fixed-point undistortion stops up to pixels short."""
-    pixels = np.asarray(pixels, np.float64).reshape(-1, 2)
-    n = camera.normalized_rays(pixels)[:, :2].copy()  # (N, 2) normalised image coordinates
-    C, Rt = camera.center, camera.R.T
-
-    def proj(xy):
-        return camera.project(C + np.concatenate([xy, np.ones((len(xy), 1))], 1) @ Rt.T)
-
-    eps = 1e-6
-    for _ in range(iterations):
-        f = proj(n)
-        r = f - pixels
-        if not np.any(np.abs(r) > 1e-7):
-            break
-        jx = (proj(n + (eps, 0.0)) - f) / eps
-        jy = (proj(n + (0.0, eps)) - f) / eps
-        det = jx[:, 0] * jy[:, 1] - jy[:, 0] * jx[:, 1]
-        with np.errstate(divide='ignore', invalid='ignore'):
-            dx = (jy[:, 1] * r[:, 0] - jy[:, 0] * r[:, 1]) / det
-            dy = (-jx[:, 1] * r[:, 0] + jx[:, 0] * r[:, 1]) / det
-        step = np.stack([dx, dy], 1)
-        n = np.where(np.isfinite(step), n - step, n)
-    rays = np.concatenate([n, np.ones((len(n), 1))], 1) @ camera.R
-    return rays / np.linalg.norm(rays, axis=1, keepdims=True)
 
 
 def sample_bilinear(texture: np.ndarray, uv: np.ndarray) -> np.ndarray:
@@ -104,7 +74,7 @@ def refine_corners(gray: np.ndarray, camera: Camera, board: Board, ids: np.ndarr
     offsets = (np.arange(3) + 0.5) / 3 - 0.5
     sub = np.stack(np.meshgrid(offsets, offsets), -1).reshape(-1, 2)
     grid = np.stack([xs, ys], 1).astype(np.float64)
-    rays = exact_rays(cam, (grid[:, None, :] + sub[None]).reshape(-1, 2))
+    rays = cam.pixel_rays((grid[:, None, :] + sub[None]).reshape(-1, 2))
     depth = float(np.linalg.norm(tvec))
     metres_per_sample = depth / cam.focal / 3.0
     base = board.image(_TEXTURE_PPM, 0.0).astype(np.float32) / 255.0

@@ -476,14 +476,19 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
         cpu1, wall1 = cpu_seconds(node.pid), time.monotonic()
         threads1 = thread_cpu_seconds(node.pid)
         # the final counts: the node publishes /diagnostics on a wall-clock period once no
-        # frame set forms; wait for one sent after the last output
+        # frame set forms; wait until two such in a row, sent after the last output, show
+        # the same counts (a loaded node may still be working through its queue)
         with lock:
             seen = len(diags)
-        deadline = time.monotonic() + 5.0
+        deadline = time.monotonic() + 30.0
         while time.monotonic() < deadline:
             with lock:
-                if len(diags) > seen and diags[-1].get('_reason'):
-                    break
+                last = diags[-2:] if len(diags) >= seen + 2 else []
+            if len(last) == 2 and all(d.get('_reason') for d in last) \
+                    and {k: v for k, v in last[0].items() if k != '_reason'
+                         and 'time' not in k} == {k: v for k, v in last[1].items()
+                                                  if k != '_reason' and 'time' not in k}:
+                break
             time.sleep(0.1)
         sampling.set()
         sampler.join(timeout=5)

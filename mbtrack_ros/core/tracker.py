@@ -606,7 +606,7 @@ class Tracker:
                                              bins=frame_bins() if frame_bins else None)
             for tid in released:
                 self.remove_track(tid)
-            for t in tracks:   # a lagging track catches up (AutoDetectionConfig.reach_move)
+            for t in tracks:   # a lagging track catches up (AutoDetectionConfig.reach_radius)
                 if t.track_id in self.detection.reach_moves and t.track_id not in released:
                     state = t.mean.copy()
                     state[[X, Y]] = self.detection.reach_moves[t.track_id]

@@ -16,7 +16,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from mbtrack_ros.calibration.align import exact_rays, sample_bilinear
+from mbtrack_ros.calibration.align import sample_bilinear
 from mbtrack_ros.calibration.board import Board, BoardPose
 from mbtrack_ros.core.camera import Camera, RoomCalibration, look_at
 from mbtrack_ros.synth.errors import SynthError
@@ -55,11 +55,11 @@ def _texture(board: Board) -> np.ndarray:
     return board.image(_TEXTURE_PPM, _MARGIN).astype(np.float32) / 255.0
 
 
-def _board_hits(camera: Camera, pixels: np.ndarray, R: np.ndarray, t: np.ndarray, *,
-                exact: bool = True) -> tuple[np.ndarray, np.ndarray]:
+def _board_hits(camera: Camera, pixels: np.ndarray, R: np.ndarray, t: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
     """Board-frame points (N, 2) and ray lengths (N,) where the rays of ``pixels`` (N, 2)
     meet the board plane ``X = R p + t`` (NaN when they do not)."""
-    rays = exact_rays(camera, pixels) if exact else camera.pixel_rays(pixels)
+    rays = camera.pixel_rays(pixels)
     C = camera.center
     n = R[:, 2]
     with np.errstate(divide='ignore', invalid='ignore'):
@@ -101,7 +101,7 @@ def render_boards(camera: Camera, placements: Sequence[tuple[Board, np.ndarray, 
         x0, y0 = board.outline[0, :2]
         lo = np.array([x0 - _MARGIN, y0 - _MARGIN])
         hi = lo + np.array([tex.shape[1], tex.shape[0]]) / _TEXTURE_PPM
-        xy, _ = _board_hits(camera, grid, R, t, exact=False)  # where to look closer
+        xy, _ = _board_hits(camera, grid, R, t)  # where to look closer
         pad = 0.1 * board.square
         near = np.all((xy > lo - pad) & (xy < hi + pad), axis=1)
         near = cv2.dilate(near.reshape(H, W).astype(np.uint8), np.ones((5, 5), np.uint8))

@@ -65,12 +65,16 @@ class DetectionAssociator:
         within ``relocate_radius`` it is not born either: weak detections there are mostly
         the fringe of that track's person or a gap between people. Before a track is
         moved (by the gain or hidden), a lost track whose model is nearer the detection's
-        takes its id back instead (``reuse_before_moving``); before a birth, a released
+        takes its id back instead, and the track stays where it is (not instead of a track
+        placed within ``relocate_interval``: its move would not happen); before a birth, a released
         track and then a hidden one within ``reuse_radius`` that look alike are given
         back their person (``reuse_time``, ``reuse_hidden``; a reported track of doubtful
         existence counts as hidden, ``reuse_doubtful``); a detection that would still
         be born beside a look-alike track born or moved within ``relocate_interval`` is
-        dropped (``young_look_alike``).
+        dropped: a young track lags its person for a few frames, and the detection beside
+        it that looks like it (``move_distance``) is that person - unless the young track
+        keeps ``move_support`` of its exclusive support with the detection as one more
+        track (it stands on a person of its own).
         """
         cfg = self.config
         state = det.state.copy()
@@ -120,8 +124,7 @@ class DetectionAssociator:
         if best is None and cfg.relocate_hidden:
             best = self._nearest_hidden(det, tracks, keep, means, models, moved, stamp_ns)
             hidden = best is not None
-        if best is not None and cfg.reuse_before_moving \
-                and not self._placed_recently(tracks[best[0]].track_id, stamp_ns):
+        if best is not None and not self._placed_recently(tracks[best[0]].track_id, stamp_ns):
             # a lost track that looks more like the detection than the track about to be
             # moved takes its id back; that track stays where it is. Not instead of a
             # track placed within relocate_interval: that move would not happen (the
@@ -136,11 +139,6 @@ class DetectionAssociator:
                 info['action'] = f'reuse {reused} (not {tid})'
                 self._decide(info)
                 return Birth(model=model, state=state, detection=det, track_id=reused)
-        beside = False
-        if best is None and cfg.beside_support > 0:
-            best = self._lagging_beside(det, model, tracks, keep, means, models, evidence,
-                                        moved, stamp_ns, info, support)
-            beside = best is not None
         if best is None and near and det.score < cfg.beside_threshold:
             info['action'] = 'drop (weak beside a track)'
             self._decide(info)
@@ -163,9 +161,19 @@ class DetectionAssociator:
                     # (id, metres, appearance distance, existence) of the track moved
                     info['far'] = (int(tid), round(best[1], 2), round(likeness[tid], 3),
                                    round(float(self.aux[tid].existence), 3))
-            if best is None and reused is None and cfg.young_look_alike:
+            if best is None and reused is None:
                 young = [(n[1], n[0]) for n in near
                          if cfg.looks_alike(n[3]) and self._placed_recently(n[0], stamp_ns)]
+                if young:
+                    # ... unless the young track keeps move_support of its exclusive
+                    # support with the detection as one more track: it stands on a person
+                    # of its own, and the detection is somebody else
+                    if support is None:
+                        support = self._exclusive_support(det, model, tracks, keep, means,
+                                                          models, evidence)
+                    left = {int(tracks[k].track_id): float(support[1][j])
+                            for j, k in enumerate(keep)}
+                    young = [y for y in young if not left.get(y[1], 0.0) >= cfg.move_support]
                 if young:
                     # a track born or moved moments ago lags its person: the detection
                     # beside it that looks like it is that person, not a newcomer
@@ -178,7 +186,7 @@ class DetectionAssociator:
                 return Birth(model=model, state=state, detection=det, track_id=reused)
         tid = tracks[best[0]].track_id
         again = False
-        if not (hidden or beside) and self._placed_recently(tid, stamp_ns):
+        if not hidden and self._placed_recently(tid, stamp_ns):
             again = gains[tid] > cfg.move_again_gain \
                 and self._moved_again.get(tid) != self._placed.get(tid)
             if not again:
@@ -189,7 +197,6 @@ class DetectionAssociator:
         info['action'] = f'move {tid}' + (' (doubtful, far)' if doubtful
                                           else ' (hidden, far)' if far
                                           else ' (hidden)' if hidden
-                                          else ' (beside)' if beside
                                           else ' (again)' if again else '')
         self._decide(info)
         self._placed[tid] = int(stamp_ns)
@@ -253,62 +260,6 @@ class DetectionAssociator:
                 best = (k, d)
         return best
 
-    def _lagging_beside(self, det: Detection, model: PersonModel,
-                        tracks: Sequence[TrackEstimate], keep: Sequence[int],
-                        means: np.ndarray, models: Mapping[int, PersonModel],
-                        evidence: Mapping[str, FrameEvidence], moved: set[int],
-                        stamp_ns: int, info: dict,
-                        support: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-                        ) -> tuple[int, float] | None:
-        """(index, exclusive support with the detection) of the reported track whose
-        person the detection is, or None (``AutoDetectionConfig.beside_support``);
-        ``support``: :meth:`_exclusive_support` of the same tracks if already computed.
-
-        A track that fell 0.5-1 m behind its person keeps some of their foreground (the
-        corner cameras look along the gap), so it stays reported, while the detector finds
-        the person outside its 0.5 m exclusion radius. With the detection as one more
-        track, such a track's exclusive support falls below ``beside_support`` (the
-        release's measure of a spare track) while it was above before: its foreground was
-        the detection's person, and it is moved there instead of a birth beside it. Only
-        when exactly one track within ``relocate_radius`` would fall below (in a group
-        at the door several do, and the nearest is often not the person's), that track
-        within ``beside_radius`` of the detection (one farther off was mostly another
-        person's), and not a spare track, one not reported, or one moved within
-        ``relocate_interval`` (it would hop through a group; a young track never moved may
-        be: a birth that lags its person from the start). A track on a person of its own keeps its
-        exclusive support next to a newcomer."""
-        cfg = self.config
-        keep = list(keep)
-        gap = np.linalg.norm(means[keep][:, [X, Y]] - det.xy, axis=1)
-        near = np.flatnonzero(gap <= cfg.relocate_radius)
-        if not len(near):
-            return None
-        alone, with_det, spare = support if support is not None else \
-            self._exclusive_support(det, model, tracks, keep, means, models, evidence)
-        info['beside'] = [(int(tracks[keep[j]].track_id), round(float(alone[j]), 3),
-                           round(float(with_det[j]), 3)) for j in near]
-        # the one near track the detection would leave spare (NaN, seen nowhere: none);
-        # two or more (a group at the door): whose person it is is unclear
-        losing = near[with_det[near] < cfg.beside_support]
-        if len(losing) != 1:
-            return None
-        i = int(losing[0])
-        if gap[i] > cfg.beside_radius:    # farther off, mostly another person's track
-            return None
-        k = keep[i]
-        tid = tracks[k].track_id
-        ref = models.get(tid)
-        # a track moved within relocate_interval stays (it would hop through a group); a
-        # young one never moved may be taken (a birth lagging its person from the start)
-        moved_lately = self._placed_recently(tid, stamp_ns) \
-            and self._placed.get(tid, 0) > self._first_seen.get(tid, stamp_ns)
-        if spare[i] or tid in moved or ref is None or not ref.view_angles.size \
-                or not self.reported(tid) or moved_lately:
-            return None
-        if not alone[i] >= cfg.beside_support:    # not spare now, spare with it
-            return None
-        return k, float(with_det[i])
-
     def _exclusive_support(self, det: Detection, model: PersonModel,
                            tracks: Sequence[TrackEstimate], keep: Sequence[int],
                            means: np.ndarray, models: Mapping[int, PersonModel],
@@ -336,9 +287,7 @@ class DetectionAssociator:
         shapes = [self._shape(models.get(tracks[j].track_id), tracks[j]) for j in keep]
         cams = [self.calibration.cameras[n] for n in side]
         sils = [rasterize(c, states, shapes + [model.shape]) for c in cams]
-        # a bootstrap ghost is no one's support (the track lagging on its person's old place)
-        fgs = [evidence[n].foreground if evidence[n].ghost is None
-               else evidence[n].foreground & ~evidence[n].ghost for n in side]
+        fgs = [evidence[n].foreground for n in side]
         least = [rel.min_area * c.width * c.height / (320.0 * 240.0) for c in cams]
         xy = states[:, [X, Y]]
         spare, alone = spare_tracks(fgs, [s.select(0, k) for s in sils], rel.spare_support,
@@ -353,7 +302,7 @@ class DetectionAssociator:
         """The id of the track released nearest the detection, within ``reuse_radius``
         metres and ``reuse_time`` seconds, not live, whose appearance model is within
         ``reuse_distance`` of the detection's - or, when ``below`` is given, nearer than
-        ``below`` (``reuse_before_moving``) - (and forgets it), or None; each candidate's
+        ``below`` (a lost track nearer in appearance than the track to be moved) - (and forgets it), or None; each candidate's
         distance and model distance go to ``info['reuse']``."""
         best = None
         for tid, (_, xy, old) in self._released.items():

@@ -449,6 +449,7 @@ class BackgroundModel:
         self._raw: np.ndarray | None = None          # the last foreground test before unknowns
         self._ghost_age: np.ndarray | None = None    # consecutive frames judged a ghost
         self._ghost: np.ndarray | None = None        # pixels the next update learns at once
+        self._learn: np.ndarray | None = None        # ghost places found by the detection
         self._prev_fg: np.ndarray | None = None      # foreground of the last update
         self._came_tracked: np.ndarray | None = None  # foreground that arrived under a track
         self._seen = 0                               # frames offered for bootstrapping
@@ -650,6 +651,57 @@ class BackgroundModel:
         self._ghost = _whole_components(ghost, ripe)
         return fg & ~self._ghost
 
+    def outline_gradients(self, image: np.ndarray, foreground: np.ndarray, mask: np.ndarray,
+                          *, width: int, exclude: np.ndarray | None = None
+                          ) -> tuple[float, float, float]:
+        """The border test of :func:`ghost_components` for the foreground of one
+        silhouette: the foreground (H, W) bool within ``width`` pixels of ``mask`` (H, W)
+        bool is cut out (foreground of people beside it stays outside), and the colour
+        gradient (:func:`_colour_gradient`) over the border band of that cut (3 pixels
+        across the border, not along the cut lines) is summed in the model (scaled by the
+        global gain) and in ``image`` (H, W, 3) uint8 RGB. Band pixels in ``exclude`` (H,
+        W) bool (other tracks' silhouettes) or not yet known do not count. Returns (model
+        sum, frame sum, share of the band that counts); (0, 0, 0) before the model exists
+        or without foreground there."""
+        if self._bg is None or mask.shape != self._bg.shape[:2] or not mask.any():
+            return 0.0, 0.0, 0.0
+        cfg = self.config
+        h, w = mask.shape
+        rows, cols = np.nonzero(mask.any(axis=1))[0], np.nonzero(mask.any(axis=0))[0]
+        pad = width + 3
+        win = (slice(max(int(rows[0]) - pad, 0), min(int(rows[-1]) + pad + 1, h)),
+               slice(max(int(cols[0]) - pad, 0), min(int(cols[-1]) + pad + 1, w)))
+        k = np.ones((2 * width + 1, 2 * width + 1), np.uint8)
+        region = cv2.dilate(np.ascontiguousarray(mask[win]).view(np.uint8), k)
+        cut = (np.ascontiguousarray(foreground[win]).view(np.uint8) & region).astype(np.uint8)
+        if not cut.any():
+            return 0.0, 0.0, 0.0
+        k3 = np.ones((3, 3), np.uint8)
+        band = cv2.dilate(cut, k3).astype(bool) & ~cv2.erode(cut, k3).astype(bool)
+        band &= cv2.erode(region, np.ones((5, 5), np.uint8)).astype(bool)   # not the cuts
+        whole = int(band.sum())
+        if exclude is not None and exclude.shape == mask.shape:
+            band &= ~exclude[win]
+        if self._unknown is not None and self._unknown.shape == mask.shape:
+            band &= self._unknown[win] == 0
+        if not whole or not band.any():
+            return 0.0, 0.0, 0.0
+        scaled = self._bg[win].copy()
+        scaled[..., 0] *= self.gain
+        scaled[..., 1:] = 128.0 + self.gain * (scaled[..., 1:] - 128.0)
+        luma, chroma = float(cfg.luma_threshold), float(cfg.chroma_threshold)
+        g_model = _colour_gradient(scaled, luma, chroma)[band].sum()
+        g_frame = _colour_gradient(_to_ycc(np.ascontiguousarray(image[win])), luma,
+                                   chroma)[band].sum()
+        return float(g_model), float(g_frame), float(band.sum()) / whole
+
+    def learn_next(self, mask: np.ndarray) -> None:
+        """Set the model to the frame on ``mask`` (H, W) bool at the next update, as for a
+        ghost (:meth:`_learn_ghosts`): a place the detection found to be a ghost."""
+        if mask.shape != (self.shape or mask.shape):
+            return
+        self._learn = mask.copy() if self._learn is None else self._learn | mask
+
     def update(self, image: np.ndarray, *, exclude: np.ndarray | None = None) -> None:
         """Temporal filtering of the model on stable pixels only.
 
@@ -713,16 +765,18 @@ class BackgroundModel:
 
     def _note_arrivals(self, fg: np.ndarray, occupied: np.ndarray) -> None:
         """Remember, per foreground pixel, whether it became foreground under a track (the
-        dilated track silhouettes ``occupied``, (H, W) uint8): a tracked person who walks
-        somewhere and stands still brings his foreground with his track; the place a
-        learnt person reveals becomes foreground with no track over it (a track born on
-        it comes later)."""
+        dilated track silhouettes ``occupied``, (H, W) uint8) and has stayed under one
+        since: a tracked person who walks somewhere and stands still brings his foreground
+        with his track and keeps it covered; the place a learnt person reveals becomes
+        foreground with no track over it, or under the track of that person walking away,
+        which then leaves it (a track born on it later does not bring it)."""
         if self._came_tracked is None or self._came_tracked.shape != fg.shape:
             self._came_tracked = np.zeros(fg.shape, bool)
             self._prev_fg = np.zeros(fg.shape, bool)
         arrived = fg & ~self._prev_fg
-        self._came_tracked[arrived] = occupied.view(bool)[arrived]
-        self._came_tracked &= fg
+        under = occupied.view(bool)
+        self._came_tracked[arrived] = under[arrived]
+        self._came_tracked &= fg & under
         self._prev_fg = fg.copy()
 
     def _learn_ghosts(self, ycc: np.ndarray) -> None:
@@ -730,6 +784,9 @@ class BackgroundModel:
         this frame (dilated by ``mask_dilation``: the blurred rim of the learnt outline),
         whatever the tracks; they start afresh (no static count, no motion)."""
         ghost, self._ghost = self._ghost, None
+        learn, self._learn = self._learn, None
+        if learn is not None and learn.shape == ycc.shape[:2]:
+            ghost = learn if ghost is None else ghost | learn
         if ghost is None or ghost.shape != ycc.shape[:2] or not ghost.any():
             return
         k = _kernel(2 * self.config.mask_dilation + 1)

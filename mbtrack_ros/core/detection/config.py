@@ -85,11 +85,6 @@ class AutoDetectionConfig:
         reuse_in_entry_zones: a track released inside an entry zone is lost for
             ``reuse_time`` like any other; False: its id ends at once (its person is taken
             to have left the room).
-        reuse_before_moving: before a detection moves a track (by the gain or as a hidden
-            track), a lost track within ``reuse_radius`` whose model is nearer the
-            detection's than the moved track's model takes its id back instead, and the
-            track stays where it is. Not when that track was placed within
-            ``relocate_interval`` (its move would not happen).
         reuse_hidden: a detection that would start a new track moves instead the nearest
             hidden track (not reported, not placed within ``relocate_interval``) within
             ``reuse_radius`` whose model is within ``reuse_distance`` of the detection's:
@@ -98,62 +93,28 @@ class AutoDetectionConfig:
             for ``reuse_hidden`` (logged "move N (doubtful, far)"); 0 disables. With
             ``report_hidden`` every hidden track is reported, so this level is what lets
             ``reuse_hidden`` take them.
-        duplicate_by_reporting: of two tracks on one person (release ``merge_radius``,
-            ``merge_time``) release the one reported without a break for the shorter time
-            (born, moved, hidden or inside an exit later) instead of the younger one: a
-            track that was in an exit may have lost its person there.
         duplicate_margin: nats per side camera; of two such tracks keep the one whose
             appearance model explains the image where they are better (003 Eq. 3, both
             models at the pair's midpoint) by more than this
             (:meth:`AutoDetection._duplicate_judge`); ``inf`` disables. Large enough that
             a model acquired moments ago (which fits its own view best) does not win alone.
-        duplicate_own_support: of such a pair, the track to be released is kept while its
-            exclusive support (:meth:`Releaser.exclusive_support`) is at least the
-            release's ``spare_support``: two people passing close each explain foreground
-            the other does not.
         reach_radius, reach_directions: metres, count; a track whose coverage evidence for
             existence is negative at its mean is also judged at ``reach_directions``
             places on each of two rings around it (radius half and all of
             ``reach_radius``), on the foreground no other track's silhouette covers, and
             the best place counts: a track that fell behind a person who started walking
             stays reported while the person is within the detector's ``exclusion_radius``
-            (where the detector does not look for them); 0 disables.
-        reach_move: a track whose reach counted a place with positive coverage evidence
-            is also restarted there (same id and velocity, :attr:`AutoDetection.reach_moves`;
-            the tracker moves it after the frame's output), so that it catches up with its
-            person instead of staying behind.
-        catch_up: nats; a track older than ``reach_age`` whose coverage evidence at its
-            mean is not negative is still restarted at the best place of its reach when the
-            free foreground there gives coverage evidence higher by more than this than at
-            its mean (a track left behind a person keeps part of their foreground). Not
-            where the reach touches an entry zone (a newcomer's foreground is there).
-            ``inf`` disables (the default).
+            (where the detector does not look for them), and when that place has positive
+            coverage evidence the track is restarted there (same id and velocity,
+            :attr:`AutoDetection.reach_moves`; the tracker moves it after the frame's
+            output) so that it catches up with its person; 0 disables.
         reach_age: seconds a track must have existed before it has a reach: a false birth
             (a shadow, a ghost, the fringe of a person) would keep itself alive on what is
             near it; false births mostly die within a few seconds.
-        exit_rescue: coverage fraction; a track that the exit rule would release is instead
-            moved onto the floor, same id, when a place within ``reach_radius`` of its
-            estimate brought onto the floor shows a free person with mean coverage at least
-            this in the cameras that watch the place (the doorway witnesses, elsewhere the
-            corner cameras). At most once per ``relocate_interval`` per track. 0 disables
-            (the default).
-        beside_support: a confirmed detection that would start a new track next to a
-            reported track (within ``beside_radius``, not spare, not moved within
-            ``relocate_interval``) moves that track there instead (same id) when, with the
-            detection as one more track, the track's exclusive support falls below this
-            fraction from above: the track had fallen behind the detection's person and
-            lived on their fringe (:meth:`AutoDetection._lagging_beside`); 0 disables (the
-            default).
-        beside_radius: metres; the track ``beside_support`` moves must be this close to
-            the detection.
         beside_threshold: smallest detection score (the detector's combined log response)
             for a birth within ``relocate_radius`` of a track that the detection did not
             move: weak detections beside a track are mostly the fringe of that track's
             person or a gap between people; 0 keeps the detector's threshold alone.
-        young_look_alike: a confirmed detection that would start a new track within
-            ``relocate_radius`` of a track placed within ``relocate_interval`` whose model
-            looks like the detection's (``move_distance``) is dropped: a young track lags
-            its person for a few frames, and the detection beside it is that person.
         track_coverage: ``k`` of a foreground-coverage term ``k f_c`` per camera in the
             tracking filter's particle weights (:meth:`MeasurementModel.set_foreground`);
             0: colour alone. Larger holds tracks on the foreground more firmly (better
@@ -186,22 +147,13 @@ class AutoDetectionConfig:
     reuse_radius: float = 1.5
     reuse_distance: float = 0.55
     reuse_in_entry_zones: bool = True
-    reuse_before_moving: bool = True
     reuse_hidden: bool = True
     reuse_doubtful: float = 0.9
-    duplicate_by_reporting: bool = True
     duplicate_margin: float = 8.0
-    duplicate_own_support: bool = True
     reach_radius: float = 0.5
     reach_directions: int = 8
-    reach_move: bool = True
     reach_age: float = 4.0
-    catch_up: float = float('inf')
-    exit_rescue: float = 0.0
-    beside_support: float = 0.0
-    beside_radius: float = 0.6
     beside_threshold: float = 3.0
-    young_look_alike: bool = True
     birth_exit_depth: float = 0.15
     track_coverage: float = 2.0
 
@@ -253,26 +205,18 @@ class AutoDetectionConfig:
             raise DetectionError(f'reuse_doubtful must be in [0, 1], got {self.reuse_doubtful}')
         if not self.sigma > 0 or not self.clutter_distance > 0:
             raise DetectionError('sigma and clutter_distance must be > 0')
-        if not self.beside_support >= 0:
-            raise DetectionError('beside_support must be >= 0')
         if not (np.isfinite(self.track_coverage) and self.track_coverage >= 0):
             raise DetectionError(f'track_coverage must be a finite number >= 0, got '
                                  f'{self.track_coverage}')
-        if not self.beside_radius >= 0:
-            raise DetectionError(f'beside_radius must be >= 0, got {self.beside_radius}')
         if not (np.isfinite(self.beside_threshold) and self.beside_threshold >= 0):
             raise DetectionError(f'beside_threshold must be a finite number >= 0, got '
                                  f'{self.beside_threshold}')
         if self.visibility_particles < 1:
             raise DetectionError('visibility_particles must be >= 1')
-        if not (self.catch_up >= 0):
-            raise DetectionError(f'catch_up must be >= 0 (inf: off), got {self.catch_up}')
         if not (self.reach_radius >= 0 and self.reach_directions >= 1
                 and self.reach_age >= 0):
             raise DetectionError('reach_radius and reach_age must be >= 0 and '
                                  'reach_directions >= 1')
-        if not 0.0 <= self.exit_rescue <= 1.0:
-            raise DetectionError(f'exit_rescue must be in [0, 1], got {self.exit_rescue}')
         if not (np.isfinite(self.birth_exit_depth) and self.birth_exit_depth >= 0):
             raise DetectionError(f'birth_exit_depth must be a finite number >= 0, got '
                                  f'{self.birth_exit_depth}')

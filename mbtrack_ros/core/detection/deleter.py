@@ -3,8 +3,7 @@
 :class:`TrackDeleter` computes, per frame, each track's evidence for the existence and
 visibility processes (001 §3: appearance likelihood of a few posterior particles against a
 clutter likelihood, coverage of the rendered silhouette, also a little around the track:
-its reach), judges two tracks on one person (which one the image supports), rescues a
-track the exit rule would release while its person still stands at the door, and keeps
+its reach), judges two tracks on one person (which one the image supports), and keeps
 the bookkeeping of reported and released ("lost") tracks. It is a part of
 :class:`~mbtrack_ros.core.detection.manager.AutoDetection` and works on its state.
 """
@@ -22,7 +21,7 @@ from mbtrack_ros.core.detection.release import blob_coverage, paint_blobs
 from mbtrack_ros.core.existence import TrackAuxiliary, coverage_log_ratio, predictive_loglik
 from mbtrack_ros.core.resampling import systematic_indices
 from mbtrack_ros.core.shape import BodyShape, rasterize
-from mbtrack_ros.core.state import VX, VY, X, Y, TrackEstimate
+from mbtrack_ros.core.state import X, Y, TrackEstimate
 
 __all__ = ['TrackDeleter']
 
@@ -101,71 +100,9 @@ class TrackDeleter:
             return keep
         return prefer
 
-    def _rescue_exits(self, stamp_ns: int, tracks: Sequence[TrackEstimate],
-                      exited: list[int], evidence: Mapping[str, FrameEvidence],
-                      sils: Mapping[str, object], means: np.ndarray,
-                      shapes: Sequence[BodyShape], tops: np.ndarray) -> list[int]:
-        """Of the tracks the exit rule would release, those to release (returned); the
-        others are moved back onto a free person on the floor (``exit_rescue``).
-
-        An estimate pushed into the exit while its person stands at the door leaves the
-        person untracked on the floor right beside it: the track's reach
-        (:meth:`_reach_coverage`, centred on the estimate brought onto the floor) looks for
-        them there. A place counts when the cameras on
-        the door's wall, which see the doorway but not the corridor, find it covered by
-        foreground that no other track explains (mean coverage at least ``exit_rescue``);
-        of such places the one best covered in all cameras is taken (the door-wall cameras
-        look along the wall and place a person poorly along it). The track restarts there
-        with zero velocity (``reach_moves``, same id) and its estimate of this frame is
-        moved there too; ``exit_checks`` keeps each decision."""
-        cfg = self.config
-        x0, y0, x1, y1 = self.calibration.floor
-        index = {t.track_id: k for k, t in enumerate(tracks)}
-        out = []
-        for tid in exited:
-            k = index[tid]
-            last = self._rescued.get(tid)
-            centre = means.copy()
-            centre[k, X] = np.clip(means[k, X], x0, x1)
-            centre[k, Y] = np.clip(means[k, Y], y0, y1)
-            places, rings = self._reach_coverage(k, evidence, sils, centre, shapes, tops)
-            on_floor = (places[:, 0] >= x0) & (places[:, 0] <= x1) \
-                & (places[:, 1] >= y0) & (places[:, 1] <= y1)
-            places, rings = places[on_floor], [r for r, f in zip(rings, on_floor) if f]
-            witnesses = self.calibration.doorway_witnesses(places, cfg.release.doorway_band)
-            # the door-wall cameras decide whether someone is there (they cannot see the
-            # corridor) but look along the wall; where, all cameras together tell
-            best, where, fit = 0.0, None, -1.0
-            for i, (place, ring) in enumerate(zip(places, rings)):
-                cams = [n for n, w in witnesses.items() if w[i] and n in ring] \
-                    or [n for n in self.side if n in ring]
-                score = float(np.mean([ring[n] for n in cams])) if cams else 0.0
-                best = max(best, score)
-                overall = float(np.mean(list(ring.values())))
-                if score >= cfg.exit_rescue and overall > fit:
-                    where, fit = place, overall
-            rescue = where is not None and (
-                last is None or (int(stamp_ns) - last) / 1e9 >= cfg.relocate_interval)
-            self.exit_checks.append({'id': int(tid), 'coverage': round(best, 3),
-                                     'overall': round(fit, 3),
-                                     'place': None if where is None else
-                                     (float(where[0]), float(where[1])),
-                                     'rescued': bool(rescue)})
-            if not rescue:
-                out.append(tid)
-                continue
-            self._rescued[tid] = int(stamp_ns)
-            self.reach_moves[tid] = where
-            mean = tracks[k].mean.copy()
-            mean[[X, Y]] = where
-            mean[[VX, VY]] = 0.0
-            tracks[k].mean = mean
-        return out
-
     def _reach_coverage(self, k: int, evidence: Mapping[str, FrameEvidence],
                         sils: Mapping[str, object], means: np.ndarray,
-                        shapes: Sequence[BodyShape], tops: np.ndarray, *,
-                        centre: bool = False
+                        shapes: Sequence[BodyShape], tops: np.ndarray
                         ) -> tuple[np.ndarray, list[dict[str, float]]]:
         """The places (M, 2) of track k's reach (``reach_directions`` places on each of
         the rings of radius ``reach_radius`` / 2 and ``reach_radius`` around its mean, but
@@ -175,9 +112,7 @@ class TrackDeleter:
         that no other track's silhouette (blob) at its mean covers and that is not a
         possible person of the bootstrap (the background's not-yet-known foreground), over
         the whole area: a track beside a tracked person finds no support in that person,
-        a track that lost its person at the start no support in their old place. With
-        ``centre`` the track's mean itself comes first (whoever is near it), then those
-        places (``catch_up`` compares them with it)."""
+        a track that lost its person at the start no support in their old place."""
         cfg = self.config
         if cfg.reach_radius <= 0:
             return np.zeros((0, 2)), []
@@ -192,8 +127,6 @@ class TrackDeleter:
             # another track's neighbourhood is its own (as for the detector)
             gap = np.linalg.norm(ring[:, None, :2] - means[None, others, :2], axis=2)
             ring = ring[gap.min(axis=1) > cfg.detector.exclusion_radius]
-        if centre:      # the mean itself first, whoever is near
-            ring = np.concatenate([means[k][None], ring])
         m = len(ring)
         if m == 0:
             return np.zeros((0, 2)), []
@@ -230,27 +163,6 @@ class TrackDeleter:
         place is not seen) and their existence evidence (:func:`coverage_log_ratio`)."""
         on = {n: ring.get(n, 0.0) for n in cov}
         return on, coverage_log_ratio(on, weights, self.config.existence.support_gain)
-
-    def _catch_up(self, t: TrackEstimate, k: int, cov: Mapping[str, float],
-                  weights: Mapping[str, float],
-                  reach: Callable[..., tuple[np.ndarray, list[dict[str, float]]]]) -> None:
-        """``AutoDetectionConfig.catch_up`` for supported track ``t`` (index ``k``;
-        ``cov``, ``weights``: its cameras' coverage and evidence weights): restart it at the
-        best place of its reach (``reach_moves``, logged in ``catch_ups``) when the free
-        foreground there gives positive coverage evidence, better by more than
-        ``catch_up`` than the free foreground at its mean. Not when the track or a place
-        of its reach lies in an entry zone (a door crowd)."""
-        if self.calibration.in_entry_zone(t.mean[[X, Y]])[0]:
-            return              # before the reach is computed: most door tracks stop here
-        places, rings = reach(k, centre=True)   # the mean first, then its reach
-        if len(places) < 2 or self.calibration.in_entry_zone(places[1:]).any():
-            return
-        free = [self._ring_evidence(r, cov, weights)[1] for r in rings]
-        j = 1 + int(np.argmax(free[1:]))
-        if free[j] > 0.0 and free[j] - free[0] > self.config.catch_up:
-            self.reach_moves[t.track_id] = places[j]
-            self.catch_ups.append({'id': int(t.track_id), 'xy': [float(v) for v in places[j]],
-                                   'gain': round(free[j] - free[0], 3)})
 
     def _visibility_particles(self, tracks: Sequence[TrackEstimate],
                               models: Mapping[int, PersonModel], shapes: Sequence[BodyShape]
@@ -334,10 +246,8 @@ class TrackDeleter:
                     ring, evidence = self._ring_evidence(ring, cov, weights)
                     if evidence > best:
                         cov, best = ring, evidence
-                        if cfg.reach_move and evidence > 0.0:
+                        if evidence > 0.0:
                             self.reach_moves[t.track_id] = place
-            elif cfg.reach_move and np.isfinite(cfg.catch_up) and cov and reach is not None:
-                self._catch_up(t, k, cov, weights, reach)
             aux.update(dt, loglik_visible=vis, loglik_hidden=hid, coverage=cov,
                        visible_fraction=weights)
             t.visibility = dict(aux.visibility)

@@ -213,9 +213,6 @@ class FrameEvidence:
         tracks: (H, W) bool pixels covered by the rendered silhouettes of current tracks.
         motion: (H, W) bool pixels that moved recently (None: not checked).
         edge_min_pixels, edge_neighbourhood: edge validation (``DetectorConfig``).
-        ghost: (H, W) bool foreground pixels that are a possible person of the bootstrap
-            (the background's not-yet-known foreground as this frame's test used it), or
-            None: no support of a track's own (``AutoDetection._exclusive_support``).
     """
 
     image: np.ndarray
@@ -228,7 +225,6 @@ class FrameEvidence:
     _integral: ForegroundIntegral | None = field(default=None, repr=False)
     _edges: EdgeMap | None = field(default=None, repr=False)
     _bins: np.ndarray | None = field(default=None, repr=False)
-    ghost: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def bins(self) -> np.ndarray:

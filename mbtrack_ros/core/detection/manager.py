@@ -65,6 +65,7 @@ class _Found(NamedTuple):
 
     acquired: list[tuple[Detection, PersonModel]]
     timings: dict[str, float]
+    ghosts: list[tuple[Detection, float, float]] = []  # (detection, model, frame gradient)
 
 
 class AutoDetection(DetectionAssociator, TrackDeleter):
@@ -90,7 +91,6 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
         self.decisions: list[dict] = []    # per frame: what happened to confirmed detections
         # per frame: track id -> floor place (x, y) its reach found it a person at
         self.reach_moves: dict[int, np.ndarray] = {}
-        self.catch_ups: list[dict] = []  # per frame: the reach moves made by catch_up
         self._first_seen: dict[int, int] = {}  # track id -> stamp of its first update
         self._placed: dict[int, int] = {}  # track id -> stamp of its birth or last move
         self._moved_again: dict[int, int] = {}  # track id -> stamp of its move_again_gain move
@@ -98,8 +98,6 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
         self._released: dict[int, tuple[int, np.ndarray, PersonModel | None]] = {}
         self._lost_ended: list[int] = []  # released ids whose reuse_time passed unreused
         self._shown_since: dict[int, int] = {}  # id -> birth, move, last hidden or exit stamp
-        self._rescued: dict[int, int] = {}  # id -> stamp of its last exit rescue
-        self.exit_checks: list[dict] = []  # per frame: the exit rescue's view of each exit
         self.duplicate_checks: list[dict] = []  # per frame: the duplicate judge's calls
         self.adaptations: list[dict] = []  # per frame: the appearance adaptation's decisions
         self._adapted: dict[int, int] = {}  # track id -> stamp of its last model adaptation
@@ -133,14 +131,12 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
                 pass
         self.aux.clear()
         self.reach_moves = {}
-        self.catch_ups = []
         self._first_seen.clear()
         self._placed.clear()
         self._moved_again.clear()
         self._released.clear()
         self._lost_ended.clear()
         self._shown_since.clear()
-        self._rescued.clear()
         self._adapted.clear()
         self._first_xy.clear()
         self._travelled.clear()
@@ -243,8 +239,6 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
         cfg = self.config
         t0 = time.perf_counter()
         self.reach_moves = {}
-        self.catch_ups = []
-        self.exit_checks = []
         self.duplicate_checks = []
         self.adaptations = []
         self._first_seen = {t.track_id: self._first_seen.get(t.track_id, int(stamp_ns))
@@ -286,9 +280,7 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
         det = self.config.detector
         evidence = {n: FrameEvidence(images[n], fg[n], masks[n], _bins=known_bins.get(n),
                                      edge_min_pixels=det.edge_min_pixels,
-                                     edge_neighbourhood=det.edge_neighbourhood,
-                                     ghost=self.background.model(n).possible_foreground_as_tested
-                                     if cfg.beside_support > 0 else None)
+                                     edge_neighbourhood=det.edge_neighbourhood)
                     for n in fg}
         t2 = time.perf_counter()
         # 3. support, visibility and existence
@@ -312,16 +304,14 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
 
             spare = self.releaser.spare if evidence else np.zeros(len(tracks), bool)
 
-            def reach(k: int, centre: bool = False
-                      ) -> tuple[np.ndarray, list[dict[str, float]]]:
+            def reach(k: int) -> tuple[np.ndarray, list[dict[str, float]]]:
                 """Places (M, 2) of track k's reach and its silhouette's coverages there
                 (none for a spare track: the others explain its foreground; none for a
-                track younger than ``reach_age``); ``centre``: the mean first."""
+                track younger than ``reach_age``)."""
                 age = (int(stamp_ns) - self._first_seen[tracks[k].track_id]) / 1e9
                 if (k < len(spare) and spare[k]) or age < cfg.reach_age:
                     return np.zeros((0, 2)), []
-                return self._reach_coverage(k, evidence, sils, means, shapes, tops,
-                                            centre=centre)
+                return self._reach_coverage(k, evidence, sils, means, shapes, tops)
 
             self._auxiliary(dt, colour, tracks, models, parts, owner, part_sils, coverage,
                             reach)
@@ -329,9 +319,6 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
             if evidence:  # 4. release (only once the background exists)
                 ids = [t.track_id for t in tracks]
                 ended = self.releaser.exited(ids, means[:, [X, Y]])
-                if ended and cfg.exit_rescue > 0:
-                    ended = self._rescue_exits(stamp_ns, tracks, ended, evidence, sils,
-                                               means, shapes, tops)
                 if ended:            # the others go on; the releaser forgets the exited
                     keep = [k for k, i in enumerate(ids) if i not in ended]
                     ended += self.releaser.update(stamp_ns, [ids[k] for k in keep],
@@ -342,20 +329,23 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
                 else:
                     ended = self.releaser.update(stamp_ns, ids, supported, existence,
                                                  self.releaser.doorway, self.releaser.spare)
-                shown = [self._shown_since.get(i, 0) if cfg.duplicate_by_reporting else 0
-                         for i in ids]
+                # of two tracks on one person the one reported without a break for the
+                # shorter time goes (born, moved, hidden or inside an exit later): a track
+                # that was in an exit may have lost its person there; and not while it
+                # keeps exclusive support (two people passing close each explain
+                # foreground the other does not)
+                shown = [self._shown_since.get(i, 0) for i in ids]
                 judge = None if np.isinf(cfg.duplicate_margin) else self._duplicate_judge(
                     tracks, means, models, evidence)
                 ended += [i for i in self.releaser.duplicates(
                     stamp_ns, ids, means[:, [X, Y]], shown, judge,
-                    self.releaser.exclusive_support if cfg.duplicate_own_support else None)
+                    self.releaser.exclusive_support)
                     if i not in ended]
         for tid in ended:
             self.aux.pop(tid, None)
             self._placed.pop(tid, None)
             self._moved_again.pop(tid, None)
             self._shown_since.pop(tid, None)
-            self._rescued.pop(tid, None)
             self._adapted.pop(tid, None)
             self._first_xy.pop(tid, None)
             self._travelled.discard(tid)
@@ -422,6 +412,7 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
         the detector, so it may run on the worker while the next frame is filtered."""
         t0 = time.perf_counter()
         acquired: list[tuple[Detection, PersonModel]] = []
+        ghosts: list[tuple[Detection, float, float]] = []
         if pending.evidence:
             keep = [k for k, t in enumerate(pending.tracks) if t.track_id not in pending.ended]
             others = pending.means[keep]
@@ -432,13 +423,57 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
             confirmed = self.detector.step(pending.evidence, track_xy=others[:, [X, Y]],
                                            stamp_ns=pending.stamp_ns)
             for det in confirmed:
+                outline = self._ghost_outline(det, pending.evidence)
+                if outline is not None:
+                    ghosts.append((det, *outline))
+                    continue
                 model = acquire(det, pending.images, self.calibration, others=others,
                                 other_shapes=other_shapes, config=self.config.acquisition)
                 if model is None:
                     self.detector.requeue(det)
                 else:
                     acquired.append((det, model))
-        return _Found(acquired, {'detect_find': time.perf_counter() - t0})
+        return _Found(acquired, {'detect_find': time.perf_counter() - t0}, ghosts)
+
+    def _ghost_outline(self, det: Detection, evidence: Mapping[str, FrameEvidence]
+                       ) -> tuple[float, float] | None:
+        """(model, frame) outline gradients of a confirmed detection that is a ghost, or
+        None; the ghost's silhouettes are learnt into the background at its next update.
+
+        The background's border test (:func:`~.background.ghost_components`) applied to
+        the foreground of the detection's silhouette (within 4 pixels at 320x240) instead
+        of a whole foreground component: summed over the side cameras that have a
+        background model, the colour gradient along that foreground's outline (other
+        tracks' silhouettes left out) is ``ghost_edge_ratio`` times larger in the model
+        than in the frame - the outline is that of somebody learnt into the model who has
+        left, not of somebody in the frame. The component test misses such a ghost when
+        its foreground touches a person standing beside it (their outline is in the
+        frame)."""
+        ratio = self.config.background.ghost_edge_ratio
+        if ratio <= 0:
+            return None
+        shape = BodyShape(det.height, det.width)
+        model_sum = frame_sum = 0.0
+        masks = {}
+        for n in self.side:
+            ev = evidence.get(n)
+            bank = self.background.models.get(n)
+            if ev is None or bank is None or not bank.ready:
+                continue
+            cam = self.calibration.cameras[n]
+            mask = rasterize(cam, det.state[None].astype(np.float64), shape).mask(0) > 0
+            width = max(2, int(round(4.0 * np.sqrt(cam.width * cam.height / 76800.0))))
+            g_model, g_frame, share = bank.outline_gradients(ev.image, ev.foreground, mask,
+                                                             width=width, exclude=ev.tracks)
+            if share >= 0.5:
+                model_sum += g_model
+                frame_sum += g_frame
+                masks[n] = mask
+        if not masks or not model_sum > ratio * frame_sum:
+            return None
+        for n, mask in masks.items():
+            self.background.models[n].learn_next(mask)
+        return model_sum, frame_sum
 
     def _settle(self, pending: _Pending, found: _Found) -> list[Birth]:
         """Births and moves from the detections of :meth:`_find` (:meth:`_identify`), in
@@ -452,6 +487,10 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
             moved: set[int] = set()
             # no birth or move deep in an exit: a person in the doorway or beyond
             limit = self.config.birth_exit_depth
+            for det, g_model, g_frame in found.ghosts:
+                self._decide({'xy': (float(det.xy[0]), float(det.xy[1])),
+                              'score': float(det.score), 'action': 'drop (ghost)',
+                              'outline': (round(g_model, 1), round(g_frame, 1))})
             for det, model in found.acquired:
                 if self.calibration.exit_depth(det.xy)[0] > limit:
                     continue

@@ -25,10 +25,7 @@ unsupported time.
 ``RoomCalibration.exits``) a track whose estimate is inside one and more than
 ``exit_margin`` from the floor is released at once (:meth:`Releaser.exited`): its person
 walked out. Without exits a person who leaves holds the track at the floor edge while
-they stay visible through the open door, and the timeout only starts after that. The
-estimate of a person who stands at the door can be pushed into the exit too;
-``AutoDetection`` then looks for that person on the floor beside it before it lets the
-track go (``AutoDetectionConfig.exit_rescue``).
+they stay visible through the open door, and the timeout only starts after that.
 
 **Doorways**. Seen from a camera facing the door, a track standing in the doorway
 lies in front of the corridor: the person who just walked out is still foreground behind
