@@ -227,6 +227,16 @@ class _Received:
     def ready(self) -> bool:
         return self.frame is not None and self.frame.foreground is not None
 
+    def outline_gradients(self, image, foreground, mask, *, width, exclude=None
+                          ) -> tuple[float, float, float]:
+        """(0, 0, 0): the model is on the camera's host, so the detection's ghost test
+        (:meth:`~.background.BackgroundModel.outline_gradients`) has nothing to compare
+        with here; the stage's own component test still learns ghosts."""
+        return 0.0, 0.0, 0.0
+
+    def learn_next(self, mask) -> None:
+        """Nothing: the camera stage owns the model."""
+
 
 class ReceivedForeground:
     """The fusion node's stand-in for the tracker's :class:`~.background.BackgroundBank`:
