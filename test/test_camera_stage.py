@@ -57,7 +57,8 @@ def test_stage_is_the_background_model_with_the_given_exclusion(room, rng):
 def test_fusion_gives_the_tracks_of_one_process(recording, pipeline):
     """Camera stages + a fusion tracker vs. one tracker on a room with people from its first
     frame (the bootstrap's people cue goes through the fusion node). Measured at 160x120:
-    the same ids on every frame but at most two (a release a frame apart), positions
+    the same ids on every frame but at most three (releases a frame or two apart: both
+    release the tracks of the two people walking at the end), positions
     within 7 cm (13 cm with ``pipeline_search``), mostly millimetres: the particle filter
     amplifies the update's one-frame latency. With ``pipeline_search`` the search of a frame set reads its own masks while
     the next set is received."""
@@ -68,7 +69,7 @@ def test_fusion_gives_the_tracks_of_one_process(recording, pipeline):
     tracked, same_ids, gaps = got.tracked, got.same_ids, got.gaps
     assert got.frames == FRAMES
     assert tracked >= 10   # people were tracked: the comparison says something
-    assert same_ids >= FRAMES - 2
+    assert same_ids >= FRAMES - 3
     # measured: max 64 mm, with pipeline_search one frame at 126 mm (the gaps start at 0
     # and grow as the filter carries the update's differences on)
     assert max(gaps) < (0.15 if pipeline else 0.08) and np.median(gaps) < 0.01

@@ -295,6 +295,49 @@ def test_confirmed_detection_gets_the_walking_velocity_and_direction():
     assert abs(np.angle(np.exp(1j * (d.state[4] - expected)))) < 0.4
 
 
+@pytest.mark.parametrize('speed', [0.0, 1.2])
+def test_a_walking_detection_found_sitting_is_refined_standing(monkeypatch, speed):
+    """A person walking at 1.2 m/s whose best per-frame hypothesis is a sitting body (as
+    a walker's spread legs can make it) is confirmed standing, near the painted height and
+    place, with the walking velocity kept; one standing still stays as found (sitting)."""
+    rng = np.random.default_rng(4)
+    calib = make_room()
+    bgs = backgrounds(calib)
+    bank = BackgroundBank()
+    bank.bootstrap({n: [bgs[n]] for n in calib.cameras})
+    det = Detector(calib, DetectorConfig(confirm_frames=3))
+    refine = Detector._refine
+    calls = []
+
+    def sitting_first(self, evidence, centre, track_xy, *, standing=False):
+        calls.append(standing)
+        d = refine(self, evidence, centre, track_xy, standing=standing)
+        if d is not None and not standing:   # the per-frame search finds a sitting 1.9 m
+            d.state[5], d.height = 1.0, 1.9
+        return d
+
+    monkeypatch.setattr(Detector, '_refine', sitting_first)
+    found, truth = [], None
+    for k in range(6):
+        truth = person(2.0, 3.2 - speed / FPS * k, theta=-np.pi / 2, h=1.7)
+        images = paint(calib, bgs, [truth], rng)
+        fg = bank.apply(images)
+        ev = {n: FrameEvidence(images[n], fg[n]) for n in fg}
+        found += det.step(ev, stamp_ns=int(round(k * 1e9 / FPS)))
+        if found:
+            break
+    assert len(found) == 1
+    d = found[0]
+    if speed == 0.0:
+        assert d.state[5] == 1.0 and d.height == 1.9 and True not in calls
+        return
+    assert calls[-1] is True
+    assert d.state[5] == 0.0 and abs(d.height - 1.7) <= 0.1
+    assert np.linalg.norm(d.xy - truth[0][:2]) <= 0.15
+    assert d.state[2:4] == pytest.approx([0.0, -speed], abs=0.4)
+    assert len(d.history) == 3 and d.frames == 3
+
+
 @pytest.mark.parametrize('xs, speed', [((4.45, 4.8, 4.75), None), ((4.45, 4.5, 4.55), 0.75)])
 def test_a_detection_whose_places_jumped_gets_no_velocity(xs, speed):
     """Confirming places 0.3 m apart in two frames (2.25 m/s, above ``max_speed``) are a

@@ -56,6 +56,8 @@ def test_quick_evaluate_writes_a_table_and_plots_per_benchmark(tmp_path, capsys)
     curve = [(row['degrees'], row['metres']) for r in raw['real_room'] for row in r['rows']
              if row['condition'] == 'curve']
     assert sorted(curve) == [(0.0, 0.0), (0.5, 0.0)]
+    table = (out / 'real_room.md').read_text()   # the calibration-error curve as a table
+    assert '| 0 deg | 0 cm |' in table and '| 0.5 deg | 0 cm |' in table
 
     # --report-only writes the same tables from results.json; --fill quotes them in a page
     before = {b.name: (out / f'{b.name}.md').read_text() for b in BENCHMARKS}

@@ -329,11 +329,12 @@ def test_the_replay_command_ends_at_once_with_complete_outputs(recording, tmp_pa
 
 def test_replay_at_half_scale_resizes_ahead_with_the_same_tracks(recording, tmp_path, capsys,
                                                                  monkeypatch):
-    """With ``--working-pixels`` the replay resizes the images in its reader thread (the resize
-    of ``Tracker.step``, done ahead): the step gets them at its size, and the tracks are
-    those of a replay that leaves the resize to the step, bit for bit."""
-    from mbtrack_ros.commands import replay
+    """With ``--working-pixels`` the replay decodes the images at the working size in its
+    reader thread (``RecordingReader.decode_to``: the resize of ``Tracker.step``, done
+    ahead): the step gets them at its size, and the tracks are those of a replay that
+    leaves the resize to the step, bit for bit."""
     from mbtrack_ros.core.tracker import Tracker
+    from mbtrack_ros.recording.bag import RecordingReader
 
     gt = recording / 'ground_truth.csv'
     args = ['replay', str(recording), '--working-pixels', '4800', '--particles', '30',
@@ -349,7 +350,7 @@ def test_replay_at_half_scale_resizes_ahead_with_the_same_tracks(recording, tmp_
     assert main(args + ['--out', str(tmp_path / 'ahead')]) == 0
     assert seen and all(shape == (60, 80) for frame in seen for shape in frame.values())
     monkeypatch.setattr(Tracker, 'step', step)
-    monkeypatch.setattr(replay, '_at_working_size', lambda frames, tracker: frames)
+    monkeypatch.setattr(RecordingReader, 'decode_to', lambda self, cameras: None)
     assert main(args + ['--out', str(tmp_path / 'in_step')]) == 0
     capsys.readouterr()
     ahead = (tmp_path / 'ahead' / 'tracks.csv').read_bytes()

@@ -231,7 +231,7 @@ def test_fused_outline_matches_projection_then_outline(rng):
         valid = np.array([_kernels._outline_one(
             i, *end_px[i, 0], *end_px[i, 1], *depth[i], bool(sitting[i]), shape.fractions,
             shape.half_widths, shape.segment_parts, shape.hip_fraction, widths[i], scale[i],
-            cam.focal, left, right, seg_part) for i in range(n)])
+            cam.K[0, 0], cam.K[1, 1], left, right, seg_part) for i in range(n)])
         centre = np.stack([states[:, X], states[:, Y], 0.5 * (zb + zt)], axis=1)
         ref = (left, right, seg_part, valid, np.where(valid, cam.distance(centre), np.inf))
         assert 0 < got[3].sum() < n
@@ -293,3 +293,26 @@ def test_rasterize_quads_matches_straightforward_scan(rng):
     assert spans.shape[0] > 100 and np.array_equal(got, spans)
     np.testing.assert_array_equal(area, ref_area)
     np.testing.assert_array_equal(np.diff(offsets), ref_count)
+
+
+@pytest.mark.parametrize('size', [(370, 208), (256, 300)])
+def test_silhouettes_keep_their_size_in_an_image_resized_to_another_aspect_ratio(size):
+    """A camera whose image is resized to another aspect ratio has non-square pixels
+    (fx != fy): a body's silhouette covers the same part of the picture, so its area
+    scales with both factors (sx sy) and its widest span with sx, whatever the body's
+    orientation (the outline's offsets use the focal length along their direction)."""
+    R, t = look_at((0.1, 0.1, 2.6), (3.0, 2.5, 0.8))
+    cam = Camera('c', 320, 240, [[175, 0, 159.5], [0, 175, 119.5], [0, 0, 1]],
+                 [0.0] * 5, R, t)
+    wide = cam.scaled(*size)
+    sx, sy = size[0] / 320, size[1] / 240
+    states = np.zeros((6, 6))
+    states[:, :2] = [[3.0, 2.5], [2.0, 3.5], [4.0, 1.5], [1.5, 1.5], [2.5, 4.0], [4.5, 3.5]]
+    states[:, THETA] = np.linspace(0, np.pi, 6)
+    a, b = rasterize(cam, states, BodyShape()), rasterize(wide, states, BodyShape())
+    assert np.all(a.full_area > 400)
+    np.testing.assert_allclose(b.full_area / a.full_area, sx * sy, rtol=0.04)
+    for i in range(len(states)):
+        span_a = (a.mask(i) > 0).sum(axis=1).max()
+        span_b = (b.mask(i) > 0).sum(axis=1).max()
+        assert span_b / span_a == pytest.approx(sx, rel=0.08)

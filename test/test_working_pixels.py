@@ -91,6 +91,30 @@ def test_camera_fit_is_the_block_mean_at_half_size():
     assert cam.fit(same) is same  # already at the size: no copy, no resize
 
 
+@pytest.mark.parametrize('size', [(1280, 720), (1000, 750), (641, 481)])
+def test_camera_fit_in_stages_equals_one_area_resize(size):
+    """A large reduction (2 x 2 binning stages, then one area resize) gives the single
+    area resize's image to a fraction of a grey level on a smooth picture, and puts a
+    bright dot where the camera's scaling (``Camera.scaled``) projects it."""
+    cam = make_room(8, 6).cameras['cam0'].scaled(*size).at_most(76800)
+    w, h = size
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
+    image = np.stack([127 + 100 * np.sin(xx / 37.0) * np.cos(yy / 29.0),
+                      127 + 100 * np.cos((xx + yy) / 53.0), 60 + 0.1 * xx], -1)
+    image = np.clip(image, 0, 255).astype(np.uint8)
+    one = cv2.resize(image, (cam.width, cam.height), interpolation=cv2.INTER_AREA)
+    diff = np.abs(cam.fit(image).astype(np.float64) - one)
+    assert diff.mean() < 0.5 and diff.max() <= 4
+    dot = np.zeros((h, w), np.float32)
+    u, v = int(0.61 * w), int(0.37 * h)
+    dot[v - 4:v + 4, u - 4:u + 4] = 1.0          # centred on pixel (u - 0.5, v - 0.5)
+    small = cam.fit(dot)
+    ys, xs = np.mgrid[0:cam.height, 0:cam.width]
+    centre = np.array([(small * xs).sum(), (small * ys).sum()]) / small.sum()
+    np.testing.assert_allclose(centre, [u * cam.width / w - 0.5, v * cam.height / h - 0.5],
+                               atol=0.05)
+
+
 def test_working_size_of_cameras_of_any_size():
     config = TrackerConfig()
     for (w, h) in [(320, 240), (640, 480), (1280, 720), (1920, 1080), (752, 480)]:
@@ -259,3 +283,50 @@ def test_same_room_at_twice_the_resolution_tracks_alike():
         assert len(keys) > 20
         errors.append(np.mean([np.linalg.norm(out[k] - gt[k]) for k in keys]))
     assert errors[1] < errors[0] + 0.03 and errors[1] < 0.1, errors
+
+
+@pytest.mark.parametrize('encoding', ['rgb8', 'bgr8', 'mono8', 'bgra8'])
+def test_raw_images_decoded_at_the_working_size_equal_decode_then_fit(encoding):
+    """``decode_raw(..., to=cam)`` resizes the message's own pixels (padded rows too) and
+    converts the colours on the small image: the image of a full decode then ``Camera.fit``,
+    bit for bit, never aliasing the message; at the working size already, a copy."""
+    from mbtrack_ros.recording.images import CHANNELS, decode_raw
+
+    cam = make_room(8, 6).cameras['cam0'].scaled(640, 480).at_most(76800)
+    rng = np.random.default_rng(5)
+    for w, h in ((640, 480), (320, 240)):
+        ch = CHANNELS[encoding]
+        step = w * ch + 6                                     # padded rows
+        data = rng.integers(0, 256, step * h, dtype=np.uint8)
+        full = decode_raw(encoding, h, w, step, data)
+        got = decode_raw(encoding, h, w, step, data, to=cam)
+        assert got.shape == (240, 320, 3)
+        np.testing.assert_array_equal(got, cam.fit(full))
+        assert not np.shares_memory(got, data)
+
+
+def test_jpeg_decoded_at_a_reduced_scale_is_close_to_decode_then_fit():
+    """A 1280x720 JPEG for a 370x208 working camera is decoded at 1/2 (640x360 is still
+    larger; 1/4 would not be), then resized: within a few grey levels of the full decode
+    resized, on a smooth picture; a size the reductions cannot keep (1/2 of 700 < 370 wide)
+    is decoded in full."""
+    from mbtrack_ros.recording.images import decode_compressed, encode_compressed
+
+    yy, xx = np.mgrid[0:720, 0:1280].astype(np.float64)
+    image = np.stack([127 + 100 * np.sin(xx / 41.0) * np.cos(yy / 33.0),
+                      127 + 90 * np.cos((xx + yy) / 57.0), 60 + 0.1 * xx], -1)
+    image = np.clip(image, 0, 255).astype(np.uint8)
+    fmt, data = encode_compressed(image, 'jpeg')
+    cam = make_room(8, 6).cameras['cam0'].scaled(1280, 720).at_most(76800)
+    assert (cam.width, cam.height) == (370, 208)
+    decoded = cv2.imdecode(np.frombuffer(bytes(data), np.uint8), cv2.IMREAD_REDUCED_COLOR_2)
+    assert decoded.shape[:2] == (360, 640)
+    got = decode_compressed(fmt, data, to=cam)
+    want = cam.fit(decode_compressed(fmt, data))
+    assert got.shape == want.shape == (208, 370, 3)
+    diff = np.abs(got.astype(np.float64) - want)
+    assert diff.mean() < 1.0 and diff.max() <= 8
+    small = make_room(8, 6).cameras['cam0'].scaled(700, 525).at_most(76800)
+    fmt, data = encode_compressed(cv2.resize(image, (700, 525)), 'jpeg')
+    np.testing.assert_array_equal(decode_compressed(fmt, data, to=small),
+                                  small.fit(decode_compressed(fmt, data)))

@@ -462,6 +462,26 @@ def _real_room_report(results: list[dict], out: Path) -> Report:
               '`none`, no extra identity switch; 640x480 and 1280x720 at least the MOTA and '
               'frames/s of 320x240 (`none`); all combined MOTA >= 90 %, MOTP <= 80 mm.']
     curve = [row for row in rows if row['condition'] == 'curve']
+    lines += ['', 'Calibration error: the `none` recordings replayed with every camera turned '
+              'by the angle about a random axis, or its centre moved by the distance in a '
+              'random direction (`mbtrack synth --calibration-error DEG,M`\'s perturbation).',
+              '', '| rotation error | position error | MOTA | MOTA - none | MOTP | MOTP - none '
+              '| ID switches |', '| ---: | ---: | ---: | ---: | ---: | ---: | ---: |']
+    for deg, metres in sorted({(row['degrees'], row['metres']) for row in curve},
+                              key=lambda e: (e[1] > 0, e[0], e[1])):
+        group = [row for row in curve if (row['degrees'], row['metres']) == (deg, metres)]
+        same = [row for row in group if row['seed'] in base
+                and base[row['seed']]['frames'] == row['frames']]
+        d_mota = _mean([row['mota'] - base[row['seed']]['mota'] for row in same])
+        d_motp = _mean([row['motp_mm'] - base[row['seed']]['motp_mm'] for row in same])
+        zero = deg == 0 and metres == 0
+        lines.append(
+            f'| {deg:g} deg | {100 * metres:g} cm | '
+            f'{_pct(_mean([row["mota"] for row in group]))} | '
+            f'{"-" if zero or not same else f"{100 * d_mota:+.1f}"} | '
+            f'{_num(_mean([row["motp_mm"] for row in group]), 0, " mm")} | '
+            f'{"-" if zero or not same else f"{d_motp:+.0f} mm"} | '
+            f'{sum(row["mismatches"] for row in group)} |')
     fig = _figure(7.0, 3.0)
     for k, (key, label, scale) in enumerate((('degrees', 'rotation error [deg]', 1.0),
                                              ('metres', 'position error [cm]', 100.0))):

@@ -127,22 +127,19 @@ _BLOCK = re.compile(r'(<!-- results: (\w+) -->\n)(.*?)(<!-- /results -->)', re.S
 
 
 def table_of(markdown: str) -> str:
-    """The table of a results page (its ``|`` lines, after the note that precedes them and
-    with the notes that follow them, if the page has them) and the line that regenerates
-    it."""
+    """The tables of a results page (from its first ``|`` line, after the note that
+    precedes it, with the notes and further tables that follow, up to the plots) and the
+    line that regenerates it."""
     lines = markdown.splitlines()
     start = next((i for i, line in enumerate(lines) if line.startswith('|')), len(lines))
-    # page: title, blank, description, blank, [note, blank,] table, [blank, notes,]
-    # [blank, plots,] blank, command
+    # page: title, blank, description, blank, [note, blank,] table, [blank, notes or
+    # tables,] [blank, plots,] blank, command
     note = lines[start - 2:start - 1] if start >= 6 and not lines[start - 1] else []
-    table = [line for line in lines if line.startswith('|')]
-    end = start + len(table)
-    stop = next((i for i in range(end, len(lines))
+    stop = next((i for i in range(start, len(lines))
                  if lines[i].startswith(('![', 'Regenerate:'))), len(lines))
-    notes = '\n'.join(lines[end:stop]).strip('\n')
-    after = ['', notes] if notes else []
+    body = '\n'.join(lines[start:stop]).strip('\n')
     command = [line for line in lines if line.startswith('Regenerate:')]
-    return '\n'.join(note + ([''] if note else []) + table + after + [''] + command)
+    return '\n'.join(note + ([''] if note else []) + [body, ''] + command)
 
 
 def _fill(target: Path, out: Path) -> None:

@@ -42,7 +42,7 @@ from mbtrack_ros.core.filters import FilterError
 from mbtrack_ros.core.initiation import InitiationError, initial_tracks, plan_key_views
 from mbtrack_ros.core.likelihood import LikelihoodError
 from mbtrack_ros.core.tracker import Tracker, TrackerConfig, TrackerError
-from mbtrack_ros.recording.bag import BagError, FrameSet, RecordingReader, prefetched
+from mbtrack_ros.recording.bag import BagError, RecordingReader, prefetched
 from mbtrack_ros.recording.calibration_io import load_calibration
 from mbtrack_ros.recording.csvfiles import (
     CsvFormatError, GroundTruthRow, TrackRow, read_ground_truth, write_tracks)
@@ -309,16 +309,6 @@ def _collect_key_images(reader: RecordingReader, index: _FrameIndex,
     return images
 
 
-def _at_working_size(frames: Iterator[FrameSet], tracker: Tracker) -> Iterator[FrameSet]:
-    """The frame sets with their images resized to the tracker's working size
-    (``TrackerConfig.working_pixels``) by the resize ``Tracker.step`` would apply
-    (:meth:`Tracker.working_images`), so that it runs in the reader thread;
-    ``Tracker.step`` then finds them at its size."""
-    for fs in frames:
-        fs.images = tracker.working_images(fs.images)
-        yield fs
-
-
 def _track_rows(tracker: Tracker, reader: RecordingReader, index: _FrameIndex, starts: list,
                 args: argparse.Namespace, recorder, status: dict,
                 outputs=None) -> Iterator[TrackRow]:
@@ -334,8 +324,11 @@ def _track_rows(tracker: Tracker, reader: RecordingReader, index: _FrameIndex, s
                disable=not sys.stderr.isatty())
     known = set(tracker.calibration.cameras)
     t_start = time.perf_counter()
-    # read, decode and resize while tracking
-    frames = prefetched(_at_working_size(reader.frames(), tracker), depth=4)
+    # read, decode and resize while tracking: the images of larger cameras are decoded
+    # at the tracker's working size (TrackerConfig.working_pixels), resized once in the
+    # reader thread; Tracker.step then finds them at its size
+    reader.decode_to(tracker.resized_cameras)
+    frames = prefetched(reader.frames(), depth=4)
     try:
         for fs in frames:
             if args.max_frames is not None and status['frames'] >= args.max_frames:

@@ -124,7 +124,7 @@ def nearest_two_views(rel, target, view_angles, n_views, va, vb, wa):
 
 # -- rasterisation ----------------------------------------------------------------------------
 @njit(cache=True, nogil=True)
-def _outline_one(i, bx, by, tx, ty, d0, d1, sit, frac, half, parts, hip, width, scale, focal,
+def _outline_one(i, bx, by, tx, ty, d0, d1, sit, frac, half, parts, hip, width, scale, fx, fy,
                  left, right, seg_part):
     """Outline points left/right of the body axis of particle i at the profile heights
     (003 §2.1), from its projected axis ends (b: bottom, t: top) and their optical depths
@@ -132,13 +132,18 @@ def _outline_one(i, bx, by, tx, ty, d0, d1, sit, frac, half, parts, hip, width, 
 
     ``frac`` (P,) profile height fractions, ``half`` (P,) half-width fractions, ``parts``
     (P - 1,) segment parts, ``hip`` the hip height fraction, ``width`` the body width
-    (metres), ``scale`` s(o) (:func:`width_scale`), ``focal`` pixels. A standing axis runs
+    (metres), ``scale`` s(o) (:func:`width_scale`), ``fx, fy`` the focal lengths in pixels
+    (``K[0, 0], K[1, 1]``). A standing axis runs
     from the feet to the head top (height fraction f = frac); a sitting one from the hip to
     the head top, f = (frac - hip) / (1 - hip) clipped at 0, and its segments below the hip
     (the legs) are dropped. The image position of the axis point at fraction f is placed on
     the segment with the perspective-correct fraction ``f d1 / ((1 - f) d0 + f d1)`` (exact
     for a pinhole camera, depth being linear along the axis); offsets are half-width *
-    focal / depth * s, perpendicular to the bottom -> top image direction.
+    f_n / depth * s, perpendicular to the bottom -> top image direction n, with
+    f_n = 1 / sqrt((n_x / fx)^2 + (n_y / fy)^2) the focal length along n (fx along a
+    vertical axis; every direction's f with square pixels), so that a camera with
+    non-square pixels (an image resized to another aspect ratio) draws bodies as wide as
+    they are.
 
     Returns False (nothing written but seg_part) if an end is behind the camera (depth <=
     1 mm) or its image point is not finite."""
@@ -157,6 +162,7 @@ def _outline_one(i, bx, by, tx, ty, d0, d1, sit, frac, half, parts, hip, width, 
     else:                                   # camera looking straight down the axis
         nx = 1.0
         ny = 0.0
+    focal = 1.0 / np.sqrt((nx / fx) ** 2 + (ny / fy) ** 2)
     for j in range(npts):
         fj = frac[j]
         if sit:
@@ -182,7 +188,7 @@ def width_scale(rel):
 
 @njit(cache=True, nogil=True)
 def body_outline(ends, end_depth, theta, sitting, frac, half, parts, hip, width, rot, t, kmat,
-                 dist, centre, focal):
+                 dist, centre):
     """The body outlines of N particles in one camera (003 §2.1): per particle the projection
     of its axis ends (the operations of ``Camera.project``), s(o) of its orientation relative
     to the camera (``Camera.viewing_angle``, :func:`width_scale`), the outline
@@ -192,8 +198,8 @@ def body_outline(ends, end_depth, theta, sitting, frac, half, parts, hip, width,
         ends: (N, 2, 3) world bottom / top axis points; end_depth (N, 2) their optical
             depths (``Camera.depth``); theta (N,) body orientations; rot, t, kmat, dist the
             camera (see :func:`_project_one`), centre (3,) its centre.
-        sitting (N,) bool; width (N,) body widths, metres; frac, half, parts, hip, focal as
-        :func:`_outline_one`.
+        sitting (N,) bool; width (N,) body widths, metres; frac, half, parts, hip as
+        :func:`_outline_one` (its focal lengths are ``kmat``'s).
 
     Returns:
         left, right (N, P, 2) image points (zeros for invalid particles), seg_part
@@ -221,7 +227,8 @@ def body_outline(ends, end_depth, theta, sitting, frac, half, parts, hip, width,
         rel = relative_orientation(theta[i], x, y, centre)
         scale = width_scale(rel)
         valid[i] = _outline_one(i, bx, by, tx, ty, d0, d1, sitting[i], frac, half, parts, hip,
-                                width[i], scale, focal, left, right, seg_part)
+                                width[i], scale, kmat[0, 0], kmat[1, 1], left, right,
+                                seg_part)
         if valid[i]:
             ex = x - centre[0]
             ey = y - centre[1]
@@ -423,15 +430,15 @@ def rasterize_quads(left, right, seg_part, valid, width, height, row_step, row_l
 
 @njit(cache=True, nogil=True)
 def silhouettes(states, heights, widths, chair, frac, half, parts, hip, r2, t2, rot, t, kmat,
-                dist, centre, focal, width, height, row_step):
+                dist, centre, width, height, row_step):
     """Rasterised silhouettes of states (N, 6) in one camera (003 §2.1): :func:`axis_ends`,
     :func:`body_outline` and :func:`rasterize_quads` in one call (see ``shape.rasterize``).
-    heights, widths (N,) metres; r2, t2 the camera's ``depth_row``; rot ... focal as
+    heights, widths (N,) metres; r2, t2 the camera's ``depth_row``; rot ... centre as
     :func:`body_outline`. Returns :func:`rasterize_quads`' arrays and the distance (N,)."""
     ends, end_depth, sitting = axis_ends(states, heights, chair, hip, r2, t2)
     left, right, seg_part, valid, distance = body_outline(
         ends, end_depth, np.ascontiguousarray(states[:, THETA]), sitting, frac, half, parts, hip,
-        widths, rot, t, kmat, dist, centre, focal)
+        widths, rot, t, kmat, dist, centre)
     row, x0, x1, part, offsets, area, part_area, full_area, bbox = rasterize_quads(
         left, right, seg_part, valid, width, height, row_step, 10 * height)
     return row, x0, x1, part, offsets, area, part_area, full_area, bbox, distance
@@ -925,7 +932,7 @@ def hjs_camera(bins, row, x0, x1, part, offsets, area, bbox, order, target, prio
 @njit(cache=True, nogil=True)
 def update_camera(image, bins, states, target, prior, heights, widths, chair, frac, half,
                   parts, hip, view_angles, n_views, key, r2, t2, rot, t, kmat, dist, centre,
-                  focal, row_step, d_occ, separable, two_sigma_sq, min_visible, mfg, bbg,
+                  row_step, d_occ, separable, two_sigma_sq, min_visible, mfg, bbg,
                   wmap, loglik, visible, inside):
     """One camera's whole share of ``MeasurementModel.hjs`` / ``separable`` in one call
     without the GIL: the image's colour bins (:func:`quantize_rgb`, when ``bins`` is given
@@ -940,8 +947,8 @@ def update_camera(image, bins, states, target, prior, heights, widths, chair, fr
         chair, frac, half, parts, hip: the body shape (``BodyShape``).
         view_angles (K, V), n_views (K,): the key-view angles of the targets; key
             (K, V, 1536) their key-view histograms (``key_view_stack``).
-        r2 ... focal: the camera (``Camera.depth_row``, ``projection_parameters``,
-            ``focal``); row_step: row sampling.
+        r2 ... centre: the camera (``Camera.depth_row``, ``projection_parameters``);
+            row_step: row sampling.
         d_occ, separable, mfg, bbg, wmap: as :func:`hjs_camera_ws`.
         two_sigma_sq: 2 sigma^2 of 000 Eq. 19; min_visible: fewer silhouette pixels (rows
             times row_step) leave a particle neutral (0) in this camera.
@@ -962,7 +969,7 @@ def update_camera(image, bins, states, target, prior, heights, widths, chair, fr
     n = states.shape[0]
     row, x0, x1, part, offsets, area, _, full_area, bbox, distance = silhouettes(
         states, heights, widths, chair, frac, half, parts, hip, r2, t2, rot, t, kmat, dist,
-        centre, focal, bins.shape[1], bins.shape[0], row_step)
+        centre, bins.shape[1], bins.shape[0], row_step)
     # 003 Eq. 1-2: orientation relative to the camera (Camera.viewing_angle), two key views
     rel = np.empty(n)
     for i in range(n):

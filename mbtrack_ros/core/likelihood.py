@@ -569,7 +569,7 @@ class MeasurementModel:
         cam = self._camera(name)
         cached = self._camera_args.get(name)
         if cached is None or cached[0] is not cam:
-            cached = (cam, (*cam.depth_row, *cam.projection_parameters, cam.focal))
+            cached = (cam, (*cam.depth_row, *cam.projection_parameters))
             self._camera_args[name] = cached
         return cached[1]
 

@@ -26,7 +26,8 @@ Projection (003 §2.1): the foot and head-top points are projected with
 :meth:`Camera.project`; the axis points at the profile heights are placed on the image
 segment joining them by perspective-correct interpolation (exact for a pinhole camera); the
 outline is drawn around the axis, perpendicular to the foot -> head image direction, with
-offsets in pixels = half-width (m) * focal / depth of the axis point, times
+offsets in pixels = half-width (m) * focal / depth of the axis point (the focal length
+along the offset's image direction: fx beside an upright axis when the pixels are not square), times
 ``s(o) = 0.7 + 0.3 |cos o|`` with o the body orientation relative to the camera. Each
 segment of the profile is then a convex quadrilateral in the image; a pixel belongs to it
 when its centre is inside (half-open edge rules, so neighbouring parts never share a
@@ -242,7 +243,7 @@ def silhouette_outline(camera: Camera, states: np.ndarray, shape: BodyShape, *,
     return _kernels.body_outline(
         ends, end_depth, np.ascontiguousarray(states[:, THETA]), sitting, shape.fractions,
         shape.half_widths, shape.segment_parts, float(shape.hip_fraction), w,
-        *camera.projection_parameters, camera.focal)
+        *camera.projection_parameters)
 
 
 def rasterize(camera: Camera, states: np.ndarray, shape: BodyShape | Sequence[BodyShape], *,
@@ -283,7 +284,7 @@ def rasterize(camera: Camera, states: np.ndarray, shape: BodyShape | Sequence[Bo
      distance) = _kernels.silhouettes(
         states, h, w, float(shape.chair_height), shape.fractions, shape.half_widths,
         shape.segment_parts, float(shape.hip_fraction), *camera.depth_row,
-        *camera.projection_parameters, camera.focal, camera.width, camera.height,
+        *camera.projection_parameters, camera.width, camera.height,
         int(row_step))
     return Silhouettes(row=row, x0=x0, x1=x1, part=part, offsets=offsets, area=area,
                        part_area=part_area, full_area=full_area, bbox=bbox,

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field, replace, fields
 
 import numpy as np
 
-from mbtrack_ros.core.camera import RoomCalibration
+from mbtrack_ros.core.camera import Camera, RoomCalibration
 from mbtrack_ros.core.dynamics import DynamicsError, MotionConfig
 from mbtrack_ros.core.filters import FilterConfig, FilterError, TrackingFilter, make_filter
 from mbtrack_ros.core.state import SIT, STATE_DIM, FrameResult, TrackEstimate, VX, VY, X, Y
@@ -506,6 +506,13 @@ class Tracker:
         self._last_stamp = None
         self._search_pending = False
         self._steps = 0
+
+    @property
+    def resized_cameras(self) -> dict[str, Camera]:
+        """Camera name -> working camera, of the cameras whose input images are larger
+        than the working size (:meth:`working_images` resizes theirs; a reader may deliver
+        them at this size instead)."""
+        return {n: self.calibration.cameras[n] for n in sorted(self._resize)}
 
     def working_images(self, images: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         """``images`` at the working size: those at a camera's input size are resized

@@ -279,6 +279,7 @@ class RecordingReader:
         self._damaged: str | None = None
         self._sizes: dict[str, tuple[int, int]] = {}  # camera -> calibrated (width, height)
         self._max_scale = 1.0
+        self._to: dict[str, object] = {}   # camera -> Camera of the size to decode to
 
     def limit_image_sizes(self, sizes: dict[str, tuple[int, int]], *,
                           max_scale: float = MAX_RESCALE) -> None:
@@ -288,6 +289,13 @@ class RecordingReader:
         listed in ``FrameSet.errors``."""
         self._sizes = {str(c): (int(w), int(h)) for c, (w, h) in sizes.items()}
         self._max_scale = float(max_scale)
+
+    def decode_to(self, cameras: dict) -> None:
+        """Deliver the images of camera ``c`` at the size of ``cameras[c]`` (a ``Camera``:
+        the tracker's working camera, ``Camera.at_most``), resized once while decoding
+        (``decode_raw`` / ``decode_compressed`` with ``to``: no full-size copy, JPEG decoded
+        at a reduced scale); other cameras as they are."""
+        self._to = dict(cameras)
 
     def __enter__(self) -> RecordingReader:
         try:
@@ -378,7 +386,8 @@ class RecordingReader:
         it cannot be decoded (the stamp of a readable header is kept either way, so that an
         undecodable image takes its own place in its frame set)."""
         msg = typestore.deserialize_cdr(raw, msgtype)
-        limit = dict(expected=self._sizes.get(camera), max_scale=self._max_scale)
+        limit = dict(expected=self._sizes.get(camera), max_scale=self._max_scale,
+                     to=self._to.get(camera))
         try:
             if msgtype == IMAGE:
                 image = decode_raw(msg.encoding, msg.height, msg.width, msg.step, msg.data,

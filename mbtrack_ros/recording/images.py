@@ -14,6 +14,12 @@ compressed payload, read without decoding) is checked against :data:`MAX_SIDE` a
 caller passes ``expected`` (the calibrated size), against it: equal, or with ``max_scale`` > 1
 at most that many times larger per side. A compressed payload without a readable size header
 is refused, never decoded blind.
+
+Given ``to`` (the camera at the size the tracker works at, ``Camera.at_most``), the decoders
+return the image at that camera's size, resized once (``Camera.fit``) from the message's own
+pixels: a raw image is not copied first, a colour conversion runs on the small image, and a
+JPEG is decoded by the decoder itself at 1/2, 1/4 or 1/8 scale (libjpeg's scaled inverse
+DCT) while that is still at least the working size, then resized.
 """
 from __future__ import annotations
 
@@ -80,12 +86,13 @@ def _check_size(width: int, height: int, expected: tuple[int, int] | None = None
 
 def decode_raw(encoding: str, height: int, width: int, step: int, data,
                *, is_bigendian: int = 0, expected: tuple[int, int] | None = None,
-               max_scale: float = 1.0) -> np.ndarray:
+               max_scale: float = 1.0, to=None) -> np.ndarray:
     """Decode a raw ``sensor_msgs/Image`` payload to ``(height, width, 3) uint8`` RGB.
 
     ``data`` is any bytes-like object or a uint8 array (rclpy gives ``array.array`` or bytes,
     rosbags a numpy array). The result never aliases ``data``. ``expected`` (width, height)
     and ``max_scale``: the size check of the module docstring, before any conversion.
+    ``to``: a camera (``Camera``) whose size the image is resized to (module docstring).
     """
     del is_bigendian  # 8-bit encodings only: byte order does not matter
     encoding = str(encoding).strip().lower()
@@ -109,12 +116,17 @@ def decode_raw(encoding: str, height: int, width: int, step: int, data,
             f'{step * height}', 'data-length')
     rows = buf.reshape(height, step)[:, : width * channels]
     pixels = rows.reshape(height, width, channels)
-    if encoding == 'rgb8':
+    if to is not None and (height, width) != (to.height, to.width):
+        pixels = to.fit(np.ascontiguousarray(pixels))   # a new array, at the working size
+    elif encoding == 'rgb8':
         return pixels.copy()  # contiguous, never aliases the message buffer
+    if encoding == 'rgb8':
+        return pixels
     if encoding == 'bgr8':
         return cv2.cvtColor(np.ascontiguousarray(pixels), cv2.COLOR_BGR2RGB)
     if encoding == 'mono8':
-        return cv2.cvtColor(np.ascontiguousarray(pixels[:, :, 0]), cv2.COLOR_GRAY2RGB)
+        grey = pixels if pixels.ndim == 2 else pixels[:, :, 0]   # a resize drops the axis
+        return cv2.cvtColor(np.ascontiguousarray(grey), cv2.COLOR_GRAY2RGB)
     if encoding == 'rgba8':
         return cv2.cvtColor(np.ascontiguousarray(pixels), cv2.COLOR_RGBA2RGB)
     return cv2.cvtColor(np.ascontiguousarray(pixels), cv2.COLOR_BGRA2RGB)  # bgra8
@@ -177,25 +189,44 @@ def compressed_size(fmt: str, data) -> tuple[int, int]:
     return w, h
 
 
+#: JPEG decoding at a reduced scale: factor -> imdecode flag (libjpeg's scaled IDCT)
+_REDUCED = ((8, cv2.IMREAD_REDUCED_COLOR_8), (4, cv2.IMREAD_REDUCED_COLOR_4),
+            (2, cv2.IMREAD_REDUCED_COLOR_2))
+
+
 def decode_compressed(fmt: str, data, *, expected: tuple[int, int] | None = None,
-                      max_scale: float = 1.0) -> np.ndarray:
+                      max_scale: float = 1.0, to=None) -> np.ndarray:
     """Decode a ``sensor_msgs/CompressedImage`` payload (JPEG/PNG) to ``(H, W, 3) uint8`` RGB.
 
     ``fmt`` is the message's ``format`` field (``jpeg``, ``png``, ``rgb8; jpeg compressed
     bgr8`` ...); the decoder itself trusts the file signature. The size the header declares
     (:func:`compressed_size`) is checked before decoding (module docstring; ``expected`` =
-    (width, height)), and the decoded image must have that size.
+    (width, height)), and the decoded image must have that size (divided by the reduction,
+    rounded up). ``to``: a camera (``Camera``) whose size the image is resized to; a JPEG
+    is decoded at the largest reduction (1/2, 1/4, 1/8) that keeps both sides at least
+    that size when the size divides exactly (module docstring).
     """
     w, h = compressed_size(fmt, data)
     _check_size(w, h, expected, max_scale)
     buf = _buffer(data)
-    image = cv2.imdecode(buf, cv2.IMREAD_COLOR)
+    flag, k = cv2.IMREAD_COLOR, 1
+    if to is not None and buf[:2].tobytes() == b'\xff\xd8':
+        for k, reduced in _REDUCED:
+            if w % k == 0 and h % k == 0 and w // k >= to.width and h // k >= to.height:
+                flag = reduced
+                break
+        else:
+            k = 1
+    image = cv2.imdecode(buf, flag)
     if image is None:
         raise ImageConversionError(f'cannot decode {buf.size} bytes as {str(fmt)[:40]!r}',
                                    'undecodable')
-    if image.shape[:2] != (h, w):
+    if image.shape[:2] != (-(-h // k), -(-w // k)):
         raise ImageConversionError(f'decoded {image.shape[1]}x{image.shape[0]}, the header '
-                                   f'declares {w}x{h}', 'decoded-size')
+                                   f'declares {w}x{h}' + (f' (at 1/{k})' if k > 1 else ''),
+                                   'decoded-size')
+    if to is not None:
+        image = to.fit(image)
     return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
 
 

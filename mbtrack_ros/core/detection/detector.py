@@ -97,7 +97,9 @@ class DetectorConfig:
         min_motion: fraction of recently moving pixels of the silhouette (in every side
             camera that sees it, in one of the confirming frames) to confirm a detection.
         min_speed, max_speed: m/s; a confirmed detection faster than ``min_speed`` over
-            its confirming frames gets its walking direction as body orientation; one
+            its confirming frames gets its walking direction as body orientation and is
+            standing (a sitting best hypothesis is refined again with standing bodies
+            only: a walker's spread legs fit a sitting body's thighs); one
             faster than ``max_speed`` gets no velocity: its places jumped (a neighbour,
             the fringe of a group), nobody walked there (a clipped velocity would send
             the new track off the wrong way).
@@ -508,7 +510,10 @@ class Detector:
         return [found[i] for i in keep]
 
     def _refine(self, evidence: Mapping[str, FrameEvidence], centre: np.ndarray,
-                track_xy: np.ndarray) -> Detection | None:
+                track_xy: np.ndarray, *, standing: bool = False) -> Detection | None:
+        """The best fine hypothesis within ``fine_radius`` of ``centre`` (position and pose,
+        then size and orientation, then position again); ``standing``: standing bodies
+        only. None when no hypothesis there is scored."""
         cfg = self.config
         r = cfg.fine_radius
         off = np.arange(-r, r + 1e-9, cfg.fine_spacing)
@@ -522,7 +527,7 @@ class Detector:
         if xy.size == 0:
             return None
         # step 1: position and pose with the mean size
-        poses = [0.0, 1.0] if cfg.sitting else [0.0]
+        poses = [0.0, 1.0] if cfg.sitting and not standing else [0.0]
         h0 = float(np.median(cfg.heights))
         w0 = float(np.median(cfg.widths))
         states = np.concatenate([_states(xy, 0.0, p) for p in poses])
@@ -583,7 +588,9 @@ class Detector:
 
         With ``stamp_ns`` the positions of the confirming frames give the velocity of a
         confirmed detection (state ``vx, vy``) and, when faster than ``min_speed``, its
-        body orientation (walking direction), which annotates the acquired key views.
+        body orientation (walking direction), which annotates the acquired key views; such
+        a walking detection is standing (a sitting one is refined again on this frame's
+        evidence with standing bodies only).
         """
         cfg = self.config
         found = self.detect(evidence, track_xy=track_xy)
@@ -609,6 +616,8 @@ class Detector:
             # bootstrapped) never moves; people who appear do
             if det.frames >= cfg.confirm_frames and det.motion >= cfg.min_motion:
                 self._velocity(det)
+                if det.state[SIT] >= 0.5 and self._walking(det):
+                    det = self._standing(evidence, det, track_xy)
                 confirmed.append(det)
             else:
                 survivors.append(det)
@@ -629,6 +638,28 @@ class Detector:
         det.state[[VX, VY]] = v
         if speed >= self.config.min_speed:
             det.state[THETA] = float(np.arctan2(v[1], v[0]))
+
+    def _walking(self, det: Detection) -> bool:
+        """Whether the fitted velocity of a confirmed detection is a walk (``min_speed``
+        to ``max_speed``)."""
+        v = fitted_velocity(det.history)
+        return v is not None and \
+            self.config.min_speed <= float(np.hypot(*v)) <= self.config.max_speed
+
+    def _standing(self, evidence: Mapping[str, FrameEvidence], det: Detection,
+                  track_xy: np.ndarray | None) -> Detection:
+        """A walking detection whose best hypothesis sits, refined again at its place
+        with standing bodies only (nobody walks seated: a sitting body with its thighs
+        forward fits a walker's spread legs, and the tallest sitting body the whole
+        silhouette); its velocity, orientation and history kept. The detection itself if no
+        standing hypothesis there is scored."""
+        track_xy = np.zeros((0, 2)) if track_xy is None else np.asarray(track_xy, np.float64)
+        up = self._refine(evidence, det.xy, track_xy.reshape(-1, 2), standing=True)
+        if up is None:
+            return det
+        up.state[[VX, VY, THETA]] = det.state[[VX, VY, THETA]]
+        up.frames, up.history, up.motion = det.frames, det.history, det.motion
+        return up
 
     def requeue(self, detection: Detection) -> None:
         """Keep a confirmed detection that could not be acquired: it is emitted again as
