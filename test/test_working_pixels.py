@@ -91,30 +91,6 @@ def test_camera_fit_is_the_block_mean_at_half_size():
     assert cam.fit(same) is same  # already at the size: no copy, no resize
 
 
-@pytest.mark.parametrize('size', [(1280, 720), (1000, 750), (641, 481)])
-def test_camera_fit_in_stages_equals_one_area_resize(size):
-    """A large reduction (2 x 2 binning stages, then one area resize) gives the single
-    area resize's image to a fraction of a grey level on a smooth picture, and puts a
-    bright dot where the camera's scaling (``Camera.scaled``) projects it."""
-    cam = make_room(8, 6).cameras['cam0'].scaled(*size).at_most(76800)
-    w, h = size
-    yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
-    image = np.stack([127 + 100 * np.sin(xx / 37.0) * np.cos(yy / 29.0),
-                      127 + 100 * np.cos((xx + yy) / 53.0), 60 + 0.1 * xx], -1)
-    image = np.clip(image, 0, 255).astype(np.uint8)
-    one = cv2.resize(image, (cam.width, cam.height), interpolation=cv2.INTER_AREA)
-    diff = np.abs(cam.fit(image).astype(np.float64) - one)
-    assert diff.mean() < 0.5 and diff.max() <= 4
-    dot = np.zeros((h, w), np.float32)
-    u, v = int(0.61 * w), int(0.37 * h)
-    dot[v - 4:v + 4, u - 4:u + 4] = 1.0          # centred on pixel (u - 0.5, v - 0.5)
-    small = cam.fit(dot)
-    ys, xs = np.mgrid[0:cam.height, 0:cam.width]
-    centre = np.array([(small * xs).sum(), (small * ys).sum()]) / small.sum()
-    np.testing.assert_allclose(centre, [u * cam.width / w - 0.5, v * cam.height / h - 0.5],
-                               atol=0.05)
-
-
 def test_working_size_of_cameras_of_any_size():
     config = TrackerConfig()
     for (w, h) in [(320, 240), (640, 480), (1280, 720), (1920, 1080), (752, 480)]:

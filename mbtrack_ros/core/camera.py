@@ -327,19 +327,8 @@ class Camera:
 
     def fit(self, image: np.ndarray) -> np.ndarray:
         """``image`` (H, W[, C]) resized to this camera's size (area averaging, the right
-        filter for shrinking), or the same array when it already has that size.
-
-        A large reduction is done in stages: 2 x 2 binning while the image is still at least
-        twice the size on both sides (OpenCV's fast integer-factor path), then one area
-        resize by the remaining factor (below 2, the slow general path on a quarter of the
-        pixels or fewer). Each stage maps the whole image onto the whole output, so the
-        geometry is that of one resize (:meth:`scaled`); the result differs from a single
-        area resize by a fraction of a grey level."""
-        h, w = image.shape[:2]
-        while w >= 2 * self.width and h >= 2 * self.height:
-            w, h = w // 2, h // 2
-            image = cv2.resize(image, (w, h), interpolation=cv2.INTER_AREA)
-        if (h, w) == (self.height, self.width):
+        filter for shrinking), or the same array when it already has that size."""
+        if image.shape[:2] == (self.height, self.width):
             return image
         return cv2.resize(image, (self.width, self.height), interpolation=cv2.INTER_AREA)
 
