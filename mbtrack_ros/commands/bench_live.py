@@ -164,6 +164,7 @@ class LiveResult:
     image_format: str = 'raw'                        # of the working images: raw | jpeg
     cameras: int = 4
     tracker_threads: tuple[tuple[str, float], ...] = ()  # (thread, CPU s) of the tracker
+    unanswered: tuple[int, ...] = ()  # frame indices seen on /clock without an output
 
 
 #: kinds of bad images the soak injects, in turn
@@ -523,6 +524,8 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
     cpu = cpu1 - cpu0
     wall = wall1 - wall0
     stamps, lat, _ = match_latencies(images_c, people_c)
+    order = sorted(images_c)
+    unanswered = tuple(k for k, s in enumerate(order) if s not in people_c)
     return LiveResult(
         frames=frames, people_messages=len(people_c),
         latency_all=latency_stats(images_c, people_c),
@@ -542,7 +545,7 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
         image_bytes_per_frame=(float(np.mean(jpegs)) if jpegs else float('nan'))
         if image_format == 'jpeg' else float(working_bytes) if camera_nodes else float('nan'),
         image_format=image_format, cameras=len(cams),
-        tracker_threads=thread_split(threads0, threads1, node.pid))
+        tracker_threads=thread_split(threads0, threads1, node.pid), unanswered=unanswered)
 
 
 def run_offline(recording: Path, *, seed: int = 0, ground_truth: bool = False,
@@ -660,6 +663,9 @@ def soak_summary(live: LiveResult, camera: str) -> str:
             f'{len(mb)} samples over the second tenth)\n'
             f'soak: frame sets processed {formed - lost} of {live.frames} played ({formed} '
             f'formed, {count("incomplete frame sets")} incomplete, {lost} dropped)\n'
+            f'soak: frames without an output (index in the recording): '
+            f'{", ".join(map(str, live.unanswered[:12])) or "none"}'
+            f'{" ..." if len(live.unanswered) > 12 else ""}\n'
             f'soak: bad images injected on {camera}: {live.injected_bad}; /diagnostics '
             f'dropped images (bad): {count("dropped images (bad)")}; dropped frames (late or '
             f'duplicate): {count("dropped frames (late or duplicate)")}')

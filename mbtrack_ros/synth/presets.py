@@ -71,12 +71,22 @@ def _lanz_seq4(crowd: Crowd) -> None:
                   patrol_pauses=pauses[start:] + pauses[:start], speed_range=(0.7, 1.0))
 
 
-def _clear_room(crowd: Crowd) -> None:
-    for _ in range(2):
+def _present_then_arriving(crowd: Crowd, present: int, leave: tuple[float, float],
+                           gap: tuple[float, float], visit: tuple[float, float],
+                           max_people: int, min_people: int, first: float) -> None:
+    """``present`` people standing in the room from the first frame (0.9 m apart), each
+    leaving after a time drawn from ``leave`` (seconds), then arrivals every ``gap``
+    seconds from ``first`` on, each staying ``visit`` seconds, keeping between
+    ``min_people`` and ``max_people`` in the room."""
+    for _ in range(present):
         crowd.add(tuple(crowd.random_free_point(min_gap=0.9)), behaviour='room',
-                  leave_time=float(crowd.rng.uniform(20.0, 70.0)))
-    crowd.schedule_arrivals(gap=(6.0, 18.0), visit=(30.0, 80.0), max_people=5,
-                            min_people=2, first=0.3)
+                  leave_time=float(crowd.rng.uniform(*leave)))
+    crowd.schedule_arrivals(gap=gap, visit=visit, max_people=max_people,
+                            min_people=min_people, first=first)
+
+
+def _clear_room(crowd: Crowd) -> None:
+    _present_then_arriving(crowd, 2, (20.0, 70.0), (6.0, 18.0), (30.0, 80.0), 5, 2, 0.3)
 
 
 def _empty(crowd: Crowd) -> None:
@@ -86,39 +96,24 @@ def _empty(crowd: Crowd) -> None:
 def _crowd(crowd: Crowd) -> None:
     """A crowd of 6-10: four people present, the others arriving every few seconds."""
     top = int(crowd.rng.integers(6, 11))
-    for _ in range(4):
-        crowd.add(tuple(crowd.random_free_point(min_gap=0.9)), behaviour='room',
-                  leave_time=float(crowd.rng.uniform(25.0, 60.0)))
-    crowd.schedule_arrivals(gap=(1.5, 4.0), visit=(20.0, 60.0), max_people=top,
-                            min_people=top, first=0.5)
+    _present_then_arriving(crowd, 4, (25.0, 60.0), (1.5, 4.0), (20.0, 60.0), top, top, 0.5)
 
 
 def _occupied(crowd: Crowd) -> None:
     """Four or five people in the room from the first frame; some leave early, later a
     few others come in."""
-    for _ in range(int(crowd.rng.integers(4, 6))):
-        crowd.add(tuple(crowd.random_free_point(min_gap=0.9)), behaviour='room',
-                  leave_time=float(crowd.rng.uniform(4.0, 40.0)))
-    crowd.schedule_arrivals(gap=(6.0, 15.0), visit=(15.0, 40.0), max_people=5,
-                            min_people=1, first=12.0)
+    _present_then_arriving(crowd, int(crowd.rng.integers(4, 6)), (4.0, 40.0), (6.0, 15.0),
+                           (15.0, 40.0), 5, 1, 12.0)
 
 
 def _large(crowd: Crowd) -> None:
     """Three people present, up to six in all over the visit."""
-    for _ in range(3):
-        crowd.add(tuple(crowd.random_free_point(min_gap=0.9)), behaviour='room',
-                  leave_time=float(crowd.rng.uniform(20.0, 60.0)))
-    crowd.schedule_arrivals(gap=(3.0, 10.0), visit=(20.0, 60.0), max_people=6,
-                            min_people=3, first=1.0)
+    _present_then_arriving(crowd, 3, (20.0, 60.0), (3.0, 10.0), (20.0, 60.0), 6, 3, 1.0)
 
 
 def _hall(crowd: Crowd) -> None:
     """Four people present, four more arriving every 1-2.5 s: eight within ten seconds."""
-    for _ in range(4):
-        crowd.add(tuple(crowd.random_free_point(min_gap=0.9)), behaviour='room',
-                  leave_time=float(crowd.rng.uniform(40.0, 90.0)))
-    crowd.schedule_arrivals(gap=(1.0, 2.5), visit=(40.0, 90.0), max_people=8,
-                            min_people=4, first=0.3)
+    _present_then_arriving(crowd, 4, (40.0, 90.0), (1.0, 2.5), (40.0, 90.0), 8, 4, 0.3)
 
 
 def _two_doors(crowd: Crowd) -> None:
