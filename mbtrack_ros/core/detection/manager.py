@@ -65,7 +65,8 @@ class _Found(NamedTuple):
 
     acquired: list[tuple[Detection, PersonModel]]
     timings: dict[str, float]
-    ghosts: list[tuple[Detection, float, float]] = []  # (detection, model, frame gradient)
+    ghosts: tuple[tuple[Detection, float, float], ...] = ()  # (detection, model, frame
+    #                                                          outline gradient) of ghosts
 
 
 class AutoDetection(DetectionAssociator, TrackDeleter):
@@ -433,7 +434,7 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
                     self.detector.requeue(det)
                 else:
                     acquired.append((det, model))
-        return _Found(acquired, {'detect_find': time.perf_counter() - t0}, ghosts)
+        return _Found(acquired, {'detect_find': time.perf_counter() - t0}, tuple(ghosts))
 
     def _ghost_outline(self, det: Detection, evidence: Mapping[str, FrameEvidence]
                        ) -> tuple[float, float] | None:
