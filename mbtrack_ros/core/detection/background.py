@@ -333,6 +333,15 @@ def _colour_gradient(ycc: np.ndarray, luma: float, chroma: float) -> np.ndarray:
     return out
 
 
+def _gain_scaled(bg: np.ndarray, gain: float) -> np.ndarray:
+    """A copy of model pixels (..., 3) float32 Y-Cb-Cr under the global gain, as the
+    foreground test compares them: luminance times ``gain``, chroma offsets from 128 too."""
+    scaled = bg.copy()
+    scaled[..., 0] *= gain
+    scaled[..., 1:] = 128.0 + gain * (scaled[..., 1:] - 128.0)
+    return scaled
+
+
 def ghost_components(fg: np.ndarray, ycc: np.ndarray, bg: np.ndarray, gain: float, *,
                      luma: float, chroma: float, ratio: float, min_area: int,
                      excluded: np.ndarray | None = None) -> np.ndarray:
@@ -375,9 +384,7 @@ def ghost_components(fg: np.ndarray, ycc: np.ndarray, bg: np.ndarray, gain: floa
     whole = np.bincount(band_label[band], minlength=n)
     if excluded is not None and excluded.any():
         band &= ~excluded[win]
-    scaled = bg[win].copy()
-    scaled[..., 0] *= gain
-    scaled[..., 1:] = 128.0 + gain * (scaled[..., 1:] - 128.0)
+    scaled = _gain_scaled(bg[win], gain)
     g_frame = _colour_gradient(ycc[win], luma, chroma)
     g_model = _colour_gradient(scaled, luma, chroma)
     lab = band_label[band]
@@ -686,9 +693,7 @@ class BackgroundModel:
             band &= self._unknown[win] == 0
         if not whole or not band.any():
             return 0.0, 0.0, 0.0
-        scaled = self._bg[win].copy()
-        scaled[..., 0] *= self.gain
-        scaled[..., 1:] = 128.0 + self.gain * (scaled[..., 1:] - 128.0)
+        scaled = _gain_scaled(self._bg[win], self.gain)
         luma, chroma = float(cfg.luma_threshold), float(cfg.chroma_threshold)
         g_model = _colour_gradient(scaled, luma, chroma)[band].sum()
         g_frame = _colour_gradient(_to_ycc(np.ascontiguousarray(image[win])), luma,

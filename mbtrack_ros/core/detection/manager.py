@@ -40,7 +40,7 @@ from mbtrack_ros.core.detection.deleter import TrackDeleter
 from mbtrack_ros.core.detection.detector import Detection, Detector, FrameEvidence, is_ceiling
 from mbtrack_ros.core.detection.release import Releaser
 from mbtrack_ros.core.existence import TrackAuxiliary
-from mbtrack_ros.core.shape import BodyShape, rasterize
+from mbtrack_ros.core.shape import BodyShape, rasterize, render_labels
 from mbtrack_ros.core.state import X, Y, TrackEstimate
 
 __all__ = ['AutoDetection', 'AutoDetectionConfig', 'Birth']
@@ -462,7 +462,7 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
             if ev is None or bank is None or not bank.ready:
                 continue
             cam = self.calibration.cameras[n]
-            mask = rasterize(cam, det.state[None].astype(np.float64), shape).mask(0) > 0
+            mask = render_labels(cam, det.state, shape) > 0
             width = max(2, int(round(4.0 * np.sqrt(cam.width * cam.height / 76800.0))))
             g_model, g_frame, share = bank.outline_gradients(ev.image, ev.foreground, mask,
                                                              width=width, exclude=ev.tracks)
