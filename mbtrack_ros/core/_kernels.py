@@ -933,7 +933,7 @@ def hjs_camera(bins, row, x0, x1, part, offsets, area, bbox, order, target, prio
 def update_camera(image, bins, states, target, prior, heights, widths, chair, frac, half,
                   parts, hip, view_angles, n_views, key, r2, t2, rot, t, kmat, dist, centre,
                   row_step, d_occ, separable, two_sigma_sq, min_visible, mfg, bbg,
-                  wmap, loglik, visible, inside, shown):
+                  wmap, loglik, visible, inside):
     """One camera's whole share of ``MeasurementModel.hjs`` / ``separable`` in one call
     without the GIL: the image's colour bins (:func:`quantize_rgb`, when ``bins`` is given
     empty (0, 0)), the silhouettes (:func:`silhouettes`), the key views of each particle
@@ -958,9 +958,6 @@ def update_camera(image, bins, states, target, prior, heights, widths, chair, fr
         inside (P,): receives the share of each silhouette inside the image (area over
             unclipped area), 0 where neutral (``MeasurementModel._seen_by`` decides what
             the camera says about such particles).
-        shown (P,): receives each particle's expected visible share of its silhouette
-            inside the image, sum(w*) / area (000 Eq. 34; 1 in the separable update, 0
-            where neutral): the share of its pixels the hypothesis itself would explain.
 
     Returns:
         bins (H, W) int16, the image's colour bins, and the particles' silhouettes as row
@@ -993,11 +990,9 @@ def update_camera(image, bins, states, target, prior, heights, widths, chair, fr
         if area[p] <= 0 or area[p] * row_step < min_visible:
             loglik[p] = 0.0
             inside[p] = 0.0
-            shown[p] = 0.0
         else:
             loglik[p] = -(fc[p] + bc[p]) / two_sigma_sq
             inside[p] = min(area[p] / full_area[p], 1.0)      # full_area >= area > 0
-            shown[p] = 1.0 if separable else min(max(vis[p] / area[p], 0.0), 1.0)
         f = vis[p] / full_area[p] if full_area[p] > 0 else 0.0
         f = min(max(f, 0.0), 1.0)
         visible[target[p]] += prior[p] * f

@@ -602,7 +602,6 @@ class MeasurementModel:
         cam_loglik = np.empty((len(cams), states.shape[0]))
         cam_visible = np.empty((len(cams), n_targets))
         cam_inside = np.empty((len(cams), states.shape[0]))
-        cam_shown = np.empty((len(cams), states.shape[0]))
         cam_cover = np.full((len(cams), states.shape[0]), np.nan)
         shape_args = (chair, *self._profile)
         rest = (int(self.config.subsample), float(self.config.d_occ), bool(separable),
@@ -621,7 +620,7 @@ class MeasurementModel:
                 return _kernels.update_camera(
                     image, bins, cam_states, target, prior, heights, widths, *shape_args,
                     angles, n_views, key, *cam_args, *rest, mfg, bbg, wmap, cam_loglik[i],
-                    cam_visible[i], cam_inside[i], cam_shown[i])
+                    cam_visible[i], cam_inside[i])
 
             if separable:                               # no image buffers
                 bins, *spans = run(_NO_BUFFER, _NO_BUFFER, _NO_BUFFER)
@@ -649,8 +648,7 @@ class MeasurementModel:
         visible = np.zeros((n_targets, len(self.camera_names)))
         for i, (c, name) in enumerate(cams):
             if self._coverage_gain > 0 and name in self._foreground_integrals():
-                cam_loglik[i] += self._coverage_term(cam_cover[i] * cam_shown[i], target,
-                                                     prior, n_targets)
+                cam_loglik[i] += self._coverage_term(cam_cover[i], target, prior, n_targets)
             cam_loglik[i] = self._seen_by(cam_loglik[i], cam_inside[i], cam_visible[i],
                                           target, prior, n_targets)
             loglik += self._without_hidden(name, cam_loglik[i],
