@@ -388,8 +388,13 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
 
     if camera_nodes:
         for cam in cams:
-            listener.create_subscription(CompressedImage, f'/{cam}/working/foreground',
-                                         on_mask, qos, callback_group=group)
+            if image_format == 'jpeg':   # PNG masks next to JPEG images, else raw mono8
+                listener.create_subscription(CompressedImage,
+                                             f'/{cam}/working/foreground/compressed',
+                                             on_mask, qos, callback_group=group)
+            else:
+                listener.create_subscription(Image, f'/{cam}/working/foreground', on_mask,
+                                             qos, callback_group=group)
             if image_format == 'jpeg':
                 listener.create_subscription(CompressedImage,
                                              f'/{cam}/working/image/compressed', on_jpeg,
