@@ -10,7 +10,8 @@ from sensor_msgs.msg import CompressedImage, Image
 from std_msgs.msg import Header
 
 from mbtrack_ros.recording.images import (
-    ImageConversionError, decode_compressed, decode_raw, encode_compressed, encode_raw)
+    ImageConversionError, _check_size, decode_compressed, decode_raw, encode_compressed,
+    encode_raw)
 
 __all__ = [
     'ImageConversionError', 'compressed_to_rgb', 'image_to_mono', 'image_to_rgb',
@@ -87,18 +88,19 @@ def image_to_mono(msg: Image, *, expected: tuple[int, int] | None = None) -> np.
     """``sensor_msgs/Image`` mono8 -> (H, W) uint8 plane as sent (no colour conversion; a
     copy that does not alias the message). Raises :class:`ImageConversionError` (one line)
     on another encoding, a size that does not match ``step * height`` or, with
-    ``expected`` = (width, height), one that differs from it."""
+    ``expected`` = (width, height), one that differs from it (and, as :func:`image_to_rgb`,
+    on an empty or too large declared size before reading the data)."""
     if str(msg.encoding).strip().lower() != 'mono8':
         raise ImageConversionError(f'expected mono8, got {str(msg.encoding)[:40]!r}',
                                    'encoding')
     height, width, step = int(msg.height), int(msg.width), int(msg.step)
-    if expected is not None and (width, height) != tuple(expected):
-        raise ImageConversionError(f'plane is {width}x{height}, expected '
-                                   f'{expected[0]}x{expected[1]}', 'size')
+    _check_size(width, height, expected)
     if step < width:
         raise ImageConversionError(f'step {step} < width {width} for mono8', 'step')
-    buf = np.frombuffer(memoryview(msg.data).cast('B'), dtype=np.uint8) \
-        if not isinstance(msg.data, np.ndarray) else msg.data.ravel()
+    try:
+        buf = np.frombuffer(memoryview(msg.data).cast('B'), dtype=np.uint8)
+    except TypeError:
+        buf = np.asarray(msg.data, dtype=np.uint8).ravel()
     if buf.size != step * height:
         raise ImageConversionError(f'data has {buf.size} bytes, expected step*height = '
                                    f'{step}*{height} = {step * height}', 'data-length')
