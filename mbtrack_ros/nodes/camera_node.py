@@ -13,11 +13,10 @@ and publishes per frame, stamped with the (offset) input stamp and the camera's 
   planes 0x80 foreground, 0x40 possible person of the bootstrap, 0x20 presence
   (foreground that is no ghost); while the model bootstraps an empty message whose
   ``encoding`` (``format``) is ``bootstrap`` (``bootstrap started`` on the frame that
-  completes it). The masks follow the image's encoding: raw where bandwidth is cheap (one
-  host, shared memory), where the receiving side's CPU counts: decoding a 320x240 PNG
-  costs the fusion node about 0.5 ms per camera and frame, reading the raw plane 0.03 ms
-  (``mbtrack bench --fusion`` prints both); PNG (2-3 KiB instead of 75 KiB) with JPEG
-  images, for camera hosts on a slower network.
+  completes it). The masks follow the image's encoding: raw (75 KiB at 320x240) where
+  bandwidth is cheap (one host: shared memory), as the fusion node reads a raw plane in
+  0.03 ms per camera and frame and decodes a PNG in 0.5 ms (``mbtrack bench --fusion``
+  prints both); PNG (2-3 KiB) next to JPEG images, for camera hosts on a slower network.
 
 It subscribes to the tracker's ``~/tracks`` (``tracks_topic``) and keeps the model update
 of each frame off the silhouettes of the latest tracks (one frame of latency: frame t's
