@@ -103,8 +103,8 @@ def test_tracker_keeps_tracking_when_a_camera_node_dies_and_picks_it_up_again(
         return record
     for c in cameras:
         if c != DYING:
-            probe.create_subscription(CompressedImage, f'/{c}/working/foreground',
-                                      on_mask(c), reliable)
+            probe.create_subscription(Image, f'/{c}/working/foreground', on_mask(c),
+                                      reliable)
     probe.create_subscription(DiagnosticArray, '/diagnostics', on_diag, reliable)
     executor = MultiThreadedExecutor(num_threads=4, context=context)
     for node in [tracker, probe, *stages]:
@@ -194,24 +194,32 @@ def test_fusion_mode_parameter_refused_when_unknown(recording, context):
 
 
 @pytest.mark.ros
-def test_camera_node_offsets_stamps_and_publishes_masks_of_the_stage(recording, context):
-    """time_offset moves the stamps; the published masks are the stage's (PNG round trip)."""
+@pytest.mark.parametrize('image_format', ['raw', 'jpeg'])
+def test_camera_node_offsets_stamps_and_publishes_masks_of_the_stage(recording, context,
+                                                                     image_format):
+    """time_offset moves the stamps; the published masks are the stage's (raw mono8, or
+    PNG next to JPEG images, round trip)."""
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
     from rclpy.qos import QoSProfile, ReliabilityPolicy
-    from sensor_msgs.msg import CompressedImage
+    from sensor_msgs.msg import CompressedImage, Image
 
     from mbtrack_ros.core.detection.camera_stage import CameraStage, unpack_masks
     from mbtrack_ros.nodes.camera_node import CameraNode
-    from mbtrack_ros.nodes.conversions import compressed_to_rgb, rgb_to_image, stamp_to_ns
+    from mbtrack_ros.nodes.conversions import (
+        compressed_to_rgb, image_to_mono, rgb_to_image, stamp_to_ns)
     from mbtrack_ros.nodes.messages import make_header
     from mbtrack_ros.recording.bag import RecordingReader
 
     node = CameraNode(context=context, worker=False, cli_args=[
-        *camera_args(recording / 'calibration.yaml', 'cam0'), '-p', 'time_offset:=-0.25'])
+        *camera_args(recording / 'calibration.yaml', 'cam0'), '-p', 'time_offset:=-0.25',
+        '-p', f'image_format:={image_format}'])
     probe = Node('probe', context=context)
     got = []
-    probe.create_subscription(CompressedImage, '/cam0/working/foreground', got.append,
+    raw = image_format == 'raw'
+    probe.create_subscription(Image if raw else CompressedImage,
+                              '/cam0/working/foreground' + ('' if raw else '/compressed'),
+                              got.append,
                               QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(probe)
@@ -231,11 +239,13 @@ def test_camera_node_offsets_stamps_and_publishes_masks_of_the_stage(recording, 
     probe.destroy_node()
     assert [stamp_to_ns(m.header.stamp) for m in got] == \
         [fs.stamp_ns - 250_000_000 for fs in frame_sets]
-    assert got[0].format == 'bootstrap' and not got[0].data
+    assert (got[0].encoding if raw else got[0].format) == 'bootstrap' and not got[0].data
+    assert any((m.encoding if raw else m.format) == 'bootstrap started' for m in got)
     shown = [(m, e) for m, e in zip(got, expected) if e.foreground is not None]
     assert shown
     for msg, exp in shown:
-        for a, b in zip(unpack_masks(compressed_to_rgb(msg)),
+        assert (msg.encoding == 'mono8') if raw else msg.format.startswith('mono8; png')
+        for a, b in zip(unpack_masks(image_to_mono(msg) if raw else compressed_to_rgb(msg)),
                         (exp.foreground, exp.possible, exp.presence)):
             np.testing.assert_array_equal(a, b)
 

@@ -10,8 +10,8 @@ from sensor_msgs.msg import CompressedImage, Image
 from std_msgs.msg import Header
 
 from mbtrack_ros.nodes.conversions import (
-    ImageConversionError, compressed_to_rgb, image_to_rgb, ns_to_stamp, rgb_to_compressed,
-    rgb_to_image, stamp_to_ns)
+    ImageConversionError, compressed_to_rgb, image_to_mono, image_to_rgb, mono_to_image,
+    ns_to_stamp, rgb_to_compressed, rgb_to_image, stamp_to_ns)
 from mbtrack_ros.recording.images import decode_raw
 
 
@@ -59,6 +59,31 @@ def test_mono8_round_trip_and_grey_input():
     msg = rgb_to_image(rgb, encoding='mono8')
     assert msg.step == 6 and len(msg.data) == 24
     np.testing.assert_array_equal(image_to_rgb(msg), rgb)
+
+
+def test_mono_plane_round_trip_exact_and_bad_planes_refused():
+    """A packed-mask plane goes as raw mono8 and comes back bit for bit (no grey to RGB
+    conversion), padded rows cropped; wrong encoding, size or length: one-line errors."""
+    plane = np.random.default_rng(4).integers(0, 256, (5, 7), dtype=np.uint8)
+    msg = mono_to_image(plane, header())
+    assert (msg.encoding, msg.height, msg.width, msg.step) == ('mono8', 5, 7, 7)
+    assert msg.header.frame_id == 'cam0_optical_frame'
+    out = image_to_mono(msg, expected=(7, 5))
+    assert out.dtype == np.uint8 and out.shape == (5, 7)
+    np.testing.assert_array_equal(out, plane)
+    out[0, 0] ^= 1                                    # a copy, not the message's buffer
+    np.testing.assert_array_equal(image_to_mono(msg), plane)
+    padded = Image(height=5, width=7, encoding='mono8', step=8)
+    padded.data = np.pad(plane, ((0, 0), (0, 1)), constant_values=255).tobytes()
+    np.testing.assert_array_equal(image_to_mono(padded), plane)
+    one_line_error(lambda: image_to_mono(rgb_to_image(smooth_rgb(5, 7))), 'expected mono8')
+    one_line_error(lambda: image_to_mono(msg, expected=(8, 5)), 'differs from')
+    short = mono_to_image(plane)
+    short.data = bytes(short.data)[:-1]
+    one_line_error(lambda: image_to_mono(short), 'expected step\\*height')
+    huge = Image(height=60000, width=60000, encoding='mono8', step=60000)
+    one_line_error(lambda: image_to_mono(huge), 'exceeds the limit')
+    one_line_error(lambda: mono_to_image(np.zeros((4, 4, 3), np.uint8)), 'expected an')
 
 
 def test_padded_rows_are_cropped():

@@ -7,7 +7,11 @@ frame-set synchroniser of ``mbtrack replay REC --seed S`` (so that the one-proce
 the replay's), and prints per recording the CLEAR MOT scores of both, the frames with the
 same ids, the position gaps, and the CPU time per frame set of the one process, the camera
 stages and the fusion tracker (run one after another in this process), with the share of
-the fusion tracker's step in its filter and its detection.
+the fusion tracker's step in its filter and its detection; the same CPU after the
+start-up (the frame sets once every camera stage gives a foreground: without the
+background bootstrap and the fusion node's people cue, what a long run costs per frame
+set); and what reading one camera's frame costs the fusion tracker in each encoding of
+``camera_node`` (raw or PNG masks, raw or JPEG images).
 """
 from __future__ import annotations
 
@@ -99,10 +103,28 @@ def main_fusion(args: argparse.Namespace) -> int:
                   f' of one process; its step: filter {share["filter"]:.0f} %, search for '
                   f'new people {share["detect_search"]:.0f} %, other detection '
                   f'{share["detect"] - share["detect_search"]:.0f} %', flush=True)
+            n_steady = max(got.steady_frames, 1)
+            steady = {k: 1e3 * v / n_steady for k, v in got.steady_cpu.items()}
+            boot = {k: 1e3 * (got.cpu[k] - got.steady_cpu[k]) for k in got.cpu}
+            print(f'  after the start-up ({got.steady_frames} frame sets from frame set '
+                  f'{got.started}): one process {steady["single"]:.1f} ms, camera stages '
+                  f'{steady["stages"] / len(calibration.cameras):.1f} ms per camera, fusion '
+                  f'tracker {steady["fusion"]:.1f} ms = '
+                  f'{steady["fusion"] / max(steady["single"], 1e-9):.2f} of one process; the '
+                  f'start-up: one process {boot["single"]:.0f} ms, fusion tracker '
+                  f'{boot["fusion"]:.0f} ms in all', flush=True)
+            dec = {k: 1e3 * v / max(got.decode_frames, 1) for k, v in got.decode.items()}
+            print(f'  reading one camera frame in the fusion tracker ({got.decode_frames} '
+                  f'frames): masks PNG {dec["mask_png"]:.3f} ms, raw {dec["mask_raw"]:.3f} '
+                  f'ms; image JPEG {dec["image_jpeg"]:.3f} ms, raw {dec["image_raw"]:.3f} ms',
+                  flush=True)
             doc.append({'seed': seed, 'jpeg_quality': args.fusion_jpeg, 'mota': {k: v.mota for k, v in m.items()},
                         'motp_mm': {k: v.motp_mm for k, v in m.items()},
                         'same_ids': got.same_ids, 'frames': got.frames,
                         'cpu_ms_per_frame_set': ms, 'fusion_step_share_percent': share,
+                        'start_up_frame_sets': got.started,
+                        'steady_cpu_ms_per_frame_set': steady,
+                        'start_up_cpu_ms': boot, 'read_ms_per_camera_frame': dec,
                         'gap_median_m': float(np.median(gaps)), 'gap_max_m': float(gaps.max())})
     finally:
         shutil.rmtree(tmp, ignore_errors=True)

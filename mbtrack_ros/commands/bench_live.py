@@ -159,7 +159,7 @@ class LiveResult:
     rss_mb: tuple[tuple[float, float], ...] = ()  # (s since the player started, RSS MB)
     camera_node_cpu_seconds: tuple[float, ...] = ()  # per camera node (--live-camera-nodes)
     camera_node_logs: tuple[str, ...] = ()           # their counters at the end
-    mask_bytes_per_frame: float = float('nan')       # mean PNG mask message data, bytes
+    mask_bytes_per_frame: float = float('nan')       # mean mask message data, bytes
     image_bytes_per_frame: float = float('nan')      # mean working image data, bytes
     image_format: str = 'raw'                        # of the working images: raw | jpeg
     cameras: int = 4
@@ -388,8 +388,13 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
 
     if camera_nodes:
         for cam in cams:
-            listener.create_subscription(CompressedImage, f'/{cam}/working/foreground',
-                                         on_mask, qos, callback_group=group)
+            if image_format == 'jpeg':   # PNG masks next to JPEG images, else raw mono8
+                listener.create_subscription(CompressedImage,
+                                             f'/{cam}/working/foreground/compressed',
+                                             on_mask, qos, callback_group=group)
+            else:
+                listener.create_subscription(Image, f'/{cam}/working/foreground', on_mask,
+                                             qos, callback_group=group)
             if image_format == 'jpeg':
                 listener.create_subscription(CompressedImage,
                                              f'/{cam}/working/image/compressed', on_jpeg,
@@ -781,7 +786,8 @@ def main_live(args: argparse.Namespace) -> int:
               f'core = {1e3 * sum(per) / len(per) / live.frames:.1f} ms per camera and frame; '
               f'per camera and frame: working image {live.image_bytes_per_frame / 1024:.1f}'
               f' KiB ({"JPEG" if live.image_format == "jpeg" else "raw rgb8"}), foreground '
-              f'masks {live.mask_bytes_per_frame / 1024:.2f} KiB (PNG)')
+              f'masks {live.mask_bytes_per_frame / 1024:.2f} KiB '
+              f'({"PNG" if live.image_format == "jpeg" else "raw mono8"})')
         for line in live.camera_node_logs:
             print('  ' + line[line.find(']: ') + 3:] if ']: ' in line else line)
     print(f'load average before / after the live run: {load0[0]:.2f} / {load1[0]:.2f}')

@@ -43,6 +43,16 @@ class FusionComparison:
             ``'filter'`` (prediction, likelihood in every camera, MRF), ``'detect_search'``
             (the search for new people), ``'detect'`` (all detection work, the search
             included), ``'total'``.
+        started: frame sets of the start-up: up to and including the first one in which
+            every camera stage gave a foreground (the background bootstrap and the people
+            cue of the fusion node are in them); ``steady_cpu`` holds the CPU seconds of
+            ``'single'``, ``'stages'`` and ``'fusion'`` over the frame sets after it.
+        decode: CPU seconds per camera frame the fusion tracker spends to read a camera's
+            message, by encoding: ``'mask_png'`` (PNG-coded bit planes decoded),
+            ``'mask_raw'`` (the raw plane copied out of the message), ``'image_jpeg'``
+            (a quality-90 JPEG working image decoded), ``'image_raw'`` (copied); measured
+            on every 10th frame set's frames after the start-up (``decode_frames`` camera
+            frames).
     """
 
     frames: int = 0
@@ -56,6 +66,18 @@ class FusionComparison:
     fusion_timings: dict[str, float] = field(
         default_factory=lambda: dict.fromkeys(('filter', 'detect_search', 'detect', 'total'),
                                               0.0))
+    started: int | None = None
+    steady_cpu: dict[str, float] = field(
+        default_factory=lambda: {'single': 0.0, 'stages': 0.0, 'fusion': 0.0})
+    decode: dict[str, float] = field(
+        default_factory=lambda: dict.fromkeys(('mask_png', 'mask_raw', 'image_jpeg',
+                                               'image_raw'), 0.0))
+    decode_frames: int = 0
+
+    @property
+    def steady_frames(self) -> int:
+        """Frame sets after the start-up (:attr:`started`)."""
+        return 0 if self.started is None else self.frames - self.started
 
 
 def fusion_vs_single(recording: str | Path, config: TrackerConfig | None = None,
@@ -108,7 +130,16 @@ def fusion_vs_single(recording: str | Path, config: TrackerConfig | None = None,
             t4 = time.process_time()
             for stage in stages.values():      # what ~/tracks gives a camera node
                 stage.set_tracks(xy, velocity, heights)
-            out.cpu['stages'] += t2 - t1 + time.process_time() - t4
+            t5 = time.process_time()
+            out.cpu['stages'] += t2 - t1 + t5 - t4
+            if out.started is not None:
+                for key, dt in (('single', t1 - t0), ('stages', t2 - t1 + t5 - t4),
+                                ('fusion', t3 - t2)):
+                    out.steady_cpu[key] += dt
+                if out.steady_frames % 10 == 0:
+                    _time_decoding(frames.values(), out)
+            elif all(f.foreground is not None for f in frames.values()):
+                out.started = out.frames + 1
             xa = {t.track_id: t.mean[:2] for t in a.tracks}
             xb = {t.track_id: t.mean[:2] for t in b.tracks}
             out.frames += 1
@@ -120,3 +151,32 @@ def fusion_vs_single(recording: str | Path, config: TrackerConfig | None = None,
                                            float(t.mean[0]), float(t.mean[1]))
                                   for t in result.tracks]
     return out
+
+
+def _time_decoding(frames, out: FusionComparison) -> None:
+    """Add to ``out.decode`` the thread CPU seconds of reading each camera frame's masks
+    and image as the fusion node receives them, in each encoding (``camera_node``
+    ``image_format`` raw: rgb8 image and mono8 plane; jpeg: JPEG image and PNG plane)."""
+    import cv2
+
+    from mbtrack_ros.core.detection.camera_stage import pack_masks, unpack_masks
+
+    for f in frames:
+        if f.foreground is None:
+            continue
+        packed = pack_masks(f.foreground, f.possible, f.presence)
+        png = cv2.imencode('.png', packed)[1].tobytes()
+        plane = packed.tobytes()
+        _, jpeg = encode_compressed(f.image, 'jpeg', quality=90)
+        image = f.image.tobytes()
+        h, w = packed.shape
+        for key, read in (
+                ('mask_png', lambda: unpack_masks(decode_compressed('png', png))),
+                ('mask_raw', lambda: unpack_masks(
+                    np.frombuffer(plane, np.uint8).reshape(h, w).copy())),
+                ('image_jpeg', lambda: decode_compressed('jpeg', jpeg)),
+                ('image_raw', lambda: np.frombuffer(image, np.uint8).reshape(h, w, 3).copy())):
+            t = time.thread_time()
+            read()
+            out.decode[key] += time.thread_time() - t
+        out.decode_frames += 1

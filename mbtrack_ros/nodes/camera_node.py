@@ -8,10 +8,15 @@ and publishes per frame, stamped with the (offset) input stamp and the camera's 
 
 * ``working/image`` (``sensor_msgs/Image`` rgb8, or with ``image_format: jpeg``
   ``working/image/compressed``): the working-size image;
-* ``working/foreground`` (``sensor_msgs/CompressedImage``, PNG ``mono8``): bit planes
-  0x80 foreground, 0x40 possible person of the bootstrap, 0x20 presence (foreground that
-  is no ghost); while the model bootstraps an empty message whose ``format`` is
-  ``bootstrap`` (``bootstrap started`` on the frame that completes it).
+* ``working/foreground`` (``sensor_msgs/Image`` ``mono8``, or with ``image_format: jpeg``
+  ``working/foreground/compressed``, ``sensor_msgs/CompressedImage`` PNG ``mono8``): bit
+  planes 0x80 foreground, 0x40 possible person of the bootstrap, 0x20 presence
+  (foreground that is no ghost); while the model bootstraps an empty message whose
+  ``encoding`` (``format``) is ``bootstrap`` (``bootstrap started`` on the frame that
+  completes it). The masks follow the image's encoding: raw (75 KiB at 320x240) where
+  bandwidth is cheap (one host: shared memory), as the fusion node reads a raw plane in
+  0.03 ms per camera and frame and decodes a PNG in 0.5 ms (``mbtrack bench --fusion``
+  prints both); PNG (2-3 KiB) next to JPEG images, for camera hosts on a slower network.
 
 It subscribes to the tracker's ``~/tracks`` (``tracks_topic``) and keeps the model update
 of each frame off the silhouettes of the latest tracks (one frame of latency: frame t's
@@ -42,12 +47,12 @@ from mbtrack_ros.core.detection.camera_stage import (
     CameraStage, pack_masks, unpack_regions)
 from mbtrack_ros.core.tracker import TrackerConfig, TrackerError, length_scale
 from mbtrack_ros.nodes.conversions import (
-    ImageConversionError, compressed_to_rgb, image_to_rgb, rgb_to_compressed, rgb_to_image,
-    stamp_to_ns)
+    ImageConversionError, compressed_to_rgb, image_to_rgb, mono_to_image, rgb_to_compressed,
+    rgb_to_image, stamp_to_ns)
 from mbtrack_ros.nodes.messages import make_header
 from mbtrack_ros.nodes.transport import use_large_shm_segment
 
-__all__ = ['CAMERA_PARAMETERS', 'CameraNode', 'cloud_columns', 'main']
+__all__ = ['CAMERA_PARAMETERS', 'CameraNode', 'cloud_columns', 'foreground_message', 'main']
 
 FOREGROUND_FORMAT = 'mono8; png compressed mono8'
 WARN_PERIOD_S = 10.0
@@ -76,8 +81,10 @@ CAMERA_PARAMETERS = {
                        'instead of dropping them', {}),
     'tracker.working_pixels': (76800, 'the tracker\'s working size, pixels per image: a '
                                'larger image is resized once, here', _ir(4800, 100_000_000)),
-    'image_format': ('raw', 'raw | jpeg: the working image\'s encoding (raw: the tracks of '
-                     'one process; jpeg: about a tenth of the bandwidth)', {}),
+    'image_format': ('raw', 'raw | jpeg: the encoding of the working image and its masks '
+                     '(raw: rgb8 and mono8, the tracks of one process and the least CPU '
+                     'in the tracker; jpeg: JPEG and PNG, about a tenth of the bandwidth)',
+                     {}),
     'jpeg_quality': (90, 'JPEG quality of image_format jpeg', _ir(1, 100)),
     'tracks_topic': ('/tracker_node/tracks', 'the fusion tracker\'s tracks (PointCloud2)',
                      {}),
@@ -88,6 +95,31 @@ CAMERA_PARAMETERS = {
     'max_pending': (15, 'frames queued for processing; the oldest is dropped beyond',
                     _ir(1, 300)),
 }
+
+
+def foreground_message(frame, header, *, compressed: bool = False):
+    """The ``working/foreground`` message of a :class:`CameraFrame`: its packed masks
+    (:func:`pack_masks`) as a raw ``mono8`` ``Image``, or with ``compressed`` a PNG
+    ``CompressedImage``; while the model bootstraps an empty one whose encoding (format) is
+    ``bootstrap`` or ``bootstrap started``."""
+    if frame.foreground is None:
+        marker = 'bootstrap started' if frame.started else 'bootstrap'
+        msg = CompressedImage() if compressed else Image()
+        msg.header = header
+        if compressed:
+            msg.format = marker
+        else:
+            msg.encoding = marker
+        return msg
+    packed = pack_masks(frame.foreground, frame.possible, frame.presence)
+    if not compressed:
+        return mono_to_image(packed, header)
+    ok, data = cv2.imencode('.png', packed)
+    msg = CompressedImage()
+    msg.header = header
+    msg.format = FOREGROUND_FORMAT
+    msg.data = data.tobytes()
+    return msg
 
 
 class CameraParamsError(ValueError):
@@ -178,8 +210,9 @@ class CameraNode(Node):
         self.pub_image = (self.create_publisher(CompressedImage, 'working/image/compressed',
                                                 out_qos) if self.jpeg else
                           self.create_publisher(Image, 'working/image', out_qos))
-        self.pub_foreground = self.create_publisher(CompressedImage, 'working/foreground',
-                                                    out_qos)
+        self.pub_foreground = (
+            self.create_publisher(CompressedImage, 'working/foreground/compressed', out_qos)
+            if self.jpeg else self.create_publisher(Image, 'working/foreground', out_qos))
         in_qos = qos_profile_sensor_data if v['image_reliability'] == 'best_effort' else \
             QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         self.create_subscription(CompressedImage if compressed else Image, topic,
@@ -323,17 +356,8 @@ class CameraNode(Node):
             image = rgb_to_compressed(frame.image, header, 'jpeg', quality=self.quality)
         else:
             image = rgb_to_image(frame.image, header)
-        fg = CompressedImage()
-        fg.header = header
-        if frame.foreground is None:
-            fg.format = 'bootstrap started' if frame.started else 'bootstrap'
-        else:
-            ok, data = cv2.imencode('.png', pack_masks(frame.foreground, frame.possible,
-                                                       frame.presence))
-            fg.format = FOREGROUND_FORMAT
-            fg.data = data.tobytes()
         self.pub_image.publish(image)
-        self.pub_foreground.publish(fg)
+        self.pub_foreground.publish(foreground_message(frame, header, compressed=self.jpeg))
 
     def destroy_node(self) -> None:
         self.get_logger().info(

@@ -10,11 +10,12 @@ from sensor_msgs.msg import CompressedImage, Image
 from std_msgs.msg import Header
 
 from mbtrack_ros.recording.images import (
-    ImageConversionError, decode_compressed, decode_raw, encode_compressed, encode_raw)
+    ImageConversionError, _check_size, decode_compressed, decode_raw, encode_compressed,
+    encode_raw)
 
 __all__ = [
-    'ImageConversionError', 'compressed_to_rgb', 'image_to_rgb', 'rgb_to_compressed',
-    'rgb_to_image', 'stamp_to_ns', 'ns_to_stamp',
+    'ImageConversionError', 'compressed_to_rgb', 'image_to_mono', 'image_to_rgb',
+    'mono_to_image', 'rgb_to_compressed', 'rgb_to_image', 'stamp_to_ns', 'ns_to_stamp',
 ]
 
 
@@ -64,6 +65,46 @@ def rgb_to_image(rgb: np.ndarray, header: Header | None = None, *,
     msg.is_bigendian = 0
     msg.data = data
     return msg
+
+
+def mono_to_image(plane: np.ndarray, header: Header | None = None) -> Image:
+    """(H, W) uint8 plane (e.g. packed mask bits) -> ``sensor_msgs/Image`` mono8, raw."""
+    plane = np.ascontiguousarray(plane, dtype=np.uint8)
+    if plane.ndim != 2:
+        raise ImageConversionError(f'expected an (H, W) uint8 plane, got {plane.shape}',
+                                   'format')
+    msg = Image()
+    if header is not None:
+        msg.header = header
+    msg.height, msg.width = plane.shape
+    msg.step = plane.shape[1]
+    msg.encoding = 'mono8'
+    msg.is_bigendian = 0
+    msg.data = plane.tobytes()
+    return msg
+
+
+def image_to_mono(msg: Image, *, expected: tuple[int, int] | None = None) -> np.ndarray:
+    """``sensor_msgs/Image`` mono8 -> (H, W) uint8 plane as sent (no colour conversion; a
+    copy that does not alias the message). Raises :class:`ImageConversionError` (one line)
+    on another encoding, a size that does not match ``step * height`` or, with
+    ``expected`` = (width, height), one that differs from it (and, as :func:`image_to_rgb`,
+    on an empty or too large declared size before reading the data)."""
+    if str(msg.encoding).strip().lower() != 'mono8':
+        raise ImageConversionError(f'expected mono8, got {str(msg.encoding)[:40]!r}',
+                                   'encoding')
+    height, width, step = int(msg.height), int(msg.width), int(msg.step)
+    _check_size(width, height, expected)
+    if step < width:
+        raise ImageConversionError(f'step {step} < width {width} for mono8', 'step')
+    try:
+        buf = np.frombuffer(memoryview(msg.data).cast('B'), dtype=np.uint8)
+    except TypeError:
+        buf = np.asarray(msg.data, dtype=np.uint8).ravel()
+    if buf.size != step * height:
+        raise ImageConversionError(f'data has {buf.size} bytes, expected step*height = '
+                                   f'{step}*{height} = {step * height}', 'data-length')
+    return buf.reshape(height, step)[:, :width].copy()
 
 
 def rgb_to_compressed(rgb: np.ndarray, header: Header | None = None, fmt: str = 'jpeg', *,

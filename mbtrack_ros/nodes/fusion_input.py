@@ -3,7 +3,9 @@
 Instead of the cameras' images the tracker takes the camera nodes' streams
 (:mod:`mbtrack_ros.nodes.camera_node`): per camera the working-size image (``image_topic``,
 ``sensor_msgs/Image`` or ``CompressedImage``) and its foreground masks
-(``camera.<name>.foreground_topic``), paired by stamp into a
+(``camera.<name>.foreground_topic``: ``sensor_msgs/Image`` mono8 with the raw image
+transport, ``CompressedImage`` PNG on ``.../foreground/compressed`` with the compressed
+one, as the camera node's ``image_format`` publishes them), paired by stamp into a
 :class:`~mbtrack_ros.core.detection.camera_stage.CameraFrame` and handed to the node's
 frame-set synchroniser. Before each tracker step the frame set's masks go to the
 detection's :class:`~mbtrack_ros.core.detection.camera_stage.ReceivedForeground` (in place
@@ -23,12 +25,22 @@ from sensor_msgs.msg import CompressedImage, Image
 from mbtrack_ros.core.detection.camera_stage import (
     CameraFrame, ReceivedForeground, pack_regions, unpack_masks)
 from mbtrack_ros.nodes.conversions import (
-    ImageConversionError, compressed_to_rgb, image_to_rgb, stamp_to_ns)
+    ImageConversionError, compressed_to_rgb, image_to_mono, image_to_rgb, stamp_to_ns)
 from mbtrack_ros.nodes.messages import make_header
 
 __all__ = ['FusionInput']
 
 PAIRING = 30  # unpaired stamps kept per camera (2 s at 15 Hz)
+
+
+def _masks(msg):
+    """A ``working/foreground`` message -> (foreground, possible, presence) (H, W) bool,
+    or while the camera's model bootstraps whether it started with this frame."""
+    raw = isinstance(msg, Image)
+    marker = msg.encoding if raw else msg.format
+    if marker.startswith('bootstrap'):
+        return marker == 'bootstrap started'
+    return unpack_masks(image_to_mono(msg) if raw else compressed_to_rgb(msg))
 
 
 class FusionInput:
@@ -53,15 +65,19 @@ class FusionInput:
         reliable = QoSProfile(depth=p.qos_depth, reliability=ReliabilityPolicy.RELIABLE)
         self.topics = {}
         for cam in p.cameras:
+            compressed = cam.transport == 'compressed'
             fg_topic = str(node.declare_parameter(
                 f'camera.{cam.name}.foreground_topic',
-                f'/{cam.name}/working/foreground').value)
-            kind = CompressedImage if cam.transport == 'compressed' else Image
+                f'/{cam.name}/working/foreground' + ('/compressed' if compressed else '')
+            ).value)
+            kind = CompressedImage if compressed else Image
             node.create_subscription(kind, cam.image_topic,
                                      lambda m, c=cam.name: self._on_part(c, m, 0), qos)
-            node.create_subscription(CompressedImage, fg_topic,
+            node.create_subscription(kind, fg_topic,
                                      lambda m, c=cam.name: self._on_part(c, m, 1), qos)
-            regions = fg_topic.rsplit('/', 1)[0] + '/regions'
+            base = fg_topic[:-len('/compressed')] if fg_topic.endswith('/compressed') \
+                else fg_topic
+            regions = base.rsplit('/', 1)[0] + '/regions'
             self._regions[cam.name] = node.create_publisher(CompressedImage, regions,
                                                             reliable)
             self.topics[cam.name] = (cam.image_topic, fg_topic, regions)
@@ -80,10 +96,8 @@ class FusionInput:
                     raise ImageConversionError(
                         f'working image is {part.shape[1]}x{part.shape[0]}, the tracker '
                         f'works at {cam.width}x{cam.height} (tracker.working_pixels)')
-            elif msg.format.startswith('bootstrap'):
-                part = msg.format == 'bootstrap started'
             else:
-                part = unpack_masks(compressed_to_rgb(msg))
+                part = _masks(msg)
         except ImageConversionError as err:
             node._count_drop()
             node.warn_once(f'{camera}:convert', f'{camera}: dropping bad input: {err}')

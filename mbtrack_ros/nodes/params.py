@@ -20,7 +20,9 @@ qos_depth                       int        history depth of reliable image subsc
 camera.<name>.image_topic       string     (``/<name>/image_raw``, ``.../compressed``;
                                            foreground mode: ``/<name>/working/image``)
 camera.<name>.foreground_topic  string     foreground mode: the camera node's masks
-                                           (``/<name>/working/foreground``)
+                                           (``/<name>/working/foreground``, mono8;
+                                           ``.../compressed``, PNG, with the
+                                           compressed transport)
 camera.<name>.transport         string     per-camera override of ``image_transport``
 camera.<name>.camera_info_topic string     optional CameraInfo topic for a size check ('')
 sync.tolerance                  double     largest distance of an image's capture time
