@@ -18,7 +18,9 @@ them, after ``unknown_frames`` frames (nobody was found there). Meanwhile the fo
 test is void there (the model may show a person): the cue's person-sized blob counts as
 foreground (a possible person), the rest of the region as neither; and the blob's core
 replaces motion as the proof, required of new people, that a detection is no ghost
-(:meth:`BackgroundModel.presence`).
+(:meth:`BackgroundModel.presence`). The cue's places themselves are kept
+(:meth:`BootstrapCue.take_places`): the detection initialises all those people together on
+the first frame with foreground.
 
 **Ghosts.** A person who stood still while the model was learnt is part of it; when he walks
 away, the place he revealed differs from the model and looks like foreground (a "ghost"),
