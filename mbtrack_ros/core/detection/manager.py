@@ -20,6 +20,7 @@ detector, acquisition and release.
 """
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Mapping, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -44,6 +45,8 @@ from mbtrack_ros.core.shape import BodyShape, rasterize, render_labels
 from mbtrack_ros.core.state import X, Y, TrackEstimate
 
 __all__ = ['AutoDetection', 'AutoDetectionConfig', 'Birth']
+
+_log = logging.getLogger(__name__)
 
 
 class _Pending(NamedTuple):
@@ -458,6 +461,10 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
         if places is None or not len(places):
             return []
         dets = self.detector.detect_at(pending.evidence, places, track_xy=others[:, [X, Y]])
+        _log.debug('people present at the bootstrap: cue places %s, detections %s',
+                   np.round(places, 2).tolist(),
+                   [(round(float(d.xy[0]), 2), round(float(d.xy[1]), 2), round(d.score, 2))
+                    for d in dets])
         if not dets:
             return []
         states = np.array([d.state for d in dets])
