@@ -51,3 +51,30 @@ def test_without_the_joint_step_the_detector_confirms_them_frames_later(monkeypa
     cfg = AutoDetectionConfig().detector
     assert min(births) == boot + cfg.confirm_frames - 1
     assert len(births[min(births)]) <= cfg.max_candidates
+
+
+def test_places_of_cameras_started_apart_are_kept_once_until_taken():
+    """Cameras whose models start on different frame sets each ask the cue; the places it
+    gives are kept once (a place within ``nms_radius`` of a kept one is the same person)
+    and handed out once."""
+    from conftest import make_room
+    from mbtrack_ros.core.detection.background import BackgroundConfig, BootstrapCue
+
+    class _Cue:
+        config = BackgroundConfig().people
+        answers = [np.array([[1.0, 1.0], [3.0, 2.0]]), np.array([[3.2, 2.1], [5.0, 4.0]])]
+
+        def places(self, frames):
+            return self.answers.pop(0)
+
+        def regions(self, frames, *, places):
+            return {'cam0': places, 'cam1': places}
+
+    cue = BootstrapCue(make_room(), BackgroundConfig())
+    cue._cue = _Cue()
+    cue.frames = [{}]
+    assert cue.take_places() is None
+    assert set(cue.regions(['cam0'])) == {'cam0'}
+    cue.regions(['cam1'])
+    np.testing.assert_allclose(cue.take_places(), [[1.0, 1.0], [3.0, 2.0], [5.0, 4.0]])
+    assert cue.take_places() is None
