@@ -18,7 +18,9 @@ them, after ``unknown_frames`` frames (nobody was found there). Meanwhile the fo
 test is void there (the model may show a person): the cue's person-sized blob counts as
 foreground (a possible person), the rest of the region as neither; and the blob's core
 replaces motion as the proof, required of new people, that a detection is no ghost
-(:meth:`BackgroundModel.presence`).
+(:meth:`BackgroundModel.presence`). The cue's places themselves are kept
+(:meth:`BootstrapCue.take_places`): the detection initialises all those people together on
+the first frame with foreground.
 
 **Ghosts.** A person who stood still while the model was learnt is part of it; when he walks
 away, the place he revealed differs from the model and looks like foreground (a "ghost"),
@@ -857,7 +859,11 @@ class BootstrapCue:
     """The online bootstrap's people cue over consecutive frame sets (003 §4.2 with
     :class:`~.people.PeopleCue`): keeps the last ``bootstrap_frames`` frame sets (every
     ``bootstrap_stride``-th) and gives the not-yet-known regions of the cameras whose model
-    was just bootstrapped."""
+    was just bootstrapped.
+
+    The floor places (K, 2), metres, of the people it found there wait in :attr:`places`
+    until the detection takes them (:meth:`take_places`) to initialise everybody present
+    at once, rather than confirming them one by one over the following frames."""
 
     def __init__(self, calibration: RoomCalibration | None, config: BackgroundConfig) -> None:
         self.calibration = calibration
@@ -865,6 +871,13 @@ class BootstrapCue:
         self._cue: PeopleCue | None = None
         self.frames: list[dict[str, np.ndarray]] = []
         self._seen = 0
+        self.places: np.ndarray | None = None
+
+    def take_places(self) -> np.ndarray | None:
+        """The people's places (K, 2) of the last bootstrap not taken yet (then forgotten),
+        or None."""
+        places, self.places = self.places, None
+        return places
 
     @property
     def enabled(self) -> bool:
@@ -892,10 +905,15 @@ class BootstrapCue:
         places people in (:meth:`PeopleCue.regions`), from the frame sets kept."""
         if not started or not self.frames or self.cue is None:
             return {}
-        regions = self.cue.regions(self.frames)
+        places = self.cue.places(self.frames)
+        self.places = places if self.places is None else np.concatenate([
+            self.places, places[np.linalg.norm(places[:, None] - self.places[None], axis=2)
+                                .min(axis=1, initial=np.inf) >= self.cue.config.nms_radius]])
+        regions = self.cue.regions(self.frames, places=places)
         return {n: regions[n] for n in started if n in regions}
 
     def clear(self) -> None:
+        """Forget the frame sets kept (the places found stay until taken)."""
         self.frames = []
 
 

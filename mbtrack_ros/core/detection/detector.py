@@ -509,6 +509,28 @@ class Detector:
         keep = _nms(xy, np.array([d.score for d in found]), cfg.nms_radius, len(found))
         return [found[i] for i in keep]
 
+    def detect_at(self, evidence: Mapping[str, FrameEvidence], places: np.ndarray, *,
+                  track_xy: np.ndarray | None = None) -> list[Detection]:
+        """Detections at given floor places (K, 2), metres, in one frame: each refined
+        within ``fine_radius`` of its place (:meth:`_refine`), kept when it scores at least
+        ``threshold``, then ``nms_radius`` apart (best first). No confirmation over frames:
+        the places come with their own evidence over several frames (the bootstrap's
+        people cue, :class:`~.people.PeopleCue`)."""
+        cfg = self.config
+        track_xy = np.zeros((0, 2)) if track_xy is None \
+            else np.asarray(track_xy, np.float64).reshape(-1, 2)
+        found = []
+        for place in np.asarray(places, np.float64).reshape(-1, 2):
+            det = self._refine(evidence, place, track_xy)
+            if det is not None and det.score >= cfg.threshold:
+                det.frames = cfg.confirm_frames
+                found.append(det)
+        if not found:
+            return []
+        keep = _nms(np.array([d.xy for d in found]), np.array([d.score for d in found]),
+                    cfg.nms_radius, len(found))
+        return [found[i] for i in keep]
+
     def _refine(self, evidence: Mapping[str, FrameEvidence], centre: np.ndarray,
                 track_xy: np.ndarray, *, standing: bool = False) -> Detection | None:
         """The best fine hypothesis within ``fine_radius`` of ``centre`` (position and pose,

@@ -20,6 +20,7 @@ detector, acquisition and release.
 """
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Mapping, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -44,6 +45,8 @@ from mbtrack_ros.core.shape import BodyShape, rasterize, render_labels
 from mbtrack_ros.core.state import X, Y, TrackEstimate
 
 __all__ = ['AutoDetection', 'AutoDetectionConfig', 'Birth']
+
+_log = logging.getLogger(__name__)
 
 
 class _Pending(NamedTuple):
@@ -421,6 +424,11 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
             if born:
                 others = np.concatenate([others, np.array([b[0] for b in born])])
                 other_shapes = other_shapes + [b[1] for b in born]
+            present = self._initial(pending, others, other_shapes)
+            acquired += present
+            if present:
+                others = np.concatenate([others, np.array([d.state for d, _ in present])])
+                other_shapes = other_shapes + [m.shape for _, m in present]
             confirmed = self.detector.step(pending.evidence, track_xy=others[:, [X, Y]],
                                            stamp_ns=pending.stamp_ns)
             for det in confirmed:
@@ -435,6 +443,42 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
                 else:
                     acquired.append((det, model))
         return _Found(acquired, {'detect_find': time.perf_counter() - t0}, tuple(ghosts))
+
+    def _initial(self, pending: _Pending, others: np.ndarray, other_shapes: list
+                 ) -> list[tuple[Detection, PersonModel]]:
+        """The people present when the background was bootstrapped, initialised together
+        on the first frame set with foreground: the people cue's places
+        (:meth:`~.background.BootstrapCue.take_places`, found over the bootstrap frames
+        from multi-view motion) refined by the detector on this frame
+        (:meth:`~.detector.Detector.detect_at`), and each one's appearance model acquired
+        with all the others - current tracks ``others`` (K, 6) with ``other_shapes`` and the
+        other people present - as occluders (003 §4.1). Confirming them one by one over
+        ``confirm_frames`` frames, a few refinements per frame, would leave the last of a
+        roomful found a second later. A place the detector does not confirm here is left to
+        the ordinary search."""
+        cue = getattr(self.background, 'bootstrap_cue', None)
+        places = None if cue is None else cue.take_places()
+        if places is None or not len(places):
+            return []
+        dets = self.detector.detect_at(pending.evidence, places, track_xy=others[:, [X, Y]])
+        _log.debug('people present at the bootstrap: cue places %s, detections %s',
+                   np.round(places, 2).tolist(),
+                   [(round(float(d.xy[0]), 2), round(float(d.xy[1]), 2), round(d.score, 2))
+                    for d in dets])
+        if not dets:
+            return []
+        states = np.array([d.state for d in dets])
+        shapes = [BodyShape(d.height, d.width) for d in dets]
+        out = []
+        for k, det in enumerate(dets):
+            rest = [j for j in range(len(dets)) if j != k]
+            model = acquire(det, pending.images, self.calibration,
+                            others=np.concatenate([others, states[rest]]),
+                            other_shapes=list(other_shapes) + [shapes[j] for j in rest],
+                            config=self.config.acquisition)
+            if model is not None:
+                out.append((det, model))
+        return out
 
     def _ghost_outline(self, det: Detection, evidence: Mapping[str, FrameEvidence]
                        ) -> tuple[float, float] | None:

@@ -373,15 +373,17 @@ class PeopleCue:
                 mask = cv2.dilate(mask, self._kernel(dilation))
         return mask.astype(bool)
 
-    def regions(self, frames: Sequence[Mapping[str, np.ndarray]]
+    def regions(self, frames: Sequence[Mapping[str, np.ndarray]], *,
+                places: np.ndarray | None = None
                 ) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
         """Per camera of the last frame set, three (H, W) bool masks of the person-like
         places: the pixels not to learn (``region_*`` bodies, dilated); inside them, the
         possible foreground (the tested body); inside that, the body's core
-        (``core_width`` wide), where the person stands whichever view."""
+        (``core_width`` wide), where the person stands whichever view. ``places`` (K, 2),
+        metres: those of :meth:`places` on ``frames`` when already known."""
         cfg = self.config
         frames = list(frames)
-        xy = self.places(frames)
+        xy = self.places(frames) if places is None else np.asarray(places, np.float64)
         out = {}
         for name in frames[-1]:
             if name in self.calibration.cameras:
