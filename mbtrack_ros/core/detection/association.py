@@ -43,21 +43,21 @@ class DetectionAssociator:
         the detection would start a second track on the same person (an identity switch
         when the old one is released). So a confirmed detection within ``relocate_radius``
         of a track is first checked with the track's own appearance model (003 Eq. 3, the
-        tracker's likelihood): when, on average over the side cameras that see both, the
-        model explains the detection about as well as or better than the track's current
-        estimate (``log p(y_c | detection) - log p(y_c | track) > relocate_margin``), the
-        detection is taken for that track's person and the track is moved there (same id)
-        - or, within ``relocate_interval`` of the track's birth or last move, the detection
-        is dropped (unless its gain is above ``move_again_gain``: it is moved again, once);
-        otherwise a new track is born. A track the detection would leave
+        tracker's likelihood): the gain, on average over the side cameras that see both, of
+        ``log p(y_c | detection) - log p(y_c | track)``, a log-likelihood ratio of "the
+        track's person is at the detection" over "at the track's estimate". A positive
+        gain (the model explains the detection better) takes the detection for that
+        track's person and the track is moved there (same id) - or, within
+        ``relocate_interval`` of the track's birth or last move, the detection is dropped
+        (unless its gain is positive there too: it is moved again, once); otherwise a new
+        track is born. A track the detection would leave
         ``move_support`` or more of its exclusive support (foreground no other track
         covers) is not moved: it stands on a person of its own. The gain is a weak cue in
         groups (right and wrong moves both have gains of a few nats either way per camera);
         still, moving instead of a birth avoids most second tracks on one person, and the
         interval stops a track hopping through a
-        group. A gain in ``(relocate_margin, 0]`` moves only a track that looks like the
-        detection (``move_distance``), and such a look-alike may be moved by a gain down to
-        ``look_alike_slack`` below the margin. Of several tracks the gain would move, the
+        group. A track that looks like the detection (``move_distance``) may be moved by a
+        gain down to ``-look_alike_margin``. Of several tracks the gain would move, the
         one whose model is nearest the detection's in appearance is. A detection scoring
         below ``beside_threshold`` needs the stricter ``weak_relocate_margin`` to move a
         track (about half of such moves with a small
@@ -68,7 +68,7 @@ class DetectionAssociator:
         takes its id back instead, and the track stays where it is (not instead of a track
         placed within ``relocate_interval``: its move would not happen); before a birth, a released
         track and then a hidden one within ``reuse_radius`` that look alike are given
-        back their person (``reuse_time``, ``reuse_hidden``; a reported track of doubtful
+        back their person (``reuse_time``, ``reuse_radius``; a reported track of doubtful
         existence counts as hidden, ``reuse_doubtful``); a detection that would still
         be born beside a look-alike track born or moved within ``relocate_interval`` is
         dropped: a young track lags its person for a few frames, and the detection beside
@@ -121,7 +121,7 @@ class DetectionAssociator:
         best = min(((k, likeness[tracks[k].track_id]) for k in movable),
                    key=lambda kd: kd[1], default=None)
         hidden = False
-        if best is None and cfg.relocate_hidden:
+        if best is None:
             best = self._nearest_hidden(det, tracks, keep, means, models, moved, stamp_ns)
             hidden = best is not None
         if best is not None and not self._placed_recently(tracks[best[0]].track_id, stamp_ns):
@@ -146,7 +146,7 @@ class DetectionAssociator:
         far = doubtful = False
         if best is None:
             reused = self._reusable(det, model, models, info)
-            if reused is None and cfg.reuse_hidden:
+            if reused is None:
                 # a hidden track within reuse_radius that looks like the detection is
                 # given back its person like a lost one; so is one reported with a
                 # doubtful existence (shown again moments ago, or fading)
@@ -187,7 +187,7 @@ class DetectionAssociator:
         tid = tracks[best[0]].track_id
         again = False
         if not hidden and self._placed_recently(tid, stamp_ns):
-            again = gains[tid] > cfg.move_again_gain \
+            again = gains[tid] > 0.0 \
                 and self._moved_again.get(tid) != self._placed.get(tid)
             if not again:
                 info['action'] = f'drop (track {tid} placed recently)'
@@ -234,7 +234,7 @@ class DetectionAssociator:
         report threshold; or, reported, below ``below_existence``), or None; with ``like``
         (the detection's model, and the cache of appearance distances to it by track id,
         filled here) only a track whose model is within ``reuse_distance`` of that model
-        (``reuse_hidden``). Not a track born or moved within ``relocate_interval``: hidden
+        (the reuse of a hidden track). Not a track born or moved within ``relocate_interval``: hidden
         again so soon, its model does not explain the person there."""
         best = None
         for k in keep:

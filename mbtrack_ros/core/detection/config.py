@@ -33,46 +33,45 @@ class AutoDetectionConfig:
         sigma: appearance likelihood width (003 Eq. 3), as the tracker's.
         clutter_distance: Bhattacharyya distance whose likelihood is the "not visible"
             clutter likelihood ``p_0`` (001 Eq. 23).
-        visibility_particles: posterior particles used per track for ``p_1`` (001 Eq. 18).
         side_weight: weight in [0, 1] of the side cameras' evidence in the existence update
             when a top-down camera exists.
         report_hidden: also report tracks whose existence is below the report threshold.
         relocate_radius: metres; a confirmed detection this close to a current track is
             compared with the track's appearance model before it may start a new track.
-        relocate_margin: nats per side camera; mean log-likelihood gain (003 Eq. 3 under
-            the track's model) of the detection over the track's estimate above which the
-            detection is the track's own person and the track is moved there instead of a
-            birth (:meth:`AutoDetection._identify`); negative means "about as well".
-            Lower moves tracks more readily (fewer duplicate births, more moves onto
-            another person).
-        weak_relocate_margin: nats per side camera; the same margin for a detection scoring
-            below ``beside_threshold`` (the larger of the two applies; ``inf``: such a
-            detection moves no track by the gain). Weak detections beside a track are often
-            a neighbour's fringe, so they need a clear gain.
+        weak_relocate_margin: nats per side camera; the appearance gain
+            (:meth:`AutoDetection._explains`: mean log-likelihood ratio, 003 Eq. 3 under the
+            track's model, of the detection's place over the track's estimate) above which
+            a detection scoring below ``beside_threshold`` moves the track (``inf``: such
+            a detection moves no track). A detection at or above it moves a track whose
+            model explains it better than the track's own place (gain above 0, the ratio's
+            even odds), or, when the two look alike (``move_distance``), not more than
+            ``look_alike_margin`` worse. Weak detections beside a track are often a
+            neighbour's fringe, so they need a clear gain.
         move_support: a track is moved by the gain only while the detection would leave it
             spare: its exclusive support (:func:`~.release.spare_tracks`) with the
             detection as one more track must be below this fraction. A track that keeps
             foreground of its own beside the detection stands on a person of its own and
             the detection is somebody else. Above 1: no track is kept from a move.
-        move_distance: appearance distance; a detection the gain would move a track to
-            although the track's model explains it worse than the track's own estimate
-            (gain in ``(relocate_margin, 0]``) must look like the track: distance at most
-            this. 1 lets the gain alone decide.
-        look_alike_slack: nats per side camera below ``relocate_margin`` down to which the
-            gain may still move a look-alike track (distance at most ``move_distance``)
-            for a strong detection (``beside_threshold``) that would leave the track less
-            than ``move_support``; 0 is off. Catches tracks left behind where their person
-            turned.
+        move_distance: appearance distance (003 Eq. 4) in [0, 1] at most which a track's
+            model and a detection's look alike (the same person): a strong detection that
+            the track's model explains worse than the track's own estimate (gain at most
+            0) moves only such a track. 1 lets any track within ``look_alike_margin``
+            move.
+        look_alike_margin: nats per side camera >= 0; how much worse than its own place
+            a track's model may explain a strong detection (``beside_threshold``) that
+            looks like it (``move_distance``) for the detection to move the track, when
+            the detection would leave the track less than ``move_support``; 0: a
+            look-alike needs a positive gain like any other. Catches tracks left behind
+            where their person turned.
         relocate_interval: seconds after a track was born or moved during which a detection
             does not move it again but is dropped (a young model explains several people
-            in a group about equally well: the track would hop between them).
-        move_again_gain: nats per side camera; within ``relocate_interval`` a detection
-            whose gain for that track is above this moves it again (once) instead of
-            being dropped. ``inf``: always dropped.
-        relocate_hidden: a confirmed detection that would start a new track within
-            ``relocate_radius`` of a track that is not reported (existence below the report
-            threshold: it lost its person) moves that track instead, whatever the gain
-            (the nearest such track not placed within ``relocate_interval``).
+            in a group about equally well: the track would hop between them), unless its
+            appearance gain is positive (the track's model explains the detection better
+            than the track's own place): then it is moved again, once. A confirmed
+            detection that would start a new track within ``relocate_radius`` of a track
+            that is not reported (existence below the report threshold: it lost its
+            person) moves that track instead, whatever the gain (the nearest such track
+            not placed within ``relocate_interval``).
         reuse_time, reuse_radius: seconds, metres; a released track is *lost* for
             ``reuse_time``: a new track born within ``reuse_radius`` of where it was
             released takes its id (its person re-found) when the two look alike
@@ -85,21 +84,20 @@ class AutoDetectionConfig:
         reuse_in_entry_zones: a track released inside an entry zone is lost for
             ``reuse_time`` like any other; False: its id ends at once (its person is taken
             to have left the room).
-        reuse_hidden: a detection that would start a new track moves instead the nearest
-            hidden track (not reported, not placed within ``relocate_interval``) within
+            A detection that would start a new track moves instead the nearest hidden
+            track (not reported, not placed within ``relocate_interval``) within
             ``reuse_radius`` whose model is within ``reuse_distance`` of the detection's:
             a hidden track is given back its person like a lost one.
         reuse_doubtful: existence probability below which a reported track counts as hidden
-            for ``reuse_hidden`` (logged "move N (doubtful, far)"); 0 disables. With
-            ``report_hidden`` every hidden track is reported, so this level is what lets
-            ``reuse_hidden`` take them.
+            for that (logged "move N (doubtful, far)"); 0 disables. With ``report_hidden``
+            every hidden track is reported, so this level is what lets the reuse take them.
         duplicate_margin: nats per side camera; of two such tracks keep the one whose
             appearance model explains the image where they are better (003 Eq. 3, both
             models at the pair's midpoint) by more than this
             (:meth:`AutoDetection._duplicate_judge`); ``inf`` disables. Large enough that
             a model acquired moments ago (which fits its own view best) does not win alone.
-        reach_radius, reach_directions: metres, count; a track whose coverage evidence for
-            existence is negative at its mean is also judged at ``reach_directions``
+        reach_radius: metres; a track whose coverage evidence for
+            existence is negative at its mean is also judged at eight
             places on each of two rings around it (radius half and all of
             ``reach_radius``), on the foreground no other track's silhouette covers, and
             the best place counts: a track that fell behind a person who started walking
@@ -131,27 +129,21 @@ class AutoDetectionConfig:
     adaptation: AdaptationConfig = field(default_factory=AdaptationConfig)
     sigma: float = 0.12
     clutter_distance: float = 0.5
-    visibility_particles: int = 6
     side_weight: float = 0.3
     report_hidden: bool = False
     relocate_radius: float = 1.0
-    relocate_margin: float = -3.0
     weak_relocate_margin: float = 1.5
     move_support: float = 0.3
     move_distance: float = 0.65
-    look_alike_slack: float = 3.0
+    look_alike_margin: float = 6.0
     relocate_interval: float = 2.0
-    move_again_gain: float = 0.0
-    relocate_hidden: bool = True
     reuse_time: float = 3.0
     reuse_radius: float = 1.5
     reuse_distance: float = 0.55
     reuse_in_entry_zones: bool = True
-    reuse_hidden: bool = True
     reuse_doubtful: float = 0.9
     duplicate_margin: float = 8.0
     reach_radius: float = 0.5
-    reach_directions: int = 8
     reach_age: float = 4.0
     beside_threshold: float = 3.0
     birth_exit_depth: float = 0.15
@@ -165,32 +157,29 @@ class AutoDetectionConfig:
     def gain_gate(self, score: float, gain: float, unlike: float) -> str | None:
         """Whether the appearance gain (003 Eq. 3, nats per side camera) lets a detection
         of ``score`` move a track whose model is ``unlike`` (appearance distance) from the
-        detection's: 'move'; 'unlike' when the gain is in the doubtful band (margin, 0]
-        and the track does not look like the detection (``move_distance`` keeps it back);
-        None when the gain is too low. The margin is ``relocate_margin``, the stricter
-        ``weak_relocate_margin`` below ``beside_threshold``; a strong detection may move
-        a look-alike ``look_alike_slack`` below it (:meth:`AutoDetection._identify`)."""
-        strong = score >= self.beside_threshold
-        margin = self.relocate_margin if strong \
-            else max(self.relocate_margin, self.weak_relocate_margin)
-        alike_margin = self.relocate_margin - self.look_alike_slack if strong else margin
-        looks_alike = self.looks_alike(unlike)
-        if margin < gain <= 0.0 and not looks_alike:
-            return 'unlike'
-        return 'move' if gain > margin or (looks_alike and gain > alike_margin) else None
+        detection's: 'move'; 'unlike' when the gain is in ``(-look_alike_margin, 0]`` of
+        a strong detection and the track does not look like the detection
+        (``move_distance`` keeps it back); None when the gain is too low. A strong
+        detection (``beside_threshold``) needs a positive gain, or a look-alike track
+        one above ``-look_alike_margin``; a weak one a gain above
+        ``weak_relocate_margin`` (:meth:`AutoDetection._identify`)."""
+        if score < self.beside_threshold:
+            return 'move' if gain > max(self.weak_relocate_margin, 0.0) else None
+        if gain > 0.0:
+            return 'move'
+        if self.looks_alike(unlike):
+            return 'move' if gain > -self.look_alike_margin else None
+        return 'unlike' if gain > -self.look_alike_margin else None
 
     def __post_init__(self) -> None:
-        if not self.relocate_radius >= 0 or not np.isfinite(self.relocate_margin):
-            raise DetectionError('relocate_radius must be >= 0 and relocate_margin finite')
+        if not self.relocate_radius >= 0:
+            raise DetectionError(f'relocate_radius must be >= 0, got {self.relocate_radius}')
         if np.isnan(self.weak_relocate_margin) or self.weak_relocate_margin == -np.inf:
             raise DetectionError(f'weak_relocate_margin must be a number or inf, got '
                                  f'{self.weak_relocate_margin}')
-        if np.isnan(self.move_again_gain) or self.move_again_gain == -np.inf:
-            raise DetectionError(f'move_again_gain must be a number or inf, got '
-                                 f'{self.move_again_gain}')
-        if not (np.isfinite(self.look_alike_slack) and self.look_alike_slack >= 0):
-            raise DetectionError(f'look_alike_slack must be a finite number >= 0, got '
-                                 f'{self.look_alike_slack}')
+        if not (np.isfinite(self.look_alike_margin) and self.look_alike_margin >= 0):
+            raise DetectionError(f'look_alike_margin must be a finite number >= 0, got '
+                                 f'{self.look_alike_margin}')
         if not 0.0 <= self.move_distance <= 1.0:
             raise DetectionError(f'move_distance must be in [0, 1], got {self.move_distance}')
         if not self.move_support >= 0:
@@ -211,12 +200,8 @@ class AutoDetectionConfig:
         if not (np.isfinite(self.beside_threshold) and self.beside_threshold >= 0):
             raise DetectionError(f'beside_threshold must be a finite number >= 0, got '
                                  f'{self.beside_threshold}')
-        if self.visibility_particles < 1:
-            raise DetectionError('visibility_particles must be >= 1')
-        if not (self.reach_radius >= 0 and self.reach_directions >= 1
-                and self.reach_age >= 0):
-            raise DetectionError('reach_radius and reach_age must be >= 0 and '
-                                 'reach_directions >= 1')
+        if not (self.reach_radius >= 0 and self.reach_age >= 0):
+            raise DetectionError('reach_radius and reach_age must be >= 0')
         if not (np.isfinite(self.birth_exit_depth) and self.birth_exit_depth >= 0):
             raise DetectionError(f'birth_exit_depth must be a finite number >= 0, got '
                                  f'{self.birth_exit_depth}')
