@@ -15,7 +15,9 @@ from mbtrack_ros.core.detection.detector import Detection, DetectorConfig
 from mbtrack_ros.core.detection.release import ReleaseConfig
 from mbtrack_ros.core.existence import AuxiliaryConfig
 
-__all__ = ['AutoDetectionConfig', 'Birth']
+__all__ = ['AutoDetectionConfig', 'Birth', 'WALK_SPEED']
+
+WALK_SPEED = 0.5    # m/s, a slow walk: how far a person gets from an unsupported track
 
 
 @dataclass(frozen=True)
@@ -72,25 +74,22 @@ class AutoDetectionConfig:
             that is not reported (existence below the report threshold: it lost its
             person) moves that track instead, whatever the gain (the nearest such track
             not placed within ``relocate_interval``).
-        reuse_time, reuse_radius: seconds, metres; a released track is *lost* for
-            ``reuse_time``: a new track born within ``reuse_radius`` of where it was
-            released takes its id (its person re-found) when the two look alike
-            (``reuse_distance``). The id ends (:meth:`finished`) only when that time has
-            passed unused, so an id never comes back after it ended. 0 ends released tracks
-            at once. The time should cover a person standing still after being lost (a few
-            seconds); the radius how far a lost track may lag its person.
+        reuse_time: seconds; a released track is *lost* for ``reuse_time``: a new track
+            born within :attr:`reuse_radius` of where it was released takes its id (its
+            person re-found) when the two look alike (``reuse_distance``). The id ends
+            (:meth:`finished`) only when that time has passed unused, so an id never comes
+            back after it ended. 0 ends released tracks at once. The time should cover a
+            person standing still after being lost (a few seconds). A detection that would
+            start a new track moves instead the nearest hidden track (not reported, or
+            reported with an existence below :attr:`reuse_doubtful`; not placed within
+            ``relocate_interval``) within :attr:`reuse_radius` whose model is within
+            ``reuse_distance`` of the detection's: a hidden track is given back its person
+            like a lost one.
         reuse_distance: largest appearance distance between a released track's model and a
             detection's for the detection to take the released id; 1 accepts any.
         reuse_in_entry_zones: a track released inside an entry zone is lost for
             ``reuse_time`` like any other; False: its id ends at once (its person is taken
             to have left the room).
-            A detection that would start a new track moves instead the nearest hidden
-            track (not reported, not placed within ``relocate_interval``) within
-            ``reuse_radius`` whose model is within ``reuse_distance`` of the detection's:
-            a hidden track is given back its person like a lost one.
-        reuse_doubtful: existence probability below which a reported track counts as hidden
-            for that (logged "move N (doubtful, far)"); 0 disables. With ``report_hidden``
-            every hidden track is reported, so this level is what lets the reuse take them.
         duplicate_margin: nats per side camera; of two such tracks keep the one whose
             appearance model explains the image where they are better (003 Eq. 3, both
             models at the pair's midpoint) by more than this
@@ -138,16 +137,32 @@ class AutoDetectionConfig:
     look_alike_margin: float = 6.0
     relocate_interval: float = 2.0
     reuse_time: float = 3.0
-    reuse_radius: float = 1.5
     reuse_distance: float = 0.55
     reuse_in_entry_zones: bool = True
-    reuse_doubtful: float = 0.9
     duplicate_margin: float = 8.0
     reach_radius: float = 0.5
     reach_age: float = 4.0
     beside_threshold: float = 3.0
     birth_exit_depth: float = 0.15
     track_coverage: float = 2.0
+
+    @property
+    def reuse_radius(self) -> float:
+        """Metres from a lost or hidden track within which a detection may be its person:
+        ``relocate_radius`` (how far a supported track may lag its person) widened by
+        :data:`WALK_SPEED` over the release's ``timeout`` (how long the person may have
+        walked on while the track was unsupported before it was released)."""
+        return self.relocate_radius + WALK_SPEED * self.release.timeout
+
+    @property
+    def reuse_doubtful(self) -> float:
+        """Existence probability below which a reported track counts as hidden for the
+        reuse (logged "move N (doubtful, far)"): the existence a track is born with
+        (``existence.initial_existence``, 001 §3.2); the track a detection moves there is a
+        hypothesis no better supported than the birth it replaces. With
+        ``report_hidden`` every hidden track is reported, so this level is what lets the
+        reuse take them."""
+        return self.existence.initial_existence
 
     def looks_alike(self, unlike: float) -> bool:
         """Whether a track whose model is ``unlike`` (appearance distance) from a
@@ -186,12 +201,8 @@ class AutoDetectionConfig:
             raise DetectionError(f'move_support must be >= 0, got {self.move_support}')
         if not self.duplicate_margin >= 0:
             raise DetectionError(f'duplicate_margin must be >= 0, got {self.duplicate_margin}')
-        if not (self.reuse_time >= 0 and self.reuse_radius >= 0
-                and 0 <= self.reuse_distance <= 1):
-            raise DetectionError('reuse_time and reuse_radius must be >= 0, reuse_distance '
-                                 'in [0, 1]')
-        if not 0.0 <= self.reuse_doubtful <= 1.0:
-            raise DetectionError(f'reuse_doubtful must be in [0, 1], got {self.reuse_doubtful}')
+        if not (self.reuse_time >= 0 and 0 <= self.reuse_distance <= 1):
+            raise DetectionError('reuse_time must be >= 0 and reuse_distance in [0, 1]')
         if not self.sigma > 0 or not self.clutter_distance > 0:
             raise DetectionError('sigma and clutter_distance must be > 0')
         if not (np.isfinite(self.track_coverage) and self.track_coverage >= 0):
