@@ -1636,13 +1636,16 @@ def test_a_hidden_track_1_2_m_away_is_given_back_its_person_when_she_looks_alike
 @pytest.mark.parametrize('who, moved', [('same', True), ('other', False)])
 def test_a_reported_track_of_doubtful_existence_is_given_back_its_person_like_a_hidden_one(
         who, moved):
-    """As above, but track 1 stays reported (``report_hidden``) while its existence falls
-    once she has stepped 1.2 m away. Below ``reuse_doubtful`` (a newborn's existence, 0.9)
+    """As above, but track 1 stays reported (``existence.report_threshold`` 0) while its
+    existence falls once she has stepped 1.2 m away. Below ``reuse_doubtful`` (a newborn's existence, 0.9)
     it counts as hidden and her detection moves it there ("doubtful, far"); it is not
     taken for a person dressed differently (a new track is born)."""
     assert AutoDetectionConfig().reuse_doubtful == 0.9
+    from mbtrack_ros.core.existence import AuxiliaryConfig
+
     rng = np.random.default_rng(5)
-    calib, bgs, tracker = _painted_room_tracker(4, report_hidden=True, reach_radius=0.0)
+    calib, bgs, tracker = _painted_room_tracker(
+        4, reach_radius=0.0, existence=AuxiliaryConfig(report_threshold=0.0))
     here = person(2.0, 2.5, theta=0.0)
     there = person(3.2, 2.5, theta=0.0, **({} if who == 'same' else {'colours': YELLOW}))
     actions, existence, far = [], [], []
@@ -1655,7 +1658,7 @@ def test_a_reported_track_of_doubtful_existence_is_given_back_its_person_like_a_
             actions += [d['action'] for d in tracker.detection.decisions]
             far += [d['far'] for d in tracker.detection.decisions if 'far' in d]
             existence.append(tracker.detection.aux[1].existence)
-    assert min(existence) < 0.5         # not reported without report_hidden
+    assert min(existence) < 0.5         # not reported at the default report_threshold
     assert ('move 1 (doubtful, far)' in actions) == moved, actions
     if moved:   # logged: the track, its distance, appearance distance and existence
         (tid, metres, unlike, exists), = far

@@ -37,7 +37,6 @@ class AutoDetectionConfig:
             clutter likelihood ``p_0`` (001 Eq. 23).
         side_weight: weight in [0, 1] of the side cameras' evidence in the existence update
             when a top-down camera exists.
-        report_hidden: also report tracks whose existence is below the report threshold.
         relocate_radius: metres; a confirmed detection this close to a current track is
             compared with the track's appearance model before it may start a new track.
         weak_relocate_margin: nats per side camera; the appearance gain
@@ -129,7 +128,6 @@ class AutoDetectionConfig:
     sigma: float = 0.12
     clutter_distance: float = 0.5
     side_weight: float = 0.3
-    report_hidden: bool = False
     relocate_radius: float = 1.0
     weak_relocate_margin: float = 1.5
     move_support: float = 0.3
@@ -160,8 +158,8 @@ class AutoDetectionConfig:
         reuse (logged "move N (doubtful, far)"): the existence a track is born with
         (``existence.initial_existence``, 001 §3.2); the track a detection moves there is a
         hypothesis no better supported than the birth it replaces. With
-        ``report_hidden`` every hidden track is reported, so this level is what lets the
-        reuse take them."""
+        ``existence.report_threshold`` 0 every track is reported, so this level is what
+        lets the reuse take hidden ones."""
         return self.existence.initial_existence
 
     def looks_alike(self, unlike: float) -> bool:

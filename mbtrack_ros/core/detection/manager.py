@@ -559,8 +559,10 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
         return done + [int(t) for t in released if int(t) not in self._released]
 
     def reported(self, track_id: int) -> bool:
+        """Whether the track is reported: its existence is at least the existence
+        process's ``report_threshold`` (001 §3.2; a track without one yet is)."""
         aux = self.aux.get(int(track_id))
-        return aux is None or aux.reported or self.config.report_hidden
+        return aux is None or aux.reported
 
     # -- helpers --------------------------------------------------------------------------
     def _adapt(self, stamp_ns: int, tracks: Sequence[TrackEstimate],
