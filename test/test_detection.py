@@ -1213,7 +1213,7 @@ def test_a_person_re_found_soon_after_the_release_gets_the_released_id(
     detected again at the same place 0.3 s later: within ``reuse_time`` the new track takes
     the released id, in the entry zone too (``reuse_in_entry_zones``); with ``reuse_time``
     0, in the entry zone without ``reuse_in_entry_zones`` (the person is taken to have
-    left), or when somebody who looks different stands there (``reuse_distance``; in the
+    left), or when somebody who looks different stands there (``alike_distance``; in the
     entry zone: a newcomer), a new id is issued. The id ends (``FrameResult.ended``) at the
     release when it cannot come back, ``reuse_time`` after it when nobody took it, never
     when it was taken: an id never returns after it ended."""
@@ -1551,10 +1551,10 @@ def test_a_lost_track_that_looks_like_the_person_is_reused_before_another_is_mov
         monkeypatch, how):
     """Blue's track (1) is released while she is away; yellow's track (2) is either hidden
     (not reported, moved whatever the gain) or left behind when yellow walks off (a move by
-    the appearance gain, ``look_alike_margin`` raised and ``move_distance`` off so that any
-    gain moves).
+    the appearance gain, ``look_alike_margin`` raised and every track taken to look like the
+    detection so that any gain moves).
     Blue comes back 0.75 m from track 2: she takes her lost id back (her model fits her,
-    track 2's is yellow's) and track 2 stays. With ``reuse_distance`` 0 no released id is reused by a
+    track 2's is yellow's) and track 2 stays. With ``alike_distance`` 0 no released id is reused by a
     birth: the comparison of the two models alone gives blue her id back. When track 2
     was placed within ``relocate_interval`` ('young') the move would not happen (the
     detection is dropped), and neither does the reuse in its place."""
@@ -1562,7 +1562,8 @@ def test_a_lost_track_that_looks_like_the_person_is_reused_before_another_is_mov
 
     rng = np.random.default_rng(5)
     calib, bgs, tracker = _painted_room_tracker(
-        4, reach_radius=0.0, reuse_distance=0.0, look_alike_margin=1e9, move_distance=1.0)
+        4, reach_radius=0.0, alike_distance=0.0, look_alike_margin=1e9)
+    monkeypatch.setattr(AutoDetectionConfig, 'looks_alike', lambda self, unlike: True)
     if how == 'hidden':     # the gain never moves
         monkeypatch.setattr(AutoDetection, '_explains', lambda self, *a: -1e10)
     if how == 'young':      # the gain's move, onto a track placed moments ago
@@ -1610,7 +1611,7 @@ def test_a_hidden_track_1_2_m_away_is_given_back_its_person_when_she_looks_alike
     id), as a lost track's id would be given back within ``reuse_radius``; with a
     ``reuse_radius`` below 1.2 m (``relocate_radius`` 0.5 m), or when the person there is
     dressed differently
-    (``reuse_distance``), a new track is born."""
+    (``alike_distance``), a new track is born."""
     from mbtrack_ros.core.detection.manager import AutoDetection
 
     rng = np.random.default_rng(5)
@@ -1672,7 +1673,7 @@ def _move_or_birth(monkeypatch, who: str, gain: float, **detection):
     """Track 1 follows a person in blue; from frame 40 she is gone and somebody (``who``:
     'same', the blue person, or 'other', dressed in yellow) stands 0.75 m from the track,
     the appearance gain of track 1's model there forced to ``gain``. Returns the tracker,
-    the decisions' actions from frame 40 and the tracks ``move_distance`` kept back."""
+    the decisions' actions from frame 40 and the tracks ``alike_distance`` kept back."""
     from mbtrack_ros.core.detection.manager import AutoDetection
 
     rng = np.random.default_rng(5)
@@ -1700,12 +1701,12 @@ def test_a_doubtful_move_needs_the_detection_to_look_like_the_track(
         monkeypatch, gate, who, gain, moved):
     """The scene of :func:`_move_or_birth` with the gain in the doubtful band (-1: the
     track's model explains the detection a little worse than its own estimate). With
-    ``move_distance`` at its default a person dressed differently is born as a new track
+    ``alike_distance`` at its default a person dressed differently is born as a new track
     and track 1 stays, while the blue person herself still takes track 1 (her model
     matches); with 1 the gain alone decides and track 1 is moved onto the stranger. A
     positive gain (+1) is not doubtful: the stranger takes track 1 whatever the gate."""
-    gate = AutoDetectionConfig().move_distance if gate is None else gate
-    tracker, actions, unalike = _move_or_birth(monkeypatch, who, gain, move_distance=gate)
+    gate = AutoDetectionConfig().alike_distance if gate is None else gate
+    tracker, actions, unalike = _move_or_birth(monkeypatch, who, gain, alike_distance=gate)
     assert ('move 1' in actions) == moved, actions
     assert ('birth' in actions) == (not moved), actions
     assert bool(unalike) == (gate < 1.0 and who == 'other' and gain <= 0), unalike
@@ -1715,7 +1716,7 @@ def test_a_doubtful_move_needs_the_detection_to_look_like_the_track(
         assert np.hypot(mean[0] - 2.75, mean[1] - 2.5) < 0.3, mean
     for bad in (1.5, -0.1, float('nan')):
         with pytest.raises(DetectionError):
-            AutoDetectionConfig(move_distance=bad)
+            AutoDetectionConfig(alike_distance=bad)
 
 
 @pytest.mark.parametrize('who, gain, slack, moved', [
@@ -1778,13 +1779,13 @@ def test_of_two_tracks_a_detection_could_move_the_one_that_looks_like_it_is_move
         monkeypatch):
     """Track 1 follows a person in blue, track 2 one in yellow; from frame 40 both are gone
     and the blue person stands 0.75 m from each track. Both tracks may be moved there
-    (gains in the doubtful band, ``move_distance`` 1), and track 2's gain is the higher
+    (gains in the doubtful band, ``alike_distance`` 1), and track 2's gain is the higher
     one (-1 against -2; each gain compares the detection with that track's own place).
     The track whose model is nearer the detection's in appearance is moved: track 1."""
     from mbtrack_ros.core.detection.manager import AutoDetection
 
     rng = np.random.default_rng(5)
-    calib, bgs, tracker = _painted_room_tracker(4, reach_radius=0.0, move_distance=1.0)
+    calib, bgs, tracker = _painted_room_tracker(4, reach_radius=0.0, alike_distance=1.0)
     _no_hidden_moves(monkeypatch)
     blue, yellow = person(2.0, 2.5, theta=0.0), person(3.5, 2.5, theta=0.0, colours=YELLOW)
     there = person(2.75, 2.5, theta=0.0)

@@ -56,7 +56,7 @@ class DetectionAssociator:
         groups (right and wrong moves both have gains of a few nats either way per camera);
         still, moving instead of a birth avoids most second tracks on one person, and the
         interval stops a track hopping through a
-        group. A track that looks like the detection (``move_distance``) may be moved by a
+        group. A track that looks like the detection (``alike_distance``) may be moved by a
         gain down to ``-look_alike_margin``. Of several tracks the gain would move, the
         one whose model is nearest the detection's in appearance is. A detection scoring
         below ``beside_threshold`` needs the stricter ``weak_relocate_margin`` to move a
@@ -72,7 +72,7 @@ class DetectionAssociator:
         existence counts as hidden, ``reuse_doubtful``); a detection that would still
         be born beside a look-alike track born or moved within ``relocate_interval`` is
         dropped: a young track lags its person for a few frames, and the detection beside
-        it that looks like it (``move_distance``) is that person - unless the young track
+        it that looks like it (``alike_distance``) is that person - unless the young track
         keeps ``move_support`` of its exclusive support with the detection as one more
         track (it stands on a person of its own).
         """
@@ -83,7 +83,7 @@ class DetectionAssociator:
         near = []                   # (id, distance, gain, appearance distance) of the
         #                             tracks the check compared
         movable = []                # indices of the tracks the gain would move
-        unalike = []                # (id, distance) of those move_distance kept back
+        unalike = []                # (id, distance) of those alike_distance kept back
         likeness = {}               # id -> appearance distance to the detection, once each
         gains = {}                  # id -> appearance gain (nats per side camera), unrounded
         for k in keep:
@@ -233,7 +233,7 @@ class DetectionAssociator:
         ``relocate_radius``) of the detection (a track whose existence fell below the
         report threshold; or, reported, below ``below_existence``), or None; with ``like``
         (the detection's model, and the cache of appearance distances to it by track id,
-        filled here) only a track whose model is within ``reuse_distance`` of that model
+        filled here) only a track whose model is within ``alike_distance`` of that model
         (the reuse of a hidden track). Not a track born or moved within ``relocate_interval``: hidden
         again so soon, its model does not explain the person there."""
         best = None
@@ -254,7 +254,7 @@ class DetectionAssociator:
                 model, likeness = like
                 if tid not in likeness:
                     likeness[tid] = model_distance(models[tid], model)
-                if likeness[tid] > self.config.reuse_distance:
+                if likeness[tid] > self.config.alike_distance:
                     continue
             if best is None or d < best[1]:
                 best = (k, d)
@@ -301,7 +301,7 @@ class DetectionAssociator:
                   below: float | None = None) -> int | None:
         """The id of the track released nearest the detection, within ``reuse_radius``
         metres and ``reuse_time`` seconds, not live, whose appearance model is within
-        ``reuse_distance`` of the detection's - or, when ``below`` is given, nearer than
+        ``alike_distance`` of the detection's - or, when ``below`` is given, nearer than
         ``below`` (a lost track nearer in appearance than the track to be moved) - (and forgets it), or None; each candidate's
         distance and model distance go to ``info['reuse']``."""
         best = None
@@ -311,7 +311,7 @@ class DetectionAssociator:
                 continue
             unlike = model_distance(old, model) if old is not None else 1.0
             info.setdefault('reuse', []).append((int(tid), round(d, 2), round(unlike, 3)))
-            fits = unlike <= self.config.reuse_distance if below is None else unlike < below
+            fits = unlike <= self.config.alike_distance if below is None else unlike < below
             if fits and (best is None or d < best[1]):
                 best = (tid, d)
         if best is None:

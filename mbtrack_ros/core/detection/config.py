@@ -45,7 +45,7 @@ class AutoDetectionConfig:
             a detection scoring below ``beside_threshold`` moves the track (``inf``: such
             a detection moves no track). A detection at or above it moves a track whose
             model explains it better than the track's own place (gain above 0, the ratio's
-            even odds), or, when the two look alike (``move_distance``), not more than
+            even odds), or, when the two look alike (``alike_distance``), not more than
             ``look_alike_margin`` worse. Weak detections beside a track are often a
             neighbour's fringe, so they need a clear gain.
         move_support: a track is moved by the gain only while the detection would leave it
@@ -53,14 +53,14 @@ class AutoDetectionConfig:
             detection as one more track must be below this fraction. A track that keeps
             foreground of its own beside the detection stands on a person of its own and
             the detection is somebody else. Above 1: no track is kept from a move.
-        move_distance: appearance distance (003 Eq. 4) in [0, 1] at most which a track's
-            model and a detection's look alike (the same person): a strong detection that
-            the track's model explains worse than the track's own estimate (gain at most
-            0) moves only such a track. 1 lets any track within ``look_alike_margin``
-            move.
+        alike_distance: appearance distance (003 Eq. 4, between two appearance models)
+            in [0, 1] at most which a track's model and a detection's show the same person:
+            a strong detection that the track's model explains worse than the track's own
+            estimate (gain at most 0) moves only such a track, and only such a lost or
+            hidden track takes a detection's person back. 1 accepts any.
         look_alike_margin: nats per side camera >= 0; how much worse than its own place
             a track's model may explain a strong detection (``beside_threshold``) that
-            looks like it (``move_distance``) for the detection to move the track, when
+            looks like it (``alike_distance``) for the detection to move the track, when
             the detection would leave the track less than ``move_support``; 0: a
             look-alike needs a positive gain like any other. Catches tracks left behind
             where their person turned.
@@ -75,17 +75,15 @@ class AutoDetectionConfig:
             not placed within ``relocate_interval``).
         reuse_time: seconds; a released track is *lost* for ``reuse_time``: a new track
             born within :attr:`reuse_radius` of where it was released takes its id (its
-            person re-found) when the two look alike (``reuse_distance``). The id ends
+            person re-found) when the two look alike (``alike_distance``). The id ends
             (:meth:`finished`) only when that time has passed unused, so an id never comes
             back after it ended. 0 ends released tracks at once. The time should cover a
             person standing still after being lost (a few seconds). A detection that would
             start a new track moves instead the nearest hidden track (not reported, or
             reported with an existence below :attr:`reuse_doubtful`; not placed within
             ``relocate_interval``) within :attr:`reuse_radius` whose model is within
-            ``reuse_distance`` of the detection's: a hidden track is given back its person
+            ``alike_distance`` of the detection's: a hidden track is given back its person
             like a lost one.
-        reuse_distance: largest appearance distance between a released track's model and a
-            detection's for the detection to take the released id; 1 accepts any.
         reuse_in_entry_zones: a track released inside an entry zone is lost for
             ``reuse_time`` like any other; False: its id ends at once (its person is taken
             to have left the room).
@@ -131,11 +129,10 @@ class AutoDetectionConfig:
     relocate_radius: float = 1.0
     weak_relocate_margin: float = 1.5
     move_support: float = 0.3
-    move_distance: float = 0.65
+    alike_distance: float = 0.6
     look_alike_margin: float = 6.0
     relocate_interval: float = 2.0
     reuse_time: float = 3.0
-    reuse_distance: float = 0.55
     reuse_in_entry_zones: bool = True
     duplicate_margin: float = 8.0
     reach_radius: float = 0.5
@@ -164,15 +161,15 @@ class AutoDetectionConfig:
 
     def looks_alike(self, unlike: float) -> bool:
         """Whether a track whose model is ``unlike`` (appearance distance) from a
-        detection's looks like it (``move_distance``)."""
-        return unlike <= self.move_distance
+        detection's looks like it (``alike_distance``)."""
+        return unlike <= self.alike_distance
 
     def gain_gate(self, score: float, gain: float, unlike: float) -> str | None:
         """Whether the appearance gain (003 Eq. 3, nats per side camera) lets a detection
         of ``score`` move a track whose model is ``unlike`` (appearance distance) from the
         detection's: 'move'; 'unlike' when the gain is in ``(-look_alike_margin, 0]`` of
         a strong detection and the track does not look like the detection
-        (``move_distance`` keeps it back); None when the gain is too low. A strong
+        (``alike_distance`` keeps it back); None when the gain is too low. A strong
         detection (``beside_threshold``) needs a positive gain, or a look-alike track
         one above ``-look_alike_margin``; a weak one a gain above
         ``weak_relocate_margin`` (:meth:`AutoDetection._identify`)."""
@@ -193,14 +190,14 @@ class AutoDetectionConfig:
         if not (np.isfinite(self.look_alike_margin) and self.look_alike_margin >= 0):
             raise DetectionError(f'look_alike_margin must be a finite number >= 0, got '
                                  f'{self.look_alike_margin}')
-        if not 0.0 <= self.move_distance <= 1.0:
-            raise DetectionError(f'move_distance must be in [0, 1], got {self.move_distance}')
+        if not 0.0 <= self.alike_distance <= 1.0:
+            raise DetectionError(f'alike_distance must be in [0, 1], got {self.alike_distance}')
         if not self.move_support >= 0:
             raise DetectionError(f'move_support must be >= 0, got {self.move_support}')
         if not self.duplicate_margin >= 0:
             raise DetectionError(f'duplicate_margin must be >= 0, got {self.duplicate_margin}')
-        if not (self.reuse_time >= 0 and 0 <= self.reuse_distance <= 1):
-            raise DetectionError('reuse_time must be >= 0 and reuse_distance in [0, 1]')
+        if not self.reuse_time >= 0:
+            raise DetectionError(f'reuse_time must be >= 0, got {self.reuse_time}')
         if not self.sigma > 0 or not self.clutter_distance > 0:
             raise DetectionError('sigma and clutter_distance must be > 0')
         if not (np.isfinite(self.track_coverage) and self.track_coverage >= 0):
