@@ -1694,6 +1694,59 @@ def _move_or_birth(monkeypatch, who: str, gain: float, **detection):
     return tracker, actions, unalike
 
 
+def test_the_gain_gate_decides_by_the_log_likelihood_ratio():
+    """:meth:`AutoDetectionConfig.gain_gate` against its rule written out case by case on a
+    grid of scores, gains (nats per side camera) and appearance distances: a strong
+    detection moves a track whose model explains it better than the track's own place
+    (gain > 0), or a look-alike track (``alike_distance``) down to ``-look_alike_margin``;
+    a weak one needs ``weak_relocate_margin``."""
+    cfg = AutoDetectionConfig()
+    checked = set()
+    for score in (0.5, cfg.beside_threshold - 0.01, cfg.beside_threshold, 6.0):
+        for gain in (-9.0, -6.0, -5.9, -1.0, 0.0, 0.01, 1.5, 1.51, 4.0):
+            for unlike in (0.1, cfg.alike_distance, cfg.alike_distance + 0.01, 0.9):
+                strong, alike = score >= cfg.beside_threshold, unlike <= cfg.alike_distance
+                if not strong:
+                    want = 'move' if gain > cfg.weak_relocate_margin else None
+                elif gain > 0 or (alike and gain > -cfg.look_alike_margin):
+                    want = 'move'
+                elif gain > -cfg.look_alike_margin:
+                    want = 'unlike'         # a stranger kept back by its looks
+                else:
+                    want = None
+                assert cfg.gain_gate(score, gain, unlike) == want, (score, gain, unlike)
+                checked.add(want)
+    assert checked == {'move', 'unlike', None}
+
+
+def test_every_decision_is_logged_with_its_terms(monkeypatch, caplog):
+    """Each confirmed detection's decision is one debug line: the detection's place and
+    score, the action, and its terms - per track compared (id, metres, appearance gain in
+    nats per side camera, appearance distance), the exclusive support a move would leave,
+    the strangers the looks kept back. In the scene of :func:`_move_or_birth` with the
+    gain forced to -1: the blue person moves track 1, the stranger in yellow is born."""
+    import logging
+    import re
+
+    logger = 'mbtrack_ros.core.detection.association'
+    for who, action in (('same', 'move 1'), ('other', 'birth')):
+        caplog.clear()
+        with caplog.at_level(logging.DEBUG, logger=logger):
+            _, actions, _ = _move_or_birth(monkeypatch, who, -1.0)
+        lines = [r.getMessage() for r in caplog.records if r.name == logger]
+        assert len(lines) >= len(actions) > 0 and action in actions, (actions, lines)
+        # (the first birth is the blue person's when the room was empty)
+        line = next(m for m in lines if f': {action};' in m and 'near=' in m)
+        assert re.match(r'detection at \(2\.\d\d, 2\.\d\d\) score \d+\.\d\d: ', line), line
+        terms = re.search(r'near=\[\(1, ([\d.]+), (-?[\d.]+), ([\d.]+)\)\]', line)
+        assert terms is not None, line
+        metres, gain, unlike = map(float, terms.groups())
+        assert 0.5 < metres < 1.0 and gain == -1.0
+        assert (unlike <= AutoDetectionConfig().alike_distance) == (who == 'same'), line
+        assert ('support=[(1, ' in line) == (who == 'same'), line
+        assert ('unalike=[(1, ' in line) == (who == 'other'), line
+
+
 @pytest.mark.parametrize('gate, who, gain, moved', [
     (None, 'other', -1.0, False), (1.0, 'other', -1.0, True), (None, 'same', -1.0, True),
     (None, 'other', 1.0, True)])
