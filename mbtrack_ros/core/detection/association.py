@@ -344,7 +344,7 @@ class DetectionAssociator:
             rel = relative_angle(states[:, THETA], cam.viewing_angle(states[:, [X, Y]]))
             hists = np.stack([m.interpolate(rel[i:i + 1])[0] for i, m in enumerate(models)])
             out.append(single_target_loglik(evidence[n].bins, sil, hists,
-                                            sigma=self.config.sigma))
+                                            sigma=self.sigma))
         return out
 
     @staticmethod

@@ -32,7 +32,6 @@ class AutoDetectionConfig:
         background, detector, release, acquisition, existence: per-stage parameters.
         adaptation: the slow appearance-model adaptation of confirmed tracks
             (:mod:`~mbtrack_ros.core.detection.adaptation`; ``rate`` 0 is off).
-        sigma: appearance likelihood width (003 Eq. 3), as the tracker's.
         clutter_distance: Bhattacharyya distance whose likelihood is the "not visible"
             clutter likelihood ``p_0`` (001 Eq. 23).
         side_weight: weight in [0, 1] of the side cameras' evidence in the existence update
@@ -123,7 +122,6 @@ class AutoDetectionConfig:
     acquisition: AcquisitionConfig = field(default_factory=AcquisitionConfig)
     existence: AuxiliaryConfig = field(default_factory=AuxiliaryConfig)
     adaptation: AdaptationConfig = field(default_factory=AdaptationConfig)
-    sigma: float = 0.12
     clutter_distance: float = 0.5
     side_weight: float = 0.3
     relocate_radius: float = 1.0
@@ -198,8 +196,8 @@ class AutoDetectionConfig:
             raise DetectionError(f'duplicate_margin must be >= 0, got {self.duplicate_margin}')
         if not self.reuse_time >= 0:
             raise DetectionError(f'reuse_time must be >= 0, got {self.reuse_time}')
-        if not self.sigma > 0 or not self.clutter_distance > 0:
-            raise DetectionError('sigma and clutter_distance must be > 0')
+        if not self.clutter_distance > 0:
+            raise DetectionError(f'clutter_distance must be > 0, got {self.clutter_distance}')
         if not (np.isfinite(self.track_coverage) and self.track_coverage >= 0):
             raise DetectionError(f'track_coverage must be a finite number >= 0, got '
                                  f'{self.track_coverage}')

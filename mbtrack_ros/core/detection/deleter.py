@@ -202,7 +202,7 @@ class TrackDeleter:
         ``colour(camera)`` gives the frame's colour bins of a side camera; ``reach(k)`` the
         coverages of track k's reach ring (:meth:`_reach_coverage`)."""
         cfg = self.config
-        hidden = -cfg.clutter_distance ** 2 / (2.0 * cfg.sigma ** 2)    # 001 Eq. 23
+        hidden = -cfg.clutter_distance ** 2 / (2.0 * self.sigma ** 2)    # 001 Eq. 23
         has_particles = len(parts) > 0
         loglik: dict[str, np.ndarray] = {}
         if has_particles:
@@ -217,7 +217,7 @@ class TrackDeleter:
             for c, n in enumerate(cams):
                 sil = part_sils[n]
                 ll = key_view_loglik(colour(n), sil, key, target.ravel(), va[c], vb[c], wa[c],
-                                     sigma=cfg.sigma)
+                                     sigma=self.sigma)
                 loglik[n] = np.where(sil.area > 0, ll, -np.inf)
         for k, t in enumerate(tracks):
             aux = self.aux.setdefault(t.track_id, TrackAuxiliary(cfg.existence))

@@ -75,14 +75,19 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
     Args:
         calibration: the room.
         config: pipeline parameters.
+        sigma: the appearance likelihood width (003 Eq. 3; 000 Eq. 19), the tracking
+            filter's (``LikelihoodConfig.sigma``).
 
     The pipeline draws no random numbers: it is deterministic given the tracks.
     """
 
-    def __init__(self, calibration: RoomCalibration, config: AutoDetectionConfig | None = None
-                 ) -> None:
+    def __init__(self, calibration: RoomCalibration, config: AutoDetectionConfig | None = None,
+                 *, sigma: float = 0.12) -> None:
+        if not (np.isfinite(sigma) and sigma > 0):
+            raise DetectionError(f'sigma must be a finite number > 0, got {sigma}')
         self.calibration = calibration
         self.config = cfg = config or AutoDetectionConfig()
+        self.sigma = float(sigma)
         self.background = BackgroundBank(cfg.background, calibration=calibration)
         self.detector = Detector(calibration, cfg.detector)
         self.releaser = Releaser(calibration, cfg.release)
