@@ -1573,7 +1573,7 @@ def test_a_lost_track_that_looks_like_the_person_is_reused_before_another_is_mov
                             or placed(self, tid, stamp))
     blue, yellow = person(2.0, 2.5, theta=0.0), person(3.5, 2.5, theta=0.0, colours=YELLOW)
     back = person(2.75, 2.5, theta=0.0)
-    released_at, actions = None, []
+    released_at, actions, decided = None, [], []
     for k in range(60):
         if released_at is None:
             people = [yellow] if k >= 15 else [blue, yellow]
@@ -1582,9 +1582,10 @@ def test_a_lost_track_that_looks_like_the_person_is_reused_before_another_is_mov
             people = ([] if k < released_at + 5 else [back]) + ([] if gone else [yellow])
         tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, people, rng))
         actions += [d['action'] for d in tracker.detection.decisions]
+        decided += tracker.detection.decisions
         if released_at is None and k > 10 and tracker.track_ids == [2]:
             released_at = k
-            actions = []
+            actions, decided = [], []
             if how == 'hidden':
                 monkeypatch.setattr(AutoDetection, 'reported', lambda self, tid: tid != 2)
         if released_at is not None and k >= released_at + 12:
@@ -1600,6 +1601,12 @@ def test_a_lost_track_that_looks_like_the_person_is_reused_before_another_is_mov
     else:
         assert 'reuse 1 (not 2)' in actions and moved not in actions, actions
         assert on_blue == [1]
+        # the terms that decided it: lost track 1 (metres, appearance distance) nearer
+        # blue in appearance than track 2, the track the detection would have moved
+        reuse = next(d for d in decided if d['action'] == 'reuse 1 (not 2)')
+        (lost, metres, unlike), = [r for r in reuse['reuse'] if r[0] == 1]
+        assert reuse['unlike'][0] == 2 and unlike < reuse['unlike'][1], reuse
+        assert metres <= AutoDetectionConfig().reuse_radius, reuse
 
 
 @pytest.mark.parametrize('rule, who, moved', [(True, 'same', True), (False, 'same', False),
@@ -1876,7 +1883,7 @@ def test_no_birth_beside_a_young_track_that_looks_like_the_detection(monkeypatch
     here = person(2.0, 2.5, theta=0.0)
     there = person(2.75, 2.5, theta=0.0, **({} if who == 'same' else {'colours': YELLOW}))
     placed = AutoDetection._placed_recently
-    actions = []
+    actions, decided = [], []
     for k in range(52):
         if k == 40:
             assert tracker.track_ids == [1]
@@ -1888,6 +1895,10 @@ def test_no_birth_beside_a_young_track_that_looks_like_the_detection(monkeypatch
                            + ([there] if k >= 40 else []), rng))
         if k >= 40:
             actions += [d['action'] for d in tracker.detection.decisions]
+            decided += tracker.detection.decisions
     assert ('birth' in actions) == born, actions
     assert ('drop (young look-alike 1)' in actions) == (not born), actions
+    if not born:    # the terms: track 1 compared, its gain (-10) too low to move it
+        drop = next(d for d in decided if d['action'] == 'drop (young look-alike 1)')
+        assert [n[0] for n in drop['near']] == [1] and drop['near'][0][2] == -10.0, drop
     assert len(tracker.track_ids) == (2 if born else 1), tracker.track_ids
