@@ -91,10 +91,9 @@ class AutoDetectionConfig:
             models at the pair's midpoint) by more than this
             (:meth:`AutoDetection._duplicate_judge`); ``inf`` disables. Large enough that
             a model acquired moments ago (which fits its own view best) does not win alone.
-        reach_radius: metres; a track whose coverage evidence for
-            existence is negative at its mean is also judged at eight
-            places on each of two rings around it (radius half and all of
-            ``reach_radius``), on the foreground no other track's silhouette covers, and
+        reach_radius: metres; a track whose coverage evidence for existence is negative
+            at its mean is also judged at eight places on each of two rings around it
+            (radius half and all of ``reach_radius``), on the foreground no other track's silhouette covers, and
             the best place counts: a track that fell behind a person who started walking
             stays reported while the person is within the detector's ``exclusion_radius``
             (where the detector does not look for them), and when that place has positive
