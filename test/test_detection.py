@@ -1706,15 +1706,15 @@ def test_the_gain_gate_decides_by_the_log_likelihood_ratio():
     grid of scores, gains (nats per side camera) and appearance distances: a strong
     detection moves a track whose model explains it better than the track's own place
     (gain > 0), or a look-alike track (``alike_distance``) down to ``-look_alike_margin``;
-    a weak one needs ``weak_relocate_margin``."""
+    a weak one a gain above its score's shortfall below ``beside_threshold``."""
     cfg = AutoDetectionConfig()
     checked = set()
     for score in (0.5, cfg.beside_threshold - 0.01, cfg.beside_threshold, 6.0):
-        for gain in (-9.0, -6.0, -5.9, -1.0, 0.0, 0.01, 1.5, 1.51, 4.0):
+        for gain in (-9.0, -6.0, -5.9, -1.0, 0.0, 0.005, 0.02, 1.5, 2.0, 2.6, 4.0):
             for unlike in (0.1, cfg.alike_distance, cfg.alike_distance + 0.01, 0.9):
                 strong, alike = score >= cfg.beside_threshold, unlike <= cfg.alike_distance
                 if not strong:
-                    want = 'move' if gain > cfg.weak_relocate_margin else None
+                    want = 'move' if gain > cfg.beside_threshold - score else None
                 elif gain > 0 or (alike and gain > -cfg.look_alike_margin):
                     want = 'move'
                 elif gain > -cfg.look_alike_margin:
@@ -1828,7 +1828,7 @@ def test_a_track_placed_moments_ago_is_moved_again_by_a_positive_gain_once(
         actions += [d['action'] for d in tracker.detection.decisions if k >= 40]
     # each action once, in this order (a person detected again on the next frames
     # gives the same action again: repeats dropped; a weak detection of her beside the
-    # track needs weak_relocate_margin, which a negative gain is not, and is dropped)
+    # track needs a positive gain, which -1 is not, and is dropped)
     actions = [a for a in actions if a != 'drop (weak beside a track)']
     seen = [a for i, a in enumerate(actions) if a not in actions[:i]]
     assert seen == actions_wanted, actions

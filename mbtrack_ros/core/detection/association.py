@@ -59,7 +59,7 @@ class DetectionAssociator:
         group. A track that looks like the detection (``alike_distance``) may be moved by a
         gain down to ``-look_alike_margin``. Of several tracks the gain would move, the
         one whose model is nearest the detection's in appearance is. A detection scoring
-        below ``beside_threshold`` needs the stricter ``weak_relocate_margin`` to move a
+        below ``beside_threshold`` needs a gain above its shortfall to move a
         track (about half of such moves with a small
         gain went to another person), and when no track takes it and it has a track
         within ``relocate_radius`` it is not born either: weak detections there are mostly

@@ -37,16 +37,11 @@ class AutoDetectionConfig:
         side_weight: weight in [0, 1] of the side cameras' evidence in the existence update
             when a top-down camera exists.
         relocate_radius: metres; a confirmed detection this close to a current track is
-            compared with the track's appearance model before it may start a new track.
-        weak_relocate_margin: nats per side camera; the appearance gain
-            (:meth:`AutoDetection._explains`: mean log-likelihood ratio, 003 Eq. 3 under the
-            track's model, of the detection's place over the track's estimate) above which
-            a detection scoring below ``beside_threshold`` moves the track (``inf``: such
-            a detection moves no track). A detection at or above it moves a track whose
-            model explains it better than the track's own place (gain above 0, the ratio's
-            even odds), or, when the two look alike (``alike_distance``), not more than
-            ``look_alike_margin`` worse. Weak detections beside a track are often a
-            neighbour's fringe, so they need a clear gain.
+            compared with the track's appearance model before it may start a new track:
+            the appearance gain (:meth:`AutoDetection._explains`: mean log-likelihood
+            ratio per side camera, 003 Eq. 3 under the track's model, of the detection's
+            place over the track's estimate) decides whether it is the track's person
+            (:meth:`gain_gate`).
         move_support: a track is moved by the gain only while the detection would leave it
             spare: its exclusive support (:func:`~.release.spare_tracks`) with the
             detection as one more track must be below this fraction. A track that keeps
@@ -124,7 +119,6 @@ class AutoDetectionConfig:
     clutter_distance: float = 0.5
     side_weight: float = 0.3
     relocate_radius: float = 1.0
-    weak_relocate_margin: float = 1.5
     move_support: float = 0.3
     alike_distance: float = 0.6
     look_alike_margin: float = 6.0
@@ -168,10 +162,13 @@ class AutoDetectionConfig:
         a strong detection and the track does not look like the detection
         (``alike_distance`` keeps it back); None when the gain is too low. A strong
         detection (``beside_threshold``) needs a positive gain, or a look-alike track
-        one above ``-look_alike_margin``; a weak one a gain above
-        ``weak_relocate_margin`` (:meth:`AutoDetection._identify`)."""
+        one above ``-look_alike_margin``. A weak detection's own evidence (its score, a
+        log response) falls short of ``beside_threshold``: the gain must make up the
+        shortfall, ``gain > beside_threshold - score``, with no look-alike allowance
+        (weak detections beside a track are often a neighbour's fringe)
+        (:meth:`AutoDetection._identify`)."""
         if score < self.beside_threshold:
-            return 'move' if gain > max(self.weak_relocate_margin, 0.0) else None
+            return 'move' if gain > self.beside_threshold - score else None
         if gain > 0.0:
             return 'move'
         if self.looks_alike(unlike):
@@ -181,9 +178,6 @@ class AutoDetectionConfig:
     def __post_init__(self) -> None:
         if not self.relocate_radius >= 0:
             raise DetectionError(f'relocate_radius must be >= 0, got {self.relocate_radius}')
-        if np.isnan(self.weak_relocate_margin) or self.weak_relocate_margin == -np.inf:
-            raise DetectionError(f'weak_relocate_margin must be a number or inf, got '
-                                 f'{self.weak_relocate_margin}')
         if not (np.isfinite(self.look_alike_margin) and self.look_alike_margin >= 0):
             raise DetectionError(f'look_alike_margin must be a finite number >= 0, got '
                                  f'{self.look_alike_margin}')
