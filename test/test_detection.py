@@ -653,6 +653,16 @@ def _painted_room_tracker(seed, **detection):
     return calib, bgs, tracker
 
 
+def _set_relocate_radius(tracker, metres):
+    """Give the tracker's detection a ``relocate_radius`` (the release config's
+    ``spare_radius``; the releaser itself keeps its own)."""
+    from dataclasses import replace
+
+    cfg = tracker.detection.config
+    tracker.detection.config = replace(cfg, release=replace(cfg.release, spare_radius=metres))
+    assert tracker.detection.config.relocate_radius == metres
+
+
 def test_track_coverage_gives_the_filter_this_frame_foreground():
     """With ``track_coverage`` the filter's coverage term gets the foreground masks that
     the same frame set's background step produced (joined from the worker before the
@@ -1277,11 +1287,13 @@ def test_a_person_re_found_1_3_m_from_her_released_track_keeps_her_id_by_default
     away (a track left behind a person who turned is released and she is found again a
     few frames later): the default ``reuse_radius`` (1 m ``relocate_radius`` + 0.5 m/s for
     the 1 s release timeout) gives her the released id back; with a ``relocate_radius``
-    of 0.5 m (a reuse radius of 1 m) a new id is issued."""
+    (the release's ``spare_radius``) of 0.5 m (a reuse radius of 1 m) a new id is
+    issued."""
     assert AutoDetectionConfig().reuse_radius == 1.5
     rng = np.random.default_rng(5)
-    calib, bgs, tracker = _painted_room_tracker(
-        4, **({} if relocate_radius is None else {'relocate_radius': relocate_radius}))
+    calib, bgs, tracker = _painted_room_tracker(4)
+    if relocate_radius is not None:
+        _set_relocate_radius(tracker, relocate_radius)
     stand, moved = [person(2.3, 2.5, theta=0.0)], [person(3.6, 2.5, theta=0.0)]
     released_at, ids = None, []
     for k in range(75):
@@ -1622,8 +1634,9 @@ def test_a_hidden_track_1_2_m_away_is_given_back_its_person_when_she_looks_alike
     from mbtrack_ros.core.detection.manager import AutoDetection
 
     rng = np.random.default_rng(5)
-    calib, bgs, tracker = _painted_room_tracker(
-        4, reach_radius=0.0, **({} if rule else {'relocate_radius': 0.5}))
+    calib, bgs, tracker = _painted_room_tracker(4, reach_radius=0.0)
+    if not rule:
+        _set_relocate_radius(tracker, 0.5)
     here = person(2.0, 2.5, theta=0.0)
     there = person(3.2, 2.5, theta=0.0, **({} if who == 'same' else {'colours': YELLOW}))
     actions = []

@@ -36,17 +36,6 @@ class AutoDetectionConfig:
             clutter likelihood ``p_0`` (001 Eq. 23).
         side_weight: weight in [0, 1] of the side cameras' evidence in the existence update
             when a top-down camera exists.
-        relocate_radius: metres; a confirmed detection this close to a current track is
-            compared with the track's appearance model before it may start a new track:
-            the appearance gain (:meth:`AutoDetection._explains`: mean log-likelihood
-            ratio per side camera, 003 Eq. 3 under the track's model, of the detection's
-            place over the track's estimate) decides whether it is the track's person
-            (:meth:`gain_gate`).
-        move_support: a track is moved by the gain only while the detection would leave it
-            spare: its exclusive support (:func:`~.release.spare_tracks`) with the
-            detection as one more track must be below this fraction. A track that keeps
-            foreground of its own beside the detection stands on a person of its own and
-            the detection is somebody else. Above 1: no track is kept from a move.
         alike_distance: appearance distance (003 Eq. 4, between two appearance models)
             in [0, 1] at most which a track's model and a detection's show the same person:
             a strong detection that the track's model explains worse than the track's own
@@ -55,7 +44,7 @@ class AutoDetectionConfig:
         look_alike_margin: nats per side camera >= 0; how much worse than its own place
             a track's model may explain a strong detection (``beside_threshold``) that
             looks like it (``alike_distance``) for the detection to move the track, when
-            the detection would leave the track less than ``move_support``; 0: a
+            the detection would leave the track less than :attr:`move_support`; 0: a
             look-alike needs a positive gain like any other. Catches tracks left behind
             where their person turned.
         relocate_interval: seconds after a track was born or moved during which a detection
@@ -118,8 +107,6 @@ class AutoDetectionConfig:
     adaptation: AdaptationConfig = field(default_factory=AdaptationConfig)
     clutter_distance: float = 0.5
     side_weight: float = 0.3
-    relocate_radius: float = 1.0
-    move_support: float = 0.3
     alike_distance: float = 0.6
     look_alike_margin: float = 6.0
     relocate_interval: float = 2.0
@@ -131,6 +118,27 @@ class AutoDetectionConfig:
     beside_threshold: float = 3.0
     birth_exit_depth: float = 0.15
     track_coverage: float = 2.0
+
+    @property
+    def relocate_radius(self) -> float:
+        """Metres; a confirmed detection this close to a current track is compared with the
+        track's appearance model before it may start a new track: the appearance gain
+        (:meth:`AutoDetection._explains`: mean log-likelihood ratio per side camera, 003
+        Eq. 3 under the track's model, of the detection's place over the track's
+        estimate) decides whether it is the track's person (:meth:`gain_gate`). It is the
+        release's ``spare_radius``: the largest distance at which two hypotheses (two
+        tracks, or a track and a detection) are taken to be possibly of one person."""
+        return self.release.spare_radius
+
+    @property
+    def move_support(self) -> float:
+        """Exclusive support (:func:`~.release.spare_tracks`: foreground no other track
+        covers, per silhouette pixel) at which a track stands on a person of its own: the
+        release's ``spare_support``, below which a track is spare. A detection does not
+        move a track that keeps this much with the detection as one more track (it is
+        somebody else); ``inf`` (no track is kept from a move) when ``spare_support`` is 0
+        (no track is ever spare)."""
+        return self.release.spare_support if self.release.spare_support > 0 else np.inf
 
     @property
     def reuse_radius(self) -> float:
@@ -176,15 +184,11 @@ class AutoDetectionConfig:
         return 'unlike' if gain > -self.look_alike_margin else None
 
     def __post_init__(self) -> None:
-        if not self.relocate_radius >= 0:
-            raise DetectionError(f'relocate_radius must be >= 0, got {self.relocate_radius}')
         if not (np.isfinite(self.look_alike_margin) and self.look_alike_margin >= 0):
             raise DetectionError(f'look_alike_margin must be a finite number >= 0, got '
                                  f'{self.look_alike_margin}')
         if not 0.0 <= self.alike_distance <= 1.0:
             raise DetectionError(f'alike_distance must be in [0, 1], got {self.alike_distance}')
-        if not self.move_support >= 0:
-            raise DetectionError(f'move_support must be >= 0, got {self.move_support}')
         if not self.duplicate_margin >= 0:
             raise DetectionError(f'duplicate_margin must be >= 0, got {self.duplicate_margin}')
         if not self.reuse_time >= 0:
