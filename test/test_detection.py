@@ -1574,7 +1574,8 @@ def test_a_lost_track_that_looks_like_the_person_is_reused_before_another_is_mov
 
     rng = np.random.default_rng(5)
     calib, bgs, tracker = _painted_room_tracker(
-        4, reach_radius=0.0, alike_distance=0.0, look_alike_margin=1e9)
+        4, reach_radius=0.0, look_alike_margin=1e9)
+    monkeypatch.setattr(AutoDetectionConfig, 'alike_distance', property(lambda self: 0.0))
     monkeypatch.setattr(AutoDetectionConfig, 'looks_alike', lambda self, unlike: True)
     if how == 'hidden':     # the gain never moves
         monkeypatch.setattr(AutoDetection, '_explains', lambda self, *a: -1e10)
@@ -1779,7 +1780,8 @@ def test_a_doubtful_move_needs_the_detection_to_look_like_the_track(
     matches); with 1 the gain alone decides and track 1 is moved onto the stranger. A
     positive gain (+1) is not doubtful: the stranger takes track 1 whatever the gate."""
     gate = AutoDetectionConfig().alike_distance if gate is None else gate
-    tracker, actions, unalike = _move_or_birth(monkeypatch, who, gain, alike_distance=gate)
+    monkeypatch.setattr(AutoDetectionConfig, 'alike_distance', property(lambda self: gate))
+    tracker, actions, unalike = _move_or_birth(monkeypatch, who, gain)
     assert ('move 1' in actions) == moved, actions
     assert ('birth' in actions) == (not moved), actions
     assert bool(unalike) == (gate < 1.0 and who == 'other' and gain <= 0), unalike
@@ -1787,9 +1789,9 @@ def test_a_doubtful_move_needs_the_detection_to_look_like_the_track(
     mean = tracker.filter._particles[1 if moved else 2].mean(axis=0)
     if who == 'same' or not moved:      # (blue's model drifts off the stranger)
         assert np.hypot(mean[0] - 2.75, mean[1] - 2.5) < 0.3, mean
-    for bad in (1.5, -0.1, float('nan')):
+    for bad in (0.0, -0.1, float('nan')):
         with pytest.raises(DetectionError):
-            AutoDetectionConfig(alike_distance=bad)
+            AutoDetectionConfig(clutter_distance=bad)
 
 
 @pytest.mark.parametrize('who, gain, slack, moved', [
@@ -1858,7 +1860,8 @@ def test_of_two_tracks_a_detection_could_move_the_one_that_looks_like_it_is_move
     from mbtrack_ros.core.detection.manager import AutoDetection
 
     rng = np.random.default_rng(5)
-    calib, bgs, tracker = _painted_room_tracker(4, reach_radius=0.0, alike_distance=1.0)
+    calib, bgs, tracker = _painted_room_tracker(4, reach_radius=0.0)
+    monkeypatch.setattr(AutoDetectionConfig, 'alike_distance', property(lambda self: 1.0))
     _no_hidden_moves(monkeypatch)
     blue, yellow = person(2.0, 2.5, theta=0.0), person(3.5, 2.5, theta=0.0, colours=YELLOW)
     there = person(2.75, 2.5, theta=0.0)

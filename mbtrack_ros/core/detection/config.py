@@ -33,14 +33,10 @@ class AutoDetectionConfig:
         adaptation: the slow appearance-model adaptation of confirmed tracks
             (:mod:`~mbtrack_ros.core.detection.adaptation`; ``rate`` 0 is off).
         clutter_distance: Bhattacharyya distance whose likelihood is the "not visible"
-            clutter likelihood ``p_0`` (001 Eq. 23).
+            clutter likelihood ``p_0`` (001 Eq. 23): what a model scores on something that
+            is not its person. Also :attr:`alike_distance`.
         side_weight: weight in [0, 1] of the side cameras' evidence in the existence update
             when a top-down camera exists.
-        alike_distance: appearance distance (003 Eq. 4, between two appearance models)
-            in [0, 1] at most which a track's model and a detection's show the same person:
-            a strong detection that the track's model explains worse than the track's own
-            estimate (gain at most 0) moves only such a track, and only such a lost or
-            hidden track takes a detection's person back. 1 accepts any.
         look_alike_margin: nats per side camera >= 0; how much worse than its own place
             a track's model may explain a strong detection (``beside_threshold``) that
             looks like it (``alike_distance``) for the detection to move the track, when
@@ -107,7 +103,6 @@ class AutoDetectionConfig:
     adaptation: AdaptationConfig = field(default_factory=AdaptationConfig)
     clutter_distance: float = 0.5
     side_weight: float = 0.3
-    alike_distance: float = 0.6
     look_alike_margin: float = 6.0
     relocate_interval: float = 2.0
     reuse_time: float = 3.0
@@ -118,6 +113,17 @@ class AutoDetectionConfig:
     beside_threshold: float = 3.0
     birth_exit_depth: float = 0.15
     track_coverage: float = 2.0
+
+    @property
+    def alike_distance(self) -> float:
+        """Appearance distance (003 Eq. 4, between two appearance models) at most which a
+        track's model and a detection's show the same person: ``clutter_distance``, the
+        distance at which a model's likelihood is the clutter likelihood ``p_0`` (001
+        Eq. 23), so that a model nearer than it is likelier the person than clutter (a
+        log-likelihood ratio above 0). A strong detection that the track's model explains
+        worse than the track's own estimate (gain at most 0) moves only such a track, and
+        only such a lost or hidden track takes a detection's person back."""
+        return self.clutter_distance
 
     @property
     def relocate_radius(self) -> float:
@@ -187,8 +193,6 @@ class AutoDetectionConfig:
         if not (np.isfinite(self.look_alike_margin) and self.look_alike_margin >= 0):
             raise DetectionError(f'look_alike_margin must be a finite number >= 0, got '
                                  f'{self.look_alike_margin}')
-        if not 0.0 <= self.alike_distance <= 1.0:
-            raise DetectionError(f'alike_distance must be in [0, 1], got {self.alike_distance}')
         if not self.duplicate_margin >= 0:
             raise DetectionError(f'duplicate_margin must be >= 0, got {self.duplicate_margin}')
         if not self.reuse_time >= 0:
