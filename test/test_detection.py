@@ -653,6 +653,16 @@ def _painted_room_tracker(seed, **detection):
     return calib, bgs, tracker
 
 
+def _set_relocate_radius(tracker, metres):
+    """Give the tracker's detection a ``relocate_radius`` (the release config's
+    ``spare_radius``; the releaser itself keeps its own)."""
+    from dataclasses import replace
+
+    cfg = tracker.detection.config
+    tracker.detection.config = replace(cfg, release=replace(cfg.release, spare_radius=metres))
+    assert tracker.detection.config.relocate_radius == metres
+
+
 def test_track_coverage_gives_the_filter_this_frame_foreground():
     """With ``track_coverage`` the filter's coverage term gets the foreground masks that
     the same frame set's background step produced (joined from the worker before the
@@ -824,6 +834,14 @@ def _track_painted(tracker, calib, bgs, rng, frames, people_at):
     return out
 
 
+def _no_hidden_moves(monkeypatch):
+    """Patch :class:`AutoDetection` so that no hidden track is moved onto a detection (the
+    scene is about the appearance gain alone)."""
+    from mbtrack_ros.core.detection.manager import AutoDetection
+
+    monkeypatch.setattr(AutoDetection, '_nearest_hidden', lambda self, *a, **k: None)
+
+
 def _walker(k):
     """One person walking along y = 2.6 m, 0.3 m/s."""
     return [person(2.0 + 0.02 * k, 2.6, theta=0.0)]
@@ -908,29 +926,18 @@ def test_bench_detection_reports_times_and_tracks_five_people_without_births():
     assert summary['pipeline_4cams_fps'] > 0
 
 
-@pytest.mark.parametrize('again_gain', [float('inf'), None])
-def test_a_track_moved_or_born_recently_is_not_moved_again_and_no_twin_is_born(again_gain):
-    """Within ``relocate_interval`` of a track's birth a detection that its model explains
-    is dropped: neither a move (a young model in a group would hop) nor a second birth -
-    unless the gain is above ``move_again_gain`` (the default): then the young track is
-    moved onto its person, once."""
-    from dataclasses import replace
-
-    def before_drift(tracker):
-        if again_gain is not None:
-            tracker.detection.config = replace(tracker.detection.config,
-                                               move_again_gain=again_gain)
-    tracker, step = _drifted_walker(8, before_drift)  # drift 0.5 s after the birth
+def test_a_track_born_recently_is_moved_again_by_a_positive_gain_and_no_twin_is_born():
+    """Within ``relocate_interval`` of a track's birth a detection is not born beside it:
+    the young track's model explains its person's detection better than its own place
+    (a positive gain), so it is moved onto its person, once (and nothing is born)."""
+    tracker, step = _drifted_walker(8)  # drift 0.5 s after the birth
     actions = []
     for k in range(8, 20):
         actions += step(k)[1]
     assert tracker.track_ids == [1]
     assert 'birth' not in actions
     moves = [a for a in actions if a.startswith('move')]
-    if again_gain == float('inf'):
-        assert moves == [] and any(a.startswith('drop') for a in actions), actions
-    else:                       # back on its person: no detection beside it after
-        assert moves == ['move 1 (again)'], actions
+    assert moves == ['move 1 (again)'], actions   # back on its person: nothing beside it
 
 
 def test_deferred_search_gives_the_same_tracks_as_the_full_step():
@@ -1181,19 +1188,16 @@ def test_a_hidden_track_beside_a_detection_is_moved_there_instead_of_a_birth(
         monkeypatch, hidden_rule):
     """A track 0.8 m off its person whose existence fell below the report threshold (it lost
     its person): the person's detection moves that track (same id) whatever the appearance
-    gain (``relocate_hidden``); without the rule a second track is born (and released
-    later as a duplicate)."""
-    from dataclasses import replace
-
+    gain; when no hidden track is found (``_nearest_hidden`` patched) a second track is
+    born (and released later as a duplicate)."""
     from mbtrack_ros.core.detection.manager import AutoDetection
 
     def hidden(tracker):
         # the appearance gain can never move a track; track 1 counts as hidden
-        det = tracker.detection
-        # (reuse_hidden off: within reuse_radius it would move the track as well)
-        det.config = replace(det.config, relocate_margin=1e9, relocate_hidden=hidden_rule,
-                             reuse_hidden=False)
+        monkeypatch.setattr(AutoDetection, '_explains', lambda self, *a: -1e9)
         monkeypatch.setattr(AutoDetection, 'reported', lambda self, tid: False)
+        if not hidden_rule:
+            _no_hidden_moves(monkeypatch)
 
     tracker, step = _drifted_walker(36, before_drift=hidden)
     actions = []
@@ -1219,7 +1223,7 @@ def test_a_person_re_found_soon_after_the_release_gets_the_released_id(
     detected again at the same place 0.3 s later: within ``reuse_time`` the new track takes
     the released id, in the entry zone too (``reuse_in_entry_zones``); with ``reuse_time``
     0, in the entry zone without ``reuse_in_entry_zones`` (the person is taken to have
-    left), or when somebody who looks different stands there (``reuse_distance``; in the
+    left), or when somebody who looks different stands there (``alike_distance``; in the
     entry zone: a newcomer), a new id is issued. The id ends (``FrameResult.ended``) at the
     release when it cannot come back, ``reuse_time`` after it when nobody took it, never
     when it was taken: an id never returns after it ended."""
@@ -1276,16 +1280,20 @@ def test_a_person_re_found_2_5_s_after_the_release_keeps_her_id_by_default(reuse
     assert ids[-1] == ([1] if reuse_time >= 2.5 else [2]), (reuse_time, ids[-1])
 
 
-@pytest.mark.parametrize('reuse_radius, reused', [(AutoDetectionConfig().reuse_radius, True),
-                                                  (1.0, False)])
+@pytest.mark.parametrize('relocate_radius, reused', [(None, True), (0.5, False)])
 def test_a_person_re_found_1_3_m_from_her_released_track_keeps_her_id_by_default(
-        reuse_radius, reused):
+        relocate_radius, reused):
     """A person's track is released where she stood, and she is detected again 1.3 m
-    away (on clear-room a track left 1.1-1.3 m behind a person turning along a wall is
-    released as spare and she is found again a few frames later): the default ``reuse_radius`` (1.5 m) gives her the released id back;
-    with the former 1 m a new id is issued."""
+    away (a track left behind a person who turned is released and she is found again a
+    few frames later): the default ``reuse_radius`` (1 m ``relocate_radius`` + 0.5 m/s for
+    the 1 s release timeout) gives her the released id back; with a ``relocate_radius``
+    (the release's ``spare_radius``) of 0.5 m (a reuse radius of 1 m) a new id is
+    issued."""
+    assert AutoDetectionConfig().reuse_radius == 1.5
     rng = np.random.default_rng(5)
-    calib, bgs, tracker = _painted_room_tracker(4, reuse_radius=reuse_radius)
+    calib, bgs, tracker = _painted_room_tracker(4)
+    if relocate_radius is not None:
+        _set_relocate_radius(tracker, relocate_radius)
     stand, moved = [person(2.3, 2.5, theta=0.0)], [person(3.6, 2.5, theta=0.0)]
     released_at, ids = None, []
     for k in range(75):
@@ -1298,7 +1306,7 @@ def test_a_person_re_found_1_3_m_from_her_released_track_keeps_her_id_by_default
             released_at = k
         ids.append(sorted(tracker.track_ids))
     assert released_at is not None and released_at + 5 < 60
-    assert ids[-1] == ([1] if reused else [2]), (reuse_radius, ids[-1])
+    assert ids[-1] == ([1] if reused else [2]), (relocate_radius, ids[-1])
 
 
 @pytest.mark.parametrize('margin', [AutoDetectionConfig().duplicate_margin, float('inf')])
@@ -1517,7 +1525,7 @@ def test_reach_counts_foreground_only_where_no_other_track_is():
     covered = {}
     for case in ('free', 'tracked', 'ghost', 'excluded'):
         det = AutoDetection(calib, AutoDetectionConfig(
-            reach_radius=0.5, reach_directions=4,
+            reach_radius=0.5,
             detector=DetectorConfig(exclusion_radius=0.5 if case == 'excluded' else 0.0)))
         det.bootstrap({n: [np.zeros((H, W, 3), np.uint8)] for n in calib.cameras})
         means = np.array([me, other]) if case in ('tracked', 'excluded') else me[None]
@@ -1535,7 +1543,7 @@ def test_reach_counts_foreground_only_where_no_other_track_is():
         places, rings = det._reach_coverage(0, evidence, sils, means, [shape] * len(means),
                                             np.full(len(means), 1.8))
         if case == 'excluded':
-            assert len(places) == len(rings) == 6     # 8 places, the 2 nearest the track not
+            assert 0 < len(places) == len(rings) < 16  # 16 places, those near the track not
             assert np.linalg.norm(places - person_xy, axis=1).min() > 0.5
             continue
         at = int(np.argmin(np.linalg.norm(places - person_xy, axis=1)))
@@ -1545,7 +1553,7 @@ def test_reach_counts_foreground_only_where_no_other_track_is():
         assert covered['free'][n] > 0.8, (n, covered)
         assert covered['tracked'][n] < 0.1, (n, covered)
         assert covered['ghost'][n] < 0.1, (n, covered)
-    for bad in ({'reach_radius': -0.1}, {'reach_directions': 0}, {'reach_age': -1.0}):
+    for bad in ({'reach_radius': -0.1}, {'reach_age': -1.0}):
         with pytest.raises(DetectionError):
             AutoDetectionConfig(**bad)
 
@@ -1554,10 +1562,11 @@ def test_reach_counts_foreground_only_where_no_other_track_is():
 def test_a_lost_track_that_looks_like_the_person_is_reused_before_another_is_moved(
         monkeypatch, how):
     """Blue's track (1) is released while she is away; yellow's track (2) is either hidden
-    (not reported, ``relocate_hidden``) or left behind when yellow walks off (a move by the
-    appearance gain, margin lowered and ``move_distance`` off so that any gain moves).
+    (not reported, moved whatever the gain) or left behind when yellow walks off (a move by
+    the appearance gain, ``look_alike_margin`` raised and every track taken to look like the
+    detection so that any gain moves).
     Blue comes back 0.75 m from track 2: she takes her lost id back (her model fits her,
-    track 2's is yellow's) and track 2 stays. With ``reuse_distance`` 0 no released id is reused by a
+    track 2's is yellow's) and track 2 stays. With ``alike_distance`` 0 no released id is reused by a
     birth: the comparison of the two models alone gives blue her id back. When track 2
     was placed within ``relocate_interval`` ('young') the move would not happen (the
     detection is dropped), and neither does the reuse in its place."""
@@ -1565,8 +1574,11 @@ def test_a_lost_track_that_looks_like_the_person_is_reused_before_another_is_mov
 
     rng = np.random.default_rng(5)
     calib, bgs, tracker = _painted_room_tracker(
-        4, reach_radius=0.0, reuse_distance=0.0,
-        relocate_margin=1e9 if how == 'hidden' else -1e9, move_distance=1.0)
+        4, reach_radius=0.0, look_alike_margin=1e9)
+    monkeypatch.setattr(AutoDetectionConfig, 'alike_distance', property(lambda self: 0.0))
+    monkeypatch.setattr(AutoDetectionConfig, 'looks_alike', lambda self, unlike: True)
+    if how == 'hidden':     # the gain never moves
+        monkeypatch.setattr(AutoDetection, '_explains', lambda self, *a: -1e10)
     if how == 'young':      # the gain's move, onto a track placed moments ago
         placed = AutoDetection._placed_recently
         monkeypatch.setattr(AutoDetection, '_placed_recently', lambda self, tid, stamp:
@@ -1574,7 +1586,7 @@ def test_a_lost_track_that_looks_like_the_person_is_reused_before_another_is_mov
                             or placed(self, tid, stamp))
     blue, yellow = person(2.0, 2.5, theta=0.0), person(3.5, 2.5, theta=0.0, colours=YELLOW)
     back = person(2.75, 2.5, theta=0.0)
-    released_at, actions = None, []
+    released_at, actions, decided = None, [], []
     for k in range(60):
         if released_at is None:
             people = [yellow] if k >= 15 else [blue, yellow]
@@ -1583,9 +1595,10 @@ def test_a_lost_track_that_looks_like_the_person_is_reused_before_another_is_mov
             people = ([] if k < released_at + 5 else [back]) + ([] if gone else [yellow])
         tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, people, rng))
         actions += [d['action'] for d in tracker.detection.decisions]
+        decided += tracker.detection.decisions
         if released_at is None and k > 10 and tracker.track_ids == [2]:
             released_at = k
-            actions = []
+            actions, decided = [], []
             if how == 'hidden':
                 monkeypatch.setattr(AutoDetection, 'reported', lambda self, tid: tid != 2)
         if released_at is not None and k >= released_at + 12:
@@ -1601,6 +1614,12 @@ def test_a_lost_track_that_looks_like_the_person_is_reused_before_another_is_mov
     else:
         assert 'reuse 1 (not 2)' in actions and moved not in actions, actions
         assert on_blue == [1]
+        # the terms that decided it: lost track 1 (metres, appearance distance) nearer
+        # blue in appearance than track 2, the track the detection would have moved
+        reuse = next(d for d in decided if d['action'] == 'reuse 1 (not 2)')
+        (lost, metres, unlike), = [r for r in reuse['reuse'] if r[0] == 1]
+        assert reuse['unlike'][0] == 2 and unlike < reuse['unlike'][1], reuse
+        assert metres <= AutoDetectionConfig().reuse_radius, reuse
 
 
 @pytest.mark.parametrize('rule, who, moved', [(True, 'same', True), (False, 'same', False),
@@ -1608,14 +1627,17 @@ def test_a_lost_track_that_looks_like_the_person_is_reused_before_another_is_mov
 def test_a_hidden_track_1_2_m_away_is_given_back_its_person_when_she_looks_alike(
         monkeypatch, rule, who, moved):
     """Track 1 follows a person in blue; from frame 40 it is hidden (not reported) and she
-    stands 1.2 m away, beyond ``relocate_radius``. With ``reuse_hidden`` her detection
-    moves track 1 there (same id), as a lost track's id would be given back within
-    ``reuse_radius``; without it, or when the person there is dressed differently
-    (``reuse_distance``), a new track is born."""
+    stands 1.2 m away, beyond ``relocate_radius``. Her detection moves track 1 there (same
+    id), as a lost track's id would be given back within ``reuse_radius``; with a
+    ``reuse_radius`` below 1.2 m (``relocate_radius`` 0.5 m), or when the person there is
+    dressed differently
+    (``alike_distance``), a new track is born."""
     from mbtrack_ros.core.detection.manager import AutoDetection
 
     rng = np.random.default_rng(5)
-    calib, bgs, tracker = _painted_room_tracker(4, reuse_hidden=rule, reach_radius=0.0)
+    calib, bgs, tracker = _painted_room_tracker(4, reach_radius=0.0)
+    if not rule:
+        _set_relocate_radius(tracker, 0.5)
     here = person(2.0, 2.5, theta=0.0)
     there = person(3.2, 2.5, theta=0.0, **({} if who == 'same' else {'colours': YELLOW}))
     actions = []
@@ -1633,17 +1655,19 @@ def test_a_hidden_track_1_2_m_away_is_given_back_its_person_when_she_looks_alike
     assert (np.hypot(mean[0] - 3.2, mean[1] - 2.5) < 0.3) == moved
 
 
-@pytest.mark.parametrize('doubtful, who, moved', [(0.9, 'same', True), (0.0, 'same', False),
-                                                  (0.9, 'other', False)])
+@pytest.mark.parametrize('who, moved', [('same', True), ('other', False)])
 def test_a_reported_track_of_doubtful_existence_is_given_back_its_person_like_a_hidden_one(
-        doubtful, who, moved):
-    """As above, but track 1 stays reported (``report_hidden``) while its existence falls
-    once she has stepped 1.2 m away. With ``reuse_doubtful`` 0.9 it counts as hidden and
-    her detection moves it there ("doubtful, far"); with 0 a reported track is never taken
-    (a new track is born), nor is it for a person dressed differently."""
+        who, moved):
+    """As above, but track 1 stays reported (``existence.report_threshold`` 0) while its
+    existence falls once she has stepped 1.2 m away. Below ``reuse_doubtful`` (a newborn's existence, 0.9)
+    it counts as hidden and her detection moves it there ("doubtful, far"); it is not
+    taken for a person dressed differently (a new track is born)."""
+    assert AutoDetectionConfig().reuse_doubtful == 0.9
+    from mbtrack_ros.core.existence import AuxiliaryConfig
+
     rng = np.random.default_rng(5)
-    calib, bgs, tracker = _painted_room_tracker(4, report_hidden=True, reach_radius=0.0,
-                                                reuse_doubtful=doubtful)
+    calib, bgs, tracker = _painted_room_tracker(
+        4, reach_radius=0.0, existence=AuxiliaryConfig(report_threshold=0.0))
     here = person(2.0, 2.5, theta=0.0)
     there = person(3.2, 2.5, theta=0.0, **({} if who == 'same' else {'colours': YELLOW}))
     actions, existence, far = [], [], []
@@ -1656,7 +1680,7 @@ def test_a_reported_track_of_doubtful_existence_is_given_back_its_person_like_a_
             actions += [d['action'] for d in tracker.detection.decisions]
             far += [d['far'] for d in tracker.detection.decisions if 'far' in d]
             existence.append(tracker.detection.aux[1].existence)
-    assert min(existence) < 0.5         # not reported without report_hidden
+    assert min(existence) < 0.5         # not reported at the default report_threshold
     assert ('move 1 (doubtful, far)' in actions) == moved, actions
     if moved:   # logged: the track, its distance, appearance distance and existence
         (tid, metres, unlike, exists), = far
@@ -1664,21 +1688,18 @@ def test_a_reported_track_of_doubtful_existence_is_given_back_its_person_like_a_
     assert ('birth' in actions) == (not moved), actions
     mean = tracker.filter._particles[1].mean(axis=0)
     assert (np.hypot(mean[0] - 3.2, mean[1] - 2.5) < 0.3) == moved
-    for bad in (float('nan'), -0.1, 1.5):
-        with pytest.raises(DetectionError, match='reuse_doubtful'):
-            AutoDetectionConfig(reuse_doubtful=bad)
 
 
 def _move_or_birth(monkeypatch, who: str, gain: float, **detection):
     """Track 1 follows a person in blue; from frame 40 she is gone and somebody (``who``:
     'same', the blue person, or 'other', dressed in yellow) stands 0.75 m from the track,
     the appearance gain of track 1's model there forced to ``gain``. Returns the tracker,
-    the decisions' actions from frame 40 and the tracks ``move_distance`` kept back."""
+    the decisions' actions from frame 40 and the tracks ``alike_distance`` kept back."""
     from mbtrack_ros.core.detection.manager import AutoDetection
 
     rng = np.random.default_rng(5)
-    calib, bgs, tracker = _painted_room_tracker(4, reach_radius=0.0, relocate_hidden=False,
-                                                reuse_hidden=False, **detection)
+    calib, bgs, tracker = _painted_room_tracker(4, reach_radius=0.0, **detection)
+    _no_hidden_moves(monkeypatch)
     here = person(2.0, 2.5, theta=0.0)
     there = person(2.75, 2.5, theta=0.0, **({} if who == 'same' else {'colours': YELLOW}))
     actions, unalike = [], []
@@ -1694,6 +1715,59 @@ def _move_or_birth(monkeypatch, who: str, gain: float, **detection):
     return tracker, actions, unalike
 
 
+def test_the_gain_gate_decides_by_the_log_likelihood_ratio():
+    """:meth:`AutoDetectionConfig.gain_gate` against its rule written out case by case on a
+    grid of scores, gains (nats per side camera) and appearance distances: a strong
+    detection moves a track whose model explains it better than the track's own place
+    (gain > 0), or a look-alike track (``alike_distance``) down to ``-look_alike_margin``;
+    a weak one a gain above its score's shortfall below ``beside_threshold``."""
+    cfg = AutoDetectionConfig()
+    checked = set()
+    for score in (0.5, cfg.beside_threshold - 0.01, cfg.beside_threshold, 6.0):
+        for gain in (-9.0, -6.0, -5.9, -1.0, 0.0, 0.005, 0.02, 1.5, 2.0, 2.6, 4.0):
+            for unlike in (0.1, cfg.alike_distance, cfg.alike_distance + 0.01, 0.9):
+                strong, alike = score >= cfg.beside_threshold, unlike <= cfg.alike_distance
+                if not strong:
+                    want = 'move' if gain > cfg.beside_threshold - score else None
+                elif gain > 0 or (alike and gain > -cfg.look_alike_margin):
+                    want = 'move'
+                elif gain > -cfg.look_alike_margin:
+                    want = 'unlike'         # a stranger kept back by its looks
+                else:
+                    want = None
+                assert cfg.gain_gate(score, gain, unlike) == want, (score, gain, unlike)
+                checked.add(want)
+    assert checked == {'move', 'unlike', None}
+
+
+def test_every_decision_is_logged_with_its_terms(monkeypatch, caplog):
+    """Each confirmed detection's decision is one debug line: the detection's place and
+    score, the action, and its terms - per track compared (id, metres, appearance gain in
+    nats per side camera, appearance distance), the exclusive support a move would leave,
+    the strangers the looks kept back. In the scene of :func:`_move_or_birth` with the
+    gain forced to -1: the blue person moves track 1, the stranger in yellow is born."""
+    import logging
+    import re
+
+    logger = 'mbtrack_ros.core.detection.association'
+    for who, action in (('same', 'move 1'), ('other', 'birth')):
+        caplog.clear()
+        with caplog.at_level(logging.DEBUG, logger=logger):
+            _, actions, _ = _move_or_birth(monkeypatch, who, -1.0)
+        lines = [r.getMessage() for r in caplog.records if r.name == logger]
+        assert len(lines) >= len(actions) > 0 and action in actions, (actions, lines)
+        # (the first birth is the blue person's when the room was empty)
+        line = next(m for m in lines if f': {action};' in m and 'near=' in m)
+        assert re.match(r'detection at \(2\.\d\d, 2\.\d\d\) score \d+\.\d\d: ', line), line
+        terms = re.search(r'near=\[\(1, ([\d.]+), (-?[\d.]+), ([\d.]+)\)\]', line)
+        assert terms is not None, line
+        metres, gain, unlike = map(float, terms.groups())
+        assert 0.5 < metres < 1.0 and gain == -1.0
+        assert (unlike <= AutoDetectionConfig().alike_distance) == (who == 'same'), line
+        assert ('support=[(1, ' in line) == (who == 'same'), line
+        assert ('unalike=[(1, ' in line) == (who == 'other'), line
+
+
 @pytest.mark.parametrize('gate, who, gain, moved', [
     (None, 'other', -1.0, False), (1.0, 'other', -1.0, True), (None, 'same', -1.0, True),
     (None, 'other', 1.0, True)])
@@ -1701,12 +1775,13 @@ def test_a_doubtful_move_needs_the_detection_to_look_like_the_track(
         monkeypatch, gate, who, gain, moved):
     """The scene of :func:`_move_or_birth` with the gain in the doubtful band (-1: the
     track's model explains the detection a little worse than its own estimate). With
-    ``move_distance`` at its default a person dressed differently is born as a new track
+    ``alike_distance`` at its default a person dressed differently is born as a new track
     and track 1 stays, while the blue person herself still takes track 1 (her model
     matches); with 1 the gain alone decides and track 1 is moved onto the stranger. A
     positive gain (+1) is not doubtful: the stranger takes track 1 whatever the gate."""
-    gate = AutoDetectionConfig().move_distance if gate is None else gate
-    tracker, actions, unalike = _move_or_birth(monkeypatch, who, gain, move_distance=gate)
+    gate = AutoDetectionConfig().alike_distance if gate is None else gate
+    monkeypatch.setattr(AutoDetectionConfig, 'alike_distance', property(lambda self: gate))
+    tracker, actions, unalike = _move_or_birth(monkeypatch, who, gain)
     assert ('move 1' in actions) == moved, actions
     assert ('birth' in actions) == (not moved), actions
     assert bool(unalike) == (gate < 1.0 and who == 'other' and gain <= 0), unalike
@@ -1714,51 +1789,49 @@ def test_a_doubtful_move_needs_the_detection_to_look_like_the_track(
     mean = tracker.filter._particles[1 if moved else 2].mean(axis=0)
     if who == 'same' or not moved:      # (blue's model drifts off the stranger)
         assert np.hypot(mean[0] - 2.75, mean[1] - 2.5) < 0.3, mean
-    for bad in (1.5, -0.1, float('nan')):
+    for bad in (0.0, -0.1, float('nan')):
         with pytest.raises(DetectionError):
-            AutoDetectionConfig(move_distance=bad)
+            AutoDetectionConfig(clutter_distance=bad)
 
 
 @pytest.mark.parametrize('who, gain, slack, moved', [
     ('same', -4.5, None, True), ('other', -4.5, None, False), ('same', -7.0, None, False),
     ('same', -4.5, 0.0, False)])
-def test_a_look_alike_track_is_moved_by_a_gain_below_the_relocate_margin(
+def test_a_look_alike_track_is_moved_by_a_negative_gain_within_the_look_alike_margin(
         monkeypatch, who, gain, slack, moved):
-    """The scene of :func:`_move_or_birth` with a gain below ``relocate_margin`` (-3): the
-    blue person takes track 1 back when the gain is within ``look_alike_slack`` (3) of
-    the margin (she looks like the track); a stranger in yellow is born beside it, and so
-    is she at a gain further down or with no slack."""
-    slack = AutoDetectionConfig().look_alike_slack if slack is None else slack
-    assert AutoDetectionConfig().relocate_margin == -3.0
-    tracker, actions, _ = _move_or_birth(monkeypatch, who, gain, look_alike_slack=slack)
+    """The scene of :func:`_move_or_birth` with a negative gain: the blue person takes
+    track 1 back when the gain is above ``-look_alike_margin`` (-6; she looks like the
+    track); a stranger in yellow is born beside it, and so is she at a gain further down
+    or with a margin of 0."""
+    slack = AutoDetectionConfig().look_alike_margin if slack is None else slack
+    assert AutoDetectionConfig().look_alike_margin == 6.0
+    tracker, actions, _ = _move_or_birth(monkeypatch, who, gain, look_alike_margin=slack)
     assert ('move 1' in actions) == moved, actions
     assert ('birth' in actions) == (not moved), actions
     mean = tracker.filter._particles[1 if moved else 2].mean(axis=0)
     assert np.hypot(mean[0] - 2.75, mean[1] - 2.5) < 0.3, mean
     for bad in (float('nan'), float('inf'), -0.5):
-        with pytest.raises(DetectionError, match='look_alike_slack'):
-            AutoDetectionConfig(look_alike_slack=bad)
+        with pytest.raises(DetectionError, match='look_alike_margin'):
+            AutoDetectionConfig(look_alike_margin=bad)
 
 
-@pytest.mark.parametrize('again_gain, gain, actions_wanted', [
-    (4.0, 6.0, ['move 1', 'move 1 (again)', 'drop (track 1 placed recently)']),
-    (4.0, 3.0, ['move 1', 'drop (track 1 placed recently)']),
-    (float('inf'), 6.0, ['move 1', 'drop (track 1 placed recently)'])])
-def test_a_track_placed_moments_ago_is_moved_again_by_a_strong_gain_once(
-        monkeypatch, again_gain, gain, actions_wanted):
+@pytest.mark.parametrize('gain, actions_wanted', [
+    (6.0, ['move 1', 'move 1 (again)', 'drop (track 1 placed recently)']),
+    (-1.0, ['move 1', 'drop (track 1 placed recently)'])])
+def test_a_track_placed_moments_ago_is_moved_again_by_a_positive_gain_once(
+        monkeypatch, gain, actions_wanted):
     """Track 1 follows a person in blue at (2, 2.5); she stands at (2.75, 2.5) from frame
     40, back at (2, 2.5) from frame 50 and at (2.75, 2.5) again from frame 60, the gain of
     track 1's model forced to ``gain``. Her first detection moves track 1; the next comes
-    within ``relocate_interval`` of that move and is dropped, unless the gain is above
-    ``move_again_gain``: then track 1 is moved again, once - the third detection, within
+    within ``relocate_interval`` of that move and is dropped, unless the gain is positive
+    (track 1's model explains her better than its own place): then it is moved again, once - the third detection, within
     the interval of a move made that way, is dropped. (The actions are what is asserted:
     alone in the room she is followed back either way.)"""
     from mbtrack_ros.core.detection.manager import AutoDetection
 
     rng = np.random.default_rng(5)
-    calib, bgs, tracker = _painted_room_tracker(4, reach_radius=0.0, relocate_hidden=False,
-                                                reuse_hidden=False,
-                                                move_again_gain=again_gain)
+    calib, bgs, tracker = _painted_room_tracker(4, reach_radius=0.0)
+    _no_hidden_moves(monkeypatch)
     here, there = person(2.0, 2.5, theta=0.0), person(2.75, 2.5, theta=0.0)
     actions = []
     for k in range(70):
@@ -1769,27 +1842,27 @@ def test_a_track_placed_moments_ago_is_moved_again_by_a_strong_gain_once(
         tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, [who], rng))
         actions += [d['action'] for d in tracker.detection.decisions if k >= 40]
     # each action once, in this order (a person detected again on the next frames
-    # gives the same action again: repeats dropped)
+    # gives the same action again: repeats dropped; a weak detection of her beside the
+    # track needs a positive gain, which -1 is not, and is dropped)
+    actions = [a for a in actions if a != 'drop (weak beside a track)']
     seen = [a for i, a in enumerate(actions) if a not in actions[:i]]
     assert seen == actions_wanted, actions
     assert tracker.track_ids == [1]
-    for bad in (float('nan'), float('-inf')):
-        with pytest.raises(DetectionError, match='move_again_gain'):
-            AutoDetectionConfig(move_again_gain=bad)
 
 
 def test_of_two_tracks_a_detection_could_move_the_one_that_looks_like_it_is_moved(
         monkeypatch):
     """Track 1 follows a person in blue, track 2 one in yellow; from frame 40 both are gone
     and the blue person stands 0.75 m from each track. Both tracks may be moved there
-    (gains in the doubtful band, ``move_distance`` 1), and track 2's gain is the higher
+    (gains in the doubtful band, ``alike_distance`` 1), and track 2's gain is the higher
     one (-1 against -2; each gain compares the detection with that track's own place).
     The track whose model is nearer the detection's in appearance is moved: track 1."""
     from mbtrack_ros.core.detection.manager import AutoDetection
 
     rng = np.random.default_rng(5)
-    calib, bgs, tracker = _painted_room_tracker(4, reach_radius=0.0, relocate_hidden=False,
-                                                reuse_hidden=False, move_distance=1.0)
+    calib, bgs, tracker = _painted_room_tracker(4, reach_radius=0.0)
+    monkeypatch.setattr(AutoDetectionConfig, 'alike_distance', property(lambda self: 1.0))
+    _no_hidden_moves(monkeypatch)
     blue, yellow = person(2.0, 2.5, theta=0.0), person(3.5, 2.5, theta=0.0, colours=YELLOW)
     there = person(2.75, 2.5, theta=0.0)
     actions, near = [], []
@@ -1821,12 +1894,12 @@ def test_no_birth_beside_a_young_track_that_looks_like_the_detection(monkeypatch
     from mbtrack_ros.core.detection.manager import AutoDetection
 
     rng = np.random.default_rng(5)
-    calib, bgs, tracker = _painted_room_tracker(4, reach_radius=0.0,
-                                                relocate_hidden=False, reuse_hidden=False)
+    calib, bgs, tracker = _painted_room_tracker(4, reach_radius=0.0)
+    _no_hidden_moves(monkeypatch)
     here = person(2.0, 2.5, theta=0.0)
     there = person(2.75, 2.5, theta=0.0, **({} if who == 'same' else {'colours': YELLOW}))
     placed = AutoDetection._placed_recently
-    actions = []
+    actions, decided = [], []
     for k in range(52):
         if k == 40:
             assert tracker.track_ids == [1]
@@ -1838,6 +1911,10 @@ def test_no_birth_beside_a_young_track_that_looks_like_the_detection(monkeypatch
                            + ([there] if k >= 40 else []), rng))
         if k >= 40:
             actions += [d['action'] for d in tracker.detection.decisions]
+            decided += tracker.detection.decisions
     assert ('birth' in actions) == born, actions
     assert ('drop (young look-alike 1)' in actions) == (not born), actions
+    if not born:    # the terms: track 1 compared, its gain (-10) too low to move it
+        drop = next(d for d in decided if d['action'] == 'drop (young look-alike 1)')
+        assert [n[0] for n in drop['near']] == [1] and drop['near'][0][2] == -10.0, drop
     assert len(tracker.track_ids) == (2 if born else 1), tracker.track_ids

@@ -109,8 +109,7 @@ def test_working_size_of_cameras_of_any_size():
 
 def test_pixel_lengths_scale_and_scale_one_changes_nothing():
     plain = TrackerConfig().detection_config()
-    assert plain == AutoDetectionConfig(detector=plain.detector, release=plain.release,
-                                        sigma=plain.sigma)
+    assert plain == AutoDetectionConfig(detector=plain.detector, release=plain.release)
     assert plain.background == AutoDetectionConfig().background
     half = TrackerConfig().detection_config(0.5)
     bg, people, det = half.background, half.background.people, half.detector

@@ -265,7 +265,7 @@ class TrackerConfig:
             release = replace(release, spare_support=float(self.spare_support))
         if self.release_recover_time is not None:
             release = replace(release, recover_time=float(self.release_recover_time))
-        config = AutoDetectionConfig(detector=detector, release=release, sigma=float(self.sigma))
+        config = AutoDetectionConfig(detector=detector, release=release)
         if self.adaptation_rate is not None:
             config = replace(config, adaptation=replace(config.adaptation,
                                                         rate=float(self.adaptation_rate)))
@@ -400,7 +400,8 @@ class Tracker:
         self.detection = None
         if self.config.detection:
             from mbtrack_ros.core.detection.manager import AutoDetection
-            self.detection = AutoDetection(calibration, self.config.detection_config(scale))
+            self.detection = AutoDetection(calibration, self.config.detection_config(scale),
+                                           sigma=float(self.config.sigma))
         self.illumination = None
         if self.detection is not None:   # the background model is the reference
             from mbtrack_ros.core.detection.illumination import IlluminationNormaliser

@@ -43,23 +43,23 @@ class DetectionAssociator:
         the detection would start a second track on the same person (an identity switch
         when the old one is released). So a confirmed detection within ``relocate_radius``
         of a track is first checked with the track's own appearance model (003 Eq. 3, the
-        tracker's likelihood): when, on average over the side cameras that see both, the
-        model explains the detection about as well as or better than the track's current
-        estimate (``log p(y_c | detection) - log p(y_c | track) > relocate_margin``), the
-        detection is taken for that track's person and the track is moved there (same id)
-        - or, within ``relocate_interval`` of the track's birth or last move, the detection
-        is dropped (unless its gain is above ``move_again_gain``: it is moved again, once);
-        otherwise a new track is born. A track the detection would leave
+        tracker's likelihood): the gain, on average over the side cameras that see both, of
+        ``log p(y_c | detection) - log p(y_c | track)``, a log-likelihood ratio of "the
+        track's person is at the detection" over "at the track's estimate". A positive
+        gain (the model explains the detection better) takes the detection for that
+        track's person and the track is moved there (same id) - or, within
+        ``relocate_interval`` of the track's birth or last move, the detection is dropped
+        (unless its gain is positive there too: it is moved again, once); otherwise a new
+        track is born. A track the detection would leave
         ``move_support`` or more of its exclusive support (foreground no other track
         covers) is not moved: it stands on a person of its own. The gain is a weak cue in
         groups (right and wrong moves both have gains of a few nats either way per camera);
         still, moving instead of a birth avoids most second tracks on one person, and the
         interval stops a track hopping through a
-        group. A gain in ``(relocate_margin, 0]`` moves only a track that looks like the
-        detection (``move_distance``), and such a look-alike may be moved by a gain down to
-        ``look_alike_slack`` below the margin. Of several tracks the gain would move, the
+        group. A track that looks like the detection (``alike_distance``) may be moved by a
+        gain down to ``-look_alike_margin``. Of several tracks the gain would move, the
         one whose model is nearest the detection's in appearance is. A detection scoring
-        below ``beside_threshold`` needs the stricter ``weak_relocate_margin`` to move a
+        below ``beside_threshold`` needs a gain above its shortfall to move a
         track (about half of such moves with a small
         gain went to another person), and when no track takes it and it has a track
         within ``relocate_radius`` it is not born either: weak detections there are mostly
@@ -68,11 +68,11 @@ class DetectionAssociator:
         takes its id back instead, and the track stays where it is (not instead of a track
         placed within ``relocate_interval``: its move would not happen); before a birth, a released
         track and then a hidden one within ``reuse_radius`` that look alike are given
-        back their person (``reuse_time``, ``reuse_hidden``; a reported track of doubtful
+        back their person (``reuse_time``, ``reuse_radius``; a reported track of doubtful
         existence counts as hidden, ``reuse_doubtful``); a detection that would still
         be born beside a look-alike track born or moved within ``relocate_interval`` is
         dropped: a young track lags its person for a few frames, and the detection beside
-        it that looks like it (``move_distance``) is that person - unless the young track
+        it that looks like it (``alike_distance``) is that person - unless the young track
         keeps ``move_support`` of its exclusive support with the detection as one more
         track (it stands on a person of its own).
         """
@@ -83,7 +83,7 @@ class DetectionAssociator:
         near = []                   # (id, distance, gain, appearance distance) of the
         #                             tracks the check compared
         movable = []                # indices of the tracks the gain would move
-        unalike = []                # (id, distance) of those move_distance kept back
+        unalike = []                # (id, distance) of those alike_distance kept back
         likeness = {}               # id -> appearance distance to the detection, once each
         gains = {}                  # id -> appearance gain (nats per side camera), unrounded
         for k in keep:
@@ -121,7 +121,7 @@ class DetectionAssociator:
         best = min(((k, likeness[tracks[k].track_id]) for k in movable),
                    key=lambda kd: kd[1], default=None)
         hidden = False
-        if best is None and cfg.relocate_hidden:
+        if best is None:
             best = self._nearest_hidden(det, tracks, keep, means, models, moved, stamp_ns)
             hidden = best is not None
         if best is not None and not self._placed_recently(tracks[best[0]].track_id, stamp_ns):
@@ -146,7 +146,7 @@ class DetectionAssociator:
         far = doubtful = False
         if best is None:
             reused = self._reusable(det, model, models, info)
-            if reused is None and cfg.reuse_hidden:
+            if reused is None:
                 # a hidden track within reuse_radius that looks like the detection is
                 # given back its person like a lost one; so is one reported with a
                 # doubtful existence (shown again moments ago, or fading)
@@ -187,7 +187,7 @@ class DetectionAssociator:
         tid = tracks[best[0]].track_id
         again = False
         if not hidden and self._placed_recently(tid, stamp_ns):
-            again = gains[tid] > cfg.move_again_gain \
+            again = gains[tid] > 0.0 \
                 and self._moved_again.get(tid) != self._placed.get(tid)
             if not again:
                 info['action'] = f'drop (track {tid} placed recently)'
@@ -233,8 +233,8 @@ class DetectionAssociator:
         ``relocate_radius``) of the detection (a track whose existence fell below the
         report threshold; or, reported, below ``below_existence``), or None; with ``like``
         (the detection's model, and the cache of appearance distances to it by track id,
-        filled here) only a track whose model is within ``reuse_distance`` of that model
-        (``reuse_hidden``). Not a track born or moved within ``relocate_interval``: hidden
+        filled here) only a track whose model is within ``alike_distance`` of that model
+        (the reuse of a hidden track). Not a track born or moved within ``relocate_interval``: hidden
         again so soon, its model does not explain the person there."""
         best = None
         for k in keep:
@@ -254,7 +254,7 @@ class DetectionAssociator:
                 model, likeness = like
                 if tid not in likeness:
                     likeness[tid] = model_distance(models[tid], model)
-                if likeness[tid] > self.config.reuse_distance:
+                if likeness[tid] > self.config.alike_distance:
                     continue
             if best is None or d < best[1]:
                 best = (k, d)
@@ -301,7 +301,7 @@ class DetectionAssociator:
                   below: float | None = None) -> int | None:
         """The id of the track released nearest the detection, within ``reuse_radius``
         metres and ``reuse_time`` seconds, not live, whose appearance model is within
-        ``reuse_distance`` of the detection's - or, when ``below`` is given, nearer than
+        ``alike_distance`` of the detection's - or, when ``below`` is given, nearer than
         ``below`` (a lost track nearer in appearance than the track to be moved) - (and forgets it), or None; each candidate's
         distance and model distance go to ``info['reuse']``."""
         best = None
@@ -311,7 +311,7 @@ class DetectionAssociator:
                 continue
             unlike = model_distance(old, model) if old is not None else 1.0
             info.setdefault('reuse', []).append((int(tid), round(d, 2), round(unlike, 3)))
-            fits = unlike <= self.config.reuse_distance if below is None else unlike < below
+            fits = unlike <= self.config.alike_distance if below is None else unlike < below
             if fits and (best is None or d < best[1]):
                 best = (tid, d)
         if best is None:
@@ -344,7 +344,7 @@ class DetectionAssociator:
             rel = relative_angle(states[:, THETA], cam.viewing_angle(states[:, [X, Y]]))
             hists = np.stack([m.interpolate(rel[i:i + 1])[0] for i, m in enumerate(models)])
             out.append(single_target_loglik(evidence[n].bins, sil, hists,
-                                            sigma=self.config.sigma))
+                                            sigma=self.sigma))
         return out
 
     @staticmethod

@@ -15,7 +15,9 @@ from mbtrack_ros.core.detection.detector import Detection, DetectorConfig
 from mbtrack_ros.core.detection.release import ReleaseConfig
 from mbtrack_ros.core.existence import AuxiliaryConfig
 
-__all__ = ['AutoDetectionConfig', 'Birth']
+__all__ = ['AutoDetectionConfig', 'Birth', 'WALK_SPEED']
+
+WALK_SPEED = 0.5    # m/s, a slow walk: how far a person gets from an unsupported track
 
 
 @dataclass(frozen=True)
@@ -30,78 +32,48 @@ class AutoDetectionConfig:
         background, detector, release, acquisition, existence: per-stage parameters.
         adaptation: the slow appearance-model adaptation of confirmed tracks
             (:mod:`~mbtrack_ros.core.detection.adaptation`; ``rate`` 0 is off).
-        sigma: appearance likelihood width (003 Eq. 3), as the tracker's.
         clutter_distance: Bhattacharyya distance whose likelihood is the "not visible"
-            clutter likelihood ``p_0`` (001 Eq. 23).
-        visibility_particles: posterior particles used per track for ``p_1`` (001 Eq. 18).
+            clutter likelihood ``p_0`` (001 Eq. 23): what a model scores on something that
+            is not its person. Also :attr:`alike_distance`.
         side_weight: weight in [0, 1] of the side cameras' evidence in the existence update
             when a top-down camera exists.
-        report_hidden: also report tracks whose existence is below the report threshold.
-        relocate_radius: metres; a confirmed detection this close to a current track is
-            compared with the track's appearance model before it may start a new track.
-        relocate_margin: nats per side camera; mean log-likelihood gain (003 Eq. 3 under
-            the track's model) of the detection over the track's estimate above which the
-            detection is the track's own person and the track is moved there instead of a
-            birth (:meth:`AutoDetection._identify`); negative means "about as well".
-            Lower moves tracks more readily (fewer duplicate births, more moves onto
-            another person).
-        weak_relocate_margin: nats per side camera; the same margin for a detection scoring
-            below ``beside_threshold`` (the larger of the two applies; ``inf``: such a
-            detection moves no track by the gain). Weak detections beside a track are often
-            a neighbour's fringe, so they need a clear gain.
-        move_support: a track is moved by the gain only while the detection would leave it
-            spare: its exclusive support (:func:`~.release.spare_tracks`) with the
-            detection as one more track must be below this fraction. A track that keeps
-            foreground of its own beside the detection stands on a person of its own and
-            the detection is somebody else. Above 1: no track is kept from a move.
-        move_distance: appearance distance; a detection the gain would move a track to
-            although the track's model explains it worse than the track's own estimate
-            (gain in ``(relocate_margin, 0]``) must look like the track: distance at most
-            this. 1 lets the gain alone decide.
-        look_alike_slack: nats per side camera below ``relocate_margin`` down to which the
-            gain may still move a look-alike track (distance at most ``move_distance``)
-            for a strong detection (``beside_threshold``) that would leave the track less
-            than ``move_support``; 0 is off. Catches tracks left behind where their person
-            turned.
+        look_alike_margin: nats per side camera >= 0; how much worse than its own place
+            a track's model may explain a strong detection (``beside_threshold``) that
+            looks like it (``alike_distance``) for the detection to move the track, when
+            the detection would leave the track less than :attr:`move_support`; 0: a
+            look-alike needs a positive gain like any other. Catches tracks left behind
+            where their person turned.
         relocate_interval: seconds after a track was born or moved during which a detection
             does not move it again but is dropped (a young model explains several people
-            in a group about equally well: the track would hop between them).
-        move_again_gain: nats per side camera; within ``relocate_interval`` a detection
-            whose gain for that track is above this moves it again (once) instead of
-            being dropped. ``inf``: always dropped.
-        relocate_hidden: a confirmed detection that would start a new track within
-            ``relocate_radius`` of a track that is not reported (existence below the report
-            threshold: it lost its person) moves that track instead, whatever the gain
-            (the nearest such track not placed within ``relocate_interval``).
-        reuse_time, reuse_radius: seconds, metres; a released track is *lost* for
-            ``reuse_time``: a new track born within ``reuse_radius`` of where it was
-            released takes its id (its person re-found) when the two look alike
-            (``reuse_distance``). The id ends (:meth:`finished`) only when that time has
-            passed unused, so an id never comes back after it ended. 0 ends released tracks
-            at once. The time should cover a person standing still after being lost (a few
-            seconds); the radius how far a lost track may lag its person.
-        reuse_distance: largest appearance distance between a released track's model and a
-            detection's for the detection to take the released id; 1 accepts any.
+            in a group about equally well: the track would hop between them), unless its
+            appearance gain is positive (the track's model explains the detection better
+            than the track's own place): then it is moved again, once. A confirmed
+            detection that would start a new track within ``relocate_radius`` of a track
+            that is not reported (existence below the report threshold: it lost its
+            person) moves that track instead, whatever the gain (the nearest such track
+            not placed within ``relocate_interval``).
+        reuse_time: seconds; a released track is *lost* for ``reuse_time``: a new track
+            born within :attr:`reuse_radius` of where it was released takes its id (its
+            person re-found) when the two look alike (``alike_distance``). The id ends
+            (:meth:`finished`) only when that time has passed unused, so an id never comes
+            back after it ended. 0 ends released tracks at once. The time should cover a
+            person standing still after being lost (a few seconds). A detection that would
+            start a new track moves instead the nearest hidden track (not reported, or
+            reported with an existence below :attr:`reuse_doubtful`; not placed within
+            ``relocate_interval``) within :attr:`reuse_radius` whose model is within
+            ``alike_distance`` of the detection's: a hidden track is given back its person
+            like a lost one.
         reuse_in_entry_zones: a track released inside an entry zone is lost for
             ``reuse_time`` like any other; False: its id ends at once (its person is taken
             to have left the room).
-        reuse_hidden: a detection that would start a new track moves instead the nearest
-            hidden track (not reported, not placed within ``relocate_interval``) within
-            ``reuse_radius`` whose model is within ``reuse_distance`` of the detection's:
-            a hidden track is given back its person like a lost one.
-        reuse_doubtful: existence probability below which a reported track counts as hidden
-            for ``reuse_hidden`` (logged "move N (doubtful, far)"); 0 disables. With
-            ``report_hidden`` every hidden track is reported, so this level is what lets
-            ``reuse_hidden`` take them.
         duplicate_margin: nats per side camera; of two such tracks keep the one whose
             appearance model explains the image where they are better (003 Eq. 3, both
             models at the pair's midpoint) by more than this
             (:meth:`AutoDetection._duplicate_judge`); ``inf`` disables. Large enough that
             a model acquired moments ago (which fits its own view best) does not win alone.
-        reach_radius, reach_directions: metres, count; a track whose coverage evidence for
-            existence is negative at its mean is also judged at ``reach_directions``
-            places on each of two rings around it (radius half and all of
-            ``reach_radius``), on the foreground no other track's silhouette covers, and
+        reach_radius: metres; a track whose coverage evidence for existence is negative
+            at its mean is also judged at eight places on each of two rings around it
+            (radius half and all of ``reach_radius``), on the foreground no other track's silhouette covers, and
             the best place counts: a track that fell behind a person who started walking
             stays reported while the person is within the detector's ``exclusion_radius``
             (where the detector does not look for them), and when that place has positive
@@ -129,94 +101,112 @@ class AutoDetectionConfig:
     acquisition: AcquisitionConfig = field(default_factory=AcquisitionConfig)
     existence: AuxiliaryConfig = field(default_factory=AuxiliaryConfig)
     adaptation: AdaptationConfig = field(default_factory=AdaptationConfig)
-    sigma: float = 0.12
     clutter_distance: float = 0.5
-    visibility_particles: int = 6
     side_weight: float = 0.3
-    report_hidden: bool = False
-    relocate_radius: float = 1.0
-    relocate_margin: float = -3.0
-    weak_relocate_margin: float = 1.5
-    move_support: float = 0.3
-    move_distance: float = 0.65
-    look_alike_slack: float = 3.0
+    look_alike_margin: float = 6.0
     relocate_interval: float = 2.0
-    move_again_gain: float = 0.0
-    relocate_hidden: bool = True
     reuse_time: float = 3.0
-    reuse_radius: float = 1.5
-    reuse_distance: float = 0.55
     reuse_in_entry_zones: bool = True
-    reuse_hidden: bool = True
-    reuse_doubtful: float = 0.9
     duplicate_margin: float = 8.0
     reach_radius: float = 0.5
-    reach_directions: int = 8
     reach_age: float = 4.0
     beside_threshold: float = 3.0
     birth_exit_depth: float = 0.15
     track_coverage: float = 2.0
 
+    @property
+    def alike_distance(self) -> float:
+        """Appearance distance (003 Eq. 4, between two appearance models) at most which a
+        track's model and a detection's show the same person: ``clutter_distance``, the
+        distance at which a model's likelihood is the clutter likelihood ``p_0`` (001
+        Eq. 23), so that a model nearer than it is likelier the person than clutter (a
+        log-likelihood ratio above 0). A strong detection that the track's model explains
+        worse than the track's own estimate (gain at most 0) moves only such a track, and
+        only such a lost or hidden track takes a detection's person back."""
+        return self.clutter_distance
+
+    @property
+    def relocate_radius(self) -> float:
+        """Metres; a confirmed detection this close to a current track is compared with the
+        track's appearance model before it may start a new track: the appearance gain
+        (:meth:`AutoDetection._explains`: mean log-likelihood ratio per side camera, 003
+        Eq. 3 under the track's model, of the detection's place over the track's
+        estimate) decides whether it is the track's person (:meth:`gain_gate`). It is the
+        release's ``spare_radius``: the largest distance at which two hypotheses (two
+        tracks, or a track and a detection) are taken to be possibly of one person."""
+        return self.release.spare_radius
+
+    @property
+    def move_support(self) -> float:
+        """Exclusive support (:func:`~.release.spare_tracks`: foreground no other track
+        covers, per silhouette pixel) at which a track stands on a person of its own: the
+        release's ``spare_support``, below which a track is spare. A detection does not
+        move a track that keeps this much with the detection as one more track (it is
+        somebody else); ``inf`` (no track is kept from a move) when ``spare_support`` is 0
+        (no track is ever spare)."""
+        return self.release.spare_support if self.release.spare_support > 0 else np.inf
+
+    @property
+    def reuse_radius(self) -> float:
+        """Metres from a lost or hidden track within which a detection may be its person:
+        ``relocate_radius`` (how far a supported track may lag its person) widened by
+        :data:`WALK_SPEED` over the release's ``timeout`` (how long the person may have
+        walked on while the track was unsupported before it was released)."""
+        return self.relocate_radius + WALK_SPEED * self.release.timeout
+
+    @property
+    def reuse_doubtful(self) -> float:
+        """Existence probability below which a reported track counts as hidden for the
+        reuse (logged "move N (doubtful, far)"): the existence a track is born with
+        (``existence.initial_existence``, 001 §3.2); the track a detection moves there is a
+        hypothesis no better supported than the birth it replaces. With
+        ``existence.report_threshold`` 0 every track is reported, so this level is what
+        lets the reuse take hidden ones."""
+        return self.existence.initial_existence
+
     def looks_alike(self, unlike: float) -> bool:
         """Whether a track whose model is ``unlike`` (appearance distance) from a
-        detection's looks like it (``move_distance``)."""
-        return unlike <= self.move_distance
+        detection's looks like it (``alike_distance``)."""
+        return unlike <= self.alike_distance
 
     def gain_gate(self, score: float, gain: float, unlike: float) -> str | None:
         """Whether the appearance gain (003 Eq. 3, nats per side camera) lets a detection
         of ``score`` move a track whose model is ``unlike`` (appearance distance) from the
-        detection's: 'move'; 'unlike' when the gain is in the doubtful band (margin, 0]
-        and the track does not look like the detection (``move_distance`` keeps it back);
-        None when the gain is too low. The margin is ``relocate_margin``, the stricter
-        ``weak_relocate_margin`` below ``beside_threshold``; a strong detection may move
-        a look-alike ``look_alike_slack`` below it (:meth:`AutoDetection._identify`)."""
-        strong = score >= self.beside_threshold
-        margin = self.relocate_margin if strong \
-            else max(self.relocate_margin, self.weak_relocate_margin)
-        alike_margin = self.relocate_margin - self.look_alike_slack if strong else margin
-        looks_alike = self.looks_alike(unlike)
-        if margin < gain <= 0.0 and not looks_alike:
-            return 'unlike'
-        return 'move' if gain > margin or (looks_alike and gain > alike_margin) else None
+        detection's: 'move'; 'unlike' when the gain is in ``(-look_alike_margin, 0]`` of
+        a strong detection and the track does not look like the detection
+        (``alike_distance`` keeps it back); None when the gain is too low. A strong
+        detection (``beside_threshold``) needs a positive gain, or a look-alike track
+        one above ``-look_alike_margin``. A weak detection's own evidence (its score, a
+        log response) falls short of ``beside_threshold``: the gain must make up the
+        shortfall, ``gain > beside_threshold - score``, with no look-alike allowance
+        (weak detections beside a track are often a neighbour's fringe)
+        (:meth:`AutoDetection._identify`)."""
+        if score < self.beside_threshold:
+            return 'move' if gain > self.beside_threshold - score else None
+        if gain > 0.0:
+            return 'move'
+        if self.looks_alike(unlike):
+            return 'move' if gain > -self.look_alike_margin else None
+        return 'unlike' if gain > -self.look_alike_margin else None
 
     def __post_init__(self) -> None:
-        if not self.relocate_radius >= 0 or not np.isfinite(self.relocate_margin):
-            raise DetectionError('relocate_radius must be >= 0 and relocate_margin finite')
-        if np.isnan(self.weak_relocate_margin) or self.weak_relocate_margin == -np.inf:
-            raise DetectionError(f'weak_relocate_margin must be a number or inf, got '
-                                 f'{self.weak_relocate_margin}')
-        if np.isnan(self.move_again_gain) or self.move_again_gain == -np.inf:
-            raise DetectionError(f'move_again_gain must be a number or inf, got '
-                                 f'{self.move_again_gain}')
-        if not (np.isfinite(self.look_alike_slack) and self.look_alike_slack >= 0):
-            raise DetectionError(f'look_alike_slack must be a finite number >= 0, got '
-                                 f'{self.look_alike_slack}')
-        if not 0.0 <= self.move_distance <= 1.0:
-            raise DetectionError(f'move_distance must be in [0, 1], got {self.move_distance}')
-        if not self.move_support >= 0:
-            raise DetectionError(f'move_support must be >= 0, got {self.move_support}')
+        if not (np.isfinite(self.look_alike_margin) and self.look_alike_margin >= 0):
+            raise DetectionError(f'look_alike_margin must be a finite number >= 0, got '
+                                 f'{self.look_alike_margin}')
         if not self.duplicate_margin >= 0:
             raise DetectionError(f'duplicate_margin must be >= 0, got {self.duplicate_margin}')
-        if not (self.reuse_time >= 0 and self.reuse_radius >= 0
-                and 0 <= self.reuse_distance <= 1):
-            raise DetectionError('reuse_time and reuse_radius must be >= 0, reuse_distance '
-                                 'in [0, 1]')
-        if not 0.0 <= self.reuse_doubtful <= 1.0:
-            raise DetectionError(f'reuse_doubtful must be in [0, 1], got {self.reuse_doubtful}')
-        if not self.sigma > 0 or not self.clutter_distance > 0:
-            raise DetectionError('sigma and clutter_distance must be > 0')
+        if not self.reuse_time >= 0:
+            raise DetectionError(f'reuse_time must be >= 0, got {self.reuse_time}')
+        if not self.clutter_distance > 0:
+            raise DetectionError(f'clutter_distance must be > 0, got {self.clutter_distance}')
         if not (np.isfinite(self.track_coverage) and self.track_coverage >= 0):
             raise DetectionError(f'track_coverage must be a finite number >= 0, got '
                                  f'{self.track_coverage}')
         if not (np.isfinite(self.beside_threshold) and self.beside_threshold >= 0):
             raise DetectionError(f'beside_threshold must be a finite number >= 0, got '
                                  f'{self.beside_threshold}')
-        if self.visibility_particles < 1:
-            raise DetectionError('visibility_particles must be >= 1')
-        if not (self.reach_radius >= 0 and self.reach_directions >= 1
-                and self.reach_age >= 0):
-            raise DetectionError('reach_radius and reach_age must be >= 0 and '
-                                 'reach_directions >= 1')
+        if not (self.reach_radius >= 0 and self.reach_age >= 0):
+            raise DetectionError('reach_radius and reach_age must be >= 0')
         if not (np.isfinite(self.birth_exit_depth) and self.birth_exit_depth >= 0):
             raise DetectionError(f'birth_exit_depth must be a finite number >= 0, got '
                                  f'{self.birth_exit_depth}')

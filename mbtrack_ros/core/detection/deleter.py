@@ -26,6 +26,8 @@ from mbtrack_ros.core.state import X, Y, TrackEstimate
 __all__ = ['TrackDeleter']
 
 _MID = np.array([0.5])     # offset of the systematic selection of visibility particles
+VISIBILITY_PARTICLES = 6   # posterior particles per track for p_1 (001 Eq. 18: their mean)
+REACH_DIRECTIONS = 8       # places on each ring of a track's reach (reach_radius)
 
 
 class TrackDeleter:
@@ -104,7 +106,7 @@ class TrackDeleter:
                         sils: Mapping[str, object], means: np.ndarray,
                         shapes: Sequence[BodyShape], tops: np.ndarray
                         ) -> tuple[np.ndarray, list[dict[str, float]]]:
-        """The places (M, 2) of track k's reach (``reach_directions`` places on each of
+        """The places (M, 2) of track k's reach (``REACH_DIRECTIONS`` places on each of
         the rings of radius ``reach_radius`` / 2 and ``reach_radius`` around its mean, but
         none within the detector's ``exclusion_radius`` of another track) and per place:
         camera -> coverage of its silhouette there (top-down cameras: the
@@ -116,9 +118,8 @@ class TrackDeleter:
         cfg = self.config
         if cfg.reach_radius <= 0:
             return np.zeros((0, 2)), []
-        angle = np.tile(2.0 * np.pi * np.arange(cfg.reach_directions) / cfg.reach_directions,
-                        2)
-        radius = np.repeat([0.5 * cfg.reach_radius, cfg.reach_radius], cfg.reach_directions)
+        angle = np.tile(2.0 * np.pi * np.arange(REACH_DIRECTIONS) / REACH_DIRECTIONS, 2)
+        radius = np.repeat([0.5 * cfg.reach_radius, cfg.reach_radius], REACH_DIRECTIONS)
         ring = np.repeat(means[k][None], len(angle), axis=0)
         ring[:, X] += radius * np.cos(angle)
         ring[:, Y] += radius * np.sin(angle)
@@ -181,7 +182,7 @@ class TrackDeleter:
                 # systematic selection at the weights' quantiles (no draw: a shared
                 # generator would tie every track's sample to the number of tracks)
                 idx = systematic_indices(w[None], np.array([w.sum()]), _MID,
-                                         min(cfg.visibility_particles, len(p)))[0]
+                                         min(VISIBILITY_PARTICLES, len(p)))[0]
                 rows.append(p[idx])
             else:
                 rows.append(t.mean[None])
@@ -201,7 +202,7 @@ class TrackDeleter:
         ``colour(camera)`` gives the frame's colour bins of a side camera; ``reach(k)`` the
         coverages of track k's reach ring (:meth:`_reach_coverage`)."""
         cfg = self.config
-        hidden = -cfg.clutter_distance ** 2 / (2.0 * cfg.sigma ** 2)    # 001 Eq. 23
+        hidden = -cfg.clutter_distance ** 2 / (2.0 * self.sigma ** 2)    # 001 Eq. 23
         has_particles = len(parts) > 0
         loglik: dict[str, np.ndarray] = {}
         if has_particles:
@@ -216,7 +217,7 @@ class TrackDeleter:
             for c, n in enumerate(cams):
                 sil = part_sils[n]
                 ll = key_view_loglik(colour(n), sil, key, target.ravel(), va[c], vb[c], wa[c],
-                                     sigma=cfg.sigma)
+                                     sigma=self.sigma)
                 loglik[n] = np.where(sil.area > 0, ll, -np.inf)
         for k, t in enumerate(tracks):
             aux = self.aux.setdefault(t.track_id, TrackAuxiliary(cfg.existence))

@@ -78,14 +78,19 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
     Args:
         calibration: the room.
         config: pipeline parameters.
+        sigma: the appearance likelihood width (003 Eq. 3; 000 Eq. 19), the tracking
+            filter's (``LikelihoodConfig.sigma``).
 
     The pipeline draws no random numbers: it is deterministic given the tracks.
     """
 
-    def __init__(self, calibration: RoomCalibration, config: AutoDetectionConfig | None = None
-                 ) -> None:
+    def __init__(self, calibration: RoomCalibration, config: AutoDetectionConfig | None = None,
+                 *, sigma: float = 0.12) -> None:
+        if not (np.isfinite(sigma) and sigma > 0):
+            raise DetectionError(f'sigma must be a finite number > 0, got {sigma}')
         self.calibration = calibration
         self.config = cfg = config or AutoDetectionConfig()
+        self.sigma = float(sigma)
         self.background = BackgroundBank(cfg.background, calibration=calibration)
         self.detector = Detector(calibration, cfg.detector)
         self.releaser = Releaser(calibration, cfg.release)
@@ -97,7 +102,7 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
         self.reach_moves: dict[int, np.ndarray] = {}
         self._first_seen: dict[int, int] = {}  # track id -> stamp of its first update
         self._placed: dict[int, int] = {}  # track id -> stamp of its birth or last move
-        self._moved_again: dict[int, int] = {}  # track id -> stamp of its move_again_gain move
+        self._moved_again: dict[int, int] = {}  # track id -> stamp of its move again (relocate_interval)
         # released id -> (stamp, floor xy, its appearance model) for reuse_time
         self._released: dict[int, tuple[int, np.ndarray, PersonModel | None]] = {}
         self._lost_ended: list[int] = []  # released ids whose reuse_time passed unreused
@@ -603,8 +608,10 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
         return done + [int(t) for t in released if int(t) not in self._released]
 
     def reported(self, track_id: int) -> bool:
+        """Whether the track is reported: its existence is at least the existence
+        process's ``report_threshold`` (001 §3.2; a track without one yet is)."""
         aux = self.aux.get(int(track_id))
-        return aux is None or aux.reported or self.config.report_hidden
+        return aux is None or aux.reported
 
     # -- helpers --------------------------------------------------------------------------
     def _adapt(self, stamp_ns: int, tracks: Sequence[TrackEstimate],

@@ -226,7 +226,11 @@ class ReleaseConfig:
             docstring, :func:`spare_tracks`); 0 disables. ``spare_radius``: only a track
             with another track this close on the floor (metres) can be spare, when the
             caller gives the states. Dimensionless (a foreground fraction): tracks on a
-            person typically reach 0.3-0.7, tracks on nobody stay below about 0.25.
+            person typically reach 0.3-0.7, tracks on nobody stay below about 0.25. The
+            association uses both (``AutoDetectionConfig.move_support``,
+            ``relocate_radius``): a detection within ``spare_radius`` of a track may be
+            its person, and a track that would keep ``spare_support`` with the detection
+            as one more track is not moved onto it.
         exit_margin: metres from the floor rectangle beyond which a track inside one of the
             calibration's exits is released at once (module docstring); people standing in
             a doorway stay within it. It must exceed the overshoot of a track whose person
