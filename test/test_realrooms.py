@@ -188,14 +188,14 @@ def test_shadow_model_brightness_chromaticity_and_texture():
 def test_shadow_change_tests_the_direction_of_the_change():
     """A change towards black along the reference's colour is a shadow arriving or leaving,
     however little of the pixel it covers (a penumbra: lit and shadowed mixed); a cream wall
-    partly covered by a blue-grey body is not, at any coverage, though at a partial one its
+    partly covered by a blue body is not, at any coverage, though at a partial one its
     chromaticity distortion is as small as a shadow's (brute force against the angle of
     ``I - E`` to ``-E``)."""
     from mbtrack_ros.core.detection.shadow import ShadowConfig, shadow_change
 
     cfg = ShadowConfig()
     wall = np.array([226.0, 228.0, 194.0])          # a cream wall
-    body = np.array([90.0, 100.0, 130.0])           # blue-grey clothes
+    body = np.array([90.0, 110.0, 160.0])           # blue clothes
     cover = np.linspace(0.1, 1.0, 19)
     for darkening in (0.35, 0.55):                  # a shadow of 65 % and 45 % brightness
         lit = np.tile(wall, (1, cover.size, 1))

@@ -54,7 +54,7 @@ class ShadowConfig:
             taken for a shadow (too dark to tell).
         change_angle: for a change between two frames (:func:`shadow_change`), the tangent
             of the largest angle between the change ``I - E`` and ``-E`` (the colour of
-            the light a shadow takes away against the surface's overall light; 0.2: 11
+            the light a shadow takes away against the surface's overall light; 0.3: 17
             degrees); it replaces ``chromaticity`` there.
     """
 
@@ -63,7 +63,7 @@ class ShadowConfig:
     texture: float = 0.5
     window: int = 5
     min_level: float = 15.0
-    change_angle: float = 0.2
+    change_angle: float = 0.3
 
     def __post_init__(self) -> None:
         lo, hi = self.brightness
