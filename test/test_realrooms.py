@@ -185,6 +185,43 @@ def test_shadow_model_brightness_chromaticity_and_texture():
     assert fg_shadow[inner].mean() < 0.05 and fg_person[inner].mean() > 0.95
 
 
+def test_shadow_change_tests_the_direction_of_the_change():
+    """A change towards black along the reference's colour is a shadow arriving or leaving,
+    however little of the pixel it covers (a penumbra: lit and shadowed mixed); a cream wall
+    partly covered by a blue body is not, at any coverage, though at a partial one its
+    chromaticity distortion is as small as a shadow's (brute force against the angle of
+    ``I - E`` to ``-E``)."""
+    from mbtrack_ros.core.detection.shadow import ShadowConfig, shadow_change
+
+    cfg = ShadowConfig()
+    wall = np.array([226.0, 228.0, 194.0])          # a cream wall
+    body = np.array([90.0, 110.0, 160.0])           # blue clothes
+    cover = np.linspace(0.1, 1.0, 19)
+    for darkening in (0.35, 0.55):                  # a shadow of 65 % and 45 % brightness
+        lit = np.tile(wall, (1, cover.size, 1))
+        pen = (wall * (1 - cover[:, None] * darkening))[None]
+        changed = shadow_change(lit, pen)
+        assert changed[0, (1 - cover * darkening) <= cfg.brightness[1]].all()
+        assert shadow_change(pen, lit).tolist() == changed.tolist()   # leaving, too
+    mixed = (wall * (1 - cover[:, None]) + body * cover[:, None])[None]
+    lit = np.tile(wall, (1, cover.size, 1))
+    got = shadow_change(lit, mixed)[0]
+    for k, f in enumerate(cover):                   # brute force on the change direction
+        d = mixed[0, k] - wall
+        tan = np.linalg.norm(np.cross(d, wall)) / max(-d @ wall, 1e-9) if d @ wall < 0 \
+            else np.inf
+        alpha = mixed[0, k] @ wall / (wall @ wall)
+        want = cfg.brightness[0] <= alpha <= cfg.brightness[1] and tan <= cfg.change_angle
+        assert got[k] == want, (f, tan, alpha)
+    assert not got.any()
+    # a bound on the chromaticity distortion alone takes some coverages for a light shadow
+    cd = np.linalg.norm(mixed[0] - (mixed[0] @ wall / (wall @ wall))[:, None] * wall, axis=1) \
+        / np.linalg.norm(wall)
+    alpha = mixed[0] @ wall / (wall @ wall)
+    assert ((cd <= cfg.chromaticity) & (alpha >= cfg.brightness[0])
+            & (alpha <= cfg.brightness[1])).any()
+
+
 def test_moving_shadows_are_no_person_at_the_bootstrap():
     """Ceiling lamps: the multi-view person cue of the never-empty room takes no place where
     nobody stands (a moving shadow's change is not a person's motion)."""

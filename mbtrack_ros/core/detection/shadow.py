@@ -17,11 +17,18 @@ patch scaled). Everything is vectorised (OpenCV box filters), no Python loop ove
 
 :func:`shadow_mask` classifies pixels against a reference; :func:`shadow_change` finds the
 pixels whose change between two frames is a shadow arriving or leaving (so a moving
-person's shadow is no motion of a person).
+person's shadow is no motion of a person). A change is tested by its direction in RGB: the
+light a cast shadow takes away has the surface's colour, so ``I - E`` points from ``E``
+towards black, and its chromaticity distortion grows with the darkening,
+``CD <= tan(angle) (1 - alpha)``. A pixel on the outline of a moving body is a mixture of
+the body and the surface behind it (more so in an image shrunk from a larger one), which
+changes towards the body's colour: with a small coverage both ``CD`` and ``1 - alpha`` are
+small, so a bound on ``CD`` alone takes a neutral body's outline for a light shadow, the
+bound on the angle does not (the angle does not depend on the coverage).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -45,6 +52,10 @@ class ShadowConfig:
         window: side of the texture window, pixels at 320x240 (odd).
         min_level: reference brightness (0..255, per channel mean) below which no pixel is
             taken for a shadow (too dark to tell).
+        change_angle: for a change between two frames (:func:`shadow_change`), the tangent
+            of the largest angle between the change ``I - E`` and ``-E`` (the colour of
+            the light a shadow takes away against the surface's overall light; 0.3: 17
+            degrees); it replaces ``chromaticity`` there.
     """
 
     brightness: tuple[float, float] = (0.4, 0.92)
@@ -52,15 +63,17 @@ class ShadowConfig:
     texture: float = 0.5
     window: int = 5
     min_level: float = 15.0
+    change_angle: float = 0.3
 
     def __post_init__(self) -> None:
         lo, hi = self.brightness
         if not 0 < lo < hi < 1:
             raise DetectionError(f'shadow brightness must be 0 < lo < hi < 1, got '
                                  f'{self.brightness}')
-        if self.chromaticity <= 0 or not -1 <= self.texture <= 1 or self.window < 1:
-            raise DetectionError('shadow chromaticity must be > 0, texture in [-1, 1], '
-                                 'window >= 1')
+        if self.chromaticity <= 0 or not -1 <= self.texture <= 1 or self.window < 1 \
+                or self.change_angle <= 0:
+            raise DetectionError('shadow chromaticity and change_angle must be > 0, texture '
+                                 'in [-1, 1], window >= 1')
 
 
 def _distortions(image: np.ndarray, reference: np.ndarray
@@ -115,9 +128,21 @@ def shadow_change(before: np.ndarray, after: np.ndarray,
                   config: ShadowConfig = ShadowConfig(), *, length_scale: float = 1.0
                   ) -> np.ndarray:
     """(H, W) bool pixels whose change from ``before`` to ``after`` is a shadow arriving
-    (``after`` a shadow on ``before``) or leaving (the other way round). Brightness and
-    chromaticity only: the pixels that change are at a moving shadow's edge, which lies
-    inside the texture window (a patch half in the shadow is no scaled copy)."""
-    flat = replace(config, texture=-1.0)
-    return shadow_mask(after, before, flat, length_scale=length_scale) \
-        | shadow_mask(before, after, flat, length_scale=length_scale)
+    (``after`` a shadow on ``before``) or leaving (the other way round): brightness
+    distortion ``alpha`` in ``config.brightness`` and the change within
+    ``config.change_angle`` of the reference's colour, ``CD <= change_angle (1 - alpha)``
+    (module docstring). No texture test: the pixels that change are at a moving shadow's
+    edge, which lies inside the texture window (a patch half in the shadow is no scaled
+    copy). ``length_scale`` is accepted for symmetry with :func:`shadow_mask` (no window
+    here)."""
+    del length_scale
+    if before.shape != after.shape:
+        raise DetectionError(f'shadow test: image {after.shape} and reference '
+                             f'{before.shape} differ')
+    lo, hi = config.brightness
+    out = np.zeros(before.shape[:2], bool)
+    for image, reference in ((after, before), (before, after)):
+        alpha, cd, level = _distortions(image, reference)
+        out |= (alpha >= lo) & (alpha <= hi) & (cd <= config.change_angle * (1.0 - alpha)) \
+            & (level >= config.min_level)
+    return out
