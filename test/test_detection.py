@@ -1602,7 +1602,10 @@ def test_a_lost_track_that_looks_like_the_person_is_reused_before_another_is_mov
         assert 1 not in tracker.track_ids
     else:
         assert 'reuse 1 (not 2)' in actions and moved not in actions, actions
-        assert on_blue == [1]
+        # blue has her id back; track 2, left behind by yellow ('gain'), may follow the
+        # foreground of blue 0.75 m away (its coverage above the support coverage keeps
+        # its existence) until the duplicate rule ends one of the two
+        assert on_blue == [1] if how == 'hidden' else 1 in on_blue, on_blue
 
 
 @pytest.mark.parametrize('rule, who, moved', [(True, 'same', True), (False, 'same', False),
