@@ -11,9 +11,10 @@ from scipy.special import logsumexp
 from mbtrack_ros.core.appearance import (
     model_from_images, quantize, relative_angle, single_target_loglik)
 from mbtrack_ros.core.camera import Camera, RoomCalibration, look_at
+from mbtrack_ros.core.detection.release import ReleaseConfig
 from mbtrack_ros.core.existence import (
-    AuxiliaryConfig, ExistenceError, TrackAuxiliary, binary_step, mixture_loglik,
-    predictive_loglik, transition)
+    AuxiliaryConfig, ExistenceError, TrackAuxiliary, binary_step, coverage_log_ratio,
+    mixture_loglik, predictive_loglik, transition)
 from mbtrack_ros.core.shape import BodyShape, rasterize, render_labels
 from mbtrack_ros.core.state import THETA, X, Y
 
@@ -182,7 +183,7 @@ def test_visibility_drops_during_full_occlusion_and_recovers():
     assert vis[44, 0] > 0.9                        # recovered
 
 
-def _reference_update(aux: TrackAuxiliary, dt, vis, hid, cov, frac) -> None:
+def _reference_update(aux: TrackAuxiliary, dt, vis, hid, cov, frac, neutral=0.5) -> None:
     """TrackAuxiliary.update written plainly with numpy arrays (the scalar code's reference)."""
     cfg = aux.config
     A_v = transition(cfg.desocclusion, cfg.occlusion, dt)
@@ -212,7 +213,7 @@ def _reference_update(aux: TrackAuxiliary, dt, vis, hid, cov, frac) -> None:
     for cam, f in cov.items():
         w = np.clip(frac.get(cam, 1.0), 0.0, 1.0)
         f = np.clip(f, 0.0, 1.0) if np.isfinite(f) else 0.0
-        ratio += w * cfg.support_gain * (2.0 * f - 1.0)
+        ratio += w * cfg.support_gain * 2.0 * (f - neutral)
     aux.existence, _ = step(aux.existence, transition(cfg.birth, cfg.death, dt), 0.0, ratio)
 
 
@@ -236,10 +237,35 @@ def test_scalar_update_matches_the_array_reference():
                                           zip(cams, rng.uniform(-0.1, 1.1, len(cams)))}
             frac = {c: float(v) for c, v in zip(cams, rng.uniform(-0.2, 1.2, len(cams)))}
             dt = 0.0 if t == 4 else 1 / 15
+            neutral = (0.5, 0.3, 0.0)[t % 3]
             fast.update(dt, loglik_visible=vis, loglik_hidden=hid, coverage=cov,
-                        visible_fraction=frac)
-            _reference_update(ref, dt, vis, hid, cov, frac)
+                        visible_fraction=frac, neutral_coverage=neutral)
+            _reference_update(ref, dt, vis, hid, cov, frac, neutral)
             assert fast.existence == pytest.approx(ref.existence, abs=1e-12)
             for c in ref.visibility:
                 assert fast.visibility[c] == pytest.approx(ref.visibility[c], abs=1e-12)
         assert 0.0 < fast.existence < 1.0
+
+
+def test_coverage_evidence_is_neutral_at_the_support_coverage():
+    """The coverage evidence is 0 at the support coverage f_s, positive above, negative
+    below: a person seen in part (0.4 of the rendered silhouette covered in both cameras,
+    above the release's support threshold) keeps the track for a second, an empty place
+    (0.05) loses it; with the crossover of the symmetric exponentials (0.5) the person
+    seen in part would be lost too."""
+    f_s = ReleaseConfig().min_coverage
+    assert 0.0 < f_s < 0.4
+    assert coverage_log_ratio({'a': f_s, 'b': f_s}, {}, 4.0, neutral=f_s) == 0.0
+    assert coverage_log_ratio({'a': 0.4}, {'a': 0.5}, 4.0, neutral=f_s) \
+        == pytest.approx(0.5 * 4.0 * 2.0 * (0.4 - f_s))
+
+    def existence(f: float, neutral: float) -> float:
+        aux = TrackAuxiliary(AuxiliaryConfig())
+        for _ in range(15):                                   # one second at 15 Hz
+            aux.update(1 / 15, loglik_visible={}, loglik_hidden={},
+                       coverage={'a': f, 'b': f}, neutral_coverage=neutral)
+        return aux.existence
+
+    assert existence(0.4, f_s) > 0.95
+    assert existence(0.05, f_s) < 0.05
+    assert existence(0.4, 0.5) < 0.05

@@ -155,7 +155,10 @@ def test_the_track_of_a_person_who_walked_out_ends_sooner_with_the_doorway_rule(
     0.2 s after without the doorway rule), which is not what this compares. The motion is
     the coupled one of 000 (``orientation_follows_velocity``), with which the track lags:
     with the default motion its velocity follows the person and the track ends 0.40 s
-    after their last row without the doorway rule too (1.13 s with the coupled motion)."""
+    after their last row without the doorway rule too (1.13 s with the coupled motion).
+    Without the doorway rule the track may also outlive the clip: two of the four cameras
+    still see 0.4-0.9 of its silhouette at the door covered, above the support coverage,
+    and its existence stays high."""
     from mbtrack_ros.core.dynamics import MotionConfig
     from mbtrack_ros.core.tracker import Tracker, TrackerConfig
     from mbtrack_ros.synth import Synthesizer
@@ -185,8 +188,8 @@ def test_the_track_of_a_person_who_walked_out_ends_sooner_with_the_doorway_rule(
                 last_truth, following = frame.index, set(tracker.track_ids)
             elif ended is None and following & set(released):
                 ended = frame.index
-        assert last_truth is not None and ended is not None
-        delays.append((ended - last_truth) / synth.fps)
+        assert last_truth is not None and (ended is not None or band == 0.0)
+        delays.append(np.inf if ended is None else (ended - last_truth) / synth.fps)
     delay = float(np.median(delays))
     if band > 0:
         assert 0 <= delay <= config.doorway_timeout + 0.25, delays

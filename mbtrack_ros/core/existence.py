@@ -18,7 +18,7 @@ computed in log space. Existence follows 001 §3.2: non-existence forces the sta
 void state ``u`` (Eq. 27, 30), so only the existing branch needs particles; its data
 likelihood relative to "no person" combines (a) the foreground support of the track's
 rendered silhouette (coverage ``f_c``, truncated-exponential densities on [0, 1] giving the
-log ratio ``k (2 f_c - 1)`` per camera) and (b) the visibility evidence, the likelihood of
+log ratio ``2 k (f_c - f_s)`` per camera, neutral at the support coverage ``f_s``) and (b) the visibility evidence, the likelihood of
 camera ``c`` under ``e = 1`` being the visibility mixture
 ``xi_v p_1 + (1 - xi_v) p_0`` against ``p_0`` under ``e = 0`` (the joint (v, e) chain of the
 conclusion of 001 with states (0, 0), (0, 1), (1, 1)).
@@ -169,16 +169,24 @@ def mixture_loglik(loglik_visible: np.ndarray, loglik_hidden: np.ndarray,
 
 
 def coverage_log_ratio(coverage: Mapping[str, float], weights: Mapping[str, float],
-                       gain: float, total: float = 0.0) -> float:
+                       gain: float, total: float = 0.0, neutral: float = 0.5) -> float:
     """Existence evidence of the foreground coverage ``f_c`` of a track's silhouettes:
-    ``sum_c w_c k (2 f_c - 1)``, the log ratio of two truncated exponentials on [0, 1]
-    (``p(f | e=1) ∝ exp(k f)``, ``p(f | e=0) ∝ exp(-k f)``), each camera weighted by
-    ``weights`` (1 when omitted; NaN coverage counts as 0), added to ``total``."""
+    ``sum_c w_c 2 k (f_c - f_s)``, each camera weighted by ``weights`` (1 when omitted;
+    NaN coverage counts as 0), added to ``total``.
+
+    ``p(f | e=1) ∝ exp(k f)`` and ``p(f | e=0) ∝ exp(-k f)`` on [0, 1] (truncated
+    exponentials) give the slope ``2 k``; their ratio is 1 at ``f = 0.5``. The coverage at
+    which a camera's view is neutral, ``f_s`` (``neutral``, in [0, 1]), is instead the
+    coverage that counts as a person's support (``ReleaseConfig.min_coverage``): a person
+    seen only in part (cut by a wall or a nearer person, or in a posture the body model
+    renders larger, such as sitting down) covers well under half of the rendered
+    silhouette, an empty place almost none of it, so the crossover at 0.5 would count
+    the former as evidence of absence."""
     out = total
     for cam, f in coverage.items():
         w = _unit(weights.get(cam, 1.0))
         f = _unit(f) if math.isfinite(f) else 0.0
-        out += w * gain * (2.0 * f - 1.0)
+        out += w * gain * 2.0 * (f - neutral)
     return out
 
 
@@ -191,7 +199,7 @@ class AuxiliaryConfig:
             (001 §3.1 alpha_10, alpha_01).
         death, birth: per-second probabilities of the existence chain (001 §3.2).
         initial_visibility, initial_existence: values at track creation.
-        support_gain: ``k`` of the coverage evidence ``k (2 f - 1)`` per camera.
+        support_gain: ``k`` of the coverage evidence ``2 k (f - f_s)`` per camera.
         appearance_weight: tempering of the visibility evidence in the existence update.
         visibility_cap: largest visibility prior used in that evidence: a wrong appearance
             model in every camera at once then costs at most ``log(1 - cap)`` per camera
@@ -255,7 +263,8 @@ class TrackAuxiliary:
     def update(self, dt: float, *, loglik_visible: Mapping[str, float],
                loglik_hidden: Mapping[str, float],
                coverage: Mapping[str, float] | None = None,
-               visible_fraction: Mapping[str, float] | None = None) -> None:
+               visible_fraction: Mapping[str, float] | None = None,
+               neutral_coverage: float = 0.5) -> None:
         """One filtering step of all auxiliary processes of the track.
 
         Args:
@@ -266,6 +275,8 @@ class TrackAuxiliary:
             coverage: camera -> foreground coverage of the track's silhouette in [0, 1].
             visible_fraction: camera -> expected visible fraction under the prior (w*);
                 weights the camera's evidence (1 when omitted).
+            neutral_coverage: the coverage at which a camera's coverage evidence is
+                neutral (:func:`coverage_log_ratio`).
         """
         cfg = self.config
         coverage = coverage or {}
@@ -292,7 +303,7 @@ class TrackAuxiliary:
                 mix = _logaddexp(_log(pv) + l1 - l0, _log1p_neg(pv))
                 log_ratio_e += cfg.appearance_weight * w * mix
         log_ratio_e = coverage_log_ratio(coverage, visible_fraction, cfg.support_gain,
-                                         log_ratio_e)
+                                         log_ratio_e, neutral_coverage)
         A_e = transition(cfg.birth, cfg.death, dt)
         self.existence, _ = binary_step(self.existence, A_e, 0.0, log_ratio_e)
 

@@ -163,7 +163,8 @@ class TrackDeleter:
         """A reach place's coverages on the track's cameras (those of ``cov``; 0 where the
         place is not seen) and their existence evidence (:func:`coverage_log_ratio`)."""
         on = {n: ring.get(n, 0.0) for n in cov}
-        return on, coverage_log_ratio(on, weights, self.config.existence.support_gain)
+        return on, coverage_log_ratio(on, weights, self.config.existence.support_gain,
+                                      neutral=self.releaser.config.min_coverage)
 
     def _visibility_particles(self, tracks: Sequence[TrackEstimate],
                               models: Mapping[int, PersonModel], shapes: Sequence[BodyShape]
@@ -238,7 +239,9 @@ class TrackDeleter:
             side_w = cfg.side_weight if self.ceiling else 1.0
             weights = {n: (float(t.visible_fraction.get(n, 1.0)) * side_w
                            if n in self.side else 1.0) for n in set(cov) | set(vis)}
-            best = (coverage_log_ratio(cov, weights, cfg.existence.support_gain)
+            neutral = self.releaser.config.min_coverage     # support counts for existence
+            best = (coverage_log_ratio(cov, weights, cfg.existence.support_gain,
+                                       neutral=neutral)
                     if reach is not None and cov else 0.0)
             if best < 0.0:
                 # the track's reach: its best place counts (AutoDetectionConfig.reach_radius)
@@ -250,6 +253,6 @@ class TrackDeleter:
                         if evidence > 0.0:
                             self.reach_moves[t.track_id] = place
             aux.update(dt, loglik_visible=vis, loglik_hidden=hid, coverage=cov,
-                       visible_fraction=weights)
+                       visible_fraction=weights, neutral_coverage=neutral)
             t.visibility = dict(aux.visibility)
             t.existence = float(aux.existence)
