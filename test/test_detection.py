@@ -271,13 +271,19 @@ def test_detector_finds_painted_people_within_the_bound():
         assert len(d.coverage) >= 2 and min(d.coverage.values()) > 0.5
 
 
-def test_confirmed_detection_gets_the_walking_velocity_and_direction():
-    rng = np.random.default_rng(9)
+def _empty_room_detector(seed: int, confirm_frames: int):
+    """(rng, room, background images, a bank bootstrapped on them, a Detector confirming
+    after ``confirm_frames``) of the painted empty room."""
     calib = make_room()
     bgs = backgrounds(calib)
     bank = BackgroundBank()
     bank.bootstrap({n: [bgs[n]] for n in calib.cameras})
-    det = Detector(calib, DetectorConfig(confirm_frames=5))
+    return (np.random.default_rng(seed), calib, bgs, bank,
+            Detector(calib, DetectorConfig(confirm_frames=confirm_frames)))
+
+
+def test_confirmed_detection_gets_the_walking_velocity_and_direction():
+    rng, calib, bgs, bank, det = _empty_room_detector(9, 5)
     found = []
     for k in range(8):
         p = person(1.8 - 0.08 * k, 1.5 + 0.04 * k, theta=0.0)   # 1.34 m/s at 153 degrees
@@ -300,12 +306,7 @@ def test_a_walking_detection_found_sitting_is_refined_standing(monkeypatch, spee
     """A person walking at 1.2 m/s whose best per-frame hypothesis is a sitting body (as
     a walker's spread legs can make it) is confirmed standing, near the painted height and
     place, with the walking velocity kept; one standing still stays as found (sitting)."""
-    rng = np.random.default_rng(4)
-    calib = make_room()
-    bgs = backgrounds(calib)
-    bank = BackgroundBank()
-    bank.bootstrap({n: [bgs[n]] for n in calib.cameras})
-    det = Detector(calib, DetectorConfig(confirm_frames=3))
+    rng, calib, bgs, bank, det = _empty_room_detector(4, 3)
     refine = Detector._refine
     calls = []
 
