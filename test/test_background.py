@@ -19,6 +19,16 @@ def scene(rng: np.random.Generator) -> np.ndarray:
     return cv2.resize(base, (W, H), interpolation=cv2.INTER_CUBIC)
 
 
+def scene_with_person(bg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``bg`` with a red 70 x 25 pixel "person" painted at rows 30-99, columns 60-84, and
+    that region as an (H, W) bool mask."""
+    person = bg.copy()
+    person[30:100, 60:85] = (200, 30, 40)
+    region = np.zeros((H, W), bool)
+    region[30:100, 60:85] = True
+    return person, region
+
+
 def noisy(image: np.ndarray, rng: np.random.Generator, amp: int = 4) -> np.ndarray:
     return np.clip(image.astype(np.int16) + rng.integers(-amp, amp + 1, image.shape),
                    0, 255).astype(np.uint8)
@@ -77,10 +87,7 @@ def test_border_test_learns_a_tracked_ghost_but_keeps_a_tracked_person():
     under a track (his outline is in the frame) stays foreground."""
     rng = np.random.default_rng(8)
     bg = scene(rng)
-    person = bg.copy()
-    person[30:100, 60:85] = (200, 30, 40)
-    region = np.zeros((H, W), bool)
-    region[30:100, 60:85] = True
+    person, region = scene_with_person(bg)
     cfg = BackgroundConfig(alpha=0.99, static_frames=0, ghost_frames=4)
     ghost, kept = BackgroundModel(cfg), BackgroundModel(cfg)
     ghost.bootstrap([person])                  # the person was there while it was learnt
@@ -136,10 +143,7 @@ def test_the_place_a_learnt_person_leaves_under_his_track_is_learnt_once_the_tra
     still) it is no ghost."""
     rng = np.random.default_rng(12)
     bg = scene(rng)
-    person = bg.copy()
-    person[30:100, 60:85] = (200, 30, 40)
-    region = np.zeros((H, W), bool)
-    region[30:100, 60:85] = True
+    person, region = scene_with_person(bg)
     model = BackgroundModel(BackgroundConfig(alpha=0.99, static_frames=0, ghost_frames=4))
     model.bootstrap([person])
     seen = []
@@ -258,10 +262,7 @@ def test_temporal_filter_matches_formula_and_converges():
 def test_tracked_person_is_not_absorbed_but_untracked_is():
     rng = np.random.default_rng(2)
     bg = scene(rng)
-    person = bg.copy()
-    person[30:100, 60:85] = (200, 30, 40)
-    region = np.zeros((H, W), bool)
-    region[30:100, 60:85] = True
+    person, region = scene_with_person(bg)
     cfg = BackgroundConfig(alpha=0.9)
     masked, free = BackgroundModel(cfg), BackgroundModel(cfg)
     masked.bootstrap([bg])

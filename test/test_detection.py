@@ -282,15 +282,21 @@ def _empty_room_detector(seed: int, confirm_frames: int):
             Detector(calib, DetectorConfig(confirm_frames=confirm_frames)))
 
 
+def _detect_frame(det, bank, calib, bgs, people, rng, k: int) -> list:
+    """Frame ``k`` (at FPS) of ``people`` painted into the room, through the background
+    ``bank`` into ``det``; returns the detections it confirmed."""
+    images = paint(calib, bgs, people, rng)
+    fg = bank.apply(images)
+    ev = {n: FrameEvidence(images[n], fg[n]) for n in fg}
+    return det.step(ev, stamp_ns=int(round(k * 1e9 / FPS)))
+
+
 def test_confirmed_detection_gets_the_walking_velocity_and_direction():
     rng, calib, bgs, bank, det = _empty_room_detector(9, 5)
     found = []
     for k in range(8):
         p = person(1.8 - 0.08 * k, 1.5 + 0.04 * k, theta=0.0)   # 1.34 m/s at 153 degrees
-        images = paint(calib, bgs, [p], rng)
-        fg = bank.apply(images)
-        ev = {n: FrameEvidence(images[n], fg[n]) for n in fg}
-        found += det.step(ev, stamp_ns=int(round(k * 1e9 / FPS)))
+        found += _detect_frame(det, bank, calib, bgs, [p], rng, k)
         if found:
             break
     assert found
@@ -321,10 +327,7 @@ def test_a_walking_detection_found_sitting_is_refined_standing(monkeypatch, spee
     found, truth = [], None
     for k in range(6):
         truth = person(2.0, 3.2 - speed / FPS * k, theta=-np.pi / 2, h=1.7)
-        images = paint(calib, bgs, [truth], rng)
-        fg = bank.apply(images)
-        ev = {n: FrameEvidence(images[n], fg[n]) for n in fg}
-        found += det.step(ev, stamp_ns=int(round(k * 1e9 / FPS)))
+        found += _detect_frame(det, bank, calib, bgs, [truth], rng, k)
         if found:
             break
     assert len(found) == 1
