@@ -1572,8 +1572,8 @@ def test_a_lost_track_that_looks_like_the_person_is_reused_before_another_is_mov
     the appearance gain, ``look_alike_margin`` raised and every track taken to look like the
     detection so that any gain moves).
     Blue comes back 0.75 m from track 2: she takes her lost id back (her model fits her,
-    track 2's is yellow's) and track 2 stays. With ``alike_distance`` 0 no released id is reused by a
-    birth: the comparison of the two models alone gives blue her id back. When track 2
+    track 2's is yellow's) and track 2 stays. With ``alike_distance`` 0 no released id is
+    reused by a birth: the comparison of the two models alone gives blue her id back. When track 2
     was placed within ``relocate_interval`` ('young') the move would not happen (the
     detection is dropped), and neither does the reuse in its place."""
     from mbtrack_ros.core.detection.manager import AutoDetection
@@ -1838,9 +1838,9 @@ def test_a_track_placed_moments_ago_is_moved_again_by_a_positive_gain_once(
     40, back at (2, 2.5) from frame 50 and at (2.75, 2.5) again from frame 60, the gain of
     track 1's model forced to ``gain``. Her first detection moves track 1; the next comes
     within ``relocate_interval`` of that move and is dropped, unless the gain is positive
-    (track 1's model explains her better than its own place): then it is moved again, once - the third detection, within
-    the interval of a move made that way, is dropped. (The actions are what is asserted:
-    alone in the room she is followed back either way.)"""
+    (track 1's model explains her better than its own place): then it is moved again, once -
+    the third detection, within the interval of a move made that way, is dropped. (The
+    actions are what is asserted: alone in the room she is followed back either way.)"""
     from mbtrack_ros.core.detection.manager import AutoDetection
 
     rng = np.random.default_rng(5)

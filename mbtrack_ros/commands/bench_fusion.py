@@ -87,8 +87,9 @@ def main_fusion(args: argparse.Namespace) -> int:
             m = {k: clear_mot(rows, truth) for k, rows in got.rows.items()}
             gaps = np.array(got.gaps or [0.0])
             codec = 'raw' if args.fusion_jpeg is None else f'JPEG {args.fusion_jpeg}'
-            print(f'{args.fusion} seed {seed} (working images {codec}): MOTA one process {100 * m["single"].mota:.1f} '
-                  f'/ fusion {100 * m["fusion"].mota:.1f}, MOTP {m["single"].motp_mm:.0f} / '
+            print(f'{args.fusion} seed {seed} (working images {codec}): MOTA one process '
+                  f'{100 * m["single"].mota:.1f} / fusion {100 * m["fusion"].mota:.1f}, '
+                  f'MOTP {m["single"].motp_mm:.0f} / '
                   f'{m["fusion"].motp_mm:.0f} mm, switches {m["single"].mismatches} / '
                   f'{m["fusion"].mismatches}; same ids on {got.same_ids}/{got.frames} frame '
                   f'sets; position gap median {1e3 * np.median(gaps):.1f} mm, max '
@@ -118,7 +119,8 @@ def main_fusion(args: argparse.Namespace) -> int:
                   f'frames): masks PNG {dec["mask_png"]:.3f} ms, raw {dec["mask_raw"]:.3f} '
                   f'ms; image JPEG {dec["image_jpeg"]:.3f} ms, raw {dec["image_raw"]:.3f} ms',
                   flush=True)
-            doc.append({'seed': seed, 'jpeg_quality': args.fusion_jpeg, 'mota': {k: v.mota for k, v in m.items()},
+            doc.append({'seed': seed, 'jpeg_quality': args.fusion_jpeg,
+                        'mota': {k: v.mota for k, v in m.items()},
                         'motp_mm': {k: v.motp_mm for k, v in m.items()},
                         'same_ids': got.same_ids, 'frames': got.frames,
                         'cpu_ms_per_frame_set': ms, 'fusion_step_share_percent': share,

@@ -16,9 +16,10 @@ offline speed: with the default parameters and, in a source checkout, with the f
 offline profiles (``config/clear_room_fast.yaml``, ``config/clear_room_offline.yaml``).
 
 **Soak** (``--live-bad-rate P``, with a long ``--live-frames``, ``--live-compressed`` to
-keep its recording small, and ``--live-no-offline``): the listener also publishes a bad image on one camera's topic
-(``--live-bad-camera``, reliable) for a share ``P`` of the frame sets, right after the
-``/clock`` tick of that stamp, cycling through kinds the node must refuse (unknown encoding,
+keep its recording small, and ``--live-no-offline``): the listener also publishes a bad
+image on one camera's topic (``--live-bad-camera``, reliable) for a share ``P`` of the frame
+sets, right after the ``/clock`` tick of that stamp, cycling through kinds the node must
+refuse (unknown encoding,
 unexpected frame id, a declared 8192x8192 image, a data length that does not match, a zero
 stamp). The resident memory of the tracker process is sampled every second; the summary gives
 its growth (median of the last tenth of the run against the median of the second tenth, after
@@ -726,7 +727,8 @@ def main_live(args: argparse.Namespace) -> int:
             return _error(f'--live-bad-camera must be one of {", ".join(names)}, got '
                           f'{args.live_bad_camera!r}')
         load0 = os.getloadavg()
-        live = run_live(recording, seed=seed, rate=args.live_rate, use_sim_time=not args.live_no_sim_time,
+        live = run_live(recording, seed=seed, rate=args.live_rate,
+                        use_sim_time=not args.live_no_sim_time,
                         ground_truth=args.live_ground_truth, node_args=node_args,
                         bad_rate=args.live_bad_rate, bad_camera=args.live_bad_camera,
                         camera_nodes=args.live_camera_nodes,

@@ -18,10 +18,10 @@ computed in log space. Existence follows 001 §3.2: non-existence forces the sta
 void state ``u`` (Eq. 27, 30), so only the existing branch needs particles; its data
 likelihood relative to "no person" combines (a) the foreground support of the track's
 rendered silhouette (coverage ``f_c``, truncated-exponential densities on [0, 1] giving the
-log ratio ``2 k (f_c - f_s)`` per camera, neutral at the support coverage ``f_s``) and (b) the visibility evidence, the likelihood of
-camera ``c`` under ``e = 1`` being the visibility mixture
-``xi_v p_1 + (1 - xi_v) p_0`` against ``p_0`` under ``e = 0`` (the joint (v, e) chain of the
-conclusion of 001 with states (0, 0), (0, 1), (1, 1)).
+log ratio ``2 k (f_c - f_s)`` per camera, neutral at the support coverage ``f_s``) and (b)
+the visibility evidence, the likelihood of camera ``c`` under ``e = 1`` being the visibility
+mixture ``xi_v p_1 + (1 - xi_v) p_0`` against ``p_0`` under ``e = 0`` (the joint (v, e)
+chain of the conclusion of 001 with states (0, 0), (0, 1), (1, 1)).
 
 **Relation to the HJS occlusion maps.** The HJS likelihood (000 Eq. 34) already weights the
 pixels of a target by ``w*``, the probability that no other target is in front of it under

@@ -330,8 +330,9 @@ def _length(pixels: int, scale: float) -> int:
 def _pixels_scaled(config, scale: float):
     """``AutoDetectionConfig`` with its pixel lengths (given at 320 x 240) scaled by the
     working size's length factor ``scale``: background morphology and mask growth, the
-    person cue's dilations, the edge validation. Its areas (``min_area``, ``min_blob_area``) are given at 320x240 and
-    scaled with the image area where they are used, and metres need nothing."""
+    person cue's dilations, the edge validation. Its areas (``min_area``,
+    ``min_blob_area``) are given at 320x240 and scaled with the image area where they are
+    used, and metres need nothing."""
     if scale == 1.0:
         return config
     bg = config.background

@@ -234,8 +234,9 @@ class DetectionAssociator:
         report threshold; or, reported, below ``below_existence``), or None; with ``like``
         (the detection's model, and the cache of appearance distances to it by track id,
         filled here) only a track whose model is within ``alike_distance`` of that model
-        (the reuse of a hidden track). Not a track born or moved within ``relocate_interval``: hidden
-        again so soon, its model does not explain the person there."""
+        (the reuse of a hidden track). Not a track born or moved within
+        ``relocate_interval``: hidden again so soon, its model does not explain the person
+        there."""
         best = None
         for k in keep:
             tid = tracks[k].track_id
@@ -302,8 +303,9 @@ class DetectionAssociator:
         """The id of the track released nearest the detection, within ``reuse_radius``
         metres and ``reuse_time`` seconds, not live, whose appearance model is within
         ``alike_distance`` of the detection's - or, when ``below`` is given, nearer than
-        ``below`` (a lost track nearer in appearance than the track to be moved) - (and forgets it), or None; each candidate's
-        distance and model distance go to ``info['reuse']``."""
+        ``below`` (a lost track nearer in appearance than the track to be moved) - (and
+        forgets it), or None; each candidate's distance and model distance go to
+        ``info['reuse']``."""
         best = None
         for tid, (_, xy, old) in self._released.items():
             d = float(np.hypot(*(xy - det.xy)))

@@ -73,13 +73,13 @@ class AutoDetectionConfig:
             a model acquired moments ago (which fits its own view best) does not win alone.
         reach_radius: metres; a track whose coverage evidence for existence is negative
             at its mean is also judged at eight places on each of two rings around it
-            (radius half and all of ``reach_radius``), on the foreground no other track's silhouette covers, and
-            the best place counts: a track that fell behind a person who started walking
-            stays reported while the person is within the detector's ``exclusion_radius``
-            (where the detector does not look for them), and when that place has positive
-            coverage evidence the track is restarted there (same id and velocity,
-            :attr:`AutoDetection.reach_moves`; the tracker moves it after the frame's
-            output) so that it catches up with its person; 0 disables.
+            (radius half and all of ``reach_radius``), on the foreground no other track's
+            silhouette covers, and the best place counts: a track that fell behind a person
+            who started walking stays reported while the person is within the detector's
+            ``exclusion_radius`` (where the detector does not look for them), and when
+            that place has positive coverage evidence the track is restarted there (same
+            id and velocity, :attr:`AutoDetection.reach_moves`; the tracker moves it after
+            the frame's output) so that it catches up with its person; 0 disables.
         reach_age: seconds a track must have existed before it has a reach: a false birth
             (a shadow, a ghost, the fringe of a person) would keep itself alive on what is
             near it; false births mostly die within a few seconds.

@@ -102,7 +102,8 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
         self.reach_moves: dict[int, np.ndarray] = {}
         self._first_seen: dict[int, int] = {}  # track id -> stamp of its first update
         self._placed: dict[int, int] = {}  # track id -> stamp of its birth or last move
-        self._moved_again: dict[int, int] = {}  # track id -> stamp of its move again (relocate_interval)
+        # track id -> stamp of its move again (relocate_interval)
+        self._moved_again: dict[int, int] = {}
         # released id -> (stamp, floor xy, its appearance model) for reuse_time
         self._released: dict[int, tuple[int, np.ndarray, PersonModel | None]] = {}
         self._lost_ended: list[int] = []  # released ids whose reuse_time passed unreused

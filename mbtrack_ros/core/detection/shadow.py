@@ -125,17 +125,14 @@ def shadow_mask(image: np.ndarray, reference: np.ndarray,
 
 
 def shadow_change(before: np.ndarray, after: np.ndarray,
-                  config: ShadowConfig = ShadowConfig(), *, length_scale: float = 1.0
-                  ) -> np.ndarray:
+                  config: ShadowConfig = ShadowConfig()) -> np.ndarray:
     """(H, W) bool pixels whose change from ``before`` to ``after`` is a shadow arriving
     (``after`` a shadow on ``before``) or leaving (the other way round): brightness
     distortion ``alpha`` in ``config.brightness`` and the change within
     ``config.change_angle`` of the reference's colour, ``CD <= change_angle (1 - alpha)``
     (module docstring). No texture test: the pixels that change are at a moving shadow's
     edge, which lies inside the texture window (a patch half in the shadow is no scaled
-    copy). ``length_scale`` is accepted for symmetry with :func:`shadow_mask` (no window
-    here)."""
-    del length_scale
+    copy)."""
     if before.shape != after.shape:
         raise DetectionError(f'shadow test: image {after.shape} and reference '
                              f'{before.shape} differ')
