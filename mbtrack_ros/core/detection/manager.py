@@ -41,6 +41,7 @@ from mbtrack_ros.core.detection.deleter import TrackDeleter
 from mbtrack_ros.core.detection.detector import Detection, Detector, FrameEvidence, is_ceiling
 from mbtrack_ros.core.detection.release import Releaser
 from mbtrack_ros.core.existence import TrackAuxiliary
+from mbtrack_ros.core.likelihood import LikelihoodConfig
 from mbtrack_ros.core.shape import BodyShape, rasterize, render_labels
 from mbtrack_ros.core.state import X, Y, TrackEstimate
 
@@ -79,13 +80,13 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
         calibration: the room.
         config: pipeline parameters.
         sigma: the appearance likelihood width (003 Eq. 3; 000 Eq. 19), the tracking
-            filter's (``LikelihoodConfig.sigma``).
+            filter's (default ``LikelihoodConfig.sigma``).
 
     The pipeline draws no random numbers: it is deterministic given the tracks.
     """
 
     def __init__(self, calibration: RoomCalibration, config: AutoDetectionConfig | None = None,
-                 *, sigma: float = 0.12) -> None:
+                 *, sigma: float = LikelihoodConfig.sigma) -> None:
         if not (np.isfinite(sigma) and sigma > 0):
             raise DetectionError(f'sigma must be a finite number > 0, got {sigma}')
         self.calibration = calibration
