@@ -6,6 +6,7 @@ import os
 import subprocess
 import sys
 import threading
+import time
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -55,11 +56,13 @@ def context():
 
 @contextmanager
 def playing(recording: Path, nodes: list, context, *, rate: float, threads: int,
-            timeout: float, topics: list[str] | None = None):
+            timeout: float, topics: list[str] | None = None, ready=None):
     """Spin ``nodes`` in a multi-threaded executor while ``bag_player`` (its own process)
     plays ``recording`` at ``rate`` (only ``topics`` if given); yields once the player has
-    finished (its exit code is checked). On exit: player killed if still running, executor
-    stopped, nodes destroyed."""
+    finished (its exit code is checked). ``ready`` (no argument, returns bool), if given, is
+    polled for up to 60 s before the player starts: DDS discovery of the test's subscriptions
+    takes its time on a loaded machine, and messages published before it are lost. On exit:
+    player killed if still running, executor stopped, nodes destroyed."""
     from rclpy.executors import MultiThreadedExecutor
 
     executor = MultiThreadedExecutor(num_threads=threads, context=context)
@@ -67,6 +70,11 @@ def playing(recording: Path, nodes: list, context, *, rate: float, threads: int,
         executor.add_node(node)
     spinner = threading.Thread(target=executor.spin, daemon=True)
     spinner.start()
+    if ready is not None:
+        deadline = time.monotonic() + 60
+        while not ready():
+            assert time.monotonic() < deadline, 'the test subscriptions never matched'
+            time.sleep(0.1)
     player = subprocess.Popen(
         [sys.executable, '-m', 'mbtrack_ros.nodes.bag_player', '--ros-args',
          '-p', f'bag:={recording}', '-p', f'rate:={rate}', '-p', 'wait_for_subscribers:=true',

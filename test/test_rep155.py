@@ -168,8 +168,15 @@ def test_rep155_consumer_follows_the_tracks(recording, tmp_path):
         # warm_up before subscribing: the player starts once the tracker keeps pace, so the
         # per-person publishers appear while the recording plays (a backlog processed in a
         # burst would leave the consumer's subscriptions no time to match before frame 26)
+        # and only once the tracker's outputs are discovered: what it publishes before its
+        # subscribers match is lost (volatile durability)
+        def matched() -> bool:
+            return (consumer.count_publishers('/humans/persons/tracked') > 0
+                    and consumer.count_publishers('/tf') > 0
+                    and reference.count_publishers('/tracker_node/tracks') > 0)
+
         with playing(recording, [consumer, reference], context, rate=0.5, threads=3,
-                     timeout=240, topics=[f'/{CAMERA}/image_raw']):
+                     timeout=240, topics=[f'/{CAMERA}/image_raw'], ready=matched):
             deadline = time.monotonic() + 180
             while time.monotonic() < deadline:
                 with consumer.lock:
