@@ -667,11 +667,12 @@ def _set_relocate_radius(tracker, metres):
     assert tracker.detection.config.relocate_radius == metres
 
 
-def test_track_coverage_gives_the_filter_this_frame_foreground():
-    """With ``track_coverage`` the filter's coverage term gets the foreground masks that
+def test_coverage_gain_gives_the_filter_this_frame_foreground():
+    """With a ``coverage_gain`` the filter's coverage term gets the foreground masks that
     the same frame set's background step produced (joined from the worker before the
     filter), and the person is still found and tracked."""
-    calib, bgs, tracker = _painted_room_tracker(1, track_coverage=2.0)
+    calib, bgs, tracker = _painted_room_tracker(1)
+    assert tracker.measurement.config.coverage_gain == 2.0     # the likelihood's default
     frames = [paint(calib, bgs, [person(1.5 + 0.05 * k, 2.8, theta=0.0)] if k >= 3 else [],
                     np.random.default_rng(k)) for k in range(10)]
     extracted, given = [], []
@@ -681,7 +682,7 @@ def test_track_coverage_gives_the_filter_this_frame_foreground():
         extracted.append(apply(images, **kwargs))
         return extracted[-1]
 
-    def recording_set_foreground(masks, gain):
+    def recording_set_foreground(masks, gain=None):
         assert callable(masks)          # joined by the filter when it needs them
         given.append((masks(), gain))
         set_foreground(masks, gain)
@@ -693,26 +694,27 @@ def test_track_coverage_gives_the_filter_this_frame_foreground():
         tracked.append(len(tracker.step(int(round(k * 1e9 / FPS)), images).tracks))
     assert len(given) == len(extracted) == len(frames)
     for (masks, gain), fg in zip(given, extracted):
-        assert gain == 2.0 and masks.keys() == fg.keys() and fg
+        assert gain is None and masks.keys() == fg.keys() and fg   # the config's gain
         for name in fg:
             np.testing.assert_array_equal(masks[name], fg[name])
     assert any(extracted[-1][n].any() for n in extracted[-1])   # the person is foreground
     assert tracked[-1] == 1 and tracked[2] == 0
 
 
-def test_track_coverage_is_checked_and_handed_to_the_pipeline():
+def test_coverage_gain_is_checked_and_handed_to_the_likelihood():
+    from mbtrack_ros.core.likelihood import LikelihoodConfig, LikelihoodError
     from mbtrack_ros.core.tracker import TrackerConfig, TrackerError
 
-    assert TrackerConfig(track_coverage=1.5).detection_config().track_coverage == 1.5
-    assert TrackerConfig().detection_config().track_coverage == \
-        AutoDetectionConfig().track_coverage
+    assert TrackerConfig(coverage_gain=1.5).likelihood_config().coverage_gain == 1.5
+    assert TrackerConfig().likelihood_config().coverage_gain == \
+        LikelihoodConfig().coverage_gain
     for bad in (-0.1, float('nan'), float('inf')):
-        with pytest.raises(DetectionError, match='track_coverage'):
-            AutoDetectionConfig(track_coverage=bad)
-        with pytest.raises(TrackerError, match='track_coverage'):
-            TrackerConfig(track_coverage=bad)
-    with pytest.raises(TrackerError, match='track_coverage'):
-        TrackerConfig(track_coverage=True)
+        with pytest.raises(LikelihoodError, match='coverage_gain'):
+            LikelihoodConfig(coverage_gain=bad)
+        with pytest.raises(TrackerError, match='coverage_gain'):
+            TrackerConfig(coverage_gain=bad)
+    with pytest.raises(TrackerError, match='coverage_gain'):
+        TrackerConfig(coverage_gain=True)
 
 
 def test_tracker_detects_tracks_and_releases_a_painted_person():
@@ -967,9 +969,9 @@ def test_deferred_search_gives_the_same_tracks_as_the_full_step():
     assert any(runs[1]) and not any(runs[1][:4])  # born after entering, not before
 
 
-@pytest.mark.parametrize('track_coverage', [0.0, 2.0])
+@pytest.mark.parametrize('coverage_gain', [0.0, 2.0])
 def test_foreground_overlapped_with_the_filter_gives_the_same_tracks_and_background(
-        track_coverage):
+        coverage_gain):
     """Tracker.step starts the foreground on the detection's worker before the filter and
     joins it in update(): the same tracks, background models and motion as extracting it
     within update() (without the filter's coverage term, which needs it before update);
@@ -981,8 +983,8 @@ def test_foreground_overlapped_with_the_filter_gives_the_same_tracks_and_backgro
                     np.random.default_rng(k)) for k in range(14)]
     failing = 9
     runs, banks = [], []
-    for variant in ('inline', 'overlapped', 'failed')[1 if track_coverage else 0:]:
-        tracker = _detecting_tracker(calib, bgs, seed=1, track_coverage=track_coverage)
+    for variant in ('inline', 'overlapped', 'failed')[1 if coverage_gain else 0:]:
+        tracker = _detecting_tracker(calib, bgs, seed=1, coverage_gain=coverage_gain)
         if variant == 'inline':
             tracker.detection.start_foreground = lambda images: None
         rows = []
@@ -1216,24 +1218,21 @@ def test_a_hidden_track_beside_a_detection_is_moved_there_instead_of_a_birth(
         assert 'birth' in actions and not any(a.startswith('move') for a in actions)
 
 
-@pytest.mark.parametrize('reuse_time, place, back, entry, reused', [
-    (2.0, (2.5, 2.5), 'same', True, True), (0.0, (2.5, 2.5), 'same', True, False),
-    (2.0, (4.6, 4.5), 'same', True, True), (2.0, (4.6, 4.5), 'same', False, False),
-    (2.0, (4.6, 4.5), 'other', True, False), (2.0, (2.5, 2.5), None, True, False),
-    (2.0, (2.5, 2.5), 'other', True, False)])
+@pytest.mark.parametrize('reuse_time, place, back, reused', [
+    (2.0, (2.5, 2.5), 'same', True), (0.0, (2.5, 2.5), 'same', False),
+    (2.0, (4.6, 4.5), 'same', True), (2.0, (4.6, 4.5), 'other', False),
+    (2.0, (2.5, 2.5), None, False), (2.0, (2.5, 2.5), 'other', False)])
 def test_a_person_re_found_soon_after_the_release_gets_the_released_id(
-        reuse_time, place, back, entry, reused):
+        reuse_time, place, back, reused):
     """A standing person vanishes (their track is released after the 1 s timeout) and is
     detected again at the same place 0.3 s later: within ``reuse_time`` the new track takes
-    the released id, in the entry zone too (``reuse_in_entry_zones``); with ``reuse_time``
-    0, in the entry zone without ``reuse_in_entry_zones`` (the person is taken to have
-    left), or when somebody who looks different stands there (``alike_distance``; in the
+    the released id, in the entry zone too; with ``reuse_time`` 0, or when somebody who
+    looks different stands there (``alike_distance``; in the
     entry zone: a newcomer), a new id is issued. The id ends (``FrameResult.ended``) at the
     release when it cannot come back, ``reuse_time`` after it when nobody took it, never
     when it was taken: an id never returns after it ended."""
     rng = np.random.default_rng(5)
-    calib, bgs, tracker = _painted_room_tracker(      # entry: the default
-        4, reuse_time=reuse_time, **({} if entry else {'reuse_in_entry_zones': False}))
+    calib, bgs, tracker = _painted_room_tracker(4, reuse_time=reuse_time)
     stand = [person(*place, theta=0.0)]
     other = [person(*place, theta=0.0, colours=YELLOW)]
     released_at, ids, ended = None, [], {}
@@ -1253,7 +1252,7 @@ def test_a_person_re_found_soon_after_the_release_gets_the_released_id(
     assert ids[-1] == ([1] if reused else [2] if back else [])
     if reused:
         assert 1 not in ended
-    elif reuse_time == 0 or not entry:  # cannot come back: ends at the release
+    elif reuse_time == 0:  # cannot come back: ends at the release
         assert ended[1] == released_at
     else:       # lost for reuse_time, then ended
         assert ended[1] == released_at + round(reuse_time * FPS)

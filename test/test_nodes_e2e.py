@@ -84,7 +84,7 @@ def test_detection_parameter_reaches_the_tracker(room_calibration, context, tmp_
                  '-p', 'tracker.particles:=50', '-p', 'tracker.release_time:=1.5',
                  '-p', 'detection.threshold:=2.5', '-p', 'tracker.subsample:=2',
                  '-p', 'detection.spare_support:=0.0', '-p', 'detection.reuse_time:=0.5',
-                 '-p', 'detection.reuse_in_entry_zones:=false')
+                 '-p', 'tracker.coverage_gain:=1.5')
     try:
         assert node.params.tracker.detection is True
         assert node.tracker.config.detection is True and node.tracker.config.particles == 50
@@ -95,7 +95,7 @@ def test_detection_parameter_reaches_the_tracker(room_calibration, context, tmp_
         assert cfg.release.spare_support == 0.0  # the spare-track rule switched off
         assert node.tracker.detection.releaser.config.spare_support == 0.0
         assert cfg.reuse_time == 0.5 and node.tracker.detection.config.reuse_time == 0.5
-        assert node.tracker.detection.config.reuse_in_entry_zones is False  # default: true
+        assert node.tracker.measurement.config.coverage_gain == 1.5  # default: 2.0
     finally:
         node.destroy_node()
     node = start(context, '-p', f'calibration_file:={room_calibration}',
@@ -172,7 +172,7 @@ BAD = [
     (['-p', 'motion.velocity_noise:=-0.1'], "'motion.velocity_noise': value out of range"),
     (['-p', 'motion.orientation_follows_velocity:=1.0'],
      "'motion.orientation_follows_velocity': wrong type"),
-    (['-p', 'detection.reuse_in_entry_zones:=1'], "'detection.reuse_in_entry_zones': wrong type"),
+    (['-p', 'tracker.coverage_gain:=true'], "'tracker.coverage_gain': wrong type"),
     (['-p', 'cameras:=[cam0,cam9]'], 'unknown camera(s) cam9'),
     (['-p', 'init_ground_truth:=/nonexistent/gt.csv'], 'does not exist'),
 ]

@@ -161,7 +161,8 @@ def test_same_seed_same_result():
     ({'spare_support': 1.5}, 'spare_support'),
     ({'reuse_time': -0.5}, 'reuse_time'),
     ({'reuse_time': float('inf')}, 'reuse_time'),
-    ({'reuse_in_entry_zones': 1}, 'reuse_in_entry_zones'),
+    ({'coverage_gain': True}, 'coverage_gain'),
+    ({'coverage_gain': -0.1}, 'coverage_gain'),
 ])
 def test_config_validation(kw, msg):
     with pytest.raises(TrackerError, match=msg):

@@ -253,9 +253,7 @@ def test_node_defaults_are_the_trackers_defaults():
                         'spare_support': pipeline.release.spare_support,
                         'release_recover_time': pipeline.release.recover_time,
                         'beside_threshold': pipeline.beside_threshold,
-                        'track_coverage': pipeline.track_coverage,
                         'reuse_time': pipeline.reuse_time,
-                        'reuse_in_entry_zones': pipeline.reuse_in_entry_zones,
                         'adaptation_rate': pipeline.adaptation.rate}
     for key, (field, _) in TRACKER_PARAMETERS.items():
         owner = config.motion if field.startswith('motion.') else config

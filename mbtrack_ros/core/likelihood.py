@@ -39,7 +39,8 @@ doorway. The exit's strip between the floor's edge and the wall is in front of t
 camera and scored as usual.
 
 With automatic detection the frame's foreground masks come too
-(:meth:`MeasurementModel.set_foreground`): each particle then gains ``k f_c`` per camera,
+(:meth:`MeasurementModel.set_foreground`): each particle then gains ``k f_c`` per camera
+(``k``: ``LikelihoodConfig.coverage_gain``),
 ``f_c`` the foreground fraction of its silhouette, counted on the spans the camera's kernel
 rasterised.
 
@@ -96,6 +97,12 @@ class LikelihoodConfig:
             update w* = 1 and the fraction is the share inside the image).
         subsample: use every k-th image row of the silhouettes (speed option).
         threads: cameras evaluated in parallel threads (0: one per CPU core, 1: serial).
+        coverage_gain: ``k`` of the foreground-coverage term ``k f_c`` (nats per camera
+            at full coverage, ``f_c`` in [0, 1] the foreground fraction of a particle's
+            silhouette) that the frame's foreground masks add to the log-likelihood
+            (:meth:`MeasurementModel.set_foreground`, module docstring); 0: colour alone.
+            Larger holds tracks on the foreground more firmly (better MOTP, fewer
+            identity switches) at the cost of the colour evidence's say.
     """
 
     sigma: float = 0.12
@@ -105,6 +112,7 @@ class LikelihoodConfig:
     min_visible_share: float = 0.1
     subsample: int = 1
     threads: int = 0
+    coverage_gain: float = 2.0
 
     def __post_init__(self) -> None:
         if not (self.sigma > 0 and np.isfinite(self.sigma)):
@@ -121,6 +129,9 @@ class LikelihoodConfig:
             raise LikelihoodError(f'subsample must be >= 1, got {self.subsample}')
         if int(self.threads) < 0:
             raise LikelihoodError(f'threads must be >= 0, got {self.threads}')
+        if not (np.isfinite(self.coverage_gain) and self.coverage_gain >= 0):
+            raise LikelihoodError(f'coverage_gain must be a finite number >= 0, got '
+                                  f'{self.coverage_gain}')
 
 
 @dataclass
@@ -329,9 +340,11 @@ class MeasurementModel:
         return moved
 
     def set_foreground(self, masks: Mapping[str, np.ndarray]
-                       | Callable[[], Mapping[str, np.ndarray]], gain: float) -> None:
+                       | Callable[[], Mapping[str, np.ndarray]],
+                       gain: float | None = None) -> None:
         """Take the frame's foreground masks (H, W) bool (003 §4.2) for a coverage term in
-        the ``hjs`` and ``separable`` log-likelihoods: ``gain * f_c(x)`` per camera, with
+        the ``hjs`` and ``separable`` log-likelihoods: ``gain * f_c(x)`` per camera (``gain``
+        None: ``config.coverage_gain``), with
         ``f_c`` the foreground fraction of the particle's silhouette: ``p(f | x) ∝ exp(k f)``,
         the exponential in f that the existence update's evidence uses
         (:func:`~mbtrack_ros.core.existence.coverage_log_ratio`).
@@ -344,6 +357,7 @@ class MeasurementModel:
         after :meth:`set_images` (which clears the masks); cameras without an image or
         mask get no term; ``gain`` 0 disables, and so does a refused call.
         """
+        gain = self.config.coverage_gain if gain is None else gain
         if not (np.isfinite(gain) and gain >= 0):
             raise LikelihoodError(f'coverage gain must be a finite number >= 0, got {gain}')
         self._foreground, self._masks_source, self._coverage_gain = {}, {}, 0.0

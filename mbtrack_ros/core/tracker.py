@@ -49,6 +49,9 @@ class TrackerConfig:
         joint_particles: joint particles of the joint filter (000 §VI-B: 10^4).
         sigma: likelihood width sigma (000 Eq. 19).
         d_occ: occlusion penalty d_occ (000 Eq. 26).
+        coverage_gain: ``k`` of the foreground-coverage term ``k f_c`` per camera in the
+            particle log-likelihood with detection on (``LikelihoodConfig.coverage_gain``),
+            nats per camera at full coverage; 0: colour alone.
         min_inside_share: a camera that sees less of a target's silhouettes inside its
             image (on average over its particles) says nothing about the target
             (``LikelihoodConfig.min_inside_share``), share in [0, 1]; 0: only the particles
@@ -79,16 +82,11 @@ class TrackerConfig:
         reuse_time: s during which a released track is only lost and a person re-found
             nearby who looks like it takes its id back (``AutoDetectionConfig.reuse_time``;
             None: its default, 0: released tracks end at once).
-        reuse_in_entry_zones: whether a track released in an entry zone is lost like any
-            other (``AutoDetectionConfig.reuse_in_entry_zones``; None: its default, on).
         detection_threshold: smallest combined log response of a detection (None: the
             detector's default).
         beside_threshold: smallest score of a detection that starts a track within 1 m of
             another track (``AutoDetectionConfig.beside_threshold``; None: its default,
             0: the detector's threshold alone).
-        track_coverage: ``k`` of the foreground-coverage term ``k f_c`` per camera in the
-            particle weights (``AutoDetectionConfig.track_coverage``; None: its default,
-            0: colour alone).
         detection: automatic detection, model acquisition and release of people (003 §4)
             with visibility/existence probabilities (001), see
             :mod:`mbtrack_ros.core.detection.manager`.
@@ -124,6 +122,7 @@ class TrackerConfig:
     joint_particles: int = 10_000
     sigma: float = 0.12
     d_occ: float = 0.15
+    coverage_gain: float = 2.0
     min_inside_share: float = 0.5
     min_visible_share: float = 0.1
     mrf_radius: float = 0.3
@@ -140,10 +139,8 @@ class TrackerConfig:
     release_recover_time: float | None = None
     detection_threshold: float | None = None
     beside_threshold: float | None = None
-    track_coverage: float | None = None
     spare_support: float | None = None
     reuse_time: float | None = None
-    reuse_in_entry_zones: bool | None = None
     subsample: int = 1
     pipeline_search: bool = False
     detection_every: int = 1
@@ -204,11 +201,10 @@ class TrackerConfig:
                 and not isinstance(self.beside_threshold, bool)
                 and 0 <= self.beside_threshold < float('inf')):
             bad(f'beside_threshold must be a finite number >= 0, got {self.beside_threshold!r}')
-        if self.track_coverage is not None and not (
-                isinstance(self.track_coverage, (int, float))
-                and not isinstance(self.track_coverage, bool)
-                and 0 <= self.track_coverage < float('inf')):
-            bad(f'track_coverage must be a finite number >= 0, got {self.track_coverage!r}')
+        if not (isinstance(self.coverage_gain, (int, float))
+                and not isinstance(self.coverage_gain, bool)
+                and 0 <= self.coverage_gain < float('inf')):
+            bad(f'coverage_gain must be a finite number >= 0, got {self.coverage_gain!r}')
         if self.spare_support is not None and not (
                 isinstance(self.spare_support, (int, float)) and 0 <= self.spare_support <= 1):
             bad(f'spare_support must be a number in [0, 1], got {self.spare_support!r}')
@@ -216,10 +212,6 @@ class TrackerConfig:
                 isinstance(self.reuse_time, bool) or not isinstance(self.reuse_time, (int, float))
                 or not 0 <= self.reuse_time < float('inf')):
             bad(f'reuse_time must be a number >= 0, got {self.reuse_time!r}')
-        if self.reuse_in_entry_zones is not None and not isinstance(self.reuse_in_entry_zones,
-                                                                    bool):
-            bad(f'reuse_in_entry_zones must be true, false or None, got '
-                f'{self.reuse_in_entry_zones!r}')
         if self.adaptation_rate is not None and (
                 isinstance(self.adaptation_rate, bool) or not (
                     isinstance(self.adaptation_rate, (int, float))
@@ -236,13 +228,15 @@ class TrackerConfig:
 
     def likelihood_config(self):
         """The likelihood parameters this configuration sets (000 Eq. 19, 26; the cameras
-        that say nothing about a target), at full image size."""
+        that say nothing about a target; the foreground-coverage term), at full image
+        size."""
         from mbtrack_ros.core.likelihood import LikelihoodConfig
 
         return LikelihoodConfig(sigma=float(self.sigma), d_occ=float(self.d_occ),
                                 subsample=int(self.subsample),
                                 min_inside_share=float(self.min_inside_share),
-                                min_visible_share=float(self.min_visible_share))
+                                min_visible_share=float(self.min_visible_share),
+                                coverage_gain=float(self.coverage_gain))
 
     def working_calibration(self, calibration: RoomCalibration) -> RoomCalibration:
         """The cameras at the size the tracker works on (``working_pixels``): each camera
@@ -271,12 +265,8 @@ class TrackerConfig:
                                                         rate=float(self.adaptation_rate)))
         if self.reuse_time is not None:
             config = replace(config, reuse_time=float(self.reuse_time))
-        if self.reuse_in_entry_zones is not None:
-            config = replace(config, reuse_in_entry_zones=self.reuse_in_entry_zones)
         if self.beside_threshold is not None:
             config = replace(config, beside_threshold=float(self.beside_threshold))
-        if self.track_coverage is not None:
-            config = replace(config, track_coverage=float(self.track_coverage))
         return _pixels_scaled(config, float(length_scale))
 
     def filter_config(self) -> FilterConfig:
@@ -580,9 +570,8 @@ class Tracker:
             if stamps and hasattr(self.measurement, 'set_capture_offsets'):
                 self.measurement.set_capture_offsets(
                     {n: (int(stamps[n]) - stamp_ns) / 1e9 for n in seen if n in stamps})
-            gain = self.detection.config.track_coverage if detect else 0.0
-            if gain > 0:   # the coverage term joins the frame's foreground when it needs it
-                self.measurement.set_foreground(self.detection.started_foreground, gain)
+            if detect:   # the coverage term joins the frame's foreground when it needs it
+                self.measurement.set_foreground(self.detection.started_foreground)
             t1 = time.perf_counter()
             updates = self.filter.step(dt, self.measurement, seen, self.rng)
             t2 = time.perf_counter()

@@ -73,6 +73,9 @@ tracker.working_pixels          int        pixels per camera image the tracker w
 tracker.joint_particles         int        joint-filter particles (10000)
 tracker.sigma                   double     likelihood width, 000 Eq. 19 (0.12)
 tracker.d_occ                   double     occlusion penalty, 000 Eq. 26 (0.15)
+tracker.coverage_gain           double     weight k of the foreground coverage f of a
+                                           particle's silhouette, k f per camera, in the
+                                           particle weights; 0 = colour alone (2.0)
 tracker.min_inside_share        double     a camera that sees less of a target inside its
                                            image says nothing about it, share 0-1 (0.5)
 tracker.min_visible_share       double     a camera in which a target is hidden behind
@@ -94,18 +97,12 @@ detection.threshold             double     smallest combined log response of a n
 detection.beside_threshold      double     smallest score of a detection that starts a
                                            track within 1 m of another track; 0 = the
                                            threshold above alone (3.0)
-detection.track_coverage        double     weight k of the foreground coverage f of a
-                                           particle's silhouette, k f per camera, in the
-                                           particle weights; 0 = colour alone (2.0)
 detection.spare_support         double     exclusive support below which a track that
                                            overlaps another one is released as spare;
                                            0 = off (0.25)
 detection.reuse_time            double     s a released track stays lost: a person re-found
                                            within 1.5 m who looks like it takes its id back
                                            (no new id); it ends after that (3.0; 0 = at once)
-detection.reuse_in_entry_zones  bool       tracks released in front of the door are lost
-                                           like any other (true); false: their ids end at
-                                           once (their people are taken to have left)
 detection.every                 int        run the detection pipeline (release, existence,
                                            background, search) on every k-th frame set
                                            only (1; a speed option that costs accuracy)
@@ -139,6 +136,7 @@ from mbtrack_ros.core.camera import CalibrationError, RoomCalibration
 from mbtrack_ros.core.dynamics import MotionConfig
 from mbtrack_ros.core.detection.manager import AutoDetectionConfig
 from mbtrack_ros.core.detection.release import ReleaseConfig
+from mbtrack_ros.core.likelihood import LikelihoodConfig
 from mbtrack_ros.core.tracker import (
     MAX_JOINT_PARTICLES, MAX_PARTICLES, TrackerConfig, TrackerError)
 from mbtrack_ros.nodes.tracker_parameters import TRACKER_PARAMETERS, tracker_config_values
@@ -259,6 +257,11 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
                                 _ir(1, MAX_JOINT_PARTICLES)),
     'tracker.sigma': (0.12, 'likelihood width sigma (000 Eq. 19)', _fr(1e-4, 10.0)),
     'tracker.d_occ': (0.15, 'occlusion penalty d_occ (000 Eq. 26)', _fr(0.0, 10.0)),
+    'tracker.coverage_gain': (LikelihoodConfig().coverage_gain, 'weight k of the foreground '
+                              'coverage f of a particle silhouette, k f per camera, in the '
+                              'tracking filter particle weights '
+                              '(LikelihoodConfig.coverage_gain); 0 = colour alone',
+                              _fr(0.0, 100.0)),
     'tracker.min_inside_share': (0.5, 'a camera that sees less of a target\'s silhouettes '
                                  'inside its image says nothing about the target '
                                  '(TrackerConfig.min_inside_share)', _fr(0.0, 1.0)),
@@ -285,11 +288,6 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
                                    'within AutoDetectionConfig.relocate_radius of another '
                                    'track (the fringe of a tracked person is no newcomer); '
                                    '0 = detection.threshold alone', _fr(0.0, 100.0)),
-    'detection.track_coverage': (AutoDetectionConfig().track_coverage, 'weight k of the '
-                                 'foreground coverage f of a particle silhouette, k f per '
-                                 'camera, in the tracking filter particle weights '
-                                 '(AutoDetectionConfig.track_coverage); 0 = colour alone',
-                                 _fr(0.0, 100.0)),
     'detection.spare_support': (ReleaseConfig().spare_support, 'exclusive foreground support '
                                 'below which a track that overlaps another one is released as '
                                 'spare (ReleaseConfig.spare_support); 0 = off',
@@ -298,10 +296,6 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
                              'stays lost, its id given back to a person re-found within '
                              'AutoDetectionConfig.reuse_radius who looks like it; it ends '
                              'after (0 = at once)', _fr(0.0, 60.0)),
-    'detection.reuse_in_entry_zones': (AutoDetectionConfig().reuse_in_entry_zones, 'a track '
-                                       'released in an entry zone is lost for '
-                                       'detection.reuse_time like any other; false: its id '
-                                       'ends at once (its person is taken to have left)', {}),
     'detection.every': (1, 'run the detection pipeline on every k-th frame set only (speed '
                         'option, TrackerConfig.detection_every)', _ir(1, 30)),
     'detection.adaptation_rate': (AutoDetectionConfig().adaptation.rate, 'blending rate of '

@@ -63,9 +63,6 @@ class AutoDetectionConfig:
             ``relocate_interval``) within :attr:`reuse_radius` whose model is within
             ``alike_distance`` of the detection's: a hidden track is given back its person
             like a lost one.
-        reuse_in_entry_zones: a track released inside an entry zone is lost for
-            ``reuse_time`` like any other; False: its id ends at once (its person is taken
-            to have left the room).
         duplicate_margin: nats per side camera; of two such tracks keep the one whose
             appearance model explains the image where they are better (003 Eq. 3, both
             models at the pair's midpoint) by more than this
@@ -87,10 +84,6 @@ class AutoDetectionConfig:
             for a birth within ``relocate_radius`` of a track that the detection did not
             move: weak detections beside a track are mostly the fringe of that track's
             person or a gap between people; 0 keeps the detector's threshold alone.
-        track_coverage: ``k`` of a foreground-coverage term ``k f_c`` per camera in the
-            tracking filter's particle weights (:meth:`MeasurementModel.set_foreground`);
-            0: colour alone. Larger holds tracks on the foreground more firmly (better
-            MOTP, fewer switches) at the cost of the colour evidence's say.
         birth_exit_depth: metres; a confirmed detection deeper than this inside an exit
             starts or moves no track (its person is in the doorway or beyond).
     """
@@ -106,13 +99,11 @@ class AutoDetectionConfig:
     look_alike_margin: float = 6.0
     relocate_interval: float = 2.0
     reuse_time: float = 3.0
-    reuse_in_entry_zones: bool = True
     duplicate_margin: float = 8.0
     reach_radius: float = 0.5
     reach_age: float = 4.0
     beside_threshold: float = 3.0
     birth_exit_depth: float = 0.15
-    track_coverage: float = 2.0
 
     @property
     def alike_distance(self) -> float:
@@ -199,9 +190,6 @@ class AutoDetectionConfig:
             raise DetectionError(f'reuse_time must be >= 0, got {self.reuse_time}')
         if not self.clutter_distance > 0:
             raise DetectionError(f'clutter_distance must be > 0, got {self.clutter_distance}')
-        if not (np.isfinite(self.track_coverage) and self.track_coverage >= 0):
-            raise DetectionError(f'track_coverage must be a finite number >= 0, got '
-                                 f'{self.track_coverage}')
         if not (np.isfinite(self.beside_threshold) and self.beside_threshold >= 0):
             raise DetectionError(f'beside_threshold must be a finite number >= 0, got '
                                  f'{self.beside_threshold}')

@@ -50,8 +50,7 @@ class TrackDeleter:
     def _remember_released(self, stamp_ns: int, tracks: Sequence[TrackEstimate],
                            means: np.ndarray, ended: Sequence[int],
                            models: Mapping[int, PersonModel]) -> None:
-        """Keep where and when the tracks released this frame were, for ``reuse_time``
-        (not those released in an entry zone unless ``reuse_in_entry_zones``)."""
+        """Keep where and when the tracks released this frame were, for ``reuse_time``."""
         horizon = int(self.config.reuse_time * 1e9)
         expired = [t for t, v in self._released.items() if int(stamp_ns) - v[0] >= horizon]
         for t in expired:
@@ -61,11 +60,6 @@ class TrackDeleter:
             return
         for k, t in enumerate(tracks):
             if t.track_id not in ended:
-                continue
-            # without reuse_in_entry_zones a track released in front of the door is its
-            # person's exit: the id ends at once
-            if not self.config.reuse_in_entry_zones \
-                    and self.calibration.in_entry_zone(means[k, [X, Y]])[0]:
                 continue
             self._released[int(t.track_id)] = (int(stamp_ns), means[k, [X, Y]],
                                                models.get(t.track_id))
