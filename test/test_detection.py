@@ -1667,9 +1667,10 @@ def test_a_hidden_track_1_2_m_away_is_given_back_its_person_when_she_looks_alike
 def test_a_reported_track_of_doubtful_existence_is_given_back_its_person_like_a_hidden_one(
         who, moved):
     """As above, but track 1 stays reported (``existence.report_threshold`` 0) while its
-    existence falls once she has stepped 1.2 m away (slowly: the top-down camera's blob at
-    the old place still covers 0.7 of her foreground, and the existence is about 0.95 when
-    her detection is confirmed). Below ``reuse_doubtful`` (a newborn's existence; 0.97 in
+    existence falls once she has stepped 1.2 m away (slowly: a weak coverage evidence,
+    ``existence.support_gain`` 0.5, and the top-down camera's blob at the old place still
+    covers part of her foreground, so that it is above 0.5 when her detection is
+    confirmed). Below ``reuse_doubtful`` (a newborn's existence; 0.97 in
     this scene) it counts as hidden and her detection moves it there ("doubtful, far"); it
     is not taken for a person dressed differently (a new track is born)."""
     assert AutoDetectionConfig().reuse_doubtful == 0.9
@@ -1678,7 +1679,8 @@ def test_a_reported_track_of_doubtful_existence_is_given_back_its_person_like_a_
     rng = np.random.default_rng(5)
     calib, bgs, tracker = _painted_room_tracker(
         4, reach_radius=0.0,
-        existence=AuxiliaryConfig(report_threshold=0.0, initial_existence=0.97))
+        existence=AuxiliaryConfig(report_threshold=0.0, initial_existence=0.97,
+                                  support_gain=0.5))
     doubtful = tracker.detection.config.reuse_doubtful
     here = person(2.0, 2.5, theta=0.0)
     there = person(3.2, 2.5, theta=0.0, **({} if who == 'same' else {'colours': YELLOW}))

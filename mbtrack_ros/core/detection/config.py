@@ -35,8 +35,6 @@ class AutoDetectionConfig:
         clutter_distance: Bhattacharyya distance whose likelihood is the "not visible"
             clutter likelihood ``p_0`` (001 Eq. 23): what a model scores on something that
             is not its person. Also :attr:`alike_distance`.
-        side_weight: weight in [0, 1] of the side cameras' evidence in the existence update
-            when a top-down camera exists.
         look_alike_margin: nats per side camera >= 0; how much worse than its own place
             a track's model may explain a strong detection (``beside_threshold``) that
             looks like it (``alike_distance``) for the detection to move the track, when
@@ -63,7 +61,8 @@ class AutoDetectionConfig:
             ``relocate_interval``) within :attr:`reuse_radius` whose model is within
             ``alike_distance`` of the detection's: a hidden track is given back its person
             like a lost one.
-        duplicate_margin: nats per side camera; of two such tracks keep the one whose
+        duplicate_margin: nats per side camera; of two tracks on one person (closer than
+            the release's ``merge_radius`` for its ``merge_time``) keep the one whose
             appearance model explains the image where they are better (003 Eq. 3, both
             models at the pair's midpoint) by more than this
             (:meth:`AutoDetection._duplicate_judge`); ``inf`` disables. Large enough that
@@ -78,8 +77,11 @@ class AutoDetectionConfig:
             id and velocity, :attr:`AutoDetection.reach_moves`; the tracker moves it after
             the frame's output) so that it catches up with its person; 0 disables.
         reach_age: seconds a track must have existed before it has a reach: a false birth
-            (a shadow, a ghost, the fringe of a person) would keep itself alive on what is
-            near it; false births mostly die within a few seconds.
+            (a shadow, a ghost, the fringe of a person) would keep itself alive on the
+            foreground near it, and false births are mostly released within a few seconds
+            (the release's ``timeout`` after they lose support, or the existence process's
+            fall); longer keeps a young track of a real person who walks off from it less
+            well.
         beside_threshold: smallest detection score (the detector's combined log response)
             for a birth within ``relocate_radius`` of a track that the detection did not
             move: weak detections beside a track are mostly the fringe of that track's
@@ -95,7 +97,6 @@ class AutoDetectionConfig:
     existence: AuxiliaryConfig = field(default_factory=AuxiliaryConfig)
     adaptation: AdaptationConfig = field(default_factory=AdaptationConfig)
     clutter_distance: float = 0.5
-    side_weight: float = 0.3
     look_alike_margin: float = 6.0
     relocate_interval: float = 2.0
     reuse_time: float = 3.0

@@ -226,13 +226,10 @@ class TrackDeleter:
                             vis[n] = predictive_loglik(ll[sel])              # 001 Eq. 18
                             hid[n] = hidden
             cov = {n: float(c[k]) for n, c in coverage.items() if np.isfinite(c[k])}
-            # evidence weights: w* of the tracking cameras (top-down cameras are not used by
-            # the filter and weigh 1); with a top-down camera, which decides the release,
-            # the side cameras' support counts less (their silhouettes are more sensitive
-            # to position errors and occlusion)
-            side_w = cfg.side_weight if self.ceiling else 1.0
-            weights = {n: (float(t.visible_fraction.get(n, 1.0)) * side_w
-                           if n in self.side else 1.0) for n in set(cov) | set(vis)}
+            # evidence weights: the share w* of the track's silhouette a tracking camera
+            # sees (top-down cameras are not used by the filter and weigh 1)
+            weights = {n: (float(t.visible_fraction.get(n, 1.0)) if n in self.side else 1.0)
+                       for n in set(cov) | set(vis)}
             neutral = self.releaser.config.min_coverage     # support counts for existence
             best = (coverage_log_ratio(cov, weights, cfg.existence.support_gain,
                                        neutral=neutral)

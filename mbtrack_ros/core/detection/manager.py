@@ -119,7 +119,6 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
         self._foreground: tuple[list[str], Future] | None = None  # start_foreground()'s job
         self._searching: tuple[_Pending, Future] | None = None    # start_search()'s job
         self.side = [n for n, c in calibration.cameras.items() if not is_ceiling(c)]
-        self.ceiling = [n for n in calibration.cameras if n not in self.side]
 
     def prepare(self) -> None:
         """Do the one-off work of the first frames ahead (the people cue's floor grid), so
