@@ -176,10 +176,6 @@ def test_releaser_ends_tracks_beyond_the_exit_margin_only():
         rel.exited([1], xy)
     with pytest.raises(DetectionError, match='exit_margin'):
         ReleaseConfig(exit_margin=-0.1)
-    from mbtrack_ros.core.detection.manager import AutoDetectionConfig
-    for bad in (-0.1, float('nan')):
-        with pytest.raises(DetectionError, match='birth_exit_depth'):
-            AutoDetectionConfig(birth_exit_depth=bad)
 
 
 def _leaver(crowd):
@@ -291,27 +287,30 @@ def test_hidden_exit_particles_score_their_targets_mean_in_that_camera():
             assert hidden.any() == (name in ('cam2', 'cam3'))
 
 
-def test_no_birth_deeper_into_an_exit_than_the_birth_depth():
-    """A confirmed detection in the doorway deeper than birth_exit_depth starts no track
-    (its person is in the doorway or beyond); one just inside the exit does."""
+def test_no_birth_deeper_into_an_exit_than_half_the_body_depth():
+    """A confirmed detection whose centre is deeper inside an exit than half its body's
+    depth (its width seen from the side, 0.7 of it) starts no track (its body is wholly
+    past the floor's edge: its person is in the doorway or beyond); one just inside the
+    exit does, a wider body deeper."""
     from mbtrack_ros.core.appearance import PersonModel
     from mbtrack_ros.core.detection.detector import Detection, FrameEvidence
     from mbtrack_ros.core.detection.manager import AutoDetection, _Found, _Pending
 
     calib = make_calibration(default_room(), width=160, height=120)
     auto = AutoDetection(calib)
-    margin = 2 * auto.config.birth_exit_depth
-    assert margin < auto.config.release.exit_margin      # such a track would not end at once
+    # a track born as deep as half the deepest body would not end at once
+    assert 0.35 * max(auto.config.detector.widths) < auto.config.release.exit_margin
     image = np.zeros((120, 160, 3), np.uint8)
     evidence = {'cam0': FrameEvidence(image, np.zeros((120, 160), bool))}
     pending = _Pending(0, {'cam0': image}, [], {}, np.zeros((0, 6)), [], evidence, [])
     edge = calib.floor[3]
     found = []
-    for depth in (0.1, 0.45 * margin, 0.55 * margin, 0.4):
-        det = Detection(np.array([4.65, edge + depth, 0.0, 0.0, 0.0, 0.0]), 1.75, 0.5, 1.0)
-        found.append((det, PersonModel(1.75, 0.5)))
+    for depth, width in ((0.1, 0.5), (0.16, 0.5), (0.19, 0.5), (0.4, 0.5), (0.19, 0.6)):
+        det = Detection(np.array([4.65, edge + depth, 0.0, 0.0, 0.0, 0.0]), 1.75, width, 1.0)
+        found.append((det, PersonModel(1.75, width)))
     births = auto._settle(pending, _Found(found, {'detect_find': 0.0}))
-    assert [round(b.state[1] - edge, 3) for b in births] == [0.1, round(0.45 * margin, 3)]
+    assert [round(b.state[1] - edge, 3) for b in births] == [0.1, 0.16, 0.19]
+    assert births[-1].detection.width == 0.6
 
 
 def test_a_track_back_from_an_exit_loses_a_duplicate_pair_to_one_that_stayed():

@@ -86,8 +86,6 @@ class AutoDetectionConfig:
             for a birth within ``relocate_radius`` of a track that the detection did not
             move: weak detections beside a track are mostly the fringe of that track's
             person or a gap between people; 0 keeps the detector's threshold alone.
-        birth_exit_depth: metres; a confirmed detection deeper than this inside an exit
-            starts or moves no track (its person is in the doorway or beyond).
     """
 
     background: BackgroundConfig = field(default_factory=BackgroundConfig)
@@ -104,7 +102,6 @@ class AutoDetectionConfig:
     reach_radius: float = 0.5
     reach_age: float = 4.0
     beside_threshold: float = 3.0
-    birth_exit_depth: float = 0.15
 
     @property
     def alike_distance(self) -> float:
@@ -196,9 +193,6 @@ class AutoDetectionConfig:
                                  f'{self.beside_threshold}')
         if not (self.reach_radius >= 0 and self.reach_age >= 0):
             raise DetectionError('reach_radius and reach_age must be >= 0')
-        if not (np.isfinite(self.birth_exit_depth) and self.birth_exit_depth >= 0):
-            raise DetectionError(f'birth_exit_depth must be a finite number >= 0, got '
-                                 f'{self.birth_exit_depth}')
 
 
 @dataclass

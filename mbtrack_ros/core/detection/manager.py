@@ -42,7 +42,7 @@ from mbtrack_ros.core.detection.detector import Detection, Detector, FrameEviden
 from mbtrack_ros.core.detection.release import Releaser
 from mbtrack_ros.core.existence import TrackAuxiliary
 from mbtrack_ros.core.likelihood import LikelihoodConfig
-from mbtrack_ros.core.shape import BodyShape, rasterize, render_labels
+from mbtrack_ros.core.shape import BodyShape, rasterize, render_labels, width_scale
 from mbtrack_ros.core.state import X, Y, TrackEstimate
 
 __all__ = ['AutoDetection', 'AutoDetectionConfig', 'Birth']
@@ -536,14 +536,16 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
         if evidence:
             keep = [k for k, t in enumerate(tracks) if t.track_id not in ended]
             moved: set[int] = set()
-            # no birth or move deep in an exit: a person in the doorway or beyond
-            limit = self.config.birth_exit_depth
+            # no birth or move by a detection whose body is wholly inside an exit: its
+            # centre deeper than half the body's depth, its width seen from the side
+            # (003 §2.1: s(pi/2) = 0.7 of the width); a person in the doorway or beyond
+            half_depth = 0.5 * float(width_scale(np.array(0.5 * np.pi)))
             for det, g_model, g_frame in found.ghosts:
                 self._decide({'xy': (float(det.xy[0]), float(det.xy[1])),
                               'score': float(det.score), 'action': 'drop (ghost)',
                               'outline': (round(g_model, 1), round(g_frame, 1))})
             for det, model in found.acquired:
-                if self.calibration.exit_depth(det.xy)[0] > limit:
+                if self.calibration.exit_depth(det.xy)[0] > half_depth * det.width:
                     continue
                 birth = self._identify(det, model, tracks, keep, means, models, evidence,
                                        moved, stamp_ns)
