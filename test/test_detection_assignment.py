@@ -121,3 +121,37 @@ def test_a_scene_decided_by_the_cost_terms_the_way_a_person_would():
     # a look-alike of A (0.2): a track left behind where its person turned - move A
     llr[0, 0] = e[0] + cfg.move_llr(strong, -1.0, 0.2, sigma) + PREFER_TRACK
     assert solve_assignment(llr, e)[0] == 0
+
+
+def test_a_lost_track_takes_back_a_person_near_its_place_who_does_not_look_unlike_it():
+    """The ratio of a lost track's hypothesis: the place term (:func:`place_llr`, a 2-D
+    Gaussian of half the gate's radius against a birth anywhere on the floor) plus the
+    appearance ratio of the two models, negative for unlike ones. The place term against
+    its closed form (and integrating the Gaussian over a large floor gives 1: a density);
+    then a person re-found 0.3 m from where a track was lost moments ago is its person
+    even with models a little beyond ``alike_distance`` apart (0.53: two views of one
+    person), not somebody dressed otherwise (0.75), and not at the gate's edge with
+    that distance."""
+    from mbtrack_ros.core.detection.association import place_llr
+
+    cfg = AutoDetectionConfig()
+    sigma, area, gate = 0.12, 30.0, 1.6
+    sd = gate / 2
+    for d in (0.0, 0.3, 1.0, gate):
+        want = np.log(area / (2 * np.pi * sd ** 2)) - d ** 2 / (2 * sd ** 2)
+        assert place_llr(d, gate, area) == pytest.approx(want)
+    xs = np.linspace(-6, 6, 601)
+    g = np.exp([[place_llr(np.hypot(x, y), gate, area) for x in xs] for y in xs]) / area
+    assert g.sum() * (xs[1] - xs[0]) ** 2 == pytest.approx(1.0, rel=1e-3)
+
+    def lost(metres, unlike):
+        return place_llr(metres, gate, area) + cfg.appearance_llr(unlike, sigma) \
+            - cfg.stranger_llr(unlike, sigma)
+
+    birth = np.array([2.0, 2.0, 2.0])
+    base = np.maximum(birth, 0.0) + PREFER_TRACK
+    for u, metres, reused in ((0.53, 0.3, True), (0.75, 0.3, False), (0.53, gate, False)):
+        value = lost(metres, u)
+        llr = np.array([[base[0] + value if value > 0 else -np.inf]])
+        outcome = solve_assignment(llr, birth[:1])
+        assert (outcome[0] == 0) == reused, (u, metres, value)

@@ -32,7 +32,7 @@ from mbtrack_ros.core.shape import BodyShape, rasterize
 from mbtrack_ros.core.state import THETA, VX, VY, X, Y, TrackEstimate
 
 __all__ = ['BIRTH', 'DROP', 'DetectionAssociator', 'PREFER_TRACK', 'assignment_costs',
-           'solve_assignment']
+           'place_llr', 'solve_assignment']
 
 _log = logging.getLogger(__name__)
 
@@ -82,6 +82,16 @@ def solve_assignment(llr: np.ndarray, birth: np.ndarray) -> np.ndarray:
     for r, c in zip(rows, cols):
         out[r] = c if c < m else (BIRTH if c < m + n else DROP)
     return out
+
+
+def place_llr(metres: float, radius: float, area: float) -> float:
+    """Log-likelihood ratio (nats) of "the person of a track last known ``metres`` away"
+    over "a new person": a 2-D Gaussian of standard deviation ``radius / 2`` (the gate
+    ``radius`` at two deviations) around the track's last place, against a person
+    appearing anywhere on a floor of ``area`` square metres."""
+    sd2 = (0.5 * max(float(radius), 1e-3)) ** 2
+    return float(np.log(max(float(area), 1e-3) / (2.0 * np.pi * sd2))
+                 - float(metres) ** 2 / (2.0 * sd2))
 
 
 class DetectionAssociator:
@@ -211,7 +221,10 @@ class DetectionAssociator:
         - lost track (column ``len(keep) +`` index): released within ``reuse_time``, its
           person re-found within a gate of ``relocate_radius`` widened by
           :data:`WALK_SPEED` over the time since it was last supported (release timeout
-          and time since the release), looking like the detection: ``max(e, 0) + A(u)``.
+          and time since the release): ``max(e, 0) + place + A(u) - S(u)`` (place:
+          :func:`place_llr` on the floor's area; S: the reverse appearance ratio,
+          :meth:`AutoDetectionConfig.stranger_llr`), when the sum beyond ``max(e, 0)`` is
+          positive.
 
         Each hypothesis that explains a detection by a track gets :data:`PREFER_TRACK`
         more (at equal likelihood, fewer people). Returns (the decision's info, the birth's
@@ -284,15 +297,21 @@ class DetectionAssociator:
                 if support[j] >= cfg.move_support:
                     del row[j]
         since_supported = self.config.release.timeout
+        x0, y0, x1, y1 = self.calibration.floor
         for i, (tid, xy, old, released) in enumerate(lost):
             d = float(np.hypot(*(xy - det.xy)))
             age = max(int(stamp_ns) - released, 0) / 1e9
-            if d > radius + WALK_SPEED * (since_supported + age):
+            gate = radius + WALK_SPEED * (since_supported + age)
+            if d > gate or old is None:
                 continue
-            unlike = model_distance(old, model) if old is not None else 1.0
+            unlike = model_distance(old, model)
             info.setdefault('reuse', []).append((int(tid), round(d, 2), round(unlike, 3)))
-            if cfg.looks_alike(unlike):
-                row[len(keep) + i] = (base + cfg.appearance_llr(unlike, self.sigma), 'lost')
+            # where: the lost person's place against a birth anywhere on the floor; who:
+            # the two models' appearance ratio, negative for unlike ones (003 Eq. 4)
+            value = place_llr(d, gate, (x1 - x0) * (y1 - y0)) \
+                + cfg.appearance_llr(unlike, self.sigma) - cfg.stranger_llr(unlike, self.sigma)
+            if value > 0.0:
+                row[len(keep) + i] = (base + value, 'lost')
         info['gains'] = gains
         info['likeness'] = {t: round(u, 3) for t, u in likeness.items()}
         return info, e, row

@@ -46,9 +46,10 @@ class AutoDetectionConfig:
             place): then it is moved again, once; a detection beside it that looks like it
             (``alike_distance``) is that person, not a newcomer (assigned to it, dropped).
         reuse_time: seconds; a released track is *lost* for ``reuse_time``: a detection
-            that looks like it (``alike_distance``) within :attr:`reuse_radius` of where it
-            was released (widened by :data:`WALK_SPEED` over the time since) may be
-            assigned to it and take its id (its person re-found). The id ends
+            near where it was released (within :attr:`reuse_radius`, widened by
+            :data:`WALK_SPEED` over the time since) that does not look unlike it may be
+            assigned to it and take its id (its person re-found; the place and
+            appearance ratios of :mod:`.association`). The id ends
             (:meth:`finished`) only when that time has passed unused, so an id never comes
             back after it ended. 0 ends released tracks at once. The time should cover a
             person standing still after being lost (a few seconds).
@@ -183,6 +184,14 @@ class AutoDetectionConfig:
         tracker's appearance likelihood width (8.7 nats for identical models at the
         defaults)."""
         return max(0.0, (self.alike_distance ** 2 - float(unlike) ** 2)
+                   / (2.0 * float(sigma) ** 2))
+
+    def stranger_llr(self, unlike: float, sigma: float) -> float:
+        """Log-likelihood ratio (nats) of "somebody else" over "the same person" for two
+        appearance models ``unlike`` (003 Eq. 4) apart, the reverse of
+        :meth:`appearance_llr`: ``max(0, (unlike^2 - alike_distance^2) / (2 sigma^2))``
+        (their difference is the unfloored ratio)."""
+        return max(0.0, (float(unlike) ** 2 - self.alike_distance ** 2)
                    / (2.0 * float(sigma) ** 2))
 
     def __post_init__(self) -> None:
