@@ -211,7 +211,8 @@ class DetectionAssociator:
           the gain: ``max(e, 0) + log((1 - p) / p) + A(u)`` (p the existence, A the
           appearance term of :meth:`AutoDetectionConfig.appearance_llr`);
           'far': a hidden or doubtful track (existence below ``reuse_doubtful``) within
-          ``reuse_radius`` that looks like the detection: ``max(e, 0) + A(u)``;
+          ``reuse_radius``: ``max(e, 0) + place + A(u) - S(u)`` as a lost track's, when
+          positive beyond ``max(e, 0)``;
           'young': a track born or moved within ``relocate_interval`` that looks like the
           detection: it lags its person, the detection is that person, nothing is done
           (``max(e, 0)``);
@@ -321,8 +322,9 @@ class DetectionAssociator:
         """(ratio, 'hidden' or 'far') of "the detection ``metres`` from the track is the
         person of a track that lost them" (:meth:`_hypotheses`), or None for a track that is
         reported with an existence of at least ``reuse_doubtful``, or, beyond
-        ``relocate_radius`` or reported, does not look like the detection (``like(id)``:
-        the appearance distance); ``base``: the detection's own ratio, at least 0."""
+        ``relocate_radius`` or reported, whose place and appearance ratios (as a lost
+        track's, the gate ``reuse_radius``; ``like(id)``: the appearance distance) are not
+        positive; ``base``: the detection's own ratio, at least 0."""
         cfg = self.config
         aux = self.aux.get(track_id)
         p = 1.0 if aux is None else float(aux.existence)
@@ -331,8 +333,14 @@ class DetectionAssociator:
             odds = float(np.log(max(1.0 - p, 1e-9) / max(p, 1e-9)))
             return base + max(odds, 0.0) + cfg.appearance_llr(like(track_id), self.sigma), \
                 'hidden'
-        if (not reported or p < cfg.reuse_doubtful) and cfg.looks_alike(like(track_id)):
-            return base + cfg.appearance_llr(like(track_id), self.sigma), 'far'
+        if not reported or p < cfg.reuse_doubtful:
+            # where and who, as for a lost track (its gate: reuse_radius)
+            x0, y0, x1, y1 = self.calibration.floor
+            unlike = like(track_id)
+            value = place_llr(metres, cfg.reuse_radius, (x1 - x0) * (y1 - y0)) \
+                + cfg.appearance_llr(unlike, self.sigma) - cfg.stranger_llr(unlike, self.sigma)
+            if value > 0.0:
+                return base + value, 'far'
         return None
 
     def _decide(self, info: dict) -> None:
