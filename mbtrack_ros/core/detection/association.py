@@ -257,46 +257,48 @@ class DetectionAssociator:
             info['unalike'] = unalike
         e = float(det.score) - (cfg.beside_threshold if near else 0.0)
         base = max(e, 0.0) + PREFER_TRACK
-        row: dict[int, tuple[float, str]] = {}
-        checked = []                       # columns whose track's support must be checked
 
         def like(tid: int) -> float:
             if tid not in likeness:
                 likeness[tid] = model_distance(models[tid], model)
             return likeness[tid]
 
+        options: dict[int, list[tuple[float, str]]] = {}    # column -> hypotheses
         for j, k in enumerate(keep):
             tid = tracks[k].track_id
             if tid not in models:
                 continue
             young = self._placed_recently(tid, stamp_ns)
-            best = (-np.inf, '')
+            here = []
             if tid in gains:
                 value = e + cfg.move_llr(det.score, gains[tid], likeness[tid],
                                         self.sigma) + PREFER_TRACK
                 if value > max(e, 0.0):
-                    best = (value, 'gain')
+                    here.append((value, 'gain'))
             if young:
-                if dist[j] <= radius and cfg.looks_alike(like(tid)) and base > best[0]:
-                    best = (base, 'young')
+                if dist[j] <= radius and cfg.looks_alike(like(tid)):
+                    here.append((base, 'young'))
             elif dist[j] <= cfg.reuse_radius:
                 hidden = self._hidden_hypothesis(tid, float(dist[j]), like, base)
-                if hidden is not None and hidden[0] > best[0]:
-                    best = hidden
-            if np.isfinite(best[0]):
-                row[j] = best
-                if best[1] in ('gain', 'young'):
-                    checked.append(j)
+                if hidden is not None:
+                    here.append(hidden)
+            if here:
+                options[j] = here
+        checked = [j for j, here in options.items()
+                   if any(how in ('gain', 'young') for _, how in here)]
         if checked:
             # exclusive support with the detection as one more track: a track that keeps
             # move_support of it stands on a person of its own, the detection is another
+            # (its 'gain' and 'young' hypotheses go; a hidden track's stays)
             support = self._exclusive_support(det, model, tracks, keep, means, models,
                                               evidence)[1]
             info['support'] = [(int(tracks[keep[j]].track_id), round(float(support[j]), 3))
                                for j in checked]
             for j in checked:
                 if support[j] >= cfg.move_support:
-                    del row[j]
+                    options[j] = [o for o in options[j] if o[1] not in ('gain', 'young')]
+        row: dict[int, tuple[float, str]] = {j: max(here) for j, here in options.items()
+                                             if here}
         since_supported = self.config.release.timeout
         x0, y0, x1, y1 = self.calibration.floor
         for i, (tid, xy, old, released) in enumerate(lost):

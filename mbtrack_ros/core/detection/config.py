@@ -138,10 +138,12 @@ class AutoDetectionConfig:
 
     @property
     def reuse_radius(self) -> float:
-        """Metres from a lost or hidden track within which a detection may be its person:
-        ``relocate_radius`` (how far a supported track may lag its person) widened by
-        :data:`WALK_SPEED` over the release's ``timeout`` (how long the person may have
-        walked on while the track was unsupported before it was released)."""
+        """Metres from a hidden track, or from a lost one when it is released, within
+        which a detection may be its person: ``relocate_radius`` (how far a supported
+        track may lag its person) widened by :data:`WALK_SPEED` over the release's
+        ``timeout`` (how long the person may have walked on while the track was
+        unsupported before it was released); a lost track's gate widens on at that speed
+        while it is lost (:mod:`.association`)."""
         return self.relocate_radius + WALK_SPEED * self.release.timeout
 
     @property
