@@ -845,7 +845,7 @@ def _no_hidden_moves(monkeypatch):
     scene is about the appearance gain alone)."""
     from mbtrack_ros.core.detection.manager import AutoDetection
 
-    monkeypatch.setattr(AutoDetection, '_nearest_hidden', lambda self, *a, **k: None)
+    monkeypatch.setattr(AutoDetection, '_hidden_hypothesis', lambda self, *a, **k: None)
 
 
 def _walker(k):
@@ -1021,7 +1021,7 @@ def test_pipelined_search_is_timing_independent_and_starts_people_one_frame_late
     timing (random sleeps in the worker's part and in the filter) and whether the caller
     runs step() or step(search=False) + search(), the tracks are the same; the person
     appears one frame later than with the serial search; the detector and the acquisition
-    run on the worker, the decisions on the tracks (_identify) on the caller's thread."""
+    run on the worker, the decisions on the tracks (_associate) on the caller's thread."""
     import threading
     import time
 
@@ -1036,7 +1036,7 @@ def test_pipelined_search_is_timing_independent_and_starts_people_one_frame_late
         det = tracker.detection
         if variant == 'pipelined_slow':
             jitter = np.random.default_rng(5)
-            find, identify, step = det._find, det._identify, tracker.filter.step
+            find, identify, step = det._find, det._associate, tracker.filter.step
 
             def slow_find(*args, **kwargs):
                 time.sleep(jitter.uniform(0, 0.03))
@@ -1050,7 +1050,7 @@ def test_pipelined_search_is_timing_independent_and_starts_people_one_frame_late
             def slow_step(*args, **kwargs):
                 time.sleep(jitter.uniform(0, 0.03))
                 return step(*args, **kwargs)
-            det._find, det._identify, tracker.filter.step = slow_find, watched_identify, \
+            det._find, det._associate, tracker.filter.step = slow_find, watched_identify, \
                 slow_step
         rows = []
         for k, images in enumerate(frames):
@@ -1194,7 +1194,7 @@ def test_a_hidden_track_beside_a_detection_is_moved_there_instead_of_a_birth(
         monkeypatch, hidden_rule):
     """A track 0.8 m off its person whose existence fell below the report threshold (it lost
     its person): the person's detection moves that track (same id) whatever the appearance
-    gain; when no hidden track is found (``_nearest_hidden`` patched) a second track is
+    gain; when no hidden track is found (``_hidden_hypothesis`` patched) a second track is
     born (and released later as a duplicate)."""
     from mbtrack_ros.core.detection.manager import AutoDetection
 
@@ -1567,24 +1567,17 @@ def test_reach_counts_foreground_only_where_no_other_track_is():
 def test_a_lost_track_that_looks_like_the_person_is_reused_before_another_is_moved(
         monkeypatch, how):
     """Blue's track (1) is released while she is away; yellow's track (2) is either hidden
-    (not reported, moved whatever the gain) or left behind when yellow walks off (a move by
-    the appearance gain, ``look_alike_margin`` raised and every track taken to look like the
-    detection so that any gain moves).
-    Blue comes back 0.75 m from track 2: she takes her lost id back (her model fits her,
-    track 2's is yellow's) and track 2 stays. With ``alike_distance`` 0 no released id is
-    reused by a birth: the comparison of the two models alone gives blue her id back. When track 2
-    was placed within ``relocate_interval`` ('young') the move would not happen (the
-    detection is dropped), and neither does the reuse in its place."""
+    (not reported, moved whatever the gain) or left behind when yellow walks off, its
+    model's appearance gain at the detection forced to +2 nats (a move by the gain;
+    'young': track 2 counts as placed moments ago).
+    Blue comes back 0.75 m from track 2: the assignment gives her her lost id back (the
+    appearance ratio of her model and blue's lost one is larger than what track 2's
+    hypothesis offers) and track 2 stays."""
     from mbtrack_ros.core.detection.manager import AutoDetection
 
     rng = np.random.default_rng(5)
-    calib, bgs, tracker = _painted_room_tracker(
-        4, reach_radius=0.0, look_alike_margin=1e9)
-    monkeypatch.setattr(AutoDetectionConfig, 'alike_distance', property(lambda self: 0.0))
-    monkeypatch.setattr(AutoDetectionConfig, 'looks_alike', lambda self, unlike: True)
-    if how == 'hidden':     # the gain never moves
-        monkeypatch.setattr(AutoDetection, '_explains', lambda self, *a: -1e10)
-    if how == 'young':      # the gain's move, onto a track placed moments ago
+    calib, bgs, tracker = _painted_room_tracker(4, reach_radius=0.0)
+    if how == 'young':      # the gain's hypothesis, onto a track placed moments ago
         placed = AutoDetection._placed_recently
         monkeypatch.setattr(AutoDetection, '_placed_recently', lambda self, tid, stamp:
                             (tid == 2 and released_at is not None)
@@ -1604,30 +1597,30 @@ def test_a_lost_track_that_looks_like_the_person_is_reused_before_another_is_mov
         if released_at is None and k > 10 and tracker.track_ids == [2]:
             released_at = k
             actions, decided = [], []
-            if how == 'hidden':
+            if how == 'hidden':     # the gain never moves; track 2 is hidden
+                monkeypatch.setattr(AutoDetection, '_explains', lambda self, *a: -1e10)
                 monkeypatch.setattr(AutoDetection, 'reported', lambda self, tid: tid != 2)
+            else:
+                monkeypatch.setattr(AutoDetection, '_explains', lambda self, *a: 2.0)
         if released_at is not None and k >= released_at + 12:
             break
     assert released_at is not None
     on_blue = [t for t in tracker.track_ids if np.hypot(
         *(tracker.filter._particles[t].mean(axis=0)[:2] - back[0][:2])) < 0.3]
     moved = 'move 2 (hidden)' if how == 'hidden' else 'move 2'
-    if how == 'young':
-        assert 'drop (track 2 placed recently)' in actions, actions
-        assert 'reuse 1 (not 2)' not in actions and moved not in actions, actions
-        assert 1 not in tracker.track_ids
-    else:
-        assert 'reuse 1 (not 2)' in actions and moved not in actions, actions
-        # blue has her id back; track 2, left behind by yellow ('gain'), may follow the
-        # foreground of blue 0.75 m away (its coverage above the support coverage keeps
-        # its existence) until the duplicate rule ends one of the two
-        assert on_blue == [1] if how == 'hidden' else 1 in on_blue, on_blue
-        # the terms that decided it: lost track 1 (metres, appearance distance) nearer
-        # blue in appearance than track 2, the track the detection would have moved
-        reuse = next(d for d in decided if d['action'] == 'reuse 1 (not 2)')
-        (lost, metres, unlike), = [r for r in reuse['reuse'] if r[0] == 1]
-        assert reuse['unlike'][0] == 2 and unlike < reuse['unlike'][1], reuse
-        assert metres <= AutoDetectionConfig().reuse_radius, reuse
+    assert 'reuse 1 (not 2)' in actions and moved not in actions, actions
+    assert 'drop (track 2 placed recently)' not in actions, actions
+    # blue has her id back; track 2, left behind by yellow, may follow the foreground of
+    # blue 0.75 m away (its coverage above the support coverage keeps its existence)
+    # until the duplicate rule ends one of the two
+    assert on_blue == [1] if how == 'hidden' else 1 in on_blue, on_blue
+    # the terms that decided it: lost track 1 (metres, appearance distance) nearer blue
+    # in appearance than track 2, the track the detection would have moved
+    reuse = next(d for d in decided if d['action'] == 'reuse 1 (not 2)')
+    (lost, metres, unlike), = [r for r in reuse['reuse'] if r[0] == 1]
+    assert reuse['unlike'][0] == 2 and unlike < reuse['unlike'][1], reuse
+    assert reuse['llr']['lost 1'] > reuse['llr']['track 2'], reuse
+    assert metres <= AutoDetectionConfig().reuse_radius, reuse
 
 
 @pytest.mark.parametrize('rule, who, moved', [(True, 'same', True), (False, 'same', False),
@@ -1730,29 +1723,28 @@ def _move_or_birth(monkeypatch, who: str, gain: float, **detection):
     return tracker, actions, unalike
 
 
-def test_the_gain_gate_decides_by_the_log_likelihood_ratio():
-    """:meth:`AutoDetectionConfig.gain_gate` against its rule written out case by case on a
-    grid of scores, gains (nats per side camera) and appearance distances: a strong
-    detection moves a track whose model explains it better than the track's own place
-    (gain > 0), or a look-alike track (``alike_distance``) down to ``-look_alike_margin``;
-    a weak one a gain above its score's shortfall below ``beside_threshold``."""
+def test_the_move_ratio_is_the_gain_and_for_a_strong_detection_the_looks():
+    """:meth:`AutoDetectionConfig.move_llr` against its terms written out on a grid of
+    scores, gains (nats per side camera) and appearance distances: the gain, plus for a
+    strong detection (``beside_threshold``) the appearance ratio ``max(0, (a^2 - u^2) /
+    (2 sigma^2))`` (``a`` = ``alike_distance``), positive exactly for a look-alike. With
+    the detection's own ratio (score less ``beside_threshold``) added, a weak detection
+    beats its drop only with a gain above its score's shortfall."""
     cfg = AutoDetectionConfig()
-    checked = set()
+    sigma = 0.12
+    assert cfg.appearance_llr(0.0, sigma) == pytest.approx(0.25 / (2 * 0.12 ** 2))
     for score in (0.5, cfg.beside_threshold - 0.01, cfg.beside_threshold, 6.0):
-        for gain in (-9.0, -6.0, -5.9, -1.0, 0.0, 0.005, 0.02, 1.5, 2.0, 2.6, 4.0):
-            for unlike in (0.1, cfg.alike_distance, cfg.alike_distance + 0.01, 0.9):
-                strong, alike = score >= cfg.beside_threshold, unlike <= cfg.alike_distance
-                if not strong:
-                    want = 'move' if gain > cfg.beside_threshold - score else None
-                elif gain > 0 or (alike and gain > -cfg.look_alike_margin):
-                    want = 'move'
-                elif gain > -cfg.look_alike_margin:
-                    want = 'unlike'         # a stranger kept back by its looks
-                else:
-                    want = None
-                assert cfg.gain_gate(score, gain, unlike) == want, (score, gain, unlike)
-                checked.add(want)
-    assert checked == {'move', 'unlike', None}
+        for gain in (-9.0, -6.0, -1.0, 0.0, 0.02, 2.6):
+            for unlike in (0.0, 0.1, 0.3, cfg.alike_distance, 0.9):
+                strong = score >= cfg.beside_threshold
+                looks = max(0.0, (cfg.alike_distance ** 2 - unlike ** 2) / (2 * sigma ** 2))
+                assert (looks > 0) == (unlike < cfg.alike_distance)
+                want = gain + (looks if strong else 0.0)
+                got = cfg.move_llr(score, gain, unlike, sigma)
+                assert got == pytest.approx(want), (score, gain, unlike)
+                if not strong:      # the move against the drop: gain over the shortfall
+                    assert (score - cfg.beside_threshold + got > 0) == (
+                        gain > cfg.beside_threshold - score)
 
 
 def test_every_decision_is_logged_with_its_terms(monkeypatch, caplog):
@@ -1809,25 +1801,19 @@ def test_a_doubtful_move_needs_the_detection_to_look_like_the_track(
             AutoDetectionConfig(clutter_distance=bad)
 
 
-@pytest.mark.parametrize('who, gain, slack, moved', [
-    ('same', -4.5, None, True), ('other', -4.5, None, False), ('same', -7.0, None, False),
-    ('same', -4.5, 0.0, False)])
-def test_a_look_alike_track_is_moved_by_a_negative_gain_within_the_look_alike_margin(
-        monkeypatch, who, gain, slack, moved):
+@pytest.mark.parametrize('who, gain, moved', [
+    ('same', -2.0, True), ('other', -2.0, False), ('same', -9.0, False)])
+def test_a_look_alike_track_is_moved_by_a_negative_gain_its_looks_make_up(
+        monkeypatch, who, gain, moved):
     """The scene of :func:`_move_or_birth` with a negative gain: the blue person takes
-    track 1 back when the gain is above ``-look_alike_margin`` (-6; she looks like the
-    track); a stranger in yellow is born beside it, and so is she at a gain further down
-    or with a margin of 0."""
-    slack = AutoDetectionConfig().look_alike_margin if slack is None else slack
-    assert AutoDetectionConfig().look_alike_margin == 6.0
-    tracker, actions, _ = _move_or_birth(monkeypatch, who, gain, look_alike_margin=slack)
+    track 1 back when the appearance ratio of her model and the track's
+    (:meth:`AutoDetectionConfig.appearance_llr`, at most 8.7 nats) makes up the gain; a
+    stranger in yellow is born beside it, and so is she at a gain further down."""
+    tracker, actions, _ = _move_or_birth(monkeypatch, who, gain)
     assert ('move 1' in actions) == moved, actions
     assert ('birth' in actions) == (not moved), actions
     mean = tracker.filter._particles[1 if moved else 2].mean(axis=0)
     assert np.hypot(mean[0] - 2.75, mean[1] - 2.5) < 0.3, mean
-    for bad in (float('nan'), float('inf'), -0.5):
-        with pytest.raises(DetectionError, match='look_alike_margin'):
-            AutoDetectionConfig(look_alike_margin=bad)
 
 
 @pytest.mark.parametrize('gain, actions_wanted', [

@@ -1,11 +1,17 @@
-"""Data association of the automatic detection: what a confirmed detection is.
+"""Data association of the automatic detection: what the frame's confirmed detections are.
 
-:class:`DetectionAssociator` decides, for each confirmed detection, whether it is a new
-person (a birth), a current track's person re-found (the track is moved there), a released
-("lost") track's person (its id is reused), or nothing to act on (dropped), from the
-appearance gain of each nearby track's model (003 Eq. 3), appearance distances between
-models (003 Eq. 4) and the exclusive support of the tracks (the release's measure). Every
-decision is recorded in ``decisions`` and logged at debug level. It is a part of
+:class:`DetectionAssociator` decides jointly, by one optimal assignment per frame
+(:func:`solve_assignment`, ``scipy.optimize.linear_sum_assignment``), whether each confirmed
+detection is a new person (a birth), a current track's person re-found (the track is moved
+there), a released ("lost") track's person (its id is reused), or nothing to act on
+(dropped). The assignment maximises the summed log-likelihood ratios of these hypotheses
+against "the detection is false" (:meth:`DetectionAssociator._hypotheses`): the appearance
+gain of each nearby track's model (003 Eq. 3), appearance distances between models (003
+Eq. 4), the track's existence probability (001 §3.2), the gates of where its person can
+be, and the detection's own score. A track takes at most one detection and a detection one
+outcome, so two detections competing for a track, or a lost track and a current one
+competing for a detection, are settled by the total likelihood. Every decision is recorded
+in ``decisions`` and logged at debug level with its terms. It is a part of
 :class:`~mbtrack_ros.core.detection.manager.AutoDetection` and works on its state.
 """
 from __future__ import annotations
@@ -14,197 +20,330 @@ import logging
 from collections.abc import Mapping, Sequence
 
 import numpy as np
+from scipy.optimize import linear_sum_assignment
 
 from mbtrack_ros.core.appearance import (
     PersonModel, model_distance, relative_angle, single_target_loglik)
-from mbtrack_ros.core.detection.config import Birth
+from mbtrack_ros.core.detection.config import WALK_SPEED, Birth
 from mbtrack_ros.core.detection.detector import Detection, FrameEvidence
 from mbtrack_ros.core.detection.release import spare_tracks
 from mbtrack_ros.core.existence import TrackAuxiliary
 from mbtrack_ros.core.shape import BodyShape, rasterize
 from mbtrack_ros.core.state import THETA, VX, VY, X, Y, TrackEstimate
 
-__all__ = ['DetectionAssociator']
+__all__ = ['BIRTH', 'DROP', 'DetectionAssociator', 'PREFER_TRACK', 'assignment_costs',
+           'place_llr', 'solve_assignment']
 
 _log = logging.getLogger(__name__)
+
+BIRTH, DROP = -1, -2    # outcomes of solve_assignment besides a track's column
+PREFER_TRACK = 1e-3     # nats: at equal likelihood a track explains a detection rather
+#                         than a new person (the hypothesis with fewer people)
+_INFEASIBLE = 1e9       # cost of a pair outside its gate (finite: the matrix stays feasible)
+
+
+def assignment_costs(llr: np.ndarray, birth: np.ndarray) -> np.ndarray:
+    """The cost matrix of the association: (N, M + 2N) for N detections and M tracks.
+
+    Args:
+        llr: (N, M) log-likelihood ratio (nats) of "detection i is track j's person" over
+            "detection i is false"; -inf (or nan) outside the gate.
+        birth: (N,) log-likelihood ratio of "detection i is a new person" over "it is false".
+
+    Returns:
+        costs: columns 0..M-1 the tracks (``-llr``), M..M+N-1 one birth per detection (its
+        ``-birth`` on the diagonal), M+N..M+2N-1 one drop per detection (0 on the diagonal);
+        every other entry, and every pair outside its gate, ``1e9``.
+    """
+    llr = np.asarray(llr, dtype=np.float64)
+    birth = np.asarray(birth, dtype=np.float64).reshape(-1)
+    n = len(birth)
+    m = llr.shape[1] if llr.ndim == 2 else 0
+    llr = llr.reshape(n, m)
+    cost = np.full((n, m + 2 * n), _INFEASIBLE)
+    ok = np.isfinite(llr)
+    cost[:, :m][ok] = -llr[ok]
+    rows = np.arange(n)
+    cost[rows, m + rows] = np.where(np.isfinite(birth), -birth, _INFEASIBLE)
+    cost[rows, m + n + rows] = 0.0
+    return cost
+
+
+def solve_assignment(llr: np.ndarray, birth: np.ndarray) -> np.ndarray:
+    """The outcome of each detection in the assignment maximising the summed log-likelihood
+    ratios (:func:`assignment_costs`; each track takes at most one detection): the track's
+    column ``j >= 0``, :data:`BIRTH` or :data:`DROP`. (N,) int."""
+    birth = np.asarray(birth, dtype=np.float64).reshape(-1)
+    n = len(birth)
+    cost = assignment_costs(llr, birth)
+    m = cost.shape[1] - 2 * n
+    rows, cols = linear_sum_assignment(cost)
+    out = np.full(n, DROP, dtype=np.int64)
+    for r, c in zip(rows, cols):
+        out[r] = c if c < m else (BIRTH if c < m + n else DROP)
+    return out
+
+
+def place_llr(metres: float, radius: float, area: float) -> float:
+    """Log-likelihood ratio (nats) of "the person of a track last known ``metres`` away"
+    over "a new person": a 2-D Gaussian of standard deviation ``radius / 2`` (the gate
+    ``radius`` at two deviations) around the track's last place, against a person
+    appearing anywhere on a floor of ``area`` square metres."""
+    sd2 = (0.5 * max(float(radius), 1e-3)) ** 2
+    return float(np.log(max(float(area), 1e-3) / (2.0 * np.pi * sd2))
+                 - float(metres) ** 2 / (2.0 * sd2))
 
 
 class DetectionAssociator:
     """The association part of :class:`~.manager.AutoDetection` (see the module)."""
 
-    def _identify(self, det: Detection, model: PersonModel, tracks: Sequence[TrackEstimate],
-                  keep: Sequence[int], means: np.ndarray, models: Mapping[int, PersonModel],
-                  evidence: Mapping[str, FrameEvidence], moved: set[int], stamp_ns: int
-                  ) -> Birth | None:
-        """A new person, or a current track that drifted off its person, re-found.
+    def _associate(self, acquired: Sequence[tuple[Detection, PersonModel]],
+                   tracks: Sequence[TrackEstimate], keep: Sequence[int], means: np.ndarray,
+                   models: Mapping[int, PersonModel], evidence: Mapping[str, FrameEvidence],
+                   stamp_ns: int) -> list[Birth]:
+        """What the frame's confirmed detections are, decided jointly: one optimal
+        assignment (:func:`solve_assignment`) of the detections to the current tracks
+        ``keep`` (reported and hidden), the lost (released) tracks, a birth each or a drop
+        each, maximising the summed log-likelihood ratios of :meth:`_hypotheses`.
+        Returns the births and moves (a move: ``track_id`` of a current track; a
+        re-identification: ``track_id`` of a lost one); each decision is logged
+        (:meth:`_decide`)."""
+        lost = [(int(tid), xy, old, since)
+                for tid, (since, xy, old) in self._released.items() if tid not in models]
+        n, m = len(acquired), len(keep) + len(lost)
+        llr = np.full((n, m), -np.inf)
+        birth = np.zeros(n)
+        labels, infos = [], []
+        for i, (det, model) in enumerate(acquired):
+            info, birth[i], row = self._hypotheses(det, model, tracks, keep, means, models,
+                                                   evidence, stamp_ns, lost)
+            for j, (value, _) in row.items():
+                llr[i, j] = value
+            labels.append(row)
+            infos.append(info)
+        outcome = solve_assignment(llr, birth)
+        out: list[Birth] = []
+        for i, (det, model) in enumerate(acquired):
+            info, col = infos[i], int(outcome[i])
+            state = det.state.copy()
+            info['llr'] = {'birth': round(float(birth[i]), 2),
+                           **{self._column_name(j, tracks, keep, lost): round(v, 2)
+                              for j, (v, _) in labels[i].items()}}
+            if col == BIRTH:
+                info['action'] = 'birth'
+                out.append(Birth(model=model, state=state, detection=det))
+            elif col == DROP:
+                info['action'] = 'drop (weak beside a track)' if birth[i] < 0 else 'drop'
+            elif col >= len(keep):          # a lost track's person re-found
+                tid = lost[col - len(keep)][0]
+                rival = max(((v, j) for j, (v, how) in labels[i].items()
+                             if j < len(keep) and how != 'young'
+                             and v > max(birth[i], 0.0)),
+                            default=None)
+                if rival is None:
+                    info['action'] = f'reuse {tid}'
+                else:
+                    other = tracks[keep[rival[1]]].track_id
+                    info['action'] = f'reuse {tid} (not {other})'
+                    info['unlike'] = (int(other), info['likeness'][other])
+                del self._released[tid]
+                out.append(Birth(model=model, state=state, detection=det, track_id=tid))
+            else:
+                tid = tracks[keep[col]].track_id
+                how = labels[i][col][1]
+                if how == 'young':
+                    info['action'] = f'drop (young look-alike {tid})'
+                elif how == 'gain' and self._placed_recently(tid, stamp_ns) and not (
+                        info['gains'][tid] > 0.0
+                        and self._moved_again.get(tid) != self._placed.get(tid)):
+                    info['action'] = f'drop (track {tid} placed recently)'
+                else:
+                    if how == 'gain' and self._placed_recently(tid, stamp_ns):
+                        self._moved_again[tid] = int(stamp_ns)
+                        how = 'again'
+                    elif how == 'far':
+                        k = keep[col]
+                        doubtful = self.reported(tid)
+                        info['far'] = (int(tid),
+                                       round(float(np.hypot(*(means[k, [X, Y]] - det.xy))), 2),
+                                       info['likeness'][tid],
+                                       round(float(self.aux[tid].existence), 3))
+                        how = 'doubtful, far' if doubtful else 'hidden, far'
+                    info['action'] = f'move {tid}' + ('' if how == 'gain' else f' ({how})')
+                    self._placed[tid] = int(stamp_ns)
+                    self._shown_since[tid] = int(stamp_ns)
+                    self.releaser.forget(tid)
+                    self.aux[tid] = TrackAuxiliary(self.config.existence)
+                    out.append(Birth(model=models[tid], state=state, detection=det,
+                                     track_id=tid))
+            info.pop('gains')
+            info.pop('likeness')
+            self._decide(info)
+        return out
 
-        003 §4.1 excludes the neighbourhood of each track from the search, but a track that
-        lags or drifted 0.4-0.8 m off its person leaves the person outside that radius:
-        the detection would start a second track on the same person (an identity switch
-        when the old one is released). So a confirmed detection within ``relocate_radius``
-        of a track is first checked with the track's own appearance model (003 Eq. 3, the
-        tracker's likelihood): the gain, on average over the side cameras that see both, of
-        ``log p(y_c | detection) - log p(y_c | track)``, a log-likelihood ratio of "the
-        track's person is at the detection" over "at the track's estimate". A positive
-        gain (the model explains the detection better) takes the detection for that
-        track's person and the track is moved there (same id) - or, within
-        ``relocate_interval`` of the track's birth or last move, the detection is dropped
-        (unless its gain is positive there too: it is moved again, once); otherwise a new
-        track is born. A track the detection would leave
-        ``move_support`` or more of its exclusive support (foreground no other track
-        covers) is not moved: it stands on a person of its own. The gain is a weak cue in
-        groups (right and wrong moves both have gains of a few nats either way per camera);
-        still, moving instead of a birth avoids most second tracks on one person, and the
-        interval stops a track hopping through a
-        group. A track that looks like the detection (``alike_distance``) may be moved by a
-        gain down to ``-look_alike_margin``. Of several tracks the gain would move, the
-        one whose model is nearest the detection's in appearance is. A detection scoring
-        below ``beside_threshold`` needs a gain above its shortfall to move a
-        track (about half of such moves with a small
-        gain went to another person), and when no track takes it and it has a track
-        within ``relocate_radius`` it is not born either: weak detections there are mostly
-        the fringe of that track's person or a gap between people. Before a track is
-        moved (by the gain or hidden), a lost track whose model is nearer the detection's
-        takes its id back instead, and the track stays where it is (not instead of a track
-        placed within ``relocate_interval``: its move would not happen); before a birth, a released
-        track and then a hidden one within ``reuse_radius`` that look alike are given
-        back their person (``reuse_time``, ``reuse_radius``; a reported track of doubtful
-        existence counts as hidden, ``reuse_doubtful``); a detection that would still
-        be born beside a look-alike track born or moved within ``relocate_interval`` is
-        dropped: a young track lags its person for a few frames, and the detection beside
-        it that looks like it (``alike_distance``) is that person - unless the young track
-        keeps ``move_support`` of its exclusive support with the detection as one more
-        track (it stands on a person of its own).
-        """
+    @staticmethod
+    def _column_name(j: int, tracks: Sequence[TrackEstimate], keep: Sequence[int],
+                     lost: Sequence[tuple]) -> str:
+        """'track N' or 'lost N' for assignment column ``j``."""
+        if j < len(keep):
+            return f'track {tracks[keep[j]].track_id}'
+        return f'lost {lost[j - len(keep)][0]}'
+
+    def _hypotheses(self, det: Detection, model: PersonModel,
+                    tracks: Sequence[TrackEstimate], keep: Sequence[int], means: np.ndarray,
+                    models: Mapping[int, PersonModel], evidence: Mapping[str, FrameEvidence],
+                    stamp_ns: int, lost: Sequence[tuple[int, np.ndarray, PersonModel | None,
+                                                         int]]
+                    ) -> tuple[dict, float, dict[int, tuple[float, str]]]:
+        """One detection's row of the assignment: log-likelihood ratios (nats, against
+        "the detection is false", a drop, whose ratio is 0) of its hypotheses.
+
+        - birth: ``e = score - beside_threshold`` when a current track is within
+          ``relocate_radius`` (a person rarely appears next to another: the prior odds of
+          such a birth), else ``score`` (the detector's combined log response);
+        - current track (column ``keep`` index), the best of:
+          'gain': the detection is the track's person, the track having drifted off them:
+          ``e + move_llr`` (:meth:`AutoDetectionConfig.move_llr`: the appearance gain of
+          the track's model, 003 Eq. 3, and for a strong detection the appearance ratio
+          of the two models), within ``relocate_radius``;
+          'hidden': a track that is not reported (existence below the report threshold,
+          001 §3.2) within ``relocate_radius``: its person is somewhere near, whatever
+          the gain: ``max(e, 0) + log((1 - p) / p) + A(u)`` (p the existence, A the
+          appearance term of :meth:`AutoDetectionConfig.appearance_llr`);
+          'far': a hidden or doubtful track (existence below ``reuse_doubtful``) within
+          ``reuse_radius``: ``max(e, 0) + place + A(u) - S(u)`` as a lost track's, when
+          positive beyond ``max(e, 0)``;
+          'young': a track born or moved within ``relocate_interval`` that looks like the
+          detection: it lags its person, the detection is that person, nothing is done
+          (``max(e, 0)``);
+          the 'gain' and 'young' hypotheses are ruled out for a track that keeps
+          ``move_support`` of its exclusive support with the detection as one more track
+          (it stands on a person of its own);
+        - lost track (column ``len(keep) +`` index): released within ``reuse_time``, its
+          person re-found within a gate of ``relocate_radius`` widened by
+          :data:`WALK_SPEED` over the time since it was last supported (release timeout
+          and time since the release): ``max(e, 0) + place + A(u) - S(u)`` (place:
+          :func:`place_llr` on the floor's area; S: the reverse appearance ratio,
+          :meth:`AutoDetectionConfig.stranger_llr`), when the sum beyond ``max(e, 0)`` is
+          positive.
+
+        Each hypothesis that explains a detection by a track gets :data:`PREFER_TRACK`
+        more (at equal likelihood, fewer people). Returns (the decision's info, the birth's
+        ratio, column -> (ratio, hypothesis))."""
         cfg = self.config
-        state = det.state.copy()
-        info = {'xy': (float(det.xy[0]), float(det.xy[1])), 'score': float(det.score),
-                'v': (round(float(det.state[VX]), 2), round(float(det.state[VY]), 2))}
-        near = []                   # (id, distance, gain, appearance distance) of the
-        #                             tracks the check compared
-        movable = []                # indices of the tracks the gain would move
-        unalike = []                # (id, distance) of those alike_distance kept back
-        likeness = {}               # id -> appearance distance to the detection, once each
-        gains = {}                  # id -> appearance gain (nats per side camera), unrounded
-        for k in keep:
+        state = det.state
+        info: dict = {'xy': (float(det.xy[0]), float(det.xy[1])), 'score': float(det.score),
+                      'v': (round(float(state[VX]), 2), round(float(state[VY]), 2))}
+        near, unalike = [], []
+        likeness: dict[int, float] = {}    # id -> appearance distance to the detection
+        gains: dict[int, float] = {}       # id -> appearance gain (nats per side camera)
+        dist = np.hypot(*(means[list(keep)][:, [X, Y]] - det.xy).T) if len(keep) \
+            else np.zeros(0)
+        radius = cfg.relocate_radius
+        for j, k in enumerate(keep):
             tid = tracks[k].track_id
-            d = float(np.hypot(*(means[k, [X, Y]] - det.xy)))
             ref = models.get(tid)
-            if d > cfg.relocate_radius or ref is None or tid in moved \
-                    or not ref.view_angles.size:
+            if dist[j] > radius or ref is None or not ref.view_angles.size:
                 continue
             gain = gains[tid] = self._explains(ref, means[k], state, evidence)
             unlike = likeness[tid] = model_distance(ref, model)
-            near.append((int(tid), round(d, 2), round(gain, 3), round(unlike, 3)))
-            gate = cfg.gain_gate(det.score, gain, unlike)
-            if gate == 'unlike':
+            near.append((int(tid), round(float(dist[j]), 2), round(gain, 3), round(unlike, 3)))
+            if det.score >= cfg.beside_threshold and gain <= 0.0 \
+                    and not cfg.looks_alike(unlike):     # a stranger kept back by its looks
                 unalike.append((int(tid), round(unlike, 3)))
-            elif gate == 'move':
-                movable.append(k)
         if near:
             info['near'] = near
         if unalike:
             info['unalike'] = unalike
-        support = None              # _exclusive_support, computed once per detection
-        if movable:
+        e = float(det.score) - (cfg.beside_threshold if near else 0.0)
+        base = max(e, 0.0) + PREFER_TRACK
+
+        def like(tid: int) -> float:
+            if tid not in likeness:
+                likeness[tid] = model_distance(models[tid], model)
+            return likeness[tid]
+
+        options: dict[int, list[tuple[float, str]]] = {}    # column -> hypotheses
+        for j, k in enumerate(keep):
+            tid = tracks[k].track_id
+            if tid not in models:
+                continue
+            young = self._placed_recently(tid, stamp_ns)
+            here = []
+            if tid in gains:
+                value = e + cfg.move_llr(det.score, gains[tid], likeness[tid],
+                                        self.sigma) + PREFER_TRACK
+                if value > max(e, 0.0):
+                    here.append((value, 'gain'))
+            if young:
+                if dist[j] <= radius and cfg.looks_alike(like(tid)):
+                    here.append((base, 'young'))
+            elif dist[j] <= cfg.reuse_radius:
+                hidden = self._hidden_hypothesis(tid, float(dist[j]), like, base)
+                if hidden is not None:
+                    here.append(hidden)
+            if here:
+                options[j] = here
+        checked = [j for j, here in options.items()
+                   if any(how in ('gain', 'young') for _, how in here)]
+        if checked:
             # exclusive support with the detection as one more track: a track that keeps
             # move_support of it stands on a person of its own, the detection is another
+            # (its 'gain' and 'young' hypotheses go; a hidden track's stays)
             support = self._exclusive_support(det, model, tracks, keep, means, models,
-                                              evidence)
-            with_det = support[1]
-            left = {k: float(with_det[j]) for j, k in enumerate(keep)}
-            info['support'] = [(int(tracks[k].track_id), round(left[k], 3)) for k in movable]
-            movable = [k for k in movable if not left[k] >= cfg.move_support]
-        # of several movable tracks, the one whose model is nearest the detection's: each
-        # gain is measured against that track's own place (a track drifted off its person
-        # gains most), the appearance distance against one reference for all
-        best = min(((k, likeness[tracks[k].track_id]) for k in movable),
-                   key=lambda kd: kd[1], default=None)
-        hidden = False
-        if best is None:
-            best = self._nearest_hidden(det, tracks, keep, means, models, moved, stamp_ns)
-            hidden = best is not None
-        if best is not None and not self._placed_recently(tracks[best[0]].track_id, stamp_ns):
-            # a lost track that looks more like the detection than the track about to be
-            # moved takes its id back; that track stays where it is. Not instead of a
-            # track placed within relocate_interval: that move would not happen (the
-            # detection is dropped below), a young track lags its own person
-            tid = tracks[best[0]].track_id
-            unlike = likeness.get(tid)
-            if unlike is None:          # a hidden track the gain check did not compare
-                unlike = likeness[tid] = model_distance(models[tid], model)
-            info['unlike'] = (int(tid), round(unlike, 3))
-            reused = self._reusable(det, model, models, info, below=unlike)
-            if reused is not None:
-                info['action'] = f'reuse {reused} (not {tid})'
-                self._decide(info)
-                return Birth(model=model, state=state, detection=det, track_id=reused)
-        if best is None and near and det.score < cfg.beside_threshold:
-            info['action'] = 'drop (weak beside a track)'
-            self._decide(info)
-            return None
-        far = doubtful = False
-        if best is None:
-            reused = self._reusable(det, model, models, info)
-            if reused is None:
-                # a hidden track within reuse_radius that looks like the detection is
-                # given back its person like a lost one; so is one reported with a
-                # doubtful existence (shown again moments ago, or fading)
-                best = self._nearest_hidden(det, tracks, keep, means, models, moved,
-                                            stamp_ns, radius=cfg.reuse_radius,
-                                            like=(model, likeness),
-                                            below_existence=cfg.reuse_doubtful)
-                hidden = far = best is not None
-                if far:
-                    tid = tracks[best[0]].track_id
-                    doubtful = self.reported(tid)
-                    # (id, metres, appearance distance, existence) of the track moved
-                    info['far'] = (int(tid), round(best[1], 2), round(likeness[tid], 3),
-                                   round(float(self.aux[tid].existence), 3))
-            if best is None and reused is None:
-                young = [(n[1], n[0]) for n in near
-                         if cfg.looks_alike(n[3]) and self._placed_recently(n[0], stamp_ns)]
-                if young:
-                    # ... unless the young track keeps move_support of its exclusive
-                    # support with the detection as one more track: it stands on a person
-                    # of its own, and the detection is somebody else
-                    if support is None:
-                        support = self._exclusive_support(det, model, tracks, keep, means,
-                                                          models, evidence)
-                    left = {int(tracks[k].track_id): float(support[1][j])
-                            for j, k in enumerate(keep)}
-                    young = [y for y in young if not left.get(y[1], 0.0) >= cfg.move_support]
-                if young:
-                    # a track born or moved moments ago lags its person: the detection
-                    # beside it that looks like it is that person, not a newcomer
-                    info['action'] = f'drop (young look-alike {min(young)[1]})'
-                    self._decide(info)
-                    return None
-            if best is None:
-                info['action'] = 'birth' if reused is None else f'reuse {reused}'
-                self._decide(info)
-                return Birth(model=model, state=state, detection=det, track_id=reused)
-        tid = tracks[best[0]].track_id
-        again = False
-        if not hidden and self._placed_recently(tid, stamp_ns):
-            again = gains[tid] > 0.0 \
-                and self._moved_again.get(tid) != self._placed.get(tid)
-            if not again:
-                info['action'] = f'drop (track {tid} placed recently)'
-                self._decide(info)
-                return None
-            self._moved_again[tid] = int(stamp_ns)
-        info['action'] = f'move {tid}' + (' (doubtful, far)' if doubtful
-                                          else ' (hidden, far)' if far
-                                          else ' (hidden)' if hidden
-                                          else ' (again)' if again else '')
-        self._decide(info)
-        self._placed[tid] = int(stamp_ns)
-        self._shown_since[tid] = int(stamp_ns)
-        moved.add(tid)
-        self.releaser.forget(tid)
-        self.aux[tid] = TrackAuxiliary(cfg.existence)
-        return Birth(model=models[tid], state=state, detection=det, track_id=tid)
+                                              evidence)[1]
+            info['support'] = [(int(tracks[keep[j]].track_id), round(float(support[j]), 3))
+                               for j in checked]
+            for j in checked:
+                if support[j] >= cfg.move_support:
+                    options[j] = [o for o in options[j] if o[1] not in ('gain', 'young')]
+        row: dict[int, tuple[float, str]] = {j: max(here) for j, here in options.items()
+                                             if here}
+        since_supported = self.config.release.timeout
+        x0, y0, x1, y1 = self.calibration.floor
+        for i, (tid, xy, old, released) in enumerate(lost):
+            d = float(np.hypot(*(xy - det.xy)))
+            age = max(int(stamp_ns) - released, 0) / 1e9
+            gate = radius + WALK_SPEED * (since_supported + age)
+            if d > gate or old is None:
+                continue
+            unlike = model_distance(old, model)
+            info.setdefault('reuse', []).append((int(tid), round(d, 2), round(unlike, 3)))
+            # where: the lost person's place against a birth anywhere on the floor; who:
+            # the two models' appearance ratio, negative for unlike ones (003 Eq. 4)
+            value = place_llr(d, gate, (x1 - x0) * (y1 - y0)) \
+                + cfg.appearance_llr(unlike, self.sigma) - cfg.stranger_llr(unlike, self.sigma)
+            if value > 0.0:
+                row[len(keep) + i] = (base + value, 'lost')
+        info['gains'] = gains
+        info['likeness'] = {t: round(u, 3) for t, u in likeness.items()}
+        return info, e, row
+
+    def _hidden_hypothesis(self, track_id: int, metres: float, like, base: float
+                           ) -> tuple[float, str] | None:
+        """(ratio, 'hidden' or 'far') of "the detection ``metres`` from the track is the
+        person of a track that lost them" (:meth:`_hypotheses`), or None for a track that is
+        reported with an existence of at least ``reuse_doubtful``, or, beyond
+        ``relocate_radius`` or reported, whose place and appearance ratios (as a lost
+        track's, the gate ``reuse_radius``; ``like(id)``: the appearance distance) are not
+        positive; ``base``: the detection's own ratio, at least 0."""
+        cfg = self.config
+        aux = self.aux.get(track_id)
+        p = 1.0 if aux is None else float(aux.existence)
+        reported = self.reported(track_id)
+        if not reported and metres <= cfg.relocate_radius:
+            odds = float(np.log(max(1.0 - p, 1e-9) / max(p, 1e-9)))
+            return base + max(odds, 0.0) + cfg.appearance_llr(like(track_id), self.sigma), \
+                'hidden'
+        if not reported or p < cfg.reuse_doubtful:
+            # where and who, as for a lost track (its gate: reuse_radius)
+            x0, y0, x1, y1 = self.calibration.floor
+            unlike = like(track_id)
+            value = place_llr(metres, cfg.reuse_radius, (x1 - x0) * (y1 - y0)) \
+                + cfg.appearance_llr(unlike, self.sigma) - cfg.stranger_llr(unlike, self.sigma)
+            if value > 0.0:
+                return base + value, 'far'
+        return None
 
     def _decide(self, info: dict) -> None:
         """Record what happened to a confirmed detection (``decisions``) and log it at debug
@@ -222,44 +361,6 @@ class DetectionAssociator:
         since = self._placed.get(track_id)
         return since is not None \
             and (int(stamp_ns) - since) / 1e9 < self.config.relocate_interval
-
-    def _nearest_hidden(self, det: Detection, tracks: Sequence[TrackEstimate],
-                        keep: Sequence[int], means: np.ndarray,
-                        models: Mapping[int, PersonModel], moved: set[int], stamp_ns: int,
-                        radius: float | None = None,
-                        like: tuple[PersonModel, dict[int, float]] | None = None,
-                        below_existence: float = 0.0) -> tuple[int, float] | None:
-        """(index, distance) of the nearest unreported track within ``radius`` (default
-        ``relocate_radius``) of the detection (a track whose existence fell below the
-        report threshold; or, reported, below ``below_existence``), or None; with ``like``
-        (the detection's model, and the cache of appearance distances to it by track id,
-        filled here) only a track whose model is within ``alike_distance`` of that model
-        (the reuse of a hidden track). Not a track born or moved within
-        ``relocate_interval``: hidden again so soon, its model does not explain the person
-        there."""
-        best = None
-        for k in keep:
-            tid = tracks[k].track_id
-            if tid in moved or tid not in models:
-                continue
-            aux = self.aux.get(tid)
-            if self.reported(tid) \
-                    and not (aux is not None and aux.existence < below_existence):
-                continue
-            if self._placed_recently(tid, stamp_ns):
-                continue
-            d = float(np.hypot(*(means[k, [X, Y]] - det.xy)))
-            if d > (self.config.relocate_radius if radius is None else radius):
-                continue
-            if like is not None:
-                model, likeness = like
-                if tid not in likeness:
-                    likeness[tid] = model_distance(models[tid], model)
-                if likeness[tid] > self.config.alike_distance:
-                    continue
-            if best is None or d < best[1]:
-                best = (k, d)
-        return best
 
     def _exclusive_support(self, det: Detection, model: PersonModel,
                            tracks: Sequence[TrackEstimate], keep: Sequence[int],
@@ -296,30 +397,6 @@ class DetectionAssociator:
         # min_support 0: nobody is spare, every track's exclusive support is returned
         _, beside = spare_tracks(fgs, sils, 0.0, least)
         return alone, beside[:k], spare
-
-    def _reusable(self, det: Detection, model: PersonModel,
-                  models: Mapping[int, PersonModel], info: dict,
-                  below: float | None = None) -> int | None:
-        """The id of the track released nearest the detection, within ``reuse_radius``
-        metres and ``reuse_time`` seconds, not live, whose appearance model is within
-        ``alike_distance`` of the detection's - or, when ``below`` is given, nearer than
-        ``below`` (a lost track nearer in appearance than the track to be moved) - (and
-        forgets it), or None; each candidate's distance and model distance go to
-        ``info['reuse']``."""
-        best = None
-        for tid, (_, xy, old) in self._released.items():
-            d = float(np.hypot(*(xy - det.xy)))
-            if tid in models or d > self.config.reuse_radius:
-                continue
-            unlike = model_distance(old, model) if old is not None else 1.0
-            info.setdefault('reuse', []).append((int(tid), round(d, 2), round(unlike, 3)))
-            fits = unlike <= self.config.alike_distance if below is None else unlike < below
-            if fits and (best is None or d < best[1]):
-                best = (tid, d)
-        if best is None:
-            return None
-        del self._released[best[0]]
-        return best[0]
 
     def _explains(self, model: PersonModel, track: np.ndarray, candidate: np.ndarray,
                   evidence: Mapping[str, FrameEvidence]) -> float:

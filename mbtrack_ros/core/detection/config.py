@@ -34,33 +34,23 @@ class AutoDetectionConfig:
             (:mod:`~mbtrack_ros.core.detection.adaptation`; ``rate`` 0 is off).
         clutter_distance: Bhattacharyya distance whose likelihood is the "not visible"
             clutter likelihood ``p_0`` (001 Eq. 23): what a model scores on something that
-            is not its person. Also :attr:`alike_distance`.
-        look_alike_margin: nats per side camera >= 0; how much worse than its own place
-            a track's model may explain a strong detection (``beside_threshold``) that
-            looks like it (``alike_distance``) for the detection to move the track, when
-            the detection would leave the track less than :attr:`move_support`; 0: a
-            look-alike needs a positive gain like any other. Catches tracks left behind
-            where their person turned.
-        relocate_interval: seconds after a track was born or moved during which a detection
-            does not move it again but is dropped (a young model explains several people
-            in a group about equally well: the track would hop between them), unless its
-            appearance gain is positive (the track's model explains the detection better
-            than the track's own place): then it is moved again, once. A confirmed
-            detection that would start a new track within ``relocate_radius`` of a track
-            that is not reported (existence below the report threshold: it lost its
-            person) moves that track instead, whatever the gain (the nearest such track
-            not placed within ``relocate_interval``).
-        reuse_time: seconds; a released track is *lost* for ``reuse_time``: a new track
-            born within :attr:`reuse_radius` of where it was released takes its id (its
-            person re-found) when the two look alike (``alike_distance``). The id ends
+            is not its person. Also :attr:`alike_distance` and the zero of the appearance
+            ratio of two models (:meth:`appearance_llr`).
+        relocate_interval: seconds after a track was born or moved during which it lags
+            its person and its young model explains several people in a group about
+            equally well: a detection assigned to it (:mod:`.association`) is dropped, not
+            moved onto (the track would hop between people), unless its appearance gain is
+            positive (the track's model explains the detection better than the track's own
+            place): then it is moved again, once; a detection beside it that looks like it
+            (``alike_distance``) is that person, not a newcomer (assigned to it, dropped).
+        reuse_time: seconds; a released track is *lost* for ``reuse_time``: a detection
+            near where it was released (within :attr:`reuse_radius`, widened by
+            :data:`WALK_SPEED` over the time since) that does not look unlike it may be
+            assigned to it and take its id (its person re-found; the place and
+            appearance ratios of :mod:`.association`). The id ends
             (:meth:`finished`) only when that time has passed unused, so an id never comes
             back after it ended. 0 ends released tracks at once. The time should cover a
-            person standing still after being lost (a few seconds). A detection that would
-            start a new track moves instead the nearest hidden track (not reported, or
-            reported with an existence below :attr:`reuse_doubtful`; not placed within
-            ``relocate_interval``) within :attr:`reuse_radius` whose model is within
-            ``alike_distance`` of the detection's: a hidden track is given back its person
-            like a lost one.
+            person standing still after being lost (a few seconds).
         duplicate_margin: nats per side camera; of two tracks on one person (closer than
             the release's ``merge_radius`` for its ``merge_time``) keep the one whose
             appearance model explains the image where they are better (003 Eq. 3, both
@@ -82,10 +72,11 @@ class AutoDetectionConfig:
             (the release's ``timeout`` after they lose support, or the existence process's
             fall); longer keeps a young track of a real person who walks off from it less
             well.
-        beside_threshold: smallest detection score (the detector's combined log response)
-            for a birth within ``relocate_radius`` of a track that the detection did not
-            move: weak detections beside a track are mostly the fringe of that track's
-            person or a gap between people; 0 keeps the detector's threshold alone.
+        beside_threshold: nats; the prior log-odds against a birth within
+            ``relocate_radius`` of a track, subtracted from the detection's score (the
+            detector's combined log response) in the birth's ratio of the association:
+            weak detections beside a track are mostly the fringe of that track's person or
+            a gap between people; 0 keeps the detector's threshold alone.
     """
 
     background: BackgroundConfig = field(default_factory=BackgroundConfig)
@@ -95,7 +86,6 @@ class AutoDetectionConfig:
     existence: AuxiliaryConfig = field(default_factory=AuxiliaryConfig)
     adaptation: AdaptationConfig = field(default_factory=AdaptationConfig)
     clutter_distance: float = 0.5
-    look_alike_margin: float = 6.0
     relocate_interval: float = 2.0
     reuse_time: float = 3.0
     duplicate_margin: float = 8.0
@@ -120,7 +110,7 @@ class AutoDetectionConfig:
         track's appearance model before it may start a new track: the appearance gain
         (:meth:`AutoDetection._explains`: mean log-likelihood ratio per side camera, 003
         Eq. 3 under the track's model, of the detection's place over the track's
-        estimate) decides whether it is the track's person (:meth:`gain_gate`). It is the
+        estimate) weighs whether it is the track's person (:meth:`move_llr`). It is the
         release's ``spare_radius``: the largest distance at which two hypotheses (two
         tracks, or a track and a detection) are taken to be possibly of one person."""
         return self.release.spare_radius
@@ -137,10 +127,12 @@ class AutoDetectionConfig:
 
     @property
     def reuse_radius(self) -> float:
-        """Metres from a lost or hidden track within which a detection may be its person:
-        ``relocate_radius`` (how far a supported track may lag its person) widened by
-        :data:`WALK_SPEED` over the release's ``timeout`` (how long the person may have
-        walked on while the track was unsupported before it was released)."""
+        """Metres from a hidden track, or from a lost one when it is released, within
+        which a detection may be its person: ``relocate_radius`` (how far a supported
+        track may lag its person) widened by :data:`WALK_SPEED` over the release's
+        ``timeout`` (how long the person may have walked on while the track was
+        unsupported before it was released); a lost track's gate widens on at that speed
+        while it is lost (:mod:`.association`)."""
         return self.relocate_radius + WALK_SPEED * self.release.timeout
 
     @property
@@ -158,30 +150,42 @@ class AutoDetectionConfig:
         detection's looks like it (``alike_distance``)."""
         return unlike <= self.alike_distance
 
-    def gain_gate(self, score: float, gain: float, unlike: float) -> str | None:
-        """Whether the appearance gain (003 Eq. 3, nats per side camera) lets a detection
-        of ``score`` move a track whose model is ``unlike`` (appearance distance) from the
-        detection's: 'move'; 'unlike' when the gain is in ``(-look_alike_margin, 0]`` of
-        a strong detection and the track does not look like the detection
-        (``alike_distance`` keeps it back); None when the gain is too low. A strong
-        detection (``beside_threshold``) needs a positive gain, or a look-alike track
-        one above ``-look_alike_margin``. A weak detection's own evidence (its score, a
-        log response) falls short of ``beside_threshold``: the gain must make up the
-        shortfall, ``gain > beside_threshold - score``, with no look-alike allowance
-        (weak detections beside a track are often a neighbour's fringe)
-        (:meth:`AutoDetection._identify`)."""
-        if score < self.beside_threshold:
-            return 'move' if gain > self.beside_threshold - score else None
-        if gain > 0.0:
-            return 'move'
-        if self.looks_alike(unlike):
-            return 'move' if gain > -self.look_alike_margin else None
-        return 'unlike' if gain > -self.look_alike_margin else None
+    def move_llr(self, score: float, gain: float, unlike: float, sigma: float) -> float:
+        """Log-likelihood ratio (nats) of "the detection (of ``score``) is the person of a
+        track whose model is ``unlike`` (appearance distance) from the detection's" over
+        "it is a new person": the appearance gain (003 Eq. 3, nats per side camera: the
+        track's model at the detection over at the track's own estimate), plus, for a
+        strong detection (``beside_threshold``), the appearance ratio of the two models
+        (:meth:`appearance_llr`; a track left behind where its person turned explains
+        them worse than its own place, but still looks like them). The association adds
+        the detection's own ratio (its score less ``beside_threshold``), so that a weak
+        detection moves a track only when the gain makes up its shortfall (weak
+        detections beside a track are often a neighbour's fringe, which looks like the
+        neighbour)."""
+        strong = score >= self.beside_threshold
+        return float(gain) + (self.appearance_llr(unlike, sigma) if strong else 0.0)
+
+    def appearance_llr(self, unlike: float, sigma: float) -> float:
+        """Log-likelihood ratio (nats) of "same person" over "somebody else" for two
+        appearance models ``unlike`` (003 Eq. 4) apart, with the appearance likelihood
+        ``exp(-D^2 / (2 sigma^2))`` (000 Eq. 19) against the clutter likelihood at
+        ``clutter_distance`` (:attr:`alike_distance`, 001 Eq. 23), floored at 0 (a model
+        unlike the detection says it is not visible there, not that it is elsewhere):
+        ``max(0, (alike_distance^2 - unlike^2) / (2 sigma^2))``; ``sigma`` is the
+        tracker's appearance likelihood width (8.7 nats for identical models at the
+        defaults)."""
+        return max(0.0, (self.alike_distance ** 2 - float(unlike) ** 2)
+                   / (2.0 * float(sigma) ** 2))
+
+    def stranger_llr(self, unlike: float, sigma: float) -> float:
+        """Log-likelihood ratio (nats) of "somebody else" over "the same person" for two
+        appearance models ``unlike`` (003 Eq. 4) apart, the reverse of
+        :meth:`appearance_llr`: ``max(0, (unlike^2 - alike_distance^2) / (2 sigma^2))``
+        (their difference is the unfloored ratio)."""
+        return max(0.0, (float(unlike) ** 2 - self.alike_distance ** 2)
+                   / (2.0 * float(sigma) ** 2))
 
     def __post_init__(self) -> None:
-        if not (np.isfinite(self.look_alike_margin) and self.look_alike_margin >= 0):
-            raise DetectionError(f'look_alike_margin must be a finite number >= 0, got '
-                                 f'{self.look_alike_margin}')
         if not self.duplicate_margin >= 0:
             raise DetectionError(f'duplicate_margin must be >= 0, got {self.duplicate_margin}')
         if not self.reuse_time >= 0:

@@ -527,15 +527,14 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
         return model_sum, frame_sum
 
     def _settle(self, pending: _Pending, found: _Found) -> list[Birth]:
-        """Births and moves from the detections of :meth:`_find` (:meth:`_identify`), in
-        the order found; the tracks' bookkeeping is changed here only (main thread)."""
+        """Births and moves from the detections of :meth:`_find`, decided jointly
+        (:meth:`_associate`); the tracks' bookkeeping is changed here only (main thread)."""
         stamp_ns, _, tracks, models, means, _, evidence, ended = pending
         t0 = time.perf_counter()
         births: list[Birth] = []
         self.decisions = []
         if evidence:
             keep = [k for k, t in enumerate(tracks) if t.track_id not in ended]
-            moved: set[int] = set()
             # no birth or move by a detection whose body is wholly inside an exit: its
             # centre deeper than half the body's depth, its width seen from the side
             # (003 §2.1: s(pi/2) = 0.7 of the width); a person in the doorway or beyond
@@ -544,13 +543,11 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
                 self._decide({'xy': (float(det.xy[0]), float(det.xy[1])),
                               'score': float(det.score), 'action': 'drop (ghost)',
                               'outline': (round(g_model, 1), round(g_frame, 1))})
-            for det, model in found.acquired:
-                if self.calibration.exit_depth(det.xy)[0] > half_depth * det.width:
-                    continue
-                birth = self._identify(det, model, tracks, keep, means, models, evidence,
-                                       moved, stamp_ns)
-                if birth is not None:
-                    births.append(birth)
+            inside = [(det, model) for det, model in found.acquired
+                      if not self.calibration.exit_depth(det.xy)[0] > half_depth * det.width]
+            if inside:
+                births = self._associate(inside, tracks, keep, means, models, evidence,
+                                         stamp_ns)
         self.timings.update(found.timings)
         self.timings['detect_search'] = found.timings['detect_find'] \
             + time.perf_counter() - t0
