@@ -332,9 +332,12 @@ class DetectionAssociator:
         p = 1.0 if aux is None else float(aux.existence)
         reported = self.reported(track_id)
         if not reported and metres <= cfg.relocate_radius:
+            # its person lost, and the detection beside it: who it is decides (the
+            # unfloored appearance ratio, as for a lost track)
             odds = float(np.log(max(1.0 - p, 1e-9) / max(p, 1e-9)))
-            return base + max(odds, 0.0) + cfg.appearance_llr(like(track_id), self.sigma), \
-                'hidden'
+            unlike = like(track_id)
+            return base + max(odds, 0.0) + cfg.appearance_llr(unlike, self.sigma) \
+                - cfg.stranger_llr(unlike, self.sigma), 'hidden'
         if not reported or p < cfg.reuse_doubtful:
             # where and who, as for a lost track (its gate: reuse_radius)
             x0, y0, x1, y1 = self.calibration.floor
