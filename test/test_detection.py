@@ -681,10 +681,10 @@ def test_track_coverage_gives_the_filter_this_frame_foreground():
         extracted.append(apply(images, **kwargs))
         return extracted[-1]
 
-    def recording_set_foreground(masks, gain):
+    def recording_set_foreground(masks, gain, **kwargs):
         assert callable(masks)          # joined by the filter when it needs them
         given.append((masks(), gain))
-        set_foreground(masks, gain)
+        set_foreground(masks, gain, **kwargs)
 
     tracker.detection.background.apply = recording_apply
     tracker.measurement.set_foreground = recording_set_foreground

@@ -582,7 +582,12 @@ class Tracker:
                     {n: (int(stamps[n]) - stamp_ns) / 1e9 for n in seen if n in stamps})
             gain = self.detection.config.track_coverage if detect else 0.0
             if gain > 0:   # the coverage term joins the frame's foreground when it needs it
-                self.measurement.set_foreground(self.detection.started_foreground, gain)
+                # the bootstrap's possible people are foreground by guess, not observed:
+                # they count as the coverage at which the existence evidence is neutral
+                self.measurement.set_foreground(
+                    self.detection.started_foreground, gain,
+                    undecided=self.detection.started_possible,
+                    neutral=self.detection.config.release.min_coverage)
             t1 = time.perf_counter()
             updates = self.filter.step(dt, self.measurement, seen, self.rng)
             t2 = time.perf_counter()
