@@ -670,7 +670,8 @@ def _set_relocate_radius(tracker, metres):
 def test_track_coverage_gives_the_filter_this_frame_foreground():
     """With ``track_coverage`` the filter's coverage term gets the foreground masks that
     the same frame set's background step produced (joined from the worker before the
-    filter), and the person is still found and tracked."""
+    filter), its possible-person pixels as undecided at the release's ``min_coverage``,
+    and the person is still found and tracked."""
     calib, bgs, tracker = _painted_room_tracker(1, track_coverage=2.0)
     frames = [paint(calib, bgs, [person(1.5 + 0.05 * k, 2.8, theta=0.0)] if k >= 3 else [],
                     np.random.default_rng(k)) for k in range(10)]
@@ -684,6 +685,11 @@ def test_track_coverage_gives_the_filter_this_frame_foreground():
     def recording_set_foreground(masks, gain, **kwargs):
         assert callable(masks)          # joined by the filter when it needs them
         given.append((masks(), gain))
+        undecided = kwargs['undecided']()
+        assert kwargs['neutral'] == tracker.detection.config.release.min_coverage
+        for name, mask in undecided.items():
+            possible = tracker.detection.background.models[name].possible_foreground_as_tested
+            assert (mask is None and not possible.any()) or (mask == possible).all()
         set_foreground(masks, gain, **kwargs)
 
     tracker.detection.background.apply = recording_apply
