@@ -670,7 +670,8 @@ def _set_relocate_radius(tracker, metres):
 def test_coverage_gain_gives_the_filter_this_frame_foreground():
     """With a ``coverage_gain`` the filter's coverage term gets the foreground masks that
     the same frame set's background step produced (joined from the worker before the
-    filter), and the person is still found and tracked."""
+    filter), its possible-person pixels as undecided at the release's ``min_coverage``,
+    and the person is still found and tracked."""
     calib, bgs, tracker = _painted_room_tracker(1)
     assert tracker.measurement.config.coverage_gain == 2.0     # the likelihood's default
     frames = [paint(calib, bgs, [person(1.5 + 0.05 * k, 2.8, theta=0.0)] if k >= 3 else [],
@@ -682,10 +683,15 @@ def test_coverage_gain_gives_the_filter_this_frame_foreground():
         extracted.append(apply(images, **kwargs))
         return extracted[-1]
 
-    def recording_set_foreground(masks, gain=None):
+    def recording_set_foreground(masks, gain=None, **kwargs):
         assert callable(masks)          # joined by the filter when it needs them
         given.append((masks(), gain))
-        set_foreground(masks, gain)
+        undecided = kwargs['undecided']()
+        assert kwargs['neutral'] == tracker.detection.config.release.min_coverage
+        for name, mask in undecided.items():
+            possible = tracker.detection.background.models[name].possible_foreground_as_tested
+            assert (mask is None and not possible.any()) or (mask == possible).all()
+        set_foreground(masks, gain, **kwargs)
 
     tracker.detection.background.apply = recording_apply
     tracker.measurement.set_foreground = recording_set_foreground

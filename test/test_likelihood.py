@@ -666,6 +666,60 @@ def test_coverage_term_adds_gain_times_brute_force_coverage(separable):
         np.testing.assert_allclose(a, b, atol=1e-12)
 
 
+@pytest.mark.parametrize('separable', [False, True])
+def test_undecided_pixels_count_as_the_neutral_coverage_in_the_term(separable):
+    """With undecided background pixels, each counts as ``neutral`` in the particle's
+    coverage, whatever its mask value: ``(fg on decided + neutral x undecided) / area``,
+    pixel by pixel; a particle on undecided pixels alone gets ``gain x neutral``."""
+    rng = np.random.default_rng(23)
+    cams = _two_cameras()
+    mm = MeasurementModel(_room(*cams), LikelihoodConfig(min_visible_pixels=1))
+    images = {c.name: _random_image(rng, c.height, c.width) for c in cams}
+    masks = {c.name: rng.random((c.height, c.width)) < 0.4 for c in cams}
+    undecided = {c.name: np.zeros((c.height, c.width), bool) for c in cams}
+    undecided['front'][:, :24] = True          # a bootstrap region, all of it foreground
+    masks['front'][:, :24] = True
+    undecided['side'] = None                   # all decided there
+    models = [_random_model(rng, 1.7)]
+    particles = [_random_particles(rng, (0.0, 0.0), 6)]
+    weights = [rng.random(6) + 0.1]
+    gain, neutral = 1.5, 0.3
+
+    def evaluate():
+        if separable:
+            return mm.separable(particles, models).loglik[0]
+        return mm.hjs(particles, weights, models).loglik[0]
+
+    mm.set_images(images)
+    plain = evaluate()
+    mm.set_images(images)
+    mm.set_foreground(masks, gain, undecided=lambda: undecided, neutral=neutral)
+    with_term = evaluate()
+    prior = np.full(6, 1.0 / 6) if separable else weights[0] / weights[0].sum()
+    term = np.zeros(6)
+    shares = []
+    for cam in cams:
+        und = undecided[cam.name]
+        und = np.zeros((cam.height, cam.width), bool) if und is None else und
+        f = np.full(6, np.nan)
+        for i, state in enumerate(particles[0]):
+            body = mm.render_labels(cam.name, state, models[0]) > 0
+            if body.any():
+                f[i] = ((body & masks[cam.name] & ~und).sum() + neutral * (body & und).sum()
+                        ) / body.sum()
+                shares.append((body & und).sum() / body.sum())
+        inside = np.isfinite(f)
+        f[~inside] = np.sum(prior[inside] * f[inside]) / np.sum(prior[inside])
+        term += gain * f
+    assert max(shares) > 0.3 and min(shares) < 0.1    # some particles on undecided pixels
+    np.testing.assert_allclose(with_term - plain, term, atol=1e-9)
+    with pytest.raises(LikelihoodError, match='neutral coverage'):
+        mm.set_foreground(masks, gain, neutral=1.5)
+    mm.set_images(images)
+    with pytest.raises(LikelihoodError, match='undecided-pixel mask'):
+        mm.set_foreground(masks, gain, undecided={'front': np.zeros((2, 2), bool)})
+
+
 def test_coverage_term_prefers_the_foreground_over_a_look_alike_background():
     """A person and a painted look-alike of her on the wall behind: colour alone cannot
     tell them apart, the foreground can."""
@@ -683,6 +737,35 @@ def test_coverage_term_prefers_the_foreground_over_a_look_alike_background():
     mm.set_foreground(masks, 2.0)
     scored = mm.hjs(parts, [np.ones(2)], models[:1]).loglik[0]
     assert scored[0] > scored[1] + 3.0              # 2 cameras x gain 2 x (1 - 0)
+
+
+def test_a_particle_on_the_person_beats_one_on_a_guessed_blob():
+    """The online bootstrap gives a possible person's pixels the value foreground before the
+    background there is known; a track placed a little off its person at the start sits on
+    that blob. Counted as observed foreground the blob holds the track as firmly as the
+    person does (colour alike); counted as undecided (the neutral coverage) the particle
+    on the person wins by ``gain (1 - neutral)`` per camera."""
+    cams = _two_cameras()
+    mm = MeasurementModel(_room(*cams), LikelihoodConfig(min_visible_pixels=5))
+    colours = [((230, 190, 160), (200, 30, 30), (30, 30, 200))] * 2
+    models = [_flat_model(colours[0], 1.75)] * 2
+    places = np.zeros((2, 6))
+    places[1, [X, Y]] = (1.2, 1.0)                  # the blob, where she stood
+    images = _paint(cams, places, models, colours)  # a look-alike there: colour is no help
+    person = {c.name: mm.render_labels(c.name, places[0], models[0]) > 0 for c in cams}
+    blob = {c.name: mm.render_labels(c.name, places[1], models[0]) > 0 for c in cams}
+    masks = {n: person[n] | blob[n] for n in person}
+    parts = [places.copy()]                         # one track, a particle on each
+    gain, neutral = 2.0, 0.3
+    mm.set_images(images)
+    mm.set_foreground(masks, gain)
+    held = mm.hjs(parts, [np.ones(2)], models[:1]).loglik[0]
+    assert abs(held[0] - held[1]) < 0.5             # the blob holds it like the person
+    mm.set_images(images)
+    mm.set_foreground(masks, gain, undecided={n: blob[n] & ~person[n] for n in blob},
+                      neutral=neutral)
+    freed = mm.hjs(parts, [np.ones(2)], models[:1]).loglik[0]
+    assert freed[0] - freed[1] > 0.8 * len(cams) * gain * (1.0 - neutral)
 
 
 def test_coverage_masks_and_gain_are_checked():

@@ -269,6 +269,8 @@ class MeasurementModel:
         self._bins: dict[str, np.ndarray] = {}
         self._foreground: dict[str, ForegroundIntegral] | None = {}   # set_foreground()
         self._masks_source: Mapping[str, np.ndarray] | Callable[[], Mapping] = {}
+        self._undecided_source: Mapping | Callable[[], Mapping] | None = None
+        self._neutral = 0.5               # coverage of an undecided pixel (set_foreground)
         self._foreground_lock = threading.Lock()
         self._coverage_gain = 0.0
         self._pool: ThreadPoolExecutor | None = None
@@ -305,6 +307,7 @@ class MeasurementModel:
         self._bins = {}
         self._offsets = {}
         self._foreground, self._masks_source, self._coverage_gain = {}, {}, 0.0
+        self._undecided_source = None
 
     def set_capture_offsets(self, offsets: Mapping[str, float]) -> None:
         """Capture time of each camera's image relative to the particles' time, seconds
@@ -341,7 +344,10 @@ class MeasurementModel:
 
     def set_foreground(self, masks: Mapping[str, np.ndarray]
                        | Callable[[], Mapping[str, np.ndarray]],
-                       gain: float | None = None) -> None:
+                       gain: float | None = None, *,
+                       undecided: Mapping[str, np.ndarray | None]
+                       | Callable[[], Mapping[str, np.ndarray | None]] | None = None,
+                       neutral: float = 0.5) -> None:
         """Take the frame's foreground masks (H, W) bool (003 §4.2) for a coverage term in
         the ``hjs`` and ``separable`` log-likelihoods: ``gain * f_c(x)`` per camera (``gain``
         None: ``config.coverage_gain``), with
@@ -356,11 +362,26 @@ class MeasurementModel:
         another thread (the tracker's foreground worker) overlap with that update. Call
         after :meth:`set_images` (which clears the masks); cameras without an image or
         mask get no term; ``gain`` 0 disables, and so does a refused call.
+
+        ``undecided`` (a mapping or a callable called right after ``masks``): per camera
+        the (H, W) bool pixels whose mask value is a guess rather than an observation
+        (None: none), such as the possible people of the online bootstrap, foreground
+        where the background is not known yet (:class:`~mbtrack_ros.core.detection
+        .background.BackgroundModel`). Each counts as the coverage ``neutral`` in ``f_c``:
+        ``f_c = d f_d + (1 - d) neutral``, ``d`` the observed share of the silhouette and
+        ``f_d`` its coverage there (the tracker gives the coverage at which the existence
+        evidence is neutral, :func:`~mbtrack_ros.core.existence.coverage_log_ratio`). The
+        guessed blob then neither holds a track nor repels it: a track placed a little off
+        its person at the start follows her rather than stay on the blob, whose pixels it
+        would keep covered, hence not yet known, once she has left.
         """
         gain = self.config.coverage_gain if gain is None else gain
         if not (np.isfinite(gain) and gain >= 0):
             raise LikelihoodError(f'coverage gain must be a finite number >= 0, got {gain}')
+        if not (np.isfinite(neutral) and 0.0 <= neutral <= 1.0):
+            raise LikelihoodError(f'neutral coverage must be in [0, 1], got {neutral}')
         self._foreground, self._masks_source, self._coverage_gain = {}, {}, 0.0
+        self._undecided_source, self._neutral = undecided, float(neutral)
         if gain == 0:
             return
         if callable(masks):
@@ -376,10 +397,19 @@ class MeasurementModel:
                 self._foreground = self._integrals(self._masks_source())
             return self._foreground
 
+    def _undecided_masks(self) -> Mapping[str, np.ndarray | None]:
+        """The undecided pixels of :meth:`set_foreground` by camera (fetched after the
+        masks, under their lock)."""
+        source = self._undecided_source
+        if source is None:
+            return {}
+        return source() if callable(source) else source
+
     def _integrals(self, masks: Mapping[str, np.ndarray]) -> dict[str, ForegroundIntegral]:
         """Row prefix sums of the masks of the cameras with an image this frame; raises
         :class:`LikelihoodError` for a mask of the wrong size."""
         out: dict[str, ForegroundIntegral] = {}
+        undecided = self._undecided_masks() if masks else {}
         for name, mask in masks.items():
             cam = self.calibration.cameras.get(name)
             if cam is None or name not in self._images:
@@ -388,7 +418,11 @@ class MeasurementModel:
             if mask.shape != (cam.height, cam.width):
                 raise LikelihoodError(f'{name}: expected a ({cam.height}, {cam.width}) '
                                       f'foreground mask, got {mask.shape}')
-            out[name] = ForegroundIntegral(mask)
+            unknown = undecided.get(name)
+            if unknown is not None and np.shape(unknown) != mask.shape:
+                raise LikelihoodError(f'{name}: expected a ({cam.height}, {cam.width}) '
+                                      f'undecided-pixel mask, got {np.shape(unknown)}')
+            out[name] = ForegroundIntegral(mask, unknown)
         return out
 
     @property
@@ -645,7 +679,8 @@ class MeasurementModel:
             integral = (self._foreground_integrals().get(name)
                         if self._coverage_gain > 0 else None)
             if integral is not None:   # foreground coverage term on the kernel's silhouettes
-                cover, _, area = integral.coverage(Spans(*spans))
+                cover, known, area = integral.coverage(Spans(*spans))
+                cover = known * cover + (1.0 - known) * self._neutral   # set_foreground
                 cam_cover[i] = np.where(area > 0, cover, np.nan)
             return time.perf_counter() - t1
 

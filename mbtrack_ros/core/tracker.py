@@ -571,7 +571,12 @@ class Tracker:
                 self.measurement.set_capture_offsets(
                     {n: (int(stamps[n]) - stamp_ns) / 1e9 for n in seen if n in stamps})
             if detect:   # the coverage term joins the frame's foreground when it needs it
-                self.measurement.set_foreground(self.detection.started_foreground)
+                # the bootstrap's possible people are foreground by guess, not observed:
+                # they count as the coverage at which the existence evidence is neutral
+                self.measurement.set_foreground(
+                    self.detection.started_foreground,
+                    undecided=self.detection.started_possible,
+                    neutral=self.detection.config.release.min_coverage)
             t1 = time.perf_counter()
             updates = self.filter.step(dt, self.measurement, seen, self.rng)
             t2 = time.perf_counter()

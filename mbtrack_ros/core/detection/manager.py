@@ -182,6 +182,18 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
         except Exception:  # noqa: BLE001 - update() raises it with its context
             return {}
 
+    def started_possible(self) -> dict[str, np.ndarray | None]:
+        """Per camera the (H, W) bool pixels of the frame set whose foreground
+        :meth:`start_foreground` started that the background test set to foreground without
+        a known background (the bootstrap's possible people,
+        ``possible_foreground_as_tested``), None where there are none; waits for that
+        foreground like :meth:`started_foreground`."""
+        out: dict[str, np.ndarray | None] = {}
+        for name, fg in self.started_foreground().items():
+            mask = self.background.model(name).possible_foreground_as_tested
+            out[name] = mask if mask.shape == fg.shape and mask.any() else None
+        return out
+
     def abandon(self) -> None:
         """Wait for a foreground started by :meth:`start_foreground` whose frame set will not
         be updated (its step failed) and drop its deferred background update."""
