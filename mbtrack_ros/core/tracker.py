@@ -171,9 +171,11 @@ class TrackerConfig:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and np.isfinite(value) and value > 0):
                 bad(f'{name} must be a finite number > 0, got {value!r}')
-        for name in ('d_occ', 'mrf_radius', 'init_position_spread', 'init_velocity_spread'):
+        for name in ('d_occ', 'coverage_gain', 'mrf_radius', 'init_position_spread',
+                     'init_velocity_spread'):
             value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and np.isfinite(value) and value >= 0):
+            if isinstance(value, bool) or not (isinstance(value, (int, float))
+                                               and np.isfinite(value) and value >= 0):
                 bad(f'{name} must be a finite number >= 0, got {value!r}')
         if not (isinstance(self.mrf_epsilon, (int, float)) and 0 < self.mrf_epsilon <= 1):
             bad(f'mrf_epsilon must be in (0, 1], got {self.mrf_epsilon!r}')
@@ -201,10 +203,6 @@ class TrackerConfig:
                 and not isinstance(self.beside_threshold, bool)
                 and 0 <= self.beside_threshold < float('inf')):
             bad(f'beside_threshold must be a finite number >= 0, got {self.beside_threshold!r}')
-        if not (isinstance(self.coverage_gain, (int, float))
-                and not isinstance(self.coverage_gain, bool)
-                and 0 <= self.coverage_gain < float('inf')):
-            bad(f'coverage_gain must be a finite number >= 0, got {self.coverage_gain!r}')
         if self.spare_support is not None and not (
                 isinstance(self.spare_support, (int, float)) and 0 <= self.spare_support <= 1):
             bad(f'spare_support must be a number in [0, 1], got {self.spare_support!r}')

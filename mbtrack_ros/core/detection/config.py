@@ -99,9 +99,9 @@ class AutoDetectionConfig:
         track's model and a detection's show the same person: ``clutter_distance``, the
         distance at which a model's likelihood is the clutter likelihood ``p_0`` (001
         Eq. 23), so that a model nearer than it is likelier the person than clutter (a
-        log-likelihood ratio above 0). A strong detection that the track's model explains
-        worse than the track's own estimate (gain at most 0) moves only such a track, and
-        only such a lost or hidden track takes a detection's person back."""
+        log-likelihood ratio above 0): the zero of the appearance ratio of two models
+        (:meth:`appearance_llr`, :meth:`stranger_llr`) by which the association
+        (:mod:`.association`) weighs whether a detection is a track's person."""
         return self.clutter_distance
 
     @property
