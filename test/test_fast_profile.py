@@ -102,6 +102,9 @@ def test_replay_options_beat_the_params_file(tmp_path):
     assert config('--mrf-radius', '0.4').mrf_radius == 0.4
     assert not config().motion.orientation_follows_velocity
     assert config('--paper-motion').motion.orientation_follows_velocity   # 000 §VI
+    # 000 §VI-A: position and velocity only, no posture changes
+    assert config().motion.sit_flip_rate > 0
+    assert config('--paper-motion').motion.sit_flip_rate == 0.0
     # the node's motion.* parameters, and --paper-motion on top of the file's other values
     params.write_text('tracker_node:\n  ros__parameters:\n    motion:\n'
                       '      velocity_noise: 0.4\n      orientation_follows_velocity: true\n')
@@ -109,7 +112,7 @@ def test_replay_options_beat_the_params_file(tmp_path):
         velocity_noise=0.4, orientation_follows_velocity=True)
     params.write_text('tracker_node:\n  ros__parameters:\n    motion:\n      max_speed: 2\n')
     assert config('--params', str(params), '--paper-motion').motion == MotionConfig(
-        max_speed=2.0, orientation_follows_velocity=True)
+        max_speed=2.0, orientation_follows_velocity=True, sit_flip_rate=0.0)
     params.write_text('tracker_node:\n  ros__parameters:\n    tracker:\n      mrf_radius: 0.25\n')
     assert config('--params', str(params)).mrf_radius == 0.25
     assert config('--params', str(params), '--mrf-radius', '0.35').mrf_radius == 0.35
