@@ -105,6 +105,12 @@ def test_replay_options_beat_the_params_file(tmp_path):
     # 000 §VI-A: position and velocity only, no posture changes
     assert config().motion.sit_flip_rate > 0
     assert config('--paper-motion').motion.sit_flip_rate == 0.0
+    # the node's motion.sit_flip_rate, and the one-camera config of 000 §VI sets it to 0
+    params.write_text('tracker_node:\n  ros__parameters:\n    motion:\n'
+                      '      sit_flip_rate: 0.2\n')
+    assert config('--params', str(params)).motion.sit_flip_rate == 0.2
+    lanz = REPO / 'config' / 'lanz_seq.yaml'
+    assert config('--params', str(lanz)).motion == config('--paper-motion').motion
     # the node's motion.* parameters, and --paper-motion on top of the file's other values
     params.write_text('tracker_node:\n  ros__parameters:\n    motion:\n'
                       '      velocity_noise: 0.4\n      orientation_follows_velocity: true\n')

@@ -119,6 +119,9 @@ motion.orientation_follows_velocity
                                            random walk of its own)
 motion.wall_stops               bool       a particle reaching the floor's border loses its
                                            velocity into it (true; false: it bounces)
+motion.sit_flip_rate            double     rate of sitting <-> standing flips of the
+                                           particles, 1/s (0.05; 0 = the posture of the
+                                           track's start, as 000 §VI-A's 4D state)
 ==============================  =========  =================================================
 """
 from __future__ import annotations
@@ -315,6 +318,9 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
         '(000 §VI); false: the orientation is a random walk of its own', {}),
     'motion.wall_stops': (_MOTION.wall_stops, 'a particle reaching the floor\'s border loses '
                           'its velocity into it; false: it bounces back', {}),
+    'motion.sit_flip_rate': (_MOTION.sit_flip_rate, 'rate of sitting <-> standing flips of '
+                             'the particles, 1/s; 0: the posture of the track\'s start (000 '
+                             '§VI-A: position and velocity only)', _fr(0.0, 10.0)),
 }
 
 

@@ -38,6 +38,7 @@ TRACKER_PARAMETERS: dict[str, tuple[str, type]] = {
     'motion.max_speed': ('motion.max_speed', float),
     'motion.orientation_follows_velocity': ('motion.orientation_follows_velocity', bool),
     'motion.wall_stops': ('motion.wall_stops', bool),
+    'motion.sit_flip_rate': ('motion.sit_flip_rate', float),
 }
 
 
