@@ -150,3 +150,23 @@ def test_two_people_passing_close_are_not_duplicates_while_each_has_support_of_i
         assert (rel.exclusive_support()[1] >= ReleaseConfig().spare_support) == expected
     with pytest.raises(DetectionError):
         rel.duplicates(0, [1, 7], np.zeros((2, 2)), own_support=[0.5])
+
+
+def test_of_two_tracks_on_one_person_the_one_beside_the_person_goes_whatever_its_age():
+    """A due pair on one person where the older track (1) stands 0.3 m beside the person
+    and the younger one (7) on them: the younger one holds the person (exclusive support
+    above spare_support), the older one explains no foreground of its own, so the older
+    one is released (the rule's default, the younger one, would be kept by its support
+    and the pair would stay); with the roles swapped the younger one goes, as before."""
+    room = make_room(160, 120, 4)
+    due = int(np.ceil(0.5 * FPS))
+    person = [(2.5, 2.5)]
+    beside_first = [(2.8, 2.5), (2.5, 2.5)]     # track 1 beside, track 7 on the person
+    fgs, sils = _scene(room, person, beside_first)
+    support = spare_tracks(fgs, sils, 0.0)[1]
+    spare = ReleaseConfig().spare_support
+    assert support[0] < spare <= support[1]
+    assert _due_releases(room, person, beside_first, own_support=True) == {1: due}
+    assert _due_releases(room, person, beside_first[::-1], own_support=True) == {7: due}
+    # without the support the rule alone releases the younger one
+    assert _due_releases(room, person, beside_first, own_support=False) == {7: due}

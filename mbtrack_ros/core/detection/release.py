@@ -468,9 +468,13 @@ class Releaser:
                 id to keep (the other is released) or None for the rule above.
             own_support: optional (K,) exclusive support of each track, or a function
                 returning it, called only when a pair is due (:meth:`exclusive_support`):
-                the track a due pair would release is kept while its own support is at
-                least ``spare_support`` (the pair is two people passing close, each
-                explaining foreground the other does not); NaN counts as none.
+                without a judge's decision, the track released is the one that explains
+                no foreground of its own (below ``spare_support``) when the other one
+                does, whatever their ages (a track born beside a person, then a second
+                one on the person: the first goes); the track a due pair would release
+                is kept while its own support is at least ``spare_support`` (the pair is
+                two people passing close, each explaining foreground the other does
+                not); NaN counts as none.
         """
         cfg = self.config
         xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
@@ -507,6 +511,12 @@ class Releaser:
                     gone = p[1] if keep == p[0] else p[0]
                 else:
                     gone = max(p, key=rank.__getitem__)
+                    stays = p[0] if gone == p[1] else p[1]
+                    if own_support is not None and own_of(gone) >= cfg.spare_support \
+                            and not own_of(stays) >= cfg.spare_support:
+                        # the foreground decides: the track that explains none of its own
+                        # (the spare one, NaN: none) goes, not the one that holds the person
+                        gone = stays
                 if own_support is None or not own_of(gone) >= cfg.spare_support:  # NaN: none
                     out.add(gone)
         for p in list(self._close):
