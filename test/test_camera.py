@@ -44,6 +44,25 @@ def test_scaled_camera_scales_pixels(room):
     assert np.allclose((cam.project(p) + 0.5) * 2 - 0.5, big.project(p), atol=1e-9)
 
 
+def test_scaled_camera_with_another_aspect_ratio_scales_each_axis_by_its_own_factor(room):
+    """A 16:9 picture shrunk to the working size (1280x720 -> 370x208: 369.5 rounded up,
+    208 from 207.8) scales columns by 370/1280 and rows by 208/720, each about the pixel
+    centres: every projected point lands where the resized picture shows it."""
+    cam = room.cameras['cam1'].scaled(1280, 720)
+    small = cam.at_most(320 * 240)
+    assert (small.width, small.height) == (370, 208)
+    sx, sy = 370 / 1280, 208 / 720
+    rng = np.random.default_rng(5)
+    p = np.c_[rng.uniform(0.5, 5.5, 40), rng.uniform(0.5, 4.5, 40), rng.uniform(0, 2, 40)]
+    big, got = cam.project(p), small.project(p)
+    ok = np.isfinite(big).all(axis=1)
+    assert ok.sum() > 20
+    np.testing.assert_allclose(got[ok, 0], (big[ok, 0] + 0.5) * sx - 0.5, atol=1e-9)
+    np.testing.assert_allclose(got[ok, 1], (big[ok, 1] + 0.5) * sy - 0.5, atol=1e-9)
+    # the pixel aspect of the scaled camera follows the two factors
+    assert small.K[0, 0] / small.K[1, 1] == pytest.approx(cam.K[0, 0] / cam.K[1, 1] * sx / sy)
+
+
 def test_calibration_round_trip(tmp_path, room):
     path = tmp_path / 'room.yaml'
     room.save(path)

@@ -150,3 +150,49 @@ def test_two_people_passing_close_are_not_duplicates_while_each_has_support_of_i
         assert (rel.exclusive_support()[1] >= ReleaseConfig().spare_support) == expected
     with pytest.raises(DetectionError):
         rel.duplicates(0, [1, 7], np.zeros((2, 2)), own_support=[0.5])
+
+
+def test_of_two_tracks_on_one_person_the_one_beside_the_person_goes_whatever_its_age():
+    """A due pair on one person where the older track (1) stands 0.3 m beside the person
+    and the younger one (7) on them: the younger one holds the person (exclusive support
+    above spare_support), the older one explains no foreground of its own, so the older
+    one is released (the rule's default, the younger one, would be kept by its support
+    and the pair would stay); with the roles swapped the younger one goes, as before."""
+    room = make_room(160, 120, 4)
+    due = int(np.ceil(0.5 * FPS))
+    person = [(2.5, 2.5)]
+    beside_first = [(2.8, 2.5), (2.5, 2.5)]     # track 1 beside, track 7 on the person
+    fgs, sils = _scene(room, person, beside_first)
+    support = spare_tracks(fgs, sils, 0.0)[1]
+    spare = ReleaseConfig().spare_support
+    assert support[0] < spare <= support[1]
+    assert _due_releases(room, person, beside_first, own_support=True) == {1: due}
+    assert _due_releases(room, person, beside_first[::-1], own_support=True) == {7: due}
+    # without the support the rule alone releases the younger one
+    assert _due_releases(room, person, beside_first, own_support=False) == {7: due}
+
+
+def test_the_duplicate_rule_weighs_the_support_over_the_frames_the_pair_was_close():
+    """Of a due pair the track with too little exclusive support goes instead of the
+    younger one only when its support was low while the two were close (the mean), not on
+    the one frame it dips (a person passing behind another loses foreground for a moment)."""
+    due = int(np.ceil(0.5 * FPS))
+    xy = np.array([[2.0, 2.0], [2.2, 2.0]])
+
+    def released(supports):
+        rel = Releaser(make_room(), ReleaseConfig(merge_radius=0.35, merge_time=0.5))
+        out = {}
+        for k, own in enumerate(supports):
+            for tid in rel.duplicates(int(round(k * 1e9 / FPS)), [1, 7], xy,
+                                      own_support=own):
+                out.setdefault(tid, k)
+        return out
+
+    held, low = [0.4, 0.4], [0.1, 0.4]
+    assert released([low] * 20) == {1: due}                     # track 1 never held
+    assert released([held] * due + [low] + [held] * (19 - due)) == {}   # a dip
+    # low for longer than it held: its mean falls below spare_support, then it goes
+    late = released([held] * due + [low] * (20 - due))
+    assert list(late) == [1] and late[1] > due
+    # one with the support of neither: the younger one goes, as without the support
+    assert released([[0.1, 0.1]] * 20) == {7: due}

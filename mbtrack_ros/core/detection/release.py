@@ -298,6 +298,8 @@ class Releaser:
         self._spare_run: set[int] = set()       # spare on a frame of their unsupported time
         self._good_since: dict[int, int] = {}   # ... of those, supported again since
         self._close: dict[tuple[int, int], int] = {}
+        # per close pair: summed exclusive support of each track and frames summed
+        self._close_support: dict[tuple[int, int], tuple[float, float, int]] = {}
         self.spare = np.zeros(0, bool)    # tracks of the last support() that were spare
         self._side: tuple | None = None   # the last support()'s side-camera inputs
         self._exclusive: np.ndarray | None = None   # ... their exclusive_support(), cached
@@ -467,10 +469,17 @@ class Releaser:
             prefer: optional judge of a due pair: called with the two ids, returns the
                 id to keep (the other is released) or None for the rule above.
             own_support: optional (K,) exclusive support of each track, or a function
-                returning it, called only when a pair is due (:meth:`exclusive_support`):
-                the track a due pair would release is kept while its own support is at
-                least ``spare_support`` (the pair is two people passing close, each
-                explaining foreground the other does not); NaN counts as none.
+                returning it, called on the frames a pair is close
+                (:meth:`exclusive_support`): without a judge's decision, the track
+                released is the one that explained no foreground of its own while the two
+                were close (mean exclusive support over those frames below
+                ``spare_support``) when the other one did, whatever their ages (a track
+                born beside a person, then a second one on the person: the first goes;
+                the mean, not one frame's support, so that a person passing behind
+                another is not taken for it); the track a due pair would release is kept
+                while its own support is at least ``spare_support`` (the pair is two
+                people passing close, each explaining foreground the other does not);
+                NaN counts as none.
         """
         cfg = self.config
         xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
@@ -498,20 +507,35 @@ class Releaser:
             for a, b in zip(*np.nonzero(np.triu(d < cfg.merge_radius, 1))):
                 close.add((min(int(ids[a]), int(ids[b])), max(int(ids[a]), int(ids[b]))))
         self._close = {p: t for p, t in self._close.items() if p in close}
+        self._close_support = {p: v for p, v in self._close_support.items() if p in close}
         out = set()
         for p in close:
             since = self._close.setdefault(p, int(stamp_ns))
+            if own_support is not None:     # NaN (not seen) counts as none
+                sa, sb, n = self._close_support.get(p, (0.0, 0.0, 0))
+                self._close_support[p] = (sa + np.nan_to_num(own_of(p[0])),
+                                          sb + np.nan_to_num(own_of(p[1])), n + 1)
             if (int(stamp_ns) - since) / 1e9 >= cfg.merge_time:
                 keep = prefer(*p) if prefer is not None else None
                 if keep in p:           # the judge decided: the other one goes
                     gone = p[1] if keep == p[0] else p[0]
                 else:
                     gone = max(p, key=rank.__getitem__)
+                    if own_support is not None:
+                        # the foreground decides: the track that explained none of its own
+                        # while the two were close (mean exclusive support below
+                        # spare_support) goes when the other one did, whatever their ages
+                        sa, sb, n = self._close_support[p]
+                        mean = {p[0]: sa / n, p[1]: sb / n}
+                        stays = p[0] if gone == p[1] else p[1]
+                        if mean[gone] >= cfg.spare_support > mean[stays]:
+                            gone = stays
                 if own_support is None or not own_of(gone) >= cfg.spare_support:  # NaN: none
                     out.add(gone)
         for p in list(self._close):
             if p[0] in out or p[1] in out:
                 del self._close[p]
+                self._close_support.pop(p, None)
         return sorted(out)
 
     def forget(self, track_id: int) -> None:
