@@ -34,6 +34,7 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
 from mbtrack_ros.core.camera import RoomCalibration
+from mbtrack_ros.recording.cdr_images import image_view
 from mbtrack_ros.recording.csvfiles import GroundTruthRow
 from mbtrack_ros.recording.images import (
     MAX_RESCALE, ImageConversionError, decode_compressed, decode_raw, encode_compressed)
@@ -280,6 +281,7 @@ class RecordingReader:
         self._sizes: dict[str, tuple[int, int]] = {}  # camera -> calibrated (width, height)
         self._max_scale = 1.0
         self._to: dict[str, object] = {}   # camera -> Camera of the size to decode to
+        self._views = None   # McapMessages of an intact, uncompressed-file MCAP bag
 
     def limit_image_sizes(self, sizes: dict[str, tuple[int, int]], *,
                           max_scale: float = MAX_RESCALE) -> None:
@@ -304,6 +306,7 @@ class RecordingReader:
             self._reader = reader
             self._all = {c.topic: c.msgtype for c in reader.connections}
             self._counts = {c.topic: c.msgcount for c in reader.connections}
+            self._views = self._open_views()
         except Exception as err:  # rosbags raises several types for damaged bags
             files = sorted(self.path.glob('*.mcap'))
             if not files:
@@ -322,6 +325,24 @@ class RecordingReader:
         self._index_topics()
         return self
 
+    def _open_views(self):
+        """:class:`McapMessages` of the bag's MCAP files (image bytes read as views of the
+        mapped files), or None where rosbags reads them: another storage, a bag compressed
+        per file or per message, a file without a chunk index."""
+        import yaml
+
+        from mbtrack_ros.recording.mcap_messages import McapIndexError, McapMessages
+        try:
+            meta = yaml.safe_load((self.path / 'metadata.yaml').read_text())
+            info = meta['rosbag2_bagfile_information']
+            if info.get('storage_identifier') != 'mcap' \
+                    or str(info.get('compression_mode') or 'none').lower() != 'none':
+                return None
+            files = [self.path / Path(p).name for p in info['relative_file_paths']]
+            return McapMessages(files)
+        except (McapIndexError, OSError, yaml.YAMLError, KeyError, TypeError, AttributeError):
+            return None
+
     def _stream(self, topics: set[str] | None) -> Iterator[tuple[str, str, bytes]]:
         """(topic, msgtype, cdr) of every complete message of damaged MCAP files."""
         for topic, msgtype, _, data in stream_mcap(self._mcap_files, topics):
@@ -336,8 +357,18 @@ class RecordingReader:
         for conn, _, raw in self._reader.messages(connections=conns):
             yield conn.topic, conn.msgtype, raw
 
+    def _image_messages(self, topics: Iterable[str]) -> Iterator[tuple[str, str, object]]:
+        """:meth:`_messages` of image topics; CDR as views of the mapped files where it
+        can (:mod:`~mbtrack_ros.recording.mcap_messages`)."""
+        if self._views is None:
+            return self._messages(topics)
+        return self._views.messages(topics)
+
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
                  tb: TracebackType | None) -> None:
+        if self._views is not None:
+            self._views.close()
+            self._views = None
         if self._reader is not None:
             self._reader.close()
             self._reader = None
@@ -380,12 +411,13 @@ class RecordingReader:
         """Why the bag could only be read up to a damaged part, or None if it is intact."""
         return self._damaged
 
-    def _decode(self, msgtype: str, raw: bytes,
+    def _decode(self, msgtype: str, raw,
                 camera: str = '') -> tuple[int, np.ndarray | None, str | None]:
-        """``(stamp_ns, image, error)`` of an image message: the image, or ``None`` and why
-        it cannot be decoded (the stamp of a readable header is kept either way, so that an
-        undecodable image takes its own place in its frame set)."""
-        msg = typestore.deserialize_cdr(raw, msgtype)
+        """``(stamp_ns, image, error)`` of an image message (CDR bytes or a view): the
+        image, or ``None`` and why it cannot be decoded (the stamp of a readable header is
+        kept either way, so that an undecodable image takes its own place in its frame
+        set). The pixels are read in place (``image_view``), resized once by the decoder."""
+        msg = image_view(raw, msgtype)
         limit = dict(expected=self._sizes.get(camera), max_scale=self._max_scale,
                      to=self._to.get(camera))
         try:
@@ -395,8 +427,8 @@ class RecordingReader:
             else:
                 image = decode_compressed(msg.format, msg.data, **limit)
         except ImageConversionError as err:
-            return _stamp_ns(msg.header), None, str(err)
-        return _stamp_ns(msg.header), image, None
+            return msg.stamp_ns, None, str(err)
+        return msg.stamp_ns, image, None
 
     def frames(self) -> Iterator[FrameSet]:
         """Yield frame sets in time order.
@@ -435,7 +467,7 @@ class RecordingReader:
                 stamps.append(s.stamp_ns)
                 index += 1
 
-        iterator = self._messages(self._by_topic)
+        iterator = self._image_messages(self._by_topic)
         newest = {c: 0 for c in self.cameras}
         read: dict[str, int] = {}  # image messages read per topic
         while True:
