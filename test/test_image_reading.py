@@ -1,0 +1,325 @@
+"""The input path of larger cameras: image messages read in place from MCAP chunks
+(``recording/mcap_messages.py``), their CDR fields without a copy (``recording/cdr_images``)
+and the one area shrink to the working size (``Camera.fit``, ``area_shrink``), each against
+the reference it replaces: rosbags, the mcap library's reader, OpenCV's ``INTER_AREA`` and
+a brute-force area mean."""
+from __future__ import annotations
+
+import struct
+from fractions import Fraction
+
+import cv2
+import numpy as np
+import pytest
+from rosbags.highlevel import AnyReader
+from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
+
+from conftest import make_room
+from mbtrack_ros.core.camera import area_shrink
+from mbtrack_ros.recording.bag import RecordingReader, typestore
+from mbtrack_ros.recording.cdr_images import COMPRESSED, IMAGE, CdrError, image_view
+from mbtrack_ros.recording.images import CHANNELS, decode_raw, encode_compressed
+from mbtrack_ros.recording.mcap_messages import McapIndexError, McapMessages
+
+T = typestore.types
+
+
+def _header(stamp_ns: int, frame_id: str):
+    sec, nsec = divmod(stamp_ns, 1_000_000_000)
+    return T['std_msgs/msg/Header'](stamp=T['builtin_interfaces/msg/Time'](sec=sec,
+                                                                           nanosec=nsec),
+                                    frame_id=frame_id)
+
+
+def _raw(rng, encoding: str, w: int, h: int, stamp_ns: int, pad: int = 0):
+    step = w * CHANNELS[encoding] + pad
+    return T[IMAGE](header=_header(stamp_ns, 'cam_optical'), height=h, width=w,
+                    encoding=encoding, is_bigendian=0, step=step,
+                    data=rng.integers(0, 256, step * h, dtype=np.uint8))
+
+
+def _compressed(rng, kind: str, w: int, h: int, stamp_ns: int):
+    fmt, data = encode_compressed(rng.integers(0, 256, (h, w, 3), dtype=np.uint8), kind)
+    return T[COMPRESSED](header=_header(stamp_ns, 'cam_optical'), format=fmt,
+                         data=np.frombuffer(data, dtype=np.uint8))
+
+
+def _bag(path, messages, compressed_chunks: bool = False):
+    """A rosbag2 MCAP bag of ``messages`` [(topic, msg, log time ns)], in that order."""
+    writer = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)
+    if compressed_chunks:
+        writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
+    conns = {}
+    with writer:
+        for topic, msg, t in messages:
+            if topic not in conns:
+                conns[topic] = writer.add_connection(topic, msg.__msgtype__,
+                                                     typestore=typestore)
+            writer.write(conns[topic], t, typestore.serialize_cdr(msg, msg.__msgtype__))
+    return path
+
+
+def _rosbags_messages(path, topics):
+    with AnyReader([path], default_typestore=typestore) as reader:
+        conns = [c for c in reader.connections if c.topic in topics]
+        return [(c.topic, c.msgtype, bytes(raw)) for c, _, raw in reader.messages(conns)]
+
+
+# -- CDR fields in place ----------------------------------------------------------------------
+@pytest.mark.parametrize('little', [True, False])
+def test_image_view_equals_rosbags_on_every_supported_message(little):
+    """Every raw encoding the decoder supports (padded rows too) and JPEG/PNG: the fields of
+    ``image_view`` are those rosbags deserialises, in either byte order, and the pixels are
+    a view of the caller's buffer, not a copy."""
+    rng = np.random.default_rng(1)
+    msgs = [_raw(rng, enc, 7, 5, 1_700_000_000_123_456_789 + i, pad=3 * (i % 2))
+            for i, enc in enumerate(CHANNELS)]
+    msgs += [_compressed(rng, kind, 16, 8, 42) for kind in ('jpeg', 'png')]
+    for msg in msgs:
+        cdr = bytearray(typestore.serialize_cdr(msg, msg.__msgtype__, little_endian=little))
+        ref = typestore.deserialize_cdr(bytes(cdr), msg.__msgtype__)
+        view = image_view(cdr, msg.__msgtype__)
+        assert view.stamp_ns == ref.header.stamp.sec * 10**9 + ref.header.stamp.nanosec
+        assert view.frame_id == ref.header.frame_id
+        if msg.__msgtype__ == IMAGE:
+            assert (view.encoding, view.height, view.width, view.step, view.is_bigendian) \
+                == (ref.encoding, ref.height, ref.width, ref.step, ref.is_bigendian)
+        else:
+            assert view.format == ref.format
+        assert bytes(view.data) == ref.data.tobytes()
+        assert np.shares_memory(np.frombuffer(view.data, np.uint8), np.frombuffer(cdr, np.uint8))
+
+
+def test_image_view_refuses_every_truncation_in_one_line():
+    rng = np.random.default_rng(2)
+    for msg in (_raw(rng, 'rgb8', 4, 3, 5), _compressed(rng, 'png', 4, 4, 5)):
+        cdr = bytes(typestore.serialize_cdr(msg, msg.__msgtype__))
+        for cut in range(len(cdr)):
+            with pytest.raises(CdrError) as info:
+                image_view(cdr[:cut], msg.__msgtype__)
+            assert '\n' not in str(info.value)
+    with pytest.raises(CdrError):
+        image_view(b'\x00\x01\x00\x00' + b'\xff' * 40, IMAGE)   # a huge string length
+
+
+# -- MCAP chunks in place ---------------------------------------------------------------------
+@pytest.mark.parametrize('compressed_chunks', [False, True])
+def test_mcap_messages_are_rosbags_messages_in_rosbags_order(tmp_path, compressed_chunks):
+    """Two cameras with capture times out of order between them, CameraInfo-like other
+    topics in between, images large enough for many chunks (uncompressed and zstd): the
+    image topics' messages and their order are rosbags'."""
+    rng = np.random.default_rng(3)
+    messages = []
+    for k in range(24):
+        t = 10**9 + k * 66_000_000
+        messages.append(('/cam0/image_raw', _raw(rng, 'rgb8', 320, 240, t), t))
+        messages.append(('/other/image_raw/compressed', _compressed(rng, 'jpeg', 32, 24, t),
+                         t + 1))
+        t1 = t - 20_000_000 if k % 3 else t + 30_000_000   # free-running: earlier or later
+        messages.append(('/cam1/image_raw', _raw(rng, 'bgr8', 160, 120, t1), t1))
+    bag = _bag(tmp_path / 'bag', messages, compressed_chunks)
+    topics = {'/cam0/image_raw', '/cam1/image_raw', '/other/image_raw/compressed'}
+    want = _rosbags_messages(bag, topics)
+    with McapMessages(sorted(bag.glob('*.mcap'))) as views:
+        assert len(views._files[0].chunks) > 3
+        assert {t: m for t, m in views.topics().items() if t in topics} == {
+            t: m for t, m, _ in want}
+        got = [(t, m, bytes(raw)) for t, m, raw in views.messages(topics)]
+    assert got == want
+
+
+@pytest.mark.parametrize('compression', ['NONE', 'LZ4', 'ZSTD'])
+def test_mcap_messages_read_the_mcap_librarys_chunks_in_log_time_order(tmp_path, compression):
+    """A file of the reference writer (small chunks, messages written out of log-time
+    order): the messages and the log-time order of the mcap library's own reader."""
+    from mcap.reader import make_reader
+    from mcap.writer import CompressionType
+    from mcap.writer import Writer as McapWriter
+
+    rng = np.random.default_rng(4)
+    path = tmp_path / 'x.mcap'
+    times = rng.permutation(200) * 1000 + 10**9          # distinct, written shuffled
+    with path.open('wb') as handle:
+        writer = McapWriter(handle, chunk_size=4096,
+                            compression=getattr(CompressionType, compression))
+        writer.start('ros2', 'test')
+        schema = writer.register_schema(IMAGE, 'ros2msg', b'')
+        channels = [writer.register_channel(f'/cam{i}/image_raw', 'cdr', schema)
+                    for i in range(3)]
+        for k, t in enumerate(times):
+            data = rng.integers(0, 256, int(rng.integers(10, 3000)), dtype=np.uint8)
+            writer.add_message(channels[k % 3], int(t), data.tobytes(), int(t))
+        writer.finish()
+    with path.open('rb') as handle:
+        want = [(c.topic, bytes(m.data)) for _, c, m in make_reader(handle).iter_messages(
+            topics=['/cam0/image_raw', '/cam2/image_raw'], log_time_order=True)]
+    with McapMessages([path]) as views:
+        assert len(views._files[0].chunks) > 10
+        got = [(t, bytes(raw)) for t, m, raw in views.messages({'/cam0/image_raw',
+                                                                 '/cam2/image_raw'})]
+        assert {m for _, m, _ in views.messages({'/cam1/image_raw'})} == {IMAGE}
+    assert got == want
+
+
+def test_a_damaged_chunk_is_skipped_whole_and_a_file_without_index_refused(tmp_path):
+    from mcap.writer import CompressionType
+    from mcap.writer import Writer as McapWriter
+
+    rng = np.random.default_rng(5)
+    messages = [('/cam0/image_raw', _raw(rng, 'rgb8', 320, 240, 10**9 + k), 10**9 + k)
+                for k in range(12)]
+    bag = _bag(tmp_path / 'bag', messages)
+    mcap = next(bag.glob('*.mcap'))
+    with McapMessages([mcap]) as views:
+        chunks = views._files[0].chunks
+        intact = [bytes(raw) for _, _, raw in views.messages({'/cam0/image_raw'})]
+    assert len(chunks) >= 3 and len(intact) == 12
+    data = bytearray(mcap.read_bytes())
+    victim = chunks[1]
+    data[victim.offset + 1:victim.offset + 9] = struct.pack('<Q', 5)   # a wrong length
+    mcap.write_bytes(bytes(data))
+    with McapMessages([mcap]) as views:
+        lost = [bytes(raw) for _, _, raw in views.messages({'/cam0/image_raw'})]
+    assert 0 < len(lost) < 12 and all(m in intact for m in lost)
+    with RecordingReader(bag) as reader:   # the bag's own counts tell the loss
+        assert reader._views is not None
+        with pytest.raises(Exception, match='damaged bag') as info:
+            list(reader.frames())
+        assert '\n' not in str(info.value)
+
+    flat = tmp_path / 'flat.mcap'
+    with flat.open('wb') as handle:
+        writer = McapWriter(handle, use_chunking=False, compression=CompressionType.NONE)
+        writer.start('ros2', 'test')
+        schema = writer.register_schema(IMAGE, 'ros2msg', b'')
+        writer.add_message(writer.register_channel('/cam0/image_raw', 'cdr', schema), 1, b'x', 1)
+        writer.finish()
+    with pytest.raises(McapIndexError):
+        McapMessages([flat])
+    (tmp_path / 'empty.mcap').write_bytes(b'')
+    with pytest.raises(McapIndexError):
+        McapMessages([tmp_path / 'empty.mcap'])
+
+
+def test_recording_reader_reads_in_place_what_rosbags_reads(tmp_path):
+    """RecordingReader's frame sets are the same with the in-place reading as with rosbags'
+    (the working-size decode of a 640x480 and a 1280x720 camera included)."""
+    rng = np.random.default_rng(6)
+    messages = []
+    for k in range(6):
+        t = 10**9 + k * 66_666_667
+        messages.append(('/cam0/image_raw', _raw(rng, 'rgb8', 640, 480, t), t))
+        messages.append(('/cam1/image_raw', _raw(rng, 'bgr8', 1280, 720, t + 5), t + 5))
+    bag = _bag(tmp_path / 'bag', messages)
+    room = make_room(640, 480)
+    to = {'cam0': room.cameras['cam0'].at_most(76800),
+          'cam1': room.cameras['cam0'].scaled(1280, 720).at_most(76800)}
+    sets = []
+    for in_place in (True, False):
+        with RecordingReader(bag) as reader:
+            assert reader._views is not None
+            if not in_place:
+                reader._views.close()
+                reader._views = None
+            reader.decode_to(to)
+            sets.append(list(reader.frames()))
+    assert len(sets[0]) == len(sets[1]) == 6
+    for a, b in zip(*sets):
+        assert a.stamp_ns == b.stamp_ns and a.stamps == b.stamps and not a.errors
+        assert a.images['cam0'].shape == (240, 320, 3)
+        assert a.images['cam1'].shape == (208, 370, 3)
+        for cam in a.images:
+            np.testing.assert_array_equal(a.images[cam], b.images[cam])
+
+
+def test_the_live_node_converts_a_message_as_the_replay_reads_it(tmp_path):
+    """tracker_node's conversion of a ``sensor_msgs/Image`` (rclpy) and the replay's reader
+    of the same image in a bag give the same working image: one decoder, one resize."""
+    pytest.importorskip('rclpy')
+    from mbtrack_ros.nodes.conversions import image_to_rgb, rgb_to_image
+
+    rng = np.random.default_rng(7)
+    rgb = cv2.GaussianBlur(rng.integers(0, 256, (720, 1280, 3), dtype=np.uint8), (5, 5), 0)
+    work = make_room(640, 480).cameras['cam0'].scaled(1280, 720).at_most(76800)
+    msg = T[IMAGE](header=_header(10**9, 'cam_optical'), height=720, width=1280,
+                   encoding='rgb8', is_bigendian=0, step=1280 * 3, data=rgb.reshape(-1))
+    bag = _bag(tmp_path / 'bag', [('/cam0/image_raw', msg, 10**9)])
+    with RecordingReader(bag) as reader:
+        reader.decode_to({'cam0': work})
+        (frame_set,) = list(reader.frames())
+    live = image_to_rgb(rgb_to_image(rgb), expected=(1280, 720), to=work)
+    np.testing.assert_array_equal(live, frame_set.images['cam0'])
+    np.testing.assert_array_equal(live, work.fit(rgb))
+
+
+# -- the area shrink --------------------------------------------------------------------------
+def _exact_area_mean(image: np.ndarray, width: int, height: int) -> np.ndarray:
+    """Brute force: each output pixel the integral of the piecewise-constant input over its
+    cell divided by the cell's area, with exact rational cell borders."""
+    h_in, w_in = image.shape[:2]
+
+    def weights(n_in, n_out):
+        m = np.zeros((n_out, n_in))
+        s = Fraction(n_in, n_out)
+        for o in range(n_out):
+            a, b = o * s, (o + 1) * s
+            for i in range(n_in):
+                m[o, i] = float(max(Fraction(0), min(b, i + 1) - max(a, Fraction(i))) / s)
+        return m
+
+    wy, wx = weights(h_in, height), weights(w_in, width)
+    return np.einsum('oi,ijc,pj->opc', wy, image.astype(np.float64), wx)
+
+
+def test_area_shrink_is_the_exact_area_mean_up_to_rounding():
+    rng = np.random.default_rng(8)
+    for _ in range(40):
+        h_in, w_in = (int(v) for v in rng.integers(1, 24, 2))
+        height, width = int(rng.integers(1, h_in + 1)), int(rng.integers(1, w_in + 1))
+        channels = int(rng.choice([1, 3, 4]))
+        image = rng.integers(0, 256, (h_in, w_in, channels), dtype=np.uint8)
+        got = area_shrink(image, width, height)
+        exact = _exact_area_mean(image, width, height)
+        assert got.shape == (height, width, channels)
+        assert np.abs(got - exact).max() <= 0.5 + 1e-3
+
+
+@pytest.mark.parametrize('size', [(1280, 720), (1920, 1080), (1000, 750), (752, 480)])
+def test_camera_fit_is_opencvs_area_resize_within_one_grey_level(size):
+    """Any input size to the working size: within one grey level of OpenCV's direct
+    INTER_AREA, on noise (the hardest picture) and with padded rows; an integer factor is
+    OpenCV's, bit for bit."""
+    w, h = size
+    rng = np.random.default_rng(9)
+    cam = make_room(8, 6).cameras['cam0'].scaled(w, h).at_most(76800)
+    padded = rng.integers(0, 256, (h, w + 5, 3), dtype=np.uint8)
+    image = padded[:, :w]
+    got = cam.fit(image)
+    want = cv2.resize(image, (cam.width, cam.height), interpolation=cv2.INTER_AREA)
+    assert got.shape == want.shape == (cam.height, cam.width, 3)
+    assert np.abs(got.astype(int) - want).max() <= 1
+    grey = image[:, :, 1].copy()
+    assert np.abs(cam.fit(grey).astype(int) - cv2.resize(
+        grey, (cam.width, cam.height), interpolation=cv2.INTER_AREA)).max() <= 1
+    double = make_room(8, 6).cameras['cam0'].scaled(w // 2 * 2, h // 2 * 2).scaled(w // 2,
+                                                                                   h // 2)
+    even = np.ascontiguousarray(image[:h // 2 * 2, :w // 2 * 2])
+    np.testing.assert_array_equal(double.fit(even), cv2.resize(
+        even, (w // 2, h // 2), interpolation=cv2.INTER_AREA))
+
+
+def test_area_shrink_refuses_enlarging_and_other_types():
+    with pytest.raises(ValueError):
+        area_shrink(np.zeros((4, 4, 3), np.uint8), 5, 4)
+    with pytest.raises(ValueError):
+        area_shrink(np.zeros((4, 4, 3), np.float32), 2, 2)
+
+
+def test_decode_raw_of_a_view_never_aliases_it():
+    """The working image outlives the chunk buffer it was read from."""
+    rng = np.random.default_rng(10)
+    buf = bytearray(rng.integers(0, 256, 64 * 48 * 3, dtype=np.uint8).tobytes())
+    cam = make_room(8, 6).cameras['cam0'].scaled(64, 48)
+    for to in (None, cam, cam.scaled(30, 20)):
+        out = decode_raw('rgb8', 48, 64, 64 * 3, memoryview(buf), to=to)
+        assert not np.shares_memory(out, np.frombuffer(buf, np.uint8))
