@@ -92,10 +92,10 @@ def test_camera_fit_is_the_block_mean_at_half_size():
 
 
 @pytest.mark.parametrize('size', [(1280, 720), (1920, 1080), (1280, 960), (1000, 750)])
-def test_camera_fit_is_the_direct_area_resize_up_to_rounding(size):
-    """``Camera.fit`` is one area resize straight from the input (OpenCV's for an integer
-    factor, ``area_shrink`` otherwise): within one grey level of OpenCV's direct area
-    resize on a smooth picture."""
+def test_camera_fit_pyramid_is_close_to_the_direct_area_resize(size):
+    """``Camera.fit`` halves by 2x2 block means while the half is still at least the
+    working size, then area-resizes the rest: within a few grey levels of OpenCV's direct
+    area resize on a smooth picture (the same filter up to rounding and block borders)."""
     w, h = size
     yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
     image = np.stack([127 + 100 * np.sin(xx / 41.0) * np.cos(yy / 33.0),
@@ -106,12 +106,12 @@ def test_camera_fit_is_the_direct_area_resize_up_to_rounding(size):
     want = cv2.resize(image, (cam.width, cam.height), interpolation=cv2.INTER_AREA)
     assert got.shape == want.shape == (cam.height, cam.width, 3)
     diff = np.abs(got.astype(np.float64) - want)
-    assert diff.mean() < 0.1 and diff.max() <= 1
+    assert diff.mean() < 1.0 and diff.max() <= 4
 
 
 def test_camera_fit_at_half_size_is_the_direct_area_resize():
-    """An integer factor (640x480 to 320x240) is OpenCV's exact block means: the direct
-    area resize, bit for bit, on any picture."""
+    """A power-of-two-fraction size (640x480 to 320x240) is one exact halving: the
+    direct area resize, bit for bit, on any picture."""
     cam = make_room(8, 6).cameras['cam0'].scaled(640, 480).at_most(76800)
     image = np.random.default_rng(4).integers(0, 256, (480, 640, 3), dtype=np.uint8)
     np.testing.assert_array_equal(cam.fit(image), cv2.resize(image, (320, 240),
