@@ -187,6 +187,16 @@ def test_a_damaged_chunk_is_skipped_whole_and_a_file_without_index_refused(tmp_p
             list(reader.frames())
         assert '\n' not in str(info.value)
 
+    # a channel record inside a chunk garbled (no CRC to catch it): the summary's names hold
+    data = bytearray(mcap.read_bytes())
+    data[victim.offset + 1:victim.offset + 9] = struct.pack('<Q', victim.length - 9)
+    at = data.find(b'/cam0/image_raw', chunks[0].offset)
+    assert chunks[0].offset < at < chunks[0].offset + chunks[0].length
+    data[at + 6] = ord('X')
+    mcap.write_bytes(bytes(data))
+    with RecordingReader(bag) as reader:
+        assert reader._views is not None and len(list(reader.frames())) == 12
+
     flat = tmp_path / 'flat.mcap'
     with flat.open('wb') as handle:
         writer = McapWriter(handle, use_chunking=False, compression=CompressionType.NONE)
@@ -199,6 +209,29 @@ def test_a_damaged_chunk_is_skipped_whole_and_a_file_without_index_refused(tmp_p
     (tmp_path / 'empty.mcap').write_bytes(b'')
     with pytest.raises(McapIndexError):
         McapMessages([tmp_path / 'empty.mcap'])
+
+
+def test_stamps_a_nanosecond_apart_do_not_stall_the_synchroniser():
+    """Stamps no CRC vouches for (a flipped bit, a broken driver): a period of 1 ns still
+    gives windows that move on."""
+    import threading
+
+    from mbtrack_ros.recording.sync import FrameSetSynchronizer
+
+    sync = FrameSetSynchronizer(['a', 'b'], 0, 10**9)
+    out = []
+
+    def feed():
+        for cam, stamp in (('a', 10**9), ('b', 10**9), ('a', 10**9 + 1), ('b', 10**9 + 1),
+                           ('a', 10**9 + 2)):
+            out.extend(sync.add(cam, stamp, cam))
+        out.extend(sync.flush())
+
+    worker = threading.Thread(target=feed, daemon=True)
+    worker.start()
+    worker.join(timeout=10)
+    assert not worker.is_alive(), 'the synchroniser stalled'
+    assert sum(len(fs.images) for fs in out) == 5 - sync.counters.dropped_frames
 
 
 def test_recording_reader_reads_in_place_what_rosbags_reads(tmp_path):

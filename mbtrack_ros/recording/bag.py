@@ -323,6 +323,9 @@ class RecordingReader:
             except BagError:
                 pass
         self._index_topics()
+        if self._views is not None and not set(self._by_topic) <= set(self._views.topics()):
+            self._views.close()   # a summary that does not declare every image channel
+            self._views = None
         return self
 
     def _open_views(self):

@@ -181,7 +181,8 @@ class _File:
             _decompressor(chunk.compression)   # McapIndexError on an unknown one
 
     def _register(self, op: int, buf, pos: int, end: int) -> None:
-        """A Schema or Channel record (summary or chunk)."""
+        """A Schema or Channel record of the summary (the channels of chunks are those the
+        summary declares: :meth:`McapMessages.topics`)."""
         if op == _OP_SCHEMA:
             sid = _U16.unpack_from(buf, pos)[0]
             self.schemas[sid], _ = _string(buf, pos + 2, end)
@@ -190,7 +191,7 @@ class _File:
             topic, _ = _string(buf, pos + 4, end)
             self._channel_schema[cid] = sid
             self.channels[cid] = (topic, self.schemas.get(sid, ''))
-        # a channel may come before its schema in a chunk: resolve names again
+        # a channel may come before its schema: resolve names again
         for cid, sid in self._channel_schema.items():
             if not self.channels[cid][1] and sid in self.schemas:
                 self.channels[cid] = (self.channels[cid][0], self.schemas[sid])
@@ -252,8 +253,6 @@ class _File:
                     cid, _, log_time, _ = _MESSAGE.unpack_from(records, body)
                     if cid in wanted:
                         found.append((log_time, cid, records[body + _MESSAGE.size:rec_end]))
-                elif op in (_OP_SCHEMA, _OP_CHANNEL):
-                    self._register(op, records, body, rec_end)
                 pos = rec_end
         except (_Damaged, struct.error, IndexError, ValueError, RuntimeError):
             return []   # zstd/lz4 raise their own errors on damaged data
