@@ -281,7 +281,7 @@ class RecordingReader:
         self._sizes: dict[str, tuple[int, int]] = {}  # camera -> calibrated (width, height)
         self._max_scale = 1.0
         self._to: dict[str, object] = {}   # camera -> Camera of the size to decode to
-        self._views = None   # McapMessages of an intact, uncompressed-file MCAP bag
+        self._views = None   # McapMessages of an intact MCAP bag (not file-compressed)
 
     def limit_image_sizes(self, sizes: dict[str, tuple[int, int]], *,
                           max_scale: float = MAX_RESCALE) -> None:
@@ -329,9 +329,9 @@ class RecordingReader:
         return self
 
     def _open_views(self):
-        """:class:`McapMessages` of the bag's MCAP files (image bytes read as views of the
-        mapped files), or None where rosbags reads them: another storage, a bag compressed
-        per file or per message, a file without a chunk index."""
+        """:class:`McapMessages` of the bag's MCAP files (image messages as views of their
+        chunks, read once into reused buffers), or None where rosbags reads them: another
+        storage, a bag compressed per file or per message, a file without a chunk index."""
         import yaml
 
         from mbtrack_ros.recording.mcap_messages import McapIndexError, McapMessages
@@ -361,8 +361,9 @@ class RecordingReader:
             yield conn.topic, conn.msgtype, raw
 
     def _image_messages(self, topics: Iterable[str]) -> Iterator[tuple[str, str, object]]:
-        """:meth:`_messages` of image topics; CDR as views of the mapped files where it
-        can (:mod:`~mbtrack_ros.recording.mcap_messages`)."""
+        """:meth:`_messages` of image topics; the CDR as views of the chunks where it can
+        (:mod:`~mbtrack_ros.recording.mcap_messages`; a view is valid until the next
+        message is asked for)."""
         if self._views is None:
             return self._messages(topics)
         return self._views.messages(topics)
