@@ -281,7 +281,6 @@ class RecordingReader:
         self._sizes: dict[str, tuple[int, int]] = {}  # camera -> calibrated (width, height)
         self._max_scale = 1.0
         self._to: dict[str, object] = {}   # camera -> Camera of the size to decode to
-        self._views = None   # McapMessages of an intact MCAP bag (not file-compressed)
 
     def limit_image_sizes(self, sizes: dict[str, tuple[int, int]], *,
                           max_scale: float = MAX_RESCALE) -> None:
@@ -306,7 +305,6 @@ class RecordingReader:
             self._reader = reader
             self._all = {c.topic: c.msgtype for c in reader.connections}
             self._counts = {c.topic: c.msgcount for c in reader.connections}
-            self._views = self._open_views()
         except Exception as err:  # rosbags raises several types for damaged bags
             files = sorted(self.path.glob('*.mcap'))
             if not files:
@@ -323,28 +321,7 @@ class RecordingReader:
             except BagError:
                 pass
         self._index_topics()
-        if self._views is not None and not set(self._by_topic) <= set(self._views.topics()):
-            self._views.close()   # a summary that does not declare every image channel
-            self._views = None
         return self
-
-    def _open_views(self):
-        """:class:`McapMessages` of the bag's MCAP files (image messages as views of their
-        chunks, read once into reused buffers), or None where rosbags reads them: another
-        storage, a bag compressed per file or per message, a file without a chunk index."""
-        import yaml
-
-        from mbtrack_ros.recording.mcap_messages import McapIndexError, McapMessages
-        try:
-            meta = yaml.safe_load((self.path / 'metadata.yaml').read_text())
-            info = meta['rosbag2_bagfile_information']
-            if info.get('storage_identifier') != 'mcap' \
-                    or str(info.get('compression_mode') or 'none').lower() != 'none':
-                return None
-            files = [self.path / Path(p).name for p in info['relative_file_paths']]
-            return McapMessages(files)
-        except (McapIndexError, OSError, yaml.YAMLError, KeyError, TypeError, AttributeError):
-            return None
 
     def _stream(self, topics: set[str] | None) -> Iterator[tuple[str, str, bytes]]:
         """(topic, msgtype, cdr) of every complete message of damaged MCAP files."""
@@ -360,19 +337,8 @@ class RecordingReader:
         for conn, _, raw in self._reader.messages(connections=conns):
             yield conn.topic, conn.msgtype, raw
 
-    def _image_messages(self, topics: Iterable[str]) -> Iterator[tuple[str, str, object]]:
-        """:meth:`_messages` of image topics; the CDR as views of the chunks where it can
-        (:mod:`~mbtrack_ros.recording.mcap_messages`; a view is valid until the next
-        message is asked for)."""
-        if self._views is None:
-            return self._messages(topics)
-        return self._views.messages(topics)
-
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
                  tb: TracebackType | None) -> None:
-        if self._views is not None:
-            self._views.close()
-            self._views = None
         if self._reader is not None:
             self._reader.close()
             self._reader = None
@@ -471,7 +437,7 @@ class RecordingReader:
                 stamps.append(s.stamp_ns)
                 index += 1
 
-        iterator = self._image_messages(self._by_topic)
+        iterator = self._messages(self._by_topic)
         newest = {c: 0 for c in self.cameras}
         read: dict[str, int] = {}  # image messages read per topic
         while True:
