@@ -1063,3 +1063,48 @@ def histogram_of(bins, row, x0, x1, part, s0, s1, wmap, oy, ox, nch):
     accumulate_histogram(bins, row, x0, x1, part, s0, s1, plane, oy, ox, nch, hist, touched,
                          0, mark)
     return hist.reshape(3, N_BINS)
+
+
+# -- image resizing ---------------------------------------------------------------------------
+@njit(cache=True, nogil=True)
+def area_shrink(src, rows, row_w, cols, col_w, out):
+    """Area-averaging shrink of ``src`` (H, W, C) uint8 C-contiguous into ``out`` (h, w, C)
+    uint8, separably: each output row is the weighted sum of input rows ``rows[o]`` (h, K)
+    int32 with weights ``row_w[o]`` (h, K) float32 (the overlap of the row's cell with each
+    input row, divided by the cell's height; zero weights pad), then each output element
+    ``j`` of that row (w * C of them) the weighted sum of the summed row's elements
+    ``cols[l, j]`` (L, w * C) int32 with weights ``col_w[l, j]`` (L, w * C) float32, rounded
+    to the nearest level. Float32 sums: OpenCV's ``INTER_AREA`` up to its rounding."""
+    H, W, C = src.shape
+    h, K = rows.shape
+    L, M = cols.shape
+    flat = src.reshape(H, W * C)
+    dst = out.reshape(h, M)
+    line = np.empty(W * C, np.float32)
+    acc = np.empty(M, np.float32)
+    for o in range(h):
+        r = flat[rows[o, 0]]
+        wt = row_w[o, 0]
+        for j in range(W * C):
+            line[j] = wt * r[j]
+        for k in range(1, K):
+            wt = row_w[o, k]
+            if wt == 0.0:
+                continue
+            r = flat[rows[o, k]]
+            for j in range(W * C):
+                line[j] += wt * r[j]
+        idx = cols[0]
+        wl = col_w[0]
+        for j in range(M):
+            acc[j] = wl[j] * line[idx[j]]
+        for m in range(1, L):
+            idx = cols[m]
+            wl = col_w[m]
+            for j in range(M):
+                acc[j] += wl[j] * line[idx[j]]
+        d = dst[o]
+        for j in range(M):
+            v = np.int32(acc[j] + np.float32(0.5))
+            d[j] = 255 if v > 255 else (0 if v < 0 else v)
+    return out

@@ -249,18 +249,22 @@ class CameraNode(Node):
 
     # -- callbacks: convert and queue -----------------------------------------------------
     def _on_image(self, msg) -> None:
+        # decoded at the working size, resized once from the message's pixels (the decoder
+        # and resize of the tracker node and mbtrack replay); without rescale_images an
+        # image of another size than the calibration's is refused before decoding
+        limits = {'to': self.stage.camera}
+        if not self.rescale:
+            limits['expected'] = (self.camera.width, self.camera.height)
         try:
-            rgb = compressed_to_rgb(msg) if isinstance(msg, CompressedImage) \
-                else image_to_rgb(msg)
+            rgb = compressed_to_rgb(msg, **limits) if isinstance(msg, CompressedImage) \
+                else image_to_rgb(msg, **limits)
         except ImageConversionError as err:
             self.dropped += 1
-            self.warn_once('convert', f'{self.name}: dropping bad image: {err}')
-            return
-        if rgb.shape[:2] != (self.camera.height, self.camera.width) and not self.rescale:
-            self.dropped += 1
-            self.warn_once('size', f'{self.name}: image is {rgb.shape[1]}x{rgb.shape[0]}, '
-                           f'calibration {self.camera.width}x{self.camera.height}: dropped '
-                           '(set rescale_images to resize)')
+            if err.cause == 'size-mismatch':
+                self.warn_once('size', f'{self.name}: {err}: dropped (set rescale_images to '
+                               'resize)')
+            else:
+                self.warn_once('convert', f'{self.name}: dropping bad image: {err}')
             return
         with self._lock:
             self._queue.append((stamp_to_ns(msg.header.stamp) + self.offset_ns, rgb))

@@ -34,23 +34,28 @@ def ns_to_stamp(stamp_ns: int, stamp=None):
 
 
 def image_to_rgb(msg: Image, *, expected: tuple[int, int] | None = None,
-                 max_scale: float = 1.0) -> np.ndarray:
+                 max_scale: float = 1.0, to=None) -> np.ndarray:
     """``sensor_msgs/Image`` (rgb8, bgr8, mono8, rgba8, bgra8) -> (H, W, 3) uint8 RGB.
 
     Raises :class:`ImageConversionError` (one line) on an unknown encoding, a size that does
     not match ``step * height``, ``step < width * channels``, a declared size above 8192 or,
     with ``expected`` = (width, height), one that differs from it (``max_scale`` > 1: more
-    than that many times larger per side), all checked before any conversion.
+    than that many times larger per side), all checked before any conversion. ``to``: a
+    ``Camera`` whose size the image is resized to, once, from the message's own pixels
+    (``decode_raw``, the decoder ``mbtrack replay`` uses on a bag's messages).
     """
     return decode_raw(msg.encoding, msg.height, msg.width, msg.step, msg.data,
-                      is_bigendian=msg.is_bigendian, expected=expected, max_scale=max_scale)
+                      is_bigendian=msg.is_bigendian, expected=expected, max_scale=max_scale,
+                      to=to)
 
 
 def compressed_to_rgb(msg: CompressedImage, *, expected: tuple[int, int] | None = None,
-                      max_scale: float = 1.0) -> np.ndarray:
+                      max_scale: float = 1.0, to=None) -> np.ndarray:
     """``sensor_msgs/CompressedImage`` (jpeg/png) -> (H, W, 3) uint8 RGB; the size its PNG
-    or JPEG header declares is checked (as in :func:`image_to_rgb`) before decoding."""
-    return decode_compressed(msg.format, msg.data, expected=expected, max_scale=max_scale)
+    or JPEG header declares is checked (as in :func:`image_to_rgb`) before decoding; ``to``
+    as in :func:`image_to_rgb`."""
+    return decode_compressed(msg.format, msg.data, expected=expected, max_scale=max_scale,
+                             to=to)
 
 
 def rgb_to_image(rgb: np.ndarray, header: Header | None = None, *,

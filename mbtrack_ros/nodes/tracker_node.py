@@ -359,19 +359,20 @@ class TrackerNode(Node):
         if stamp <= 0:
             self._refuse(camera, 'stamp', 'the header stamp is zero (not set by the driver)')
             return
-        # rescale_images: at most MAX_RESCALE times the calibrated size on a side
+        # rescale_images: at most MAX_RESCALE times the calibrated size on a side. Decoded
+        # at the tracker's working size (tracker.working_pixels), resized once from the
+        # message's pixels: the decoder and resize of mbtrack replay's reader
         scale = MAX_RESCALE if self.params.rescale_images else 1.0
+        limits = dict(expected=(cam.width, cam.height), max_scale=scale,
+                      to=self.tracker.calibration.cameras[camera])
         try:
-            rgb = (compressed_to_rgb(msg, expected=(cam.width, cam.height), max_scale=scale)
-                   if isinstance(msg, CompressedImage)
-                   else image_to_rgb(msg, expected=(cam.width, cam.height), max_scale=scale))
+            rgb = (compressed_to_rgb(msg, **limits) if isinstance(msg, CompressedImage)
+                   else image_to_rgb(msg, **limits))
         except ImageConversionError as err:
             hint = (' (set rescale_images to resize)' if err.cause == 'size-mismatch'
                     else '')
             self._refuse(camera, err.cause, f'{err}{hint}')
             return
-        if rgb.shape[:2] != (cam.height, cam.width):
-            rgb = cam.fit(rgb)  # the tracker resizes it to its working size
         with self._lock:
             window = self._rate_window[camera]
             window.append(stamp)
@@ -562,7 +563,8 @@ class TrackerNode(Node):
 
     def debug_image(self, camera: str, rgb: np.ndarray, result: FrameResult) -> Image:
         """``~/debug/<camera>/occlusion``: occlusion maps and silhouettes (000 Fig. 4)."""
-        # the layers at the working size (tracker.working_pixels), drawn at the camera's
+        # the layers at the working size (tracker.working_pixels), drawn on the image as the
+        # tracker received it (at the working size too)
         occ, sil = occlusion_layers(self.tracker.measurement,
                                     self.tracker.calibration.cameras[camera],
                                     result, self.tracker.models)

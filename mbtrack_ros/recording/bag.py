@@ -34,6 +34,7 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
 from mbtrack_ros.core.camera import RoomCalibration
+from mbtrack_ros.recording.cdr_images import image_view
 from mbtrack_ros.recording.csvfiles import GroundTruthRow
 from mbtrack_ros.recording.images import (
     MAX_RESCALE, ImageConversionError, decode_compressed, decode_raw, encode_compressed)
@@ -380,12 +381,13 @@ class RecordingReader:
         """Why the bag could only be read up to a damaged part, or None if it is intact."""
         return self._damaged
 
-    def _decode(self, msgtype: str, raw: bytes,
+    def _decode(self, msgtype: str, raw,
                 camera: str = '') -> tuple[int, np.ndarray | None, str | None]:
-        """``(stamp_ns, image, error)`` of an image message: the image, or ``None`` and why
-        it cannot be decoded (the stamp of a readable header is kept either way, so that an
-        undecodable image takes its own place in its frame set)."""
-        msg = typestore.deserialize_cdr(raw, msgtype)
+        """``(stamp_ns, image, error)`` of an image message (CDR bytes or a view): the
+        image, or ``None`` and why it cannot be decoded (the stamp of a readable header is
+        kept either way, so that an undecodable image takes its own place in its frame
+        set). The pixels are read in place (``image_view``), resized once by the decoder."""
+        msg = image_view(raw, msgtype)
         limit = dict(expected=self._sizes.get(camera), max_scale=self._max_scale,
                      to=self._to.get(camera))
         try:
@@ -395,8 +397,8 @@ class RecordingReader:
             else:
                 image = decode_compressed(msg.format, msg.data, **limit)
         except ImageConversionError as err:
-            return _stamp_ns(msg.header), None, str(err)
-        return _stamp_ns(msg.header), image, None
+            return msg.stamp_ns, None, str(err)
+        return msg.stamp_ns, image, None
 
     def frames(self) -> Iterator[FrameSet]:
         """Yield frame sets in time order.

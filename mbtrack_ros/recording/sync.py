@@ -186,11 +186,12 @@ class FrameSetSynchronizer:
 
     @property
     def tolerance(self) -> int | None:
-        """The tolerance in use, ns (``tolerance_ns`` or half the period; None: unknown)."""
+        """The tolerance in use, ns (``tolerance_ns`` or half the period, at least 1 ns so
+        that a window is never empty; None: unknown)."""
         if self.tolerance_ns:
             return self.tolerance_ns
         period = self.period_ns
-        return None if period is None else period // 2
+        return None if period is None else max(1, period // 2)
 
     def add(self, camera: str, stamp_ns: int, image: Any) -> list[FrameSet]:
         """Buffer one frame (header stamp, ns); return the sets that became ready, oldest

@@ -149,10 +149,10 @@ class CameraStage:
         self.awaiting_regions = False  # bootstrapped; the fusion node's cue not applied yet
 
     def resize(self, image: np.ndarray) -> np.ndarray:
-        """``image`` (H, W, 3) at the working size: first to the calibrated size (as the
-        tracker node's ``rescale_images``), then by the working scale (as ``Tracker.step``);
-        the one resize when it comes at the calibrated size."""
-        return self.camera.fit(self.full.fit(image))
+        """``image`` (H, W, 3) at the working size: itself when it has that size already
+        (decoded at it, ``decode_raw(..., to=stage.camera)``), else one resize
+        (``Camera.fit``, area averaging) from whatever size it has."""
+        return self.camera.fit(image)
 
     def set_tracks(self, xy: np.ndarray, velocity: np.ndarray, heights: np.ndarray) -> None:
         """The tracks the next update keeps off: floor positions (N, 2) m, velocities (N, 2)
