@@ -506,16 +506,18 @@ def _real_room_report(results: list[dict], out: Path) -> Report:
 # ------------------------------------------------------- the paper's experiments
 
 _LANZ = ('lanz-seq1', 'lanz-seq2', 'lanz-seq3', 'lanz-seq4')
-_LANZ_ALGORITHMS = ('hjs', 'separable')
-_LANZ_SEEDS = (FRESH_SEED, FRESH_SEED + 1, FRESH_SEED + 2)
+#: (algorithm, particles per person) of each run: 000 Fig. 6 compares HJS with 100 and the
+#: separable filter with 100 and 500
+_LANZ_RUNS = (('hjs', 100), ('separable', 100), ('separable', 500))
+_LANZ_SEEDS = tuple(range(FRESH_SEED, FRESH_SEED + 5))
 
 
 def _lanz_jobs(quick: bool) -> list[Job]:
     seqs, seeds = (('lanz-seq4',), (FRESH_SEED,)) if quick else (_LANZ, _LANZ_SEEDS)
-    return [Job('lanz', f'{seq}_s{seed}_{alg}', {
-        'preset': seq, 'seed': seed, 'algorithm': alg, 'particles': 100,
+    return [Job('lanz', f'{seq}_s{seed}_{alg}{n}', {
+        'preset': seq, 'seed': seed, 'algorithm': alg, 'particles': n,
         'max_frames': 30 if quick else None})
-        for seq in seqs for seed in seeds for alg in _LANZ_ALGORITHMS]
+        for seq in seqs for seed in seeds for alg, n in _LANZ_RUNS]
 
 
 def _paper_run(job: Job, workdir: Path) -> dict:
@@ -548,28 +550,29 @@ def _mean_sd(values: Sequence[float], scale: float = 1.0, digits: int = 1,
 def _lanz_report(results: list[dict], out: Path) -> Report:
     from mbtrack_ros.evaluation.plots import plot_posterior_curves
 
-    runs: dict[tuple[str, str], list[dict]] = {}
+    runs: dict[tuple[str, str, int], list[dict]] = {}
     for r in results:
-        runs.setdefault((r['recording'], r['algorithm']), []).append(r)
+        runs.setdefault((r['recording'], r['algorithm'], r['particles']), []).append(r)
     seqs = list(dict.fromkeys(r['recording'] for r in results))
-    n_seeds = len(runs[seqs[0], 'hjs'])
-    lines = [f'Mean ± standard deviation over {n_seeds} recording seed(s).', '',
-             '| sequence | frames | MOTA HJS | MOTA separable | ID switches HJS | '
-             'ID switches separable | mass@0.5m HJS | mass@0.5m separable |',
-             '| --- |' + ' ---: |' * 7]
+    kinds = [(alg, n, f'{"HJS" if alg == "hjs" else alg} {n}') for alg, n in _LANZ_RUNS
+             if any((seq, alg, n) in runs for seq in seqs)]
+    n_seeds = len(runs[seqs[0], 'hjs', 100])
+    lines = [f'Mean ± standard deviation over {n_seeds} recording seed(s); N particles per '
+             'person.', '',
+             '| sequence | frames | ' + ' | '.join(f'MOTA {k}' for *_, k in kinds) + ' | '
+             + ' | '.join(f'ID switches {k}' for *_, k in kinds) + ' | '
+             + ' | '.join(f'mass@0.5m {k}' for *_, k in kinds) + ' |',
+             '| --- |' + ' ---: |' * (1 + 3 * len(kinds))]
     plots = []
     for seq in seqs:
-        h, s = runs[seq, 'hjs'], runs[seq, 'separable']
-        lines.append(
-            f'| `{seq}` | {h[0]["frames"]} | {_mean_sd([r["mota"] for r in h], 100, 1, " %")} '
-            f'| {_mean_sd([r["mota"] for r in s], 100, 1, " %")} '
-            f'| {_mean_sd([r["mismatches"] for r in h])} '
-            f'| {_mean_sd([r["mismatches"] for r in s])} '
-            f'| {_mean_sd([r["mass_0_5"] for r in h], digits=2)} '
-            f'| {_mean_sd([r["mass_0_5"] for r in s], digits=2)} |')
+        groups = [runs.get((seq, alg, n), []) for alg, n, _ in kinds]
+        cells = ([_mean_sd([r['mota'] for r in g], 100, 1, ' %') for g in groups]
+                 + [_mean_sd([r['mismatches'] for r in g]) for g in groups]
+                 + [_mean_sd([r['mass_0_5'] for r in g], digits=2) for g in groups])
+        lines.append(f'| `{seq}` | {groups[0][0]["frames"]} | ' + ' | '.join(cells) + ' |')
         curves = {}
-        for alg, label in (('hjs', 'HJS'), ('separable', 'separable')):
-            group = [r for r in runs[seq, alg] if r.get('curve')]
+        for (alg, n, label), group in zip(kinds, groups):
+            group = [r for r in group if r.get('curve')]
             if group:
                 curves[label] = (np.array(group[0]['curve'][0]),
                                  np.mean([r['curve'][1] for r in group], axis=0))
