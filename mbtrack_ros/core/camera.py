@@ -94,7 +94,6 @@ def _rectangle(value: Any, what: str) -> tuple[float, float, float, float]:
     return (x0, y0, x1, y1)
 
 
-
 @lru_cache(maxsize=64)
 def _area_taps(n_in: int, n_out: int) -> tuple[np.ndarray, np.ndarray]:
     """Area-averaging weights of shrinking ``n_in`` samples to ``n_out`` <= ``n_in``:
@@ -146,6 +145,7 @@ def area_shrink(image: np.ndarray, width: int, height: int) -> np.ndarray:
     out = np.empty((height, width, channels), np.uint8)
     _kernels.area_shrink(src, rows, row_w, cols, col_w, out)
     return out[:, :, 0] if grey else out
+
 
 @dataclass(frozen=True, eq=False)
 class Camera:
