@@ -250,7 +250,7 @@ def test_area_shrink_refuses_enlarging_and_other_types():
 
 
 def test_decode_raw_of_a_view_never_aliases_it():
-    """The working image outlives the chunk buffer it was read from."""
+    """The working image outlives the message buffer it was read from."""
     rng = np.random.default_rng(10)
     buf = bytearray(rng.integers(0, 256, 64 * 48 * 3, dtype=np.uint8).tobytes())
     cam = make_room(8, 6).cameras['cam0'].scaled(64, 48)

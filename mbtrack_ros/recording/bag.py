@@ -381,12 +381,12 @@ class RecordingReader:
         """Why the bag could only be read up to a damaged part, or None if it is intact."""
         return self._damaged
 
-    def _decode(self, msgtype: str, raw,
+    def _decode(self, msgtype: str, raw: bytes,
                 camera: str = '') -> tuple[int, np.ndarray | None, str | None]:
-        """``(stamp_ns, image, error)`` of an image message (CDR bytes or a view): the
-        image, or ``None`` and why it cannot be decoded (the stamp of a readable header is
-        kept either way, so that an undecodable image takes its own place in its frame
-        set). The pixels are read in place (``image_view``), resized once by the decoder."""
+        """``(stamp_ns, image, error)`` of an image message's CDR bytes: the image, or
+        ``None`` and why it cannot be decoded (the stamp of a readable header is kept either
+        way, so that an undecodable image takes its own place in its frame set). The pixels
+        are read in place (``image_view``), resized once by the decoder."""
         msg = image_view(raw, msgtype)
         limit = dict(expected=self._sizes.get(camera), max_scale=self._max_scale,
                      to=self._to.get(camera))
