@@ -224,21 +224,33 @@ class PeopleCue:
             total += np.where(seen, z, 0.0)
             views += seen
             if len(frames) > 1:
-                moved = np.zeros((cam.height, cam.width), np.uint8)
-                prev = cv2.cvtColor(frames[0][name], cv2.COLOR_RGB2GRAY)
-                for before, f in zip(frames[:-1], frames[1:]):
-                    cur = cv2.cvtColor(f[name], cv2.COLOR_RGB2GRAY)
-                    change = cv2.absdiff(cur, prev) > cfg.motion_threshold
-                    if change.any():   # a moving shadow is no person's motion (shadow.py)
-                        change &= ~shadow_change(before[name], f[name])
-                    moved |= change.view(np.uint8)
-                    prev = cur
+                moved = self._moved(name, frames)
                 if cfg.motion_dilation > 0:      # limbs move, the body between them not
                     moved = cv2.dilate(moved, self._kernel(cfg.motion_dilation))
                 moved_by_cam[name] = moved.astype(bool)
         need = min(cfg.min_views, max(len(self.cameras), 1))
         mean = np.where(views >= need, total / np.maximum(views, 1), -np.inf)
         return self.xy[:m], mean, moved_by_cam
+
+    def _moved(self, name: str, frames: Sequence[Mapping[str, np.ndarray]]) -> np.ndarray:
+        """(H, W) uint8, 1 where camera ``name``'s luminance changed by more than
+        ``motion_threshold`` over the bootstrap frames, before the dilation: between
+        consecutive frames (fast motion, a limb that swings back) or between a frame and
+        the first one (the displacement accumulated since: a slow motion whose step per
+        frame moves an edge by less than a pixel, which changes a pixel of an
+        area-sampled image by only that fraction of the edge's contrast). A pixel whose
+        change is a moving shadow's (:func:`~.shadow.shadow_change`) is not motion."""
+        cfg = self.config
+        cam = self.calibration.cameras[name]
+        moved = np.zeros((cam.height, cam.width), np.uint8)
+        grey = [cv2.cvtColor(f[name], cv2.COLOR_RGB2GRAY) for f in frames]
+        for k in range(1, len(frames)):
+            for j in {k - 1, 0}:        # the previous frame, the first frame
+                change = cv2.absdiff(grey[k], grey[j]) > cfg.motion_threshold
+                if change.any():
+                    change &= ~shadow_change(frames[j][name], frames[k][name])
+                moved |= change.view(np.uint8)
+        return moved
 
     def _coverage(self, name: str, moved: np.ndarray) -> np.ndarray:
         """(n_or * P,) moving fraction of every hypothesis in a camera, ``-inf`` where the
