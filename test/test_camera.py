@@ -44,11 +44,20 @@ def test_scaled_camera_scales_pixels(room):
     assert np.allclose((cam.project(p) + 0.5) * 2 - 0.5, big.project(p), atol=1e-9)
 
 
+def _square_16_9(room) -> Camera:
+    """``room``'s cam1 as a 1280x720 camera with square pixels (fx = fy, a wider view)."""
+    cam = room.cameras['cam1']
+    K = cam.K * np.array([[8.0], [8.0], [1.0]])
+    K[0, 2], K[1, 2] = 639.5, 359.5
+    return Camera('wide', 1280, 720, K, cam.dist, cam.R, cam.t)
+
+
 def test_scaled_camera_with_another_aspect_ratio_scales_each_axis_by_its_own_factor(room):
-    """A 16:9 picture shrunk to the working size (1280x720 -> 370x208: 369.5 rounded up,
-    208 from 207.8) scales columns by 370/1280 and rows by 208/720, each about the pixel
-    centres: every projected point lands where the resized picture shows it."""
-    cam = room.cameras['cam1'].scaled(1280, 720)
+    """A 16:9 picture with square pixels shrunk to the working size (1280x720 -> 370x208:
+    369.5 rounded up, 208 from 207.8) scales columns by 370/1280 and rows by 208/720, each
+    about the pixel centres: every projected point lands where the resized picture shows
+    it."""
+    cam = _square_16_9(room)
     small = cam.at_most(320 * 240)
     assert (small.width, small.height) == (370, 208)
     sx, sy = 370 / 1280, 208 / 720
@@ -61,6 +70,56 @@ def test_scaled_camera_with_another_aspect_ratio_scales_each_axis_by_its_own_fac
     np.testing.assert_allclose(got[ok, 1], (big[ok, 1] + 0.5) * sy - 0.5, atol=1e-9)
     # the pixel aspect of the scaled camera follows the two factors
     assert small.K[0, 0] / small.K[1, 1] == pytest.approx(cam.K[0, 0] / cam.K[1, 1] * sx / sy)
+
+
+@pytest.mark.parametrize('size', [(1280, 720), (1920, 1080), (640, 480), (1600, 240),
+                                  (320, 1200), (400, 300), (200, 150)])
+def test_a_stretched_view_works_at_its_own_square_pixel_size(room, size):
+    """``at_most``: a 320x240 view stretched to another size (non-square pixels,
+    fx / fy = (w / 320) / (h / 240)) works at 320x240 with the view's own intrinsics
+    (square pixels, 76800 of them); a smaller image is left as it is."""
+    base = room.cameras['cam1'].scaled(320, 240)
+    cam = base.scaled(*size)
+    work = cam.at_most(320 * 240)
+    if size[0] * size[1] <= 320 * 240:
+        assert work is cam
+        return
+    assert (work.width, work.height) == (320, 240)
+    np.testing.assert_allclose(work.K, base.K, atol=1e-9)
+
+
+@pytest.mark.parametrize('aspect', [0.5, 0.8, 1.0, 1.1, 1.6, 3.0])
+@pytest.mark.parametrize('size', [(1280, 720), (1000, 700), (2000, 100), (90, 1500), (400, 120),
+                                  (120, 400)])
+def test_working_camera_has_square_pixels_of_about_the_pixels_asked(room, size, aspect):
+    """Any pixel aspect ``fx / fy`` and size: square working pixels (fx = fy up to the
+    rounding of a side), never a side larger than the input, and the pixels asked up to
+    that rounding, or fewer when a side had to stay (the input is coarser there)."""
+    w, h = size
+    cam = room.cameras['cam1'].scaled(w, h)
+    K = cam.K.copy()
+    K[0, 0] = K[1, 1] * aspect
+    cam = Camera('c', w, h, K, cam.dist, cam.R, cam.t)
+    pixels = 40_000
+    work = cam.at_most(pixels)
+    assert work.width <= w and work.height <= h
+    ratio = work.K[0, 0] / work.K[1, 1]
+    assert abs(ratio - 1.0) <= 0.5 / work.width + 0.5 / work.height + 1e-9
+    kept = work.width == w or work.height == h
+    assert work.width * work.height <= pixels + (work.width + work.height) / 2 + 1
+    if not kept:
+        assert work.width * work.height >= pixels - (work.width + work.height) / 2 - 1
+
+
+def test_working_camera_of_a_square_pixel_camera_is_uniformly_scaled(room):
+    """Square pixels: both sides by ``sqrt(pixels / (w h))`` (the size rounded)."""
+    cam = room.cameras['cam1'].scaled(1280, 960)
+    assert cam.K[0, 0] == pytest.approx(cam.K[1, 1])
+    work = cam.at_most(320 * 240)
+    assert (work.width, work.height) == (320, 240)
+    work = _square_16_9(room).at_most(100_000)
+    f = np.sqrt(100_000 / (1280 * 720))
+    assert (work.width, work.height) == (round(1280 * f), round(720 * f))
 
 
 def test_calibration_round_trip(tmp_path, room):

@@ -136,7 +136,7 @@ def test_recording_reader_reads_in_place_what_rosbags_deserialises(tmp_path):
     bag = _bag(tmp_path / 'bag', messages)
     room = make_room(640, 480)
     to = {'cam0': room.cameras['cam0'].at_most(76800),
-          'cam1': room.cameras['cam0'].scaled(1280, 720).at_most(76800)}
+          'cam1': make_room(1280, 720).cameras['cam0'].at_most(76800)}   # square pixels
     with RecordingReader(bag) as reader:
         reader.decode_to(to)
         sets = list(reader.frames())

@@ -362,13 +362,28 @@ class Camera:
                            max(1, round(self.height * factor)))
 
     def at_most(self, pixels: int) -> Camera:
-        """This camera at the size the tracker works on: resized by
-        ``sqrt(pixels / (w h))`` (sizes rounded) when it has more than ``pixels`` pixels,
-        else itself."""
-        if self.width * self.height <= pixels:
+        """This camera at the size the tracker works on: when it has more than ``pixels``
+        pixels, resized to about ``pixels`` pixels with square pixels (equal focal lengths
+        ``fx = fy``), else itself.
+
+        Columns are scaled by ``sx = sqrt(pixels fy / (w h fx))`` and rows by
+        ``sy = sqrt(pixels fx / (w h fy))`` (``sx sy w h = pixels`` and ``sx fx = sy fy``;
+        a side already coarser than that keeps its size, the other is squared to it), sizes
+        rounded. A working pixel spans the same angle across and down whatever the sensor's
+        pixel aspect, as the tracker's pixel lengths and areas (kernels, dilations, edge
+        lengths, given at 320 x 240) assume. A camera with square pixels is resized by
+        ``sqrt(pixels / (w h))`` on both sides."""
+        w, h = self.width, self.height
+        if w * h <= pixels:
             return self
-        f = float(np.sqrt(pixels / (self.width * self.height)))
-        return self.scaled(max(1, round(self.width * f)), max(1, round(self.height * f)))
+        aspect = float(self.K[0, 0] / self.K[1, 1])        # fx / fy: pixel aspect
+        sx = float(np.sqrt(pixels / (w * h * aspect)))
+        sy = float(np.sqrt(pixels * aspect / (w * h)))
+        if sx > 1.0:
+            sx, sy = 1.0, aspect
+        elif sy > 1.0:
+            sx, sy = 1.0 / aspect, 1.0
+        return self.scaled(max(1, round(w * sx)), max(1, round(h * sy)))
 
     def scaled(self, width: int, height: int) -> Camera:
         """The same camera with its image resized to ``width`` x ``height`` pixels."""

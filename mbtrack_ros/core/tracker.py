@@ -103,8 +103,9 @@ class TrackerConfig:
             existence of the last detection frame set (1: every frame set; larger: less
             CPU, people found later and kept less well).
         working_pixels: pixels per camera image the tracker works on (default 320 x 240 =
-            76800): a camera with more is resized by ``sqrt(working_pixels / (w h))``
-            (aspect ratio kept, never enlarged; :meth:`Tracker.step` resizes each image
+            76800): a camera with more is resized to about that many square pixels
+            (``Camera.at_most``: by ``sqrt(working_pixels / (w h))`` when its pixels are
+            square, never enlarged; :meth:`Tracker.step` resizes each image
             once, the intrinsics are scaled to match). Every pixel-unit setting (the
             detection's morphology, mask growth and edge validation, the likelihood's
             smallest visible area) is given at 320 x 240 and scaled with the working size
@@ -238,7 +239,7 @@ class TrackerConfig:
 
     def working_calibration(self, calibration: RoomCalibration) -> RoomCalibration:
         """The cameras at the size the tracker works on (``working_pixels``): each camera
-        with more pixels resized by ``sqrt(working_pixels / (w h))``, sizes rounded."""
+        with more pixels resized to about that many square pixels (``Camera.at_most``)."""
         return replace(calibration, cameras={name: cam.at_most(self.working_pixels)
                                              for name, cam in calibration.cameras.items()})
 
