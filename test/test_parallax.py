@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from conftest import make_room
-from mbtrack_ros.core.detection.parallax import FloorParallax
+from mbtrack_ros.core.detection.parallax import FloorParallax, ParallaxEvidence
 from mbtrack_ros.core.detection.detector import _states
 from mbtrack_ros.core.detection.people import PeopleCue, PeopleCueConfig
 from mbtrack_ros.core.shape import BodyShape, rasterize
@@ -66,8 +66,8 @@ def _hidden_floor(room, name: str, post: dict[str, np.ndarray]) -> np.ndarray:
         near = cv2.dilate(post[other].astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
         q = oc.project(np.nan_to_num(p).reshape(-1, 3)).reshape(cam.height, cam.width, 2)
         inside = np.isfinite(p[..., 0]) & oc.in_image(q)
-        qi = np.clip(np.nan_to_num(q, nan=-1.0, posinf=-1.0, neginf=-1.0).astype(int), 0,
-                     [oc.width - 1, oc.height - 1])
+        q = np.clip(np.nan_to_num(q, nan=-1.0, posinf=-1.0, neginf=-1.0), -1.0, 1e6)
+        qi = np.clip(q.astype(int), 0, [oc.width - 1, oc.height - 1])
         hidden |= inside & near[qi[..., 1], qi[..., 0]]
     return hidden
 
@@ -128,3 +128,31 @@ def test_the_people_cue_finds_a_person_who_never_moves_only_with_parallax():
     assert len(off) == 0
     empty = [_render(room, post=False)] * 3
     assert len(PeopleCue(room, PeopleCueConfig(**kw)).places(empty)) == 0
+
+
+@pytest.mark.parametrize('k', [1, 2, 3, 4])
+def test_decide_is_the_lower_median_of_the_cameras_that_see_the_floor_point(k):
+    """The vectorised decision against a per-pixel loop: tested where two or more other
+    cameras see the floor point, disagreeing where at least half of them differ by more
+    than the threshold; a camera whose view is hidden there does not count."""
+    room = make_room(n_cameras=k + 1)
+    par = FloorParallax(room)
+    rng = np.random.default_rng(k)
+    h, w = 6, 7
+    others = [f'cam{i}' for i in range(1, k + 1)]
+    maps = [(np.tile(np.arange(w, dtype=np.float32), (h, 1)),
+             np.tile(np.arange(h, dtype=np.float32)[:, None], (1, w))) for _ in others]
+    ev = ParallaxEvidence(others, rng.uniform(0, 40, (k, h, w)).astype(np.float32),
+                          rng.random((k, h, w)) < 0.8, maps)
+    hidden = {'cam1': rng.random((h, w)) < 0.3}
+    disagree, known = par.decide(ev, hidden=hidden)
+    for y in range(h):
+        for x in range(w):
+            d = [ev.diff[j, y, x] for j in range(k)
+                 if ev.seen[j, y, x] and not (others[j] == 'cam1' and hidden['cam1'][y, x])]
+            assert known[y, x] == (len(d) >= 2)
+            if len(d) >= 2:
+                lower = sorted(d)[(len(d) - 1) // 2]
+                assert disagree[y, x] == (lower > par.threshold)
+            else:
+                assert not disagree[y, x]
