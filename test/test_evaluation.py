@@ -529,3 +529,22 @@ def test_eval_command_bad_inputs_exit_2_with_one_line(tmp_path, capsys, case):
     assert len(lines) == 1 and lines[0].startswith('mbtrack eval: error: ')
     assert 'Traceback' not in err
     assert not (tmp_path / 'out' / 'scores.json').exists()
+
+
+def test_time_to_track_is_the_wait_for_the_first_matched_frame():
+    """Person 1 is tracked from his 6th frame, person 2 from his first (which is the
+    recording's 5th), person 3 never; a track far from everyone matches nobody."""
+    truth = walk(1, range(20), 1.0) + walk(2, range(4, 20), 3.0) + walk(3, range(20), 5.0)
+    tracks = [tr(r.frame, 1, r.x + 0.1, r.y) for r in truth if r.person_id == 1
+              and r.frame >= 5]
+    tracks += [tr(r.frame, 2, r.x, r.y - 0.2) for r in truth if r.person_id == 2]
+    tracks += [tr(f, 9, 9.0, 9.0) for f in range(20)]
+    persons, wait = clear_mot(tracks, truth).matches_detail.time_to_track()
+    np.testing.assert_array_equal(persons, [1, 2, 3])
+    np.testing.assert_allclose(wait[:2], [5 * STEP * 1e-9, 0.0])
+    assert wait[2] == np.inf
+    # a track beyond the match threshold does not count as found
+    late = [tr(r.frame, 1, r.x + (0.1 if r.frame >= 8 else 0.8), r.y)
+            for r in truth if r.person_id == 1]
+    _, wait = clear_mot(late, truth).matches_detail.time_to_track()
+    assert wait[0] == pytest.approx(8 * STEP * 1e-9)

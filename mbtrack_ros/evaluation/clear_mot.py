@@ -67,6 +67,22 @@ class PersonFrameMatches:
     def __len__(self) -> int:
         return int(self.stamp_ns.shape[0])
 
+    def time_to_track(self) -> tuple[np.ndarray, np.ndarray]:
+        """How long each ground-truth person waited for a track: (Q,) int64 person ids
+        (ascending) and (Q,) float64 seconds from the person's first ground-truth frame to
+        his first matched one (0 when matched from the start, ``inf`` when never).
+
+        The acceptance of an occupied start ("everyone tracked within 1 s") reads it."""
+        persons = np.unique(self.person_id)
+        wait = np.full(persons.shape[0], np.inf)
+        for k, p in enumerate(persons):
+            sel = self.person_id == p               # rows are sorted by stamp
+            stamps = self.stamp_ns[sel]
+            hit = stamps[self.track_id[sel] >= 0]
+            if hit.shape[0]:
+                wait[k] = (int(hit[0]) - int(stamps[0])) * 1e-9
+        return persons.astype(np.int64), wait
+
 
 @dataclass(frozen=True)
 class PersonStats:

@@ -41,7 +41,12 @@ On real footage the contour/symmetry z-score alone ranks a person anywhere among
 first few dozen floor places of a frame (furniture and posters are person-like too);
 motion over the first frames (0.1 s) singles him out, and a person who barely moves still
 passes at ``min_motion = 0.03``. A person who stands perfectly still during the bootstrap is
-not found by this cue; he is learnt into the background, found when he moves, and the
+found by the **floor parallax** of the last frame set instead (:meth:`PeopleCue._still`,
+:class:`~.parallax.FloorParallax`): his silhouettes show something other than the floor
+the other cameras see behind him (an object stands there), and his outline is a
+person's (a contour/symmetry z-score of ``min_still_score``, well above the ``min_score``
+that motion needs: furniture stands on the floor too). Where fewer than three cameras see
+the floor behind him he is learnt into the background, found when he moves, and the
 place he reveals is recognised as a ghost by the background's border test
 (:func:`~.background.ghost_components`).
 
@@ -64,6 +69,7 @@ from mbtrack_ros.core.detection.detector import (
     _grid, _max_span_width, _nms, _states, is_ceiling)
 from mbtrack_ros.core.detection.features import (
     EdgeMap, ForegroundIntegral, Spans, colour_symmetry, contour_loglik_spans)
+from mbtrack_ros.core.detection.parallax import FloorParallax
 from mbtrack_ros.core.shape import BodyShape, Silhouettes, rasterize
 
 __all__ = ['PeopleCue', 'PeopleCueConfig']
@@ -88,6 +94,13 @@ class PeopleCueConfig:
             (ignored with a single bootstrap frame).
         w_symmetry: weight of the colour-symmetry term against the contour term.
         min_score: smallest mean contour/symmetry robust z-score over the seeing cameras.
+        min_parallax: a place that does not move is a person only if at least this share
+            of its silhouettes' floor-backed pixels (pooled over the side cameras) shows
+            something other than the floor the other cameras see there
+            (:class:`~.parallax.FloorParallax`): an object stands there (fraction).
+        min_still_score: ... and its mean contour/symmetry robust z-score reaches this
+            (its outline is a person's, not a table's or a chair's), robust standard
+            deviations; ``inf`` disables the still-person stage.
         max_people: largest number of person-like places marked.
         nms_radius: smallest distance between two marked places.
         refine_radius: how far a chosen place may move when it is refined with only the
@@ -116,6 +129,8 @@ class PeopleCueConfig:
     min_motion: float = 0.03
     w_symmetry: float = 0.3
     min_score: float = 0.0
+    min_parallax: float = 0.5
+    min_still_score: float = 1.0
     max_people: int = 6
     nms_radius: float = 0.7
     refine_radius: float = 0.5
@@ -135,6 +150,9 @@ class PeopleCueConfig:
             raise DetectionError('people cue needs at least one orientation')
         if self.min_views < 1 or self.max_people < 0 or self.dilation < 0:
             raise DetectionError('people cue min_views >= 1, max_people >= 0, dilation >= 0')
+        if not 0.0 <= self.min_parallax <= 1.0:
+            raise DetectionError(f'people cue min_parallax must be in [0, 1], got '
+                                 f'{self.min_parallax}')
         if not 0.0 < self.min_visible <= 1.0:
             raise DetectionError(f'people cue min_visible must be in (0, 1], got '
                                  f'{self.min_visible}')
@@ -163,6 +181,7 @@ class PeopleCue:
                       for n in self.cameras}
         self._seen = {n: _SeenHypotheses.of(self._sils[n], cfg, calibration.cameras[n])
                       for n in self.cameras}
+        self._parallax: FloorParallax | None = None    # built on first use
 
     @staticmethod
     def _kernel(radius: int) -> np.ndarray:
@@ -288,6 +307,7 @@ class PeopleCue:
         again (the others' coverage cannot change).
         """
         cfg = self.config
+        frames = list(frames)
         xy, score, moved = self._evidence(frames)
         ok = np.isfinite(score) & (score >= cfg.min_score)
         if cfg.max_people == 0 or not ok.any():
@@ -327,9 +347,63 @@ class PeopleCue:
                 if hit.any():
                     sub = _take(seen_hyp.spans, np.flatnonzero(hit))
                     cov[name][seen_hyp.index[hit]] = ForegroundIntegral(mv).coverage(sub)[0]
-        if not chosen:
-            return np.zeros((0, 2))
-        return self._refine(xy, score, ok, chosen, original)
+        moving = self._refine(xy, score, ok, chosen, original) if chosen \
+            else np.zeros((0, 2))
+        return self._still(frames[-1], xy, score, moving)
+
+    def _still(self, images: Mapping[str, np.ndarray], xy: np.ndarray, score: np.ndarray,
+               taken: np.ndarray) -> np.ndarray:
+        """(K + J, 2) the places ``taken`` (K, 2) followed by those of people who stand
+        still: an object on the floor (floor parallax, :class:`~.parallax.FloorParallax`,
+        over at least ``min_parallax`` of the silhouette's floor-backed pixels) whose
+        outline is a person's (mean contour/symmetry z-score ``score`` (P,) at least
+        ``min_still_score``), the largest parallax first, ``nms_radius`` apart, at most
+        ``max_people`` in all. What a chosen person explains (his body, the floor he hides
+        from the other cameras, :meth:`~.parallax.FloorParallax.decide`) is no evidence
+        for the next, nor is what the places ``taken`` explain."""
+        cfg = self.config
+        if len(taken) >= cfg.max_people or not np.isfinite(cfg.min_still_score):
+            return taken
+        if self._parallax is None:
+            self._parallax = FloorParallax(self.calibration,
+                                           threshold=cfg.motion_threshold)
+        evidence = {n: ev for n, ev in self._parallax.differences(images).items()
+                    if n in self.cameras}
+        out = [p for p in np.asarray(taken, np.float64).reshape(-1, 2)]
+        person_like = np.isfinite(score) & (score >= cfg.min_still_score)
+        while evidence and len(out) < cfg.max_people and person_like.any():
+            bodies = {n: self._region(n, np.array(out).reshape(-1, 2), cfg.height,
+                                      cfg.width, 0) for n in self.calibration.cameras}
+            shown = {}
+            for name, ev in evidence.items():
+                disagree, known = self._parallax.decide(ev, hidden=bodies)
+                shown[name] = (disagree & ~bodies[name], known & ~bodies[name])
+            cover = self._parallax_cover(shown)
+            cand = person_like & (cover >= cfg.min_parallax)
+            if out:
+                cand &= np.linalg.norm(xy[:, None] - np.array(out)[None], axis=2
+                                       ).min(axis=1) >= cfg.nms_radius
+            if not cand.any():
+                break
+            out.append(xy[int(np.flatnonzero(cand)[np.argmax(cover[cand])])])
+        return np.array(out).reshape(-1, 2)
+
+    def _parallax_cover(self, shown: Mapping[str, tuple[np.ndarray, np.ndarray]]
+                        ) -> np.ndarray:
+        """(P,) share of each place's floor-backed silhouette pixels that disagree with
+        the other cameras' floor, pooled over the cameras ``shown`` (name -> (disagree,
+        known) (H, W) bool), best orientation; 0 where fewer than two cameras see floor
+        behind a quarter of the silhouette (one view cannot place an object in depth)."""
+        n = len(self.states)
+        hits, known, views = np.zeros(n), np.zeros(n), np.zeros(n, np.int64)
+        for name, (disagree, kn) in shown.items():
+            seen_hyp = self._seen[name]
+            h, k, area = ForegroundIntegral(disagree, ~kn).counts(seen_hyp.spans)
+            hits[seen_hyp.index] += h
+            known[seen_hyp.index] += k
+            views[seen_hyp.index] += k >= 0.25 * np.maximum(area, 1)
+        cover = np.where(views >= 2, hits / np.maximum(known, 1.0), 0.0)
+        return cover.reshape(len(self.config.orientations), self.n_places).max(axis=0)
 
     def _refine(self, xy: np.ndarray, score: np.ndarray, ok: np.ndarray,
                 chosen: list[int], moved: Mapping[str, np.ndarray]) -> np.ndarray:

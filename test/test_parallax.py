@@ -1,0 +1,158 @@
+"""Floor parallax (plane + parallax background): a person standing on the floor disagrees
+with the floor the other cameras see behind him; the empty floor agrees, whatever the
+cameras' exposure; a person who never moves is a place of the people cue."""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from conftest import make_room
+from mbtrack_ros.core.detection.parallax import FloorParallax, ParallaxEvidence
+from mbtrack_ros.core.detection.detector import _states
+from mbtrack_ros.core.detection.people import PeopleCue, PeopleCueConfig
+from mbtrack_ros.core.shape import BodyShape, rasterize
+
+POST = (3.0, 2.5)          # where a person stands, metres
+
+
+def _floor_colour(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """(..., 3) a tiled, graded floor: 0.5 m tiles of two greys, a slow colour ramp."""
+    tile = ((np.floor(x / 0.5) + np.floor(y / 0.5)) % 2).astype(np.float64)
+    base = 70.0 + 50.0 * tile
+    return np.stack([base + 10.0 * x, base + 8.0 * y, base - 5.0 * x], axis=-1)
+
+
+def _render(room, *, post: bool, gains: dict[str, float] | None = None
+            ) -> dict[str, np.ndarray]:
+    """Per camera an (H, W, 3) uint8 image of the floor (walls a flat grey) with, if
+    ``post``, a person standing at ``POST``: the silhouette of the tracker's body shape
+    (003 §2.1) painted per part (skin head, blue torso, dark legs) over the floor."""
+    paint = {1: (210.0, 170.0, 140.0), 2: (40.0, 60.0, 190.0), 3: (50.0, 40.0, 40.0)}
+    out = {}
+    for name, cam in room.cameras.items():
+        u, v = np.meshgrid(np.arange(cam.width) + 0.5, np.arange(cam.height) + 0.5)
+        p = cam.floor_point(np.stack([u, v], axis=-1))
+        x0, y0, x1, y1 = room.floor
+        on = np.all(np.isfinite(p), axis=-1)
+        with np.errstate(invalid='ignore'):
+            on &= (p[..., 0] >= x0) & (p[..., 0] <= x1) & (p[..., 1] >= y0) & (p[..., 1] <= y1)
+        img = np.where(on[..., None], _floor_colour(np.nan_to_num(p[..., 0]),
+                                                    np.nan_to_num(p[..., 1])), 128.0)
+        if post:
+            parts = rasterize(cam, _states(np.array([POST])), BodyShape()).mask(0)
+            for part, colour in paint.items():
+                img[parts == part] = colour
+        img = img * (gains or {}).get(name, 1.0)
+        out[name] = np.clip(img, 0, 255).astype(np.uint8)
+    return out
+
+
+def _post_masks(room) -> dict[str, np.ndarray]:
+    empty, full = _render(room, post=False), _render(room, post=True)
+    return {n: np.any(empty[n] != full[n], axis=-1) for n in room.cameras}
+
+
+def _hidden_floor(room, name: str, post: dict[str, np.ndarray]) -> np.ndarray:
+    """(H, W) bool pixels of camera ``name`` whose floor point another camera sees
+    behind the person (within 2 pixels of his silhouette there)."""
+    cam = room.cameras[name]
+    u, v = np.meshgrid(np.arange(cam.width) + 0.5, np.arange(cam.height) + 0.5)
+    p = cam.floor_point(np.stack([u, v], axis=-1))
+    hidden = np.zeros((cam.height, cam.width), bool)
+    for other, oc in room.cameras.items():
+        if other == name:
+            continue
+        near = cv2.dilate(post[other].astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
+        q = oc.project(np.nan_to_num(p).reshape(-1, 3)).reshape(cam.height, cam.width, 2)
+        inside = np.isfinite(p[..., 0]) & oc.in_image(q)
+        q = np.clip(np.nan_to_num(q, nan=-1.0, posinf=-1.0, neginf=-1.0), -1.0, 1e6)
+        qi = np.clip(q.astype(int), 0, [oc.width - 1, oc.height - 1])
+        hidden |= inside & near[qi[..., 1], qi[..., 0]]
+    return hidden
+
+
+def test_two_cameras_give_no_parallax():
+    """With one other camera a person here and one hiding the floor from it look alike:
+    nothing is tested."""
+    room = make_room(n_cameras=2)
+    for disagree, known in FloorParallax(room).masks(_render(room, post=True)).values():
+        assert not known.any() and not disagree.any()
+
+
+@pytest.mark.parametrize('n_cameras', [3, 4])
+def test_the_empty_floor_agrees_between_cameras_whatever_their_exposure(n_cameras):
+    room = make_room(n_cameras=n_cameras)
+    gains = {'cam1': 1.25}
+    masks = FloorParallax(room).masks(_render(room, post=False, gains=gains))
+    for name, (disagree, known) in masks.items():
+        assert known.sum() > 0.2 * known.size            # the floor is tested
+        assert disagree.sum() <= 0.01 * known.sum(), name
+
+
+@pytest.mark.parametrize('n_cameras', [3, 4])
+def test_an_object_standing_on_the_floor_disagrees_with_the_floor_behind_it(n_cameras):
+    room = make_room(n_cameras=n_cameras)
+    post = _post_masks(room)
+    masks = FloorParallax(room).masks(_render(room, post=True))
+    for name, (disagree, known) in masks.items():
+        tested = post[name] & known
+        assert tested.sum() > 30, name
+        assert disagree[tested].mean() >= 0.6, name
+        # off the person, only the floor he hides from another camera disagrees
+        off = disagree & ~post[name] & ~_hidden_floor(room, name, post)
+        assert off.sum() <= 0.01 * known.sum(), name
+
+
+def test_without_the_gain_a_brighter_camera_would_disagree():
+    """The exposure correction is what keeps the floor consistent: a camera 25 % brighter
+    differs by far more than the threshold on this floor."""
+    room = make_room(n_cameras=2)
+    plain = _render(room, post=False)
+    bright = _render(room, post=False, gains={'cam1': 1.25})
+    diff = np.abs(bright['cam1'].astype(float) - plain['cam1']).max(axis=-1)
+    assert np.median(diff) > 20.0
+
+
+def test_the_people_cue_finds_a_person_who_never_moves_only_with_parallax():
+    """Three identical frame sets (no motion at all): the motion stage finds nothing; the
+    still-person stage finds the person by the floor parallax of his person-like outline,
+    and nothing in the empty room (a tiled floor has person-like edges too)."""
+    room = make_room(n_cameras=3)
+    kw = dict(spacing=0.2, min_views=2)
+    still = [_render(room, post=True)] * 3
+    places = PeopleCue(room, PeopleCueConfig(**kw)).places(still)
+    assert len(places) == 1
+    assert np.linalg.norm(places[0] - POST) <= 0.25
+    off = PeopleCue(room, PeopleCueConfig(**kw, min_still_score=np.inf)).places(still)
+    assert len(off) == 0
+    empty = [_render(room, post=False)] * 3
+    assert len(PeopleCue(room, PeopleCueConfig(**kw)).places(empty)) == 0
+
+
+@pytest.mark.parametrize('k', [1, 2, 3, 4])
+def test_decide_is_the_lower_median_of_the_cameras_that_see_the_floor_point(k):
+    """The vectorised decision against a per-pixel loop: tested where two or more other
+    cameras see the floor point, disagreeing where at least half of them differ by more
+    than the threshold; a camera whose view is hidden there does not count."""
+    room = make_room(n_cameras=k + 1)
+    par = FloorParallax(room)
+    rng = np.random.default_rng(k)
+    h, w = 6, 7
+    others = [f'cam{i}' for i in range(1, k + 1)]
+    maps = [(np.tile(np.arange(w, dtype=np.float32), (h, 1)),
+             np.tile(np.arange(h, dtype=np.float32)[:, None], (1, w))) for _ in others]
+    ev = ParallaxEvidence(others, rng.uniform(0, 40, (k, h, w)).astype(np.float32),
+                          rng.random((k, h, w)) < 0.8, maps)
+    hidden = {'cam1': rng.random((h, w)) < 0.3}
+    disagree, known = par.decide(ev, hidden=hidden)
+    for y in range(h):
+        for x in range(w):
+            d = [ev.diff[j, y, x] for j in range(k)
+                 if ev.seen[j, y, x] and not (others[j] == 'cam1' and hidden['cam1'][y, x])]
+            assert known[y, x] == (len(d) >= 2)
+            if len(d) >= 2:
+                lower = sorted(d)[(len(d) - 1) // 2]
+                assert disagree[y, x] == (lower > par.threshold)
+            else:
+                assert not disagree[y, x]
