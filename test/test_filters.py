@@ -395,20 +395,62 @@ def test_velocity_is_not_dragged_by_the_orientation_of_the_appearance_model():
     assert coupled[0] < 0.3
 
 
-def test_hjs_uses_mrf_beliefs_as_prior_and_ablation_does_not():
+def test_hjs_weighs_occluders_by_the_independent_prior_and_the_estimate_by_the_beliefs():
+    """Two targets 0.2 m apart: with the MRF, BP runs and the estimate's weights differ from
+    the likelihood's; the likelihood (000 Eq. 34: the occluders' weights) gets the
+    independently propagated, uniform priors, with the MRF as without it."""
     rng = np.random.default_rng(6)
-    # two targets 0.2 m apart: the exclusion MRF must down-weight overlapping particles
     for use_mrf in (True, False):
         filt = HJSFilter(FilterConfig(particles=100, use_mrf=use_mrf))
         filt.add(1, object(), np.array([0.0, 0.0, 0, 0, 0, 0]), rng)
         filt.add(2, object(), np.array([0.2, 0.0, 0, 0, 0, 0]), rng)
         meas = GaussianMeasurement([np.zeros(2), np.array([0.2, 0.0])])
-        filt.step(0.1, meas, {}, rng)
-        spread = max(np.ptp(w) for w in meas.prior_weights)
+        out = filt.step(0.1, meas, {}, rng)
+        assert max(np.ptp(w) for w in meas.prior_weights) < 1e-15
+        moved = max(np.abs(out[t].weights - np.exp(filt.cloud(t)[1])).max() for t in (1, 2))
         if use_mrf:
-            assert spread > 1e-3 and filt.stats['bp_iterations'] >= 1
+            assert moved > 1e-3 and filt.stats['bp_iterations'] >= 1
         else:
-            assert spread < 1e-15 and 'bp_iterations' not in filt.stats
+            assert moved < 1e-12 and 'bp_iterations' not in filt.stats
+
+
+class _OccludedMeasurement(GaussianMeasurement):
+    """Stand-in for the HJS likelihood's dependence on the other targets' priors (000 Eq.
+    34): a hypothesis loses evidence where the other targets' prior-weighted particles
+    stand (within about 0.1 m), as a person hidden by them would."""
+
+    def hjs(self, particles, weights, models):
+        self.prior_weights = [w / w.sum() for w in weights]
+        lls = []
+        for k, p in enumerate(particles):
+            hidden = np.zeros(p.shape[0])
+            for h, (q, w) in enumerate(zip(particles, self.prior_weights)):
+                if h != k:
+                    d2 = ((p[:, None, :2] - q[None, :, :2]) ** 2).sum(axis=2)
+                    hidden += np.exp(-d2 / (2 * 0.1 ** 2)) @ w
+            lls.append(self._ll(p, k) - 3.0 * hidden)
+        return _Result(lls, np.full((len(particles), 1), 0.5))
+
+
+def test_the_exclusion_moves_the_estimates_and_never_the_particles():
+    """000 Eq. 16 acts once per frame, in the estimate: with an occlusion-dependent
+    likelihood, two people 0.45 m apart give the same particle clouds with and without the
+    MRF after 30 frames (the occluders are weighed by the independently propagated
+    prior, not by beliefs that carry the target's own messages), and different estimates."""
+    truth = [np.zeros(2), np.array([0.45, 0.0])]
+    runs = {}
+    for use_mrf in (True, False):
+        filt = HJSFilter(FilterConfig(particles=60, use_mrf=use_mrf, mrf_radius=0.4))
+        for k in range(2):
+            filt.add(k, object(), np.r_[truth[k], 0, 0, 0, 0], np.random.default_rng(10 + k))
+        meas = _OccludedMeasurement(truth, sigma=0.1)
+        for _ in range(30):
+            out = filt.step(1 / 15, meas, {}, np.random.default_rng(0))
+        runs[use_mrf] = ([filt.cloud(k)[:2] for k in range(2)], [out[k].mean for k in range(2)])
+    for (p_on, w_on), (p_off, w_off) in zip(runs[True][0], runs[False][0]):
+        np.testing.assert_array_equal(p_on, p_off)
+        np.testing.assert_allclose(w_on, w_off, rtol=0, atol=1e-12)  # normalised apart
+    assert max(np.abs(a - b)[:2].max() for a, b in zip(runs[True][1], runs[False][1])) > 1e-3
 
 
 class _DepthBlindMeasurement(GaussianMeasurement):
@@ -446,18 +488,23 @@ def test_particles_carry_the_likelihood_and_the_estimate_one_copy_of_the_exclusi
     """HJSFilter: the step's estimate weighs its particles by BP belief x likelihood (000
     Eq. 18, 41); the particles go on to the next step weighted by the likelihood alone,
     so the exclusion messages are not multiplied in again every frame."""
+    from mbtrack_ros.core.mrf import belief_propagation
+
     rng = np.random.default_rng(3)
     filt = HJSFilter(FilterConfig(particles=50))
     filt.add(1, object(), np.zeros(6), rng)
     filt.add(2, object(), np.array([0.3, 0, 0, 0, 0, 0]), rng)
     meas = GaussianMeasurement([np.zeros(2), np.array([0.3, 0.0])])
     out = filt.step(0.1, meas, {}, rng)
+    # 000 Eq. 17-18 on the step's particles with the uniform propagated prior
+    beliefs = belief_propagation([out[t].particles[:, :2] for t in (1, 2)],
+                                 [np.full(50, 0.02)] * 2, radius=0.4).weights
     for k, tid in enumerate((1, 2)):
         parts, logw, _ = filt.cloud(tid)
         ll = meas._ll(parts, k)
         lik = np.exp(ll - ll.max())
         np.testing.assert_allclose(np.exp(logw), lik / lik.sum(), rtol=1e-9)
-        post = meas.prior_weights[k] * lik
+        post = beliefs[k] * lik
         np.testing.assert_allclose(out[tid].weights, post / post.sum(), rtol=1e-9)
         assert np.abs(out[tid].weights - np.exp(logw)).max() > 1e-3   # the MRF acted
 

@@ -333,10 +333,12 @@ class HJSFilter(_MarginalParticleFilter):
     Predict: per target resample + 1-body dynamics (000 Eq. 15), then belief propagation of
     the spatial-exclusion MRF on the particle weights (000 Eq. 16-18, 43) unless
     ``config.use_mrf`` is False (the ablation of 000 §VI-C). Update: the HJS likelihood
-    ``measurement.hjs`` with the BP beliefs as priors (000 Eq. 26-40). The step's estimate
-    (``TrackUpdate``) weighs the particles by BP belief x likelihood; the particles go on to
-    the next step weighted by the likelihood alone, so that every estimate carries one
-    copy of the exclusion (see the comment in :meth:`step`; docs/hjs_fidelity.md).
+    ``measurement.hjs`` (000 Eq. 26-40) with the independently propagated priors as the
+    other targets' occluder weights (000 Eq. 34). The step's estimate (``TrackUpdate``)
+    weighs the particles by BP belief x likelihood; the particles go on to the next step
+    weighted by the likelihood alone, so that every estimate carries one copy of the
+    exclusion and the particles none (see the comments in :meth:`step`;
+    docs/hjs_fidelity.md).
     """
 
     name = 'hjs'
@@ -366,12 +368,21 @@ class HJSFilter(_MarginalParticleFilter):
         particles = self._propagate(ids, dt)
         t1 = time.perf_counter()
         n = [p.shape[0] for p in particles]
-        prior = [np.full(m, 1.0 / m) for m in n]
+        independent = [np.full(m, 1.0 / m) for m in n]
+        prior = independent
         if self.config.use_mrf:
-            prior = self._exclusion_prior(ids, particles, prior)
+            prior = self._exclusion_prior(ids, particles, independent)
         t2 = time.perf_counter()
         models = [self._models[t] for t in ids]
-        result = measurement.hjs(particles, prior, models)
+        # 000 Eq. 34: the occlusion map of target h weighs the other targets' particles by
+        # their prior. Their BP beliefs would carry the messages h sent them (000 Eq. 17:
+        # target k's particles near h's cloud down-weighted), so h's own cloud would move
+        # its occluders away from itself and the h-k exclusion would enter h's weights a
+        # second time, through its likelihood, which the particles carry on to the next
+        # frame. For two targets the prior of k without h's message is the independently
+        # propagated one; the occluders are weighed by it, and the exclusion acts once, in
+        # the estimate below.
+        result = measurement.hjs(particles, independent, models)
         t3 = time.perf_counter()
         with np.errstate(divide='ignore'):
             log_prior = [np.log(p) for p in prior]

@@ -61,9 +61,10 @@ class TrackerConfig:
             (``LikelihoodConfig.min_visible_share``), share in [0, 1]; 0: never.
         mrf_radius: spatial-exclusion radius r of the MRF prior (000 Eq. 16), metres, > 0.
             000 §VI-A uses 0.4; people who stand or walk side by side are 0.42-0.5 m apart
-            centre to centre, and a radius near that pushes their tracks apart (0.3 keeps
-            them; docs/evaluation.md measures the result). ``mbtrack experiments`` keeps
-            0.4 for 000 §VI.
+            centre to centre, and a radius near that pushes their tracks apart. 0.3 lies
+            below the shape model's thinnest extent (the width seen from the side, 0.7 x
+            0.5 m = 0.35 m, 003 §2.1): it forbids only overlapping bodies.
+            ``mbtrack experiments`` keeps 0.4 for 000 §VI.
         mrf_epsilon: floor of the exclusion potential.
         use_mrf: apply the MRF prior (False = ablation of 000 §VI-C).
         theta_bp: BP stopping threshold (000 Eq. 43: 0.01).
