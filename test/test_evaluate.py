@@ -71,7 +71,7 @@ def test_quick_evaluate_writes_a_table_and_plots_per_benchmark(tmp_path, capsys)
     assert {b.name: (out / f'{b.name}.md').read_text() for b in BENCHMARKS} == before
     filled = page.read_text()
     assert 'old' not in filled and filled.startswith('intro\n') and filled.endswith('end\n')
-    assert '| `clear-room --seed 200` |' in filled
+    assert '| worst: `clear-room --seed 200` |' in filled
     assert '`mbtrack evaluate --quick --only clear_room`' in filled
     # the notes under a table (the targets) come with it, the plots do not
     rooms = filled[filled.index('<!-- results: rooms -->'):]

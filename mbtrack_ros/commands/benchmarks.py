@@ -229,31 +229,31 @@ def _views_picture(rec: Path, tracks_csv: Path, image: Path) -> Path:
 def _clear_room_report(results: list[dict], out: Path) -> Report:
     import shutil
 
-    lines = []
-    if len(results) > 1:
-        mota = np.array([100 * r['mota'] for r in results])
-        found = sum(r['start_found'] for r in results)
-        lines += [f'{len(results)} recordings: MOTA median {np.median(mota):.1f} %, worst '
-                  f'{mota.min():.1f} % ({int(np.sum(mota >= 90.0))} of {len(results)} at '
-                  f'90 % or more), ghost tracks (matched to nobody for more than '
-                  f'{GHOST_S:.0f} s) {sum(r["ghosts"] for r in results)}, identity switches '
-                  f'{sum(r["mismatches"] for r in results)}; people present in the first frame '
-                  f'found within {START_S:.0f} s: {found} of '
-                  f'{sum(r["start_people"] for r in results)}.', '']
-    lines += ['| recording | frames | people | tracks | MOTA | MOTP | miss | false pos. | '
-              'ID switches | ghosts | frames/s |', '| --- |' + ' ---: |' * 10]
-    for r in results:
-        lines.append(f'| `clear-room --seed {r["seed"]}` | {r["frames"]} | {r["persons"]} | '
-                     f'{r["tracks"]} | {_pct(r["mota"])} | {_num(r["motp_mm"], 0, " mm")} | '
-                     f'{_pct(r["miss_rate"])} | {_pct(r["false_positive_rate"])} | '
-                     f'{r["mismatches"]} | {r["ghosts"]} | {_num(r["frames_per_s"], 1)} |')
-    if len(results) > 1:
-        mean = {k: float(np.mean([r[k] for r in results]))
-                for k in ('mota', 'motp_mm', 'miss_rate', 'false_positive_rate')}
-        lines.append(f'| mean | | | | {_pct(mean["mota"])} | {_num(mean["motp_mm"], 0, " mm")} '
-                     f'| {_pct(mean["miss_rate"])} | {_pct(mean["false_positive_rate"])} | '
-                     f'{sum(r["mismatches"] for r in results)} (total) | '
-                     f'{sum(r["ghosts"] for r in results)} (total) | |')
+    # one row per statistic over the recordings (each recording's row: results.json, the plot)
+    keys = ('mota', 'motp_mm', 'miss_rate', 'false_positive_rate', 'frames_per_s')
+
+    def row(name: str, v: dict, switches, ghosts) -> str:
+        return (f'| {name} | {_pct(v["mota"])} | {_num(v["motp_mm"], 0, " mm")} | '
+                f'{_pct(v["miss_rate"])} | {_pct(v["false_positive_rate"])} | {switches} | '
+                f'{ghosts} | {_num(v["frames_per_s"], 1)} |')
+
+    lines = [f'| {len(results)} recording(s) of {results[0]["frames"]} frames | MOTA | MOTP | '
+             'miss | false pos. | ID switches | ghost tracks | frames/s |',
+             '| --- |' + ' ---: |' * 7]
+    worst = min(results, key=lambda r: r['mota'])
+    lines.append(row('mean (switches, ghosts: total)',
+                     {k: float(np.mean([r[k] for r in results])) for k in keys},
+                     sum(r['mismatches'] for r in results), sum(r['ghosts'] for r in results)))
+    lines.append(row('median', {k: float(np.median([r[k] for r in results])) for k in keys},
+                     '', ''))
+    lines.append(row(f'worst: `clear-room --seed {worst["seed"]}`', worst,
+                     worst['mismatches'], worst['ghosts']))
+    mota = np.array([r['mota'] for r in results])
+    lines += ['', f'{int(np.sum(mota >= 0.9))} of {len(results)} recordings at MOTA 90 % or '
+              f'more; ghost tracks are tracks matched to nobody for more than {GHOST_S:.0f} s; '
+              f'people present in the first frame and found within {START_S:.0f} s: '
+              f'{sum(r["start_found"] for r in results)} of '
+              f'{sum(r["start_people"] for r in results)}.']
     fig = _figure(7.0, 3.2)
     ax = fig.add_subplot(1, 2, 1)
     names = [str(r['seed']) for r in results]
@@ -265,6 +265,8 @@ def _clear_room_report(results: list[dict], out: Path) -> Report:
     ax2.bar(names, [r['mismatches'] for r in results], color='tab:red')
     ax2.set_xlabel('recording seed')
     ax2.set_ylabel('identity switches')
+    for a in (ax, ax2):
+        a.tick_params(axis='x', labelrotation=90, labelsize=6)
     fig.savefig(out / 'clear_room.png', format='png')
     plots = ['clear_room.png']
     picture = next((r['picture'] for r in results if r.get('picture')), None)
