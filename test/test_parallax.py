@@ -156,3 +156,23 @@ def test_decide_is_the_lower_median_of_the_cameras_that_see_the_floor_point(k):
                 assert disagree[y, x] == (lower > par.threshold)
             else:
                 assert not disagree[y, x]
+
+
+@pytest.mark.parametrize('n_known', [1, 2, 3])
+def test_a_still_place_needs_three_views_that_see_the_floor_behind_it(n_known):
+    """Two views' disagreements also meet where nothing stands (a phantom of the two-view
+    visual hull): the parallax cover of a place counts only when at least three cameras
+    see the floor behind a quarter of its silhouette; then it is the pooled share of those
+    pixels that disagree."""
+    room = make_room(n_cameras=3)
+    cue = PeopleCue(room, PeopleCueConfig(spacing=0.2, min_views=2))
+    names = list(room.cameras)
+    shown = {}
+    for k, name in enumerate(names):
+        cam = room.cameras[name]
+        disagree = np.ones((cam.height, cam.width), bool)
+        known = np.full((cam.height, cam.width), k < n_known)
+        shown[name] = (disagree, known)
+    cover = cue._parallax_cover(shown)
+    i = int(np.argmin(np.linalg.norm(cue.xy[:cue.n_places] - POST, axis=1)))
+    assert cover[i] == (1.0 if n_known >= 3 else 0.0)
