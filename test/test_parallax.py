@@ -156,3 +156,25 @@ def test_decide_is_the_lower_median_of_the_cameras_that_see_the_floor_point(k):
                 assert disagree[y, x] == (lower > par.threshold)
             else:
                 assert not disagree[y, x]
+
+
+@pytest.mark.parametrize('n_known, third_share', [(1, 0.0), (2, 0.0), (2, 0.05), (2, 0.2),
+                                                  (3, 0.0)])
+def test_a_still_place_needs_a_third_view_of_the_floor_behind_it(n_known, third_share):
+    """Two views' disagreements also meet where nothing stands (a phantom of the two-view
+    visual hull): the parallax cover of a place counts only when two cameras see the floor
+    behind a quarter of its silhouette and a third behind a tenth; then it is the pooled
+    share of those pixels that disagree (here all of them)."""
+    room = make_room(n_cameras=3)
+    cue = PeopleCue(room, PeopleCueConfig(spacing=0.2, min_views=2))
+    rng = np.random.default_rng(7)
+    shown = {}
+    for k, name in enumerate(room.cameras):
+        cam = room.cameras[name]
+        disagree = np.ones((cam.height, cam.width), bool)
+        share = 1.0 if k < n_known else third_share if k == n_known else 0.0
+        shown[name] = (disagree, rng.random((cam.height, cam.width)) < share)
+    cover = cue._parallax_cover(shown)
+    i = int(np.argmin(np.linalg.norm(cue.xy[:cue.n_places] - POST, axis=1)))
+    counted = n_known >= 3 or (n_known == 2 and third_share >= 0.1)
+    assert cover[i] == (1.0 if counted else 0.0)

@@ -393,16 +393,22 @@ class PeopleCue:
         """(P,) share of each place's floor-backed silhouette pixels that disagree with
         the other cameras' floor, pooled over the cameras ``shown`` (name -> (disagree,
         known) (H, W) bool), best orientation; 0 where fewer than two cameras see floor
-        behind a quarter of the silhouette (one view cannot place an object in depth)."""
+        behind a quarter of the silhouette (one view cannot place an object in depth) or
+        fewer than three behind a tenth of it: two views' disagreements meet also where
+        nothing stands (a phantom of the two-view visual hull: one view's line of sight
+        meets one object, the other's another, as between two chairs in a row), and a
+        third view that sees the floor there refutes it."""
         n = len(self.states)
-        hits, known, views = np.zeros(n), np.zeros(n), np.zeros(n, np.int64)
+        hits, known = np.zeros(n), np.zeros(n)
+        views, third = np.zeros(n, np.int64), np.zeros(n, np.int64)
         for name, (disagree, kn) in shown.items():
             seen_hyp = self._seen[name]
             h, k, area = ForegroundIntegral(disagree, ~kn).counts(seen_hyp.spans)
             hits[seen_hyp.index] += h
             known[seen_hyp.index] += k
             views[seen_hyp.index] += k >= 0.25 * np.maximum(area, 1)
-        cover = np.where(views >= 2, hits / np.maximum(known, 1.0), 0.0)
+            third[seen_hyp.index] += k >= 0.1 * np.maximum(area, 1)
+        cover = np.where((views >= 2) & (third >= 3), hits / np.maximum(known, 1.0), 0.0)
         return cover.reshape(len(self.config.orientations), self.n_places).max(axis=0)
 
     def _refine(self, xy: np.ndarray, score: np.ndarray, ok: np.ndarray,
