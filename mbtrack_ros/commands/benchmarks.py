@@ -161,11 +161,11 @@ def _found_at_start(result, within_s: float) -> dict:
     """``{'start_people': n, 'start_found': k}``: of the n people present in the first
     frame, the k matched to a track in some frame within ``within_s`` seconds of it."""
     m = result.matches_detail
+    persons, wait = m.time_to_track()
     first = int(m.stamp_ns.min())
-    present = set(m.person_id[m.stamp_ns == first].tolist())
-    early = m.matched & (m.stamp_ns <= first + int(within_s * 1e9))
-    return {'start_people': len(present),
-            'start_found': len(present & set(m.person_id[early].tolist()))}
+    present = np.isin(persons, m.person_id[m.stamp_ns == first])
+    return {'start_people': int(present.sum()),
+            'start_found': int(np.sum(present & (wait <= within_s)))}
 
 
 GHOST_S = 2.0   # a track matched to nobody for longer than this is a ghost, seconds

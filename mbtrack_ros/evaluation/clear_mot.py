@@ -76,11 +76,11 @@ class PersonFrameMatches:
         persons = np.unique(self.person_id)
         wait = np.full(persons.shape[0], np.inf)
         for k, p in enumerate(persons):
-            sel = self.person_id == p               # rows are sorted by stamp
+            sel = self.person_id == p
             stamps = self.stamp_ns[sel]
             hit = stamps[self.track_id[sel] >= 0]
             if hit.shape[0]:
-                wait[k] = (int(hit[0]) - int(stamps[0])) * 1e-9
+                wait[k] = (int(hit.min()) - int(stamps.min())) * 1e-9
         return persons.astype(np.int64), wait
 
 

@@ -88,7 +88,7 @@ class FloorParallax:
             if a not in images:
                 continue
             ia = images[a].astype(np.float32)
-            others, diffs, seen = [], [], []
+            others, diffs, seen, maps = [], [], [], []
             for b, mx, my, sees in self._maps[a]:
                 if b not in images:
                     continue
@@ -101,10 +101,9 @@ class FloorParallax:
                 diffs.append(np.maximum(np.maximum(ia - hi, lo - ia), 0.0).max(axis=-1))
                 seen.append(sees)
                 others.append(b)
+                maps.append((mx, my))
             if others:
-                out[a] = ParallaxEvidence(others, np.stack(diffs), np.stack(seen),
-                                          [(mx, my) for b, mx, my, _ in self._maps[a]
-                                           if b in others])
+                out[a] = ParallaxEvidence(others, np.stack(diffs), np.stack(seen), maps)
         return out
 
     def decide(self, evidence: ParallaxEvidence,
