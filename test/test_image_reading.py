@@ -4,6 +4,7 @@
 ``INTER_AREA`` and a brute-force area mean."""
 from __future__ import annotations
 
+import dataclasses
 import struct
 from fractions import Fraction
 
@@ -154,6 +155,58 @@ def test_recording_reader_reads_in_place_what_rosbags_deserialises(tmp_path):
         assert fs.images['cam1'].shape == (208, 370, 3)
         for cam in fs.images:
             np.testing.assert_array_equal(fs.images[cam], want[cam][k])
+
+
+def test_reader_process_gives_the_working_images_of_the_step_resize(tmp_path):
+    """``mbtrack replay`` reads in a child process (``ReaderProcess``) at the working size:
+    its frame sets are the in-process reader's (same images bit for bit, stamps, order,
+    errors, missing cameras, synchroniser warnings and dropped images), and their images
+    are those the tracker's step made from the full-size images (``Tracker.working_images``,
+    ``Camera.fit`` after decoding), bit for bit, for a 640x480 and a 1280x720 camera. A
+    caller that stops early stops the child."""
+    from mbtrack_ros.core.tracker import Tracker, TrackerConfig
+    from mbtrack_ros.recording.reader_process import ReaderProcess
+
+    rng = np.random.default_rng(9)
+    room = make_room(640, 480)
+    cams = dict(room.cameras)
+    cams['cam1'] = room.cameras['cam1'].scaled(1280, 720)
+    room = dataclasses.replace(room, cameras=cams)
+    messages = []
+    for k in range(8):
+        t = 10**9 + k * 66_666_667
+        messages.append(('/cam0/image_raw', _raw(rng, 'rgb8', 640, 480, t), t))
+        if k != 5:   # cam1 misses a frame set, and sends one image twice (dropped)
+            messages.append(('/cam1/image_raw', _raw(rng, 'bgr8', 1280, 720, t + 5), t + 5))
+        if k == 3:
+            messages.append(('/cam1/image_raw', _raw(rng, 'bgr8', 1280, 720, t + 5), t + 6))
+    bag = _bag(tmp_path / 'bag', messages)
+    tracker = Tracker(room, TrackerConfig())
+    assert set(tracker.resized_cameras) == {'cam0', 'cam1'}
+    with RecordingReader(bag) as reader:
+        full = list(reader.frames())
+        reader.decode_to(tracker.resized_cameras)
+        here = list(reader.frames())
+        warnings, dropped = list(reader.warnings), reader.sync.counters.dropped_frames
+        with ReaderProcess(reader, depth=2) as child:
+            there = list(child)
+        assert (child.warnings, child.dropped_frames) == (warnings, dropped)
+        assert dropped == 1 and any(fs.missing == ['cam1'] for fs in here)
+        with ReaderProcess(reader, depth=1) as early:
+            assert next(early).index == 0
+        assert early._child.returncode is not None   # stopped at close
+    assert len(full) == len(here) == len(there) == 8
+    for old, new, sent in zip(full, here, there):
+        assert (new.index, new.stamp_ns, new.stamps, new.missing, new.errors) == \
+            (sent.index, sent.stamp_ns, sent.stamps, sent.missing, sent.errors) == \
+            (old.index, old.stamp_ns, old.stamps, old.missing, old.errors)
+        step = tracker.working_images(old.images)
+        assert set(step) == set(new.images) == set(sent.images)
+        for cam, image in step.items():
+            work = tracker.calibration.cameras[cam]
+            assert image.shape == (work.height, work.width, 3)
+            np.testing.assert_array_equal(new.images[cam], image)
+            np.testing.assert_array_equal(sent.images[cam], image)
 
 
 def test_the_live_node_converts_a_message_as_the_replay_reads_it(tmp_path):

@@ -129,24 +129,35 @@ def test_corrupt_bag_keeps_tracks_so_far(recording, tmp_path, capsys):
     assert frames == set(range(len(frames)))  # every frame before the damage was tracked
 
 
-def test_wrong_image_size_mid_bag_is_one_line_error(recording, tmp_path, capsys, monkeypatch):
+def test_wrong_image_size_mid_bag_is_one_line_error(recording, tmp_path, capsys):
+    import shutil
+
     import cv2
 
-    from mbtrack_ros.recording import bag
+    from mbtrack_ros.core.camera import RoomCalibration
+    from mbtrack_ros.recording.bag import IMAGE, RecordingReader, RecordingWriter, _header, \
+        _T, typestore
 
-    original = bag.RecordingReader.frames
-
-    def frames(self):  # the reader yields one frame set with half-size images
-        for fs in original(self):
-            if fs.index == 6:
-                fs.images = {c: cv2.resize(im, (im.shape[1] // 2, im.shape[0] // 2))
-                             for c, im in fs.images.items()}
-            yield fs
-
-    monkeypatch.setattr(bag.RecordingReader, 'frames', frames)
+    rec = tmp_path / 'rec'   # the recording with half-size images in frame set 6
+    shutil.copytree(recording, rec, ignore=shutil.ignore_patterns('bag'))
+    calib = RoomCalibration.load(recording / 'calibration.yaml')
+    with RecordingReader(recording) as reader:
+        sets = [(fs.stamp_ns, dict(fs.images)) for fs in reader.frames()]
+    with RecordingWriter(rec / 'bag', calib) as writer:
+        for k, (stamp, images) in enumerate(sets):
+            if k != 6:
+                writer.write_frame(stamp, images)
+                continue
+            for cam, im in images.items():
+                half = cv2.resize(im, (im.shape[1] // 2, im.shape[0] // 2))
+                msg = _T[IMAGE](header=_header(stamp, calib.cameras[cam].frame_id),
+                                height=half.shape[0], width=half.shape[1], encoding='rgb8',
+                                is_bigendian=0, step=half.shape[1] * 3, data=half.reshape(-1))
+                writer._writer.write(writer._image_conn[cam], stamp,
+                                     typestore.serialize_cdr(msg, IMAGE))
     out = tmp_path / 'out'
-    code = main(['replay', str(recording), '--out', str(out), '--init-from',
-                 str(recording / 'ground_truth.csv'), '--particles', '30'])
+    code = main(['replay', str(rec), '--out', str(out), '--init-from',
+                 str(rec / 'ground_truth.csv'), '--particles', '30'])
     assert code == 1
     err = capsys.readouterr().err
     assert 'Traceback' not in err and 'frame set 6' in err

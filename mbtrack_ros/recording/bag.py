@@ -298,6 +298,28 @@ class RecordingReader:
         at a reduced scale); other cameras as they are."""
         self._to = dict(cameras)
 
+    def settings(self) -> dict:
+        """What :meth:`from_settings` needs to open the same reading again (a picklable
+        dict): the constructor's options with the cameras found, the size limits of
+        :meth:`limit_image_sizes` and the sizes of :meth:`decode_to`."""
+        found = getattr(self, '_connections', None)   # set when the bag was opened
+        return dict(path=self.path, cameras=list(found) if found else self._wanted,
+                    tolerance_ns=self.tolerance_ns,
+                    frame_rate=self.frame_rate, time_offsets=dict(self.time_offsets),
+                    timeout_ns=self.timeout_ns, sizes=dict(self._sizes),
+                    max_scale=self._max_scale, decode_to=dict(self._to))
+
+    @classmethod
+    def from_settings(cls, settings: dict) -> RecordingReader:
+        """A reader (not yet opened) with the :meth:`settings` of another one."""
+        s = dict(settings)
+        sizes, max_scale, to = s.pop('sizes'), s.pop('max_scale'), s.pop('decode_to')
+        reader = cls(s.pop('path'), **s)
+        if sizes:
+            reader.limit_image_sizes(sizes, max_scale=max_scale)
+        reader.decode_to(to)
+        return reader
+
     def __enter__(self) -> RecordingReader:
         try:
             reader = AnyReader([self.path], default_typestore=typestore)
