@@ -509,7 +509,8 @@ class Tracker:
     def working_images(self, images: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         """``images`` at the working size: those at a camera's input size are resized
         (area averaging, ``Camera.fit``), any other is passed on as it is (the likelihood
-        refuses a wrong size). :meth:`step` calls it; a reader thread may call it first."""
+        refuses a wrong size). :meth:`step` calls it; a reader may deliver them resized
+        instead (``RecordingReader.decode_to``)."""
         if not self._resize:
             return images
         cams = self.calibration.cameras
