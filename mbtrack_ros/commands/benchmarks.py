@@ -585,15 +585,15 @@ def _input_size_run(job: Job, workdir: Path) -> dict:
 def _input_size_report(results: list[dict], out: Path) -> Report:
     rows = [row for r in results for row in r['rows']]
     loads = ', '.join(f'{r["load"]:.1f}' for r in results)
+    sizes = [size for size in _SIZES
+             if any((row['width'], row['height']) == size for row in rows)]
     lines = [f'Mean over {len(results)} recording(s) (seeds from {FRESH_SEED}), each size '
              f'replayed twice; load average {loads} on {results[0]["cores"]} cores at the '
              'end of each recording\'s replays.', '',
              '| input | frames | MOTA | MOTP | ID switches | frames/s | frames/s in the tracker '
              '| CPU per frame set |', '| --- |' + ' ---: |' * 7]
-    for w, h in _SIZES:
+    for w, h in sizes:
         group = [row for row in rows if (row['width'], row['height']) == (w, h)]
-        if not group:
-            continue
         frames = sum(row['frames'] for row in group)
         lines.append(
             f'| {w}x{h} | {group[0]["frames"]} | {_pct(_mean([row["mota"] for row in group]))} '
@@ -608,7 +608,21 @@ def _input_size_report(results: list[dict], out: Path) -> Report:
               'the whole command (start-up included) and its child processes, divided by the '
               'frames. Target (#50): 640x480 and 1280x720 at least the MOTA and frames/s of '
               '320x240.']
-    return Report('\n'.join(lines))
+    fig = _figure(6.0, 3.0)   # each replay's frame rates, in the order they ran
+    ax = fig.add_subplot()
+    x = np.arange(len(sizes))
+    for key, label, colour, dx in (('frames_per_s', 'replay', 'tab:blue', -0.2),
+                                   ('tracker_frames_per_s', 'tracker', 'tab:orange', 0.2)):
+        for size_k, size in enumerate(sizes):
+            values = [row[key] for row in rows if (row['width'], row['height']) == size]
+            ax.plot(np.full(len(values), size_k + dx), values, 'o', color=colour,
+                    label=label if size_k == 0 else None)
+    ax.set_xticks(x, [f'{w}x{h}' for w, h in sizes])
+    ax.set_ylim(bottom=0)
+    ax.set_ylabel('frames/s (a dot per replay)')
+    ax.legend(fontsize=8)
+    fig.savefig(out / 'input_sizes.png', format='png')
+    return Report('\n'.join(lines), ('input_sizes.png',))
 
 
 # ------------------------------------------------------- the paper's experiments

@@ -1,7 +1,7 @@
 """Frame sets read, decoded and resized in a child process (``mbtrack replay``'s input path).
 
 Reading a recording costs CPU in proportion to its pixels: rosbags copies every message out
-of its chunk (and checks the chunk's CRC), and the decoder resizes each image to the
+of its chunk (and checks a chunk's CRC when it has one), and the decoder resizes each image to the
 tracker's working size (``RecordingReader.decode_to``). A 1280x720 camera moves 12 times
 the bytes of a 320x240 one. In a thread of the tracker's process that work holds the
 interpreter lock in its Python parts and copies, and the tracker's own threads (the
