@@ -334,11 +334,11 @@ class HJSFilter(_MarginalParticleFilter):
     the spatial-exclusion MRF on the particle weights (000 Eq. 16-18, 43) unless
     ``config.use_mrf`` is False (the ablation of 000 §VI-C). Update: the HJS likelihood
     ``measurement.hjs`` (000 Eq. 26-40) with the independently propagated priors as the
-    other targets' occluder weights (000 Eq. 34; for two targets the exact cavity of BP).
-    Posterior weights are BP belief x likelihood (000 Eq. 18, 41); they are both the step's
-    estimate and the weights the next step resamples by, so the particles carry the
-    exclusion from frame to frame as the joint filter's joint particles do (see the comments
-    in :meth:`step`; docs/hjs_fidelity.md).
+    other targets' occluder weights (000 Eq. 34). The step's estimate (``TrackUpdate``)
+    weighs the particles by BP belief x likelihood; the particles go on to the next step
+    weighted by the likelihood alone, so that every estimate carries one copy of the
+    exclusion and the particles none (see the comments in :meth:`step`;
+    docs/hjs_fidelity.md).
     """
 
     name = 'hjs'
@@ -378,21 +378,30 @@ class HJSFilter(_MarginalParticleFilter):
         # their prior. Their BP beliefs would carry the messages h sent them (000 Eq. 17:
         # target k's particles near h's cloud down-weighted), so h's own cloud would move
         # its occluders away from itself and the h-k exclusion would enter h's weights a
-        # second time, through its likelihood. For two targets the prior of k without h's
-        # message is the independently propagated one (the cavity of BP); the occluders
-        # are weighed by it.
+        # second time, through its likelihood, which the particles carry on to the next
+        # frame. For two targets the prior of k without h's message is the independently
+        # propagated one; the occluders are weighed by it, and the exclusion acts once, in
+        # the estimate below.
         result = measurement.hjs(particles, independent, models)
         t3 = time.perf_counter()
         with np.errstate(divide='ignore'):
             log_prior = [np.log(p) for p in prior]
-        # 000 Algorithm 1 / Eq. 41: posterior = BP belief x likelihood, and the next step
-        # resamples by it. The exclusion is thereby carried in the particles, as the joint
-        # filter carries it in its joint particles: two people hidden together (no depth
-        # evidence, e.g. both behind a third person) keep their order in depth, where
-        # clouds weighted by the likelihood alone diffuse through each other and come out
-        # in either order
-        # (test_filters.py::test_hidden_pair_keeps_its_order_as_the_joint_filter_does).
         updates = self._finish(ids, particles, log_prior, result.loglik, result)
+        if self.config.use_mrf and len(ids) > 1:
+            # The exclusion is a constraint on the joint state at every time step (000
+            # Eq. 13); a hard one is idempotent, delta^T = delta, so the exact joint filter
+            # applies it once however many frames pass. The HJS belief is a product of
+            # marginals: resampled by the beliefs above, the particles would carry this
+            # frame's messages into the next frame, which multiplies in new ones on top,
+            # m^T. Where the other target's position is uncertain (depth seen by one or
+            # two cameras) its message is a smooth ramp, and the repeated ramps push the
+            # tracks apart frame after frame. The particles are therefore carried on with
+            # the weights of the independently propagated prior times the likelihood
+            # (prior to BP: uniform), and every step's estimate carries one copy of the
+            # exclusion, the exact marginal of 000 Eq. 16 for two targets.
+            for k, tid in enumerate(ids):
+                self._logw[tid], _ = normalize_log_weights(
+                    np.asarray(result.loglik[k], dtype=np.float64))
         self.timings = {'predict': t1 - t0, 'mrf': t2 - t1, 'update': t3 - t2,
                         'posterior': time.perf_counter() - t3}
         return updates
