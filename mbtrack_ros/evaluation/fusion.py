@@ -15,7 +15,7 @@ itself.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -143,7 +143,8 @@ def fusion_vs_single(recording: str | Path, config: TrackerConfig | None = None,
             t2 = time.process_time()
             scoring[0] = 0.0
             for n, (fmt, data) in coded.items():   # what a JPEG working image decodes to
-                frames[n].image = decode_compressed(fmt, data)
+                # (the stage keeps its own frame: it scores particles on the raw image)
+                frames[n] = replace(frames[n], image=decode_compressed(fmt, data))
             for n, regions in bank.receive(frames).items():
                 stages[n].set_regions(*regions)
             b = fusion.step(fs.stamp_ns, {n: f.image for n, f in frames.items()},
