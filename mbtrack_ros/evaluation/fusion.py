@@ -43,8 +43,9 @@ class FusionComparison:
             tracker's steps), ``'stages'`` (all camera stages, with the JPEG coding of
             ``jpeg_quality``) and ``'fusion'`` (the fusion tracker: the masks handed over,
             JPEG decoding, its steps); the three run one after another.
-        fusion_timings: the fusion tracker's step timings summed, wall seconds:
-            ``'filter'`` (prediction, likelihood in every camera, MRF), ``'detect_search'``
+        fusion_timings: the fusion tracker's step timings summed, wall seconds, without
+            the camera stages' scoring: ``'filter'`` (prediction, likelihood in every
+            camera or the stages' answers taken, MRF), ``'detect_search'``
             (the search for new people), ``'detect'`` (all detection work, the search
             included), ``'total'``.
         started: frame sets of the start-up: up to and including the first one in which
@@ -114,13 +115,15 @@ def fusion_vs_single(recording: str | Path, config: TrackerConfig | None = None,
     stages = {n: CameraStage(c, background, working_pixels=config.working_pixels)
               for n, c in calibration.cameras.items()}
     out = FusionComparison()
-    scoring = [0.0]   # thread CPU seconds of the stages' scoring in this frame set
+    # thread CPU and wall seconds of the stages' scoring in this frame set
+    scoring = [0.0, 0.0]
 
     def scorer(name: str):
         def score(request):
-            t = time.thread_time()
+            t, w = time.thread_time(), time.perf_counter()
             got = stages[name].score(request)
             scoring[0] += time.thread_time() - t   # += of a float: atomic under the GIL
+            scoring[1] += time.perf_counter() - w
             if got is not None:
                 out.scored += 1
                 out.score_bytes['request'] += request.nbytes
@@ -141,7 +144,7 @@ def fusion_vs_single(recording: str | Path, config: TrackerConfig | None = None,
                 coded = {n: encode_compressed(f.image, 'jpeg', quality=jpeg_quality)
                          for n, f in frames.items()}
             t2 = time.process_time()
-            scoring[0] = 0.0
+            scoring[:] = [0.0, 0.0]
             for n, (fmt, data) in coded.items():   # what a JPEG working image decodes to
                 # (the stage keeps its own frame: it scores particles on the raw image)
                 frames[n] = replace(frames[n], image=decode_compressed(fmt, data))
@@ -152,8 +155,9 @@ def fusion_vs_single(recording: str | Path, config: TrackerConfig | None = None,
             t3 = time.process_time() - scoring[0]   # the stages' scoring is theirs
             out.cpu['single'] += t1 - t0
             out.cpu['fusion'] += t3 - t2
-            for key in out.fusion_timings:
-                out.fusion_timings[key] += b.timings.get(key, 0.0)
+            for key in out.fusion_timings:   # without the stages' scoring (the filter's)
+                out.fusion_timings[key] += b.timings.get(key, 0.0) \
+                    - (scoring[1] if key in ('filter', 'total') else 0.0)
             xy = np.array([t.mean[:2] for t in b.tracks]).reshape(-1, 2)
             velocity = np.array([t.mean[2:4] for t in b.tracks]).reshape(-1, 2)
             heights = np.array([t.height for t in b.tracks])
