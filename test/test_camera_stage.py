@@ -188,7 +188,7 @@ def test_stage_scores_particles_as_the_tracker_does(room, rng):
     tracker.set_images({'cam0': image})
     tracker.set_foreground({'cam0': fg}, undecided={'cam0': possible}, neutral=0.3)
     again = tracker.hjs(particles, weights, models)
-    assert requests[0].key is not None and requests[1].key is None
+    assert requests[0].key_targets.tolist() == [0, 1] and len(requests[1].key_targets) == 0
     stage = CameraStage(cam)
     stage.last = CameraFrame(image, fg, possible, fg)
     for k in range(2):
@@ -198,8 +198,18 @@ def test_stage_scores_particles_as_the_tracker_does(room, rng):
         for a, b, c in zip(local.loglik, again.loglik, restarted.loglik):
             np.testing.assert_array_equal(a, b)
             np.testing.assert_array_equal(a, c)
-    assert requests[2].key is None and replies[2] is None and requests[3].key is not None
-    assert replies[3] is not None
+    assert len(requests[2].key_targets) == 0 and replies[2] is None
+    assert requests[3].key_targets.tolist() == [0, 1] and replies[3] is not None
+    # one model's key views change: only they are sent again
+    models[1].histograms = rng.random((1, 3, 512))
+    local = model().hjs(particles, weights, models)
+    for k in range(2):
+        tracker.set_images({'cam0': image})
+        tracker.set_foreground({'cam0': fg}, undecided={'cam0': possible}, neutral=0.3)
+        changed = tracker.hjs(particles, weights, models)
+        for a, b in zip(local.loglik, changed.loglik):
+            np.testing.assert_array_equal(a, b)
+    assert requests[4].key_targets.tolist() == [1] and len(requests[5].key_targets) == 0
     # a stage with no frame answers None: the tracker scores the camera itself
     idle = CameraStage(cam)
     fallback = model({'cam0': lambda r: lambda: idle.score(r)}).hjs(particles, weights,

@@ -19,19 +19,23 @@ def _request(rng, n=7, k=2, v=3) -> CameraRequest:
                          0.15, 2, 20, True, 0.3)
 
 
-@pytest.mark.parametrize('with_key', [True, False])
-def test_request_round_trip(rng, with_key):
+@pytest.mark.parametrize('versions', [True, False])
+def test_request_round_trip(rng, versions):
+    """With versions only the key views of ``key_targets`` travel; without, every
+    target's, under versions of their own."""
     sent = _request(rng)
-    if not with_key:
-        sent = replace(sent, key=None, separable=True, coverage=False)
+    if versions:
+        sent = replace(sent, key=sent.key[[1]], versions=np.array([5, 9]),
+                       key_targets=np.array([1]), separable=True, coverage=False)
     seq, stamp, got = read_request(request_message(41, 1_700_000_000_123_456_789, sent))
     assert (seq, stamp) == (41, 1_700_000_000_123_456_789)
-    for name in ('states', 'target', 'prior', 'heights', 'widths', 'view_angles', 'n_views'):
+    for name in ('states', 'target', 'prior', 'heights', 'widths', 'view_angles', 'n_views',
+                 'key'):
         np.testing.assert_array_equal(getattr(got, name), getattr(sent, name))
-    if with_key:
-        np.testing.assert_array_equal(got.key, sent.key)
+    if versions:
+        assert got.versions.tolist() == [5, 9] and got.key_targets.tolist() == [1]
     else:
-        assert got.key is None
+        assert got.versions.tolist() == [-1, -2] and got.key_targets.tolist() == [0, 1]
     for name in ('chair', 'separable', 'two_sigma_sq', 'd_occ', 'row_step', 'min_visible',
                  'coverage', 'neutral'):
         assert getattr(got, name) == getattr(sent, name), name

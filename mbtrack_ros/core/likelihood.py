@@ -243,9 +243,8 @@ class CameraRequest:
         chair: hip height when sitting, metres.
         view_angles: (K, V) key-view angles of the targets, radians (zero padded).
         n_views: (K,) int64 key views of each target.
-        key: (K, V, 1536) key-view histograms (``appearance.key_view_stack``); None: those
-            of the camera's last request (sent again only when they change: they are most
-            of a request's bytes).
+        key: (K, V, 1536) key-view histograms (``appearance.key_view_stack``), or with
+            ``key_targets`` only those targets' (M, V, 1536).
         separable: each target alone, w* = 1 (003 Eq. 3), else HJS (000 Algorithm 1).
         two_sigma_sq: 2 sigma^2 of 000 Eq. 19.
         d_occ: occlusion penalty of 000 Eq. 26.
@@ -255,6 +254,11 @@ class CameraRequest:
         coverage: count each silhouette's foreground coverage
             (:meth:`MeasurementModel.set_foreground`).
         neutral: the coverage an undecided pixel counts as.
+        versions: (K,) int64 version of each target's key views (a new one whenever they
+            change) or None; with it a camera stage keeps the key views it was sent and
+            ``key_targets`` (M,) int64 names the targets whose views ``key`` holds (the
+            others' came with earlier requests: the key views are most of a request's
+            bytes, and only a changed model's are sent again).
     """
 
     states: np.ndarray
@@ -265,7 +269,7 @@ class CameraRequest:
     chair: float
     view_angles: np.ndarray
     n_views: np.ndarray
-    key: np.ndarray | None
+    key: np.ndarray
     separable: bool
     two_sigma_sq: float
     d_occ: float
@@ -273,12 +277,15 @@ class CameraRequest:
     min_visible: int
     coverage: bool = False
     neutral: float = 0.5
+    versions: np.ndarray | None = None
+    key_targets: np.ndarray | None = None
 
     @property
     def nbytes(self) -> int:
         """Bytes of its arrays (what a message carrying it needs, about)."""
         return sum(a.nbytes for a in (self.states, self.target, self.prior, self.heights,
-                                      self.widths, self.view_angles, self.n_views, self.key)
+                                      self.widths, self.view_angles, self.n_views, self.key,
+                                      self.versions, self.key_targets)
                    if a is not None)
 
 
@@ -409,8 +416,10 @@ class MeasurementModel:
         self._camera_args: dict[str, tuple] = {}
         # camera name -> the camera stage that scores the particles in it (set_scorers)
         self._scorers: dict[str, Scorer] = {}
-        self._last_key: np.ndarray | None = None   # the key views of the last evaluation
-        self._sent_key: dict[str, np.ndarray | None] = {}   # camera -> key views it has
+        # id of a model's key views -> (them, their version): a version per distinct key views
+        self._versions: dict[int, tuple[np.ndarray, int]] = {}
+        self._next_version = itertools.count()
+        self._sent_versions: dict[str, set[int]] = {}   # camera -> key views it has
         self._offsets: dict[str, float] = {}   # set_capture_offsets()
 
     # -- images ---------------------------------------------------------------------------
@@ -453,7 +462,21 @@ class MeasurementModel:
             if name not in self.calibration.cameras:
                 raise LikelihoodError(f'scorer for unknown camera {name!r}')
         self._scorers = dict(scorers)
-        self._sent_key = {}
+        self._sent_versions = {}
+
+    def _key_versions(self, models: Sequence[PersonModel]) -> np.ndarray:
+        """(K,) int64 version of each model's key views: the same while they stay the same
+        array (``PersonModel`` recomputes them when its views change), a new one after."""
+        held, out = {}, np.empty(len(models), np.int64)
+        for k, m in enumerate(models):
+            views = m._completed()
+            entry = self._versions.get(id(views))
+            if entry is None or entry[0] is not views:
+                entry = (views, next(self._next_version))
+            held[id(views)] = entry     # holds the array: its id is not reused meanwhile
+            out[k] = entry[1]
+        self._versions = held
+        return out
 
     @staticmethod
     def _take_scores(name: str, got: CameraScores, rows: CameraScores) -> None:
@@ -795,11 +818,7 @@ class MeasurementModel:
                 if name in self._images and parts]
         t0 = time.perf_counter()
         states, target, prior, key = self._stack(parts, priors, models)
-        if self._scorers:   # the key views as last time: the same array (sent once)
-            last = self._last_key
-            if last is not None and last.shape == key.shape and np.array_equal(last, key):
-                key = last
-            self._last_key = key
+        versions = self._key_versions(models) if self._scorers else None
         # everything a camera thread needs, prepared once: its work is then one numba call
         # that runs without the GIL (the threads do not wait for each other's Python)
         heights = np.array([m.height for m in models], dtype=np.float64)[target]
@@ -827,11 +846,13 @@ class MeasurementModel:
         asked = {}
         for _, name in cams:
             scorer = self._scorers.get(name)
-            if scorer is not None:   # key views the stage answered with already: not again
+            if scorer is not None:   # the key views the stage has already are not sent
                 request = request_of(name)
-                known = self._sent_key.get(name) is key
-                asked[name] = (request, scorer(replace(request, key=None) if known
-                                               else request))
+                have = self._sent_versions.get(name, ())
+                new = np.array([k for k, v in enumerate(versions.tolist()) if v not in have],
+                               np.int64)
+                asked[name] = (request, scorer(replace(request, key=key[new], key_targets=new,
+                                                       versions=versions)))
 
         def one(i: int) -> float:
             name = cams[i][1]
@@ -839,8 +860,9 @@ class MeasurementModel:
             rows = CameraScores(cam_loglik[i], cam_visible[i], cam_inside[i], cam_cover[i])
             if name in asked:
                 request, answer = asked[name]
-                got = answer()
-                self._sent_key[name] = key if got is not None else None
+                got = answer()    # the stage keeps the key views of this request only
+                self._sent_versions[name] = set(versions.tolist()) if got is not None \
+                    else set()
             else:
                 request, got = request_of(name), None
             if got is not None:                 # the camera's own stage scored them

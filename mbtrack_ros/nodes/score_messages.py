@@ -9,15 +9,16 @@ score the frame set's particles in its camera (the camera's share of the HJS lik
 .CameraScores`. Both travel as ``std_msgs/UInt8MultiArray`` (no ``layout``) whose bytes are,
 little endian::
 
-    request:  b'MBSQ', version u16 (1), flags u16 (1 separable, 2 coverage, 4 key views
-              included), seq u32, stamp i64 (ns, the camera's frame), P u32 (particles),
-              K u32 (targets), V u32 (key views per target), row_step u32, min_visible u32,
-              chair f64, two_sigma_sq f64, d_occ f64, neutral f64; then states (P, 6) f64,
-              target (P,) i64, prior (P,) f64, heights (P,) f64, widths (P,) f64,
-              view_angles (K, V) f64, n_views (K,) i64 and, with flag 4, key views
-              (K, V, 1536) f64
+    request:  b'MBSQ', version u16 (1), flags u16 (1 separable, 2 coverage), seq u32,
+              stamp i64 (ns, the camera's frame), P u32 (particles), K u32 (targets),
+              V u32 (key views per target), M u32 (targets whose key views are sent),
+              row_step u32, min_visible u32, chair f64, two_sigma_sq f64, d_occ f64,
+              neutral f64; then states (P, 6) f64, target (P,) i64, prior (P,) f64,
+              heights (P,) f64, widths (P,) f64, view_angles (K, V) f64, n_views (K,) i64,
+              versions (K,) i64 (of each target's key views), key_targets (M,) i64 and
+              their key views (M, V, 1536) f64
     answer:   b'MBSR', version u16 (1), flags u16 (1: no scores, the camera has no such
-              frame or lacks the key views), seq u32, stamp i64, P u32, K u32; then loglik
+              frame or lacks key views of earlier requests), seq u32, stamp i64, P u32, K u32; then loglik
               (P,), visible (K,), inside (P,), cover (P,) f64
 
 ``seq`` pairs an answer with its request. The decoders raise :class:`ScoreMessageError`
@@ -35,10 +36,10 @@ from mbtrack_ros.core.likelihood import CameraRequest, CameraScores
 __all__ = ['ScoreMessageError', 'read_request', 'read_scores', 'request_message',
            'scores_message']
 
-_REQUEST = struct.Struct('<4sHHIqIIIIIdddd')
+_REQUEST = struct.Struct('<4sHHIqIIIIIIdddd')
 _ANSWER = struct.Struct('<4sHHIqII')
 _VERSION = 1
-_SEPARABLE, _COVERAGE, _KEY = 1, 2, 4
+_SEPARABLE, _COVERAGE = 1, 2
 _NONE = 1
 _HIST = 1536
 MAX_PARTICLES = 1_000_000   # bounded work and memory per message
@@ -55,18 +56,22 @@ def _bytes(msg) -> memoryview:
 
 
 def request_message(seq: int, stamp_ns: int, request: CameraRequest) -> UInt8MultiArray:
-    """A request as a ``std_msgs/UInt8MultiArray`` (module docstring)."""
+    """A request as a ``std_msgs/UInt8MultiArray`` (module docstring); without
+    ``versions`` every target's key views go, under versions of their own (-1, -2, ...)."""
     r = request
     n, k = len(r.states), len(r.n_views)
     v = int(np.shape(r.view_angles)[1]) if k else 0
-    flags = (_SEPARABLE if r.separable else 0) | (_COVERAGE if r.coverage else 0) \
-        | (_KEY if r.key is not None else 0)
+    versions, targets = r.versions, r.key_targets
+    if versions is None or targets is None:
+        versions, targets = -1 - np.arange(k), np.arange(k)
+    m = len(targets)
+    flags = (_SEPARABLE if r.separable else 0) | (_COVERAGE if r.coverage else 0)
     parts = [_REQUEST.pack(b'MBSQ', _VERSION, flags, seq & 0xFFFFFFFF, int(stamp_ns), n, k, v,
-                           int(r.row_step), int(r.min_visible), float(r.chair),
+                           m, int(r.row_step), int(r.min_visible), float(r.chair),
                            float(r.two_sigma_sq), float(r.d_occ), float(r.neutral))]
     for a, dtype in ((r.states, '<f8'), (r.target, '<i8'), (r.prior, '<f8'),
                      (r.heights, '<f8'), (r.widths, '<f8'), (r.view_angles, '<f8'),
-                     (r.n_views, '<i8')) + (((r.key, '<f8'),) if r.key is not None else ()):
+                     (r.n_views, '<i8'), (versions, '<i8'), (targets, '<i8'), (r.key, '<f8')):
         parts.append(np.ascontiguousarray(a, dtype).tobytes())
     msg = UInt8MultiArray()
     msg.data = b''.join(parts)
@@ -74,35 +79,34 @@ def request_message(seq: int, stamp_ns: int, request: CameraRequest) -> UInt8Mul
 
 
 def read_request(msg) -> tuple[int, int, CameraRequest]:
-    """(seq, stamp ns, request) of a request message; :class:`ScoreMessageError`."""
+    """(seq, stamp ns, request) of a request message (its ``versions`` and
+    ``key_targets`` set); :class:`ScoreMessageError`."""
     data = _bytes(msg)
     if bytes(data[:4]) != b'MBSQ':
         raise ScoreMessageError('not a score request')
     if len(data) < _REQUEST.size:
         raise ScoreMessageError(f'score request of {len(data)} bytes')
-    (magic, version, flags, seq, stamp, n, k, v, row_step, min_visible, chair, two_sigma_sq,
-     d_occ, neutral) = _REQUEST.unpack_from(data)
+    (magic, version, flags, seq, stamp, n, k, v, m, row_step, min_visible, chair,
+     two_sigma_sq, d_occ, neutral) = _REQUEST.unpack_from(data)
     if magic != b'MBSQ' or version != _VERSION:
         raise ScoreMessageError(f'not a score request of version {_VERSION}')
-    if n > MAX_PARTICLES or k * max(v, 1) > MAX_VIEWS:
+    if n > MAX_PARTICLES or k * max(v, 1) > MAX_VIEWS or m > k:
         raise ScoreMessageError(f'score request too large ({n} particles, {k}x{v} views)')
     shapes = [((n, 6), '<f8'), ((n,), '<i8'), ((n,), '<f8'), ((n,), '<f8'), ((n,), '<f8'),
-              ((k, v), '<f8'), ((k,), '<i8')]
-    if flags & _KEY:
-        shapes.append(((k, v, _HIST), '<f8'))
+              ((k, v), '<f8'), ((k,), '<i8'), ((k,), '<i8'), ((m,), '<i8'),
+              ((m, v, _HIST), '<f8')]
     need = _REQUEST.size + 8 * sum(int(np.prod(s)) for s, _ in shapes)
     if len(data) != need:
         raise ScoreMessageError(f'score request of {len(data)} bytes, expected {need}')
-    arrays, at = [], _REQUEST.size
+    a, at = [], _REQUEST.size
     for shape, dtype in shapes:
         size = 8 * int(np.prod(shape))
-        arrays.append(np.frombuffer(data[at:at + size], dtype).reshape(shape))
+        a.append(np.frombuffer(data[at:at + size], dtype).reshape(shape))
         at += size
-    key = arrays[7] if flags & _KEY else None
     return seq, stamp, CameraRequest(
-        arrays[0], arrays[1], arrays[2], arrays[3], arrays[4], chair, arrays[5], arrays[6],
-        key, bool(flags & _SEPARABLE), two_sigma_sq, d_occ, row_step, min_visible,
-        bool(flags & _COVERAGE), neutral)
+        a[0], a[1], a[2], a[3], a[4], chair, a[5], a[6], a[9], bool(flags & _SEPARABLE),
+        two_sigma_sq, d_occ, row_step, min_visible, bool(flags & _COVERAGE), neutral,
+        versions=a[7], key_targets=a[8])
 
 
 def scores_message(seq: int, stamp_ns: int, scores: CameraScores | None) -> UInt8MultiArray:

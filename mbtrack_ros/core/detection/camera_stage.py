@@ -160,7 +160,8 @@ class CameraStage:
         self.last: CameraFrame | None = None   # the last frame processed
         self._camera_args = (*self.camera.depth_row, *self.camera.projection_parameters)
         self._workspaces = _Workspaces()
-        self._key: np.ndarray | None = None   # the key views of the last score request
+        # version -> (V, 1536) key views of a target, those of the last score request
+        self._views: dict[int, np.ndarray] = {}
         # (frame, its colour bins, its foreground's prefix sums) of the last frame scored
         self._scored: tuple[CameraFrame, np.ndarray, ForegroundIntegral | None] | None = None
 
@@ -217,6 +218,36 @@ class CameraStage:
         self.last = CameraFrame(im, fg, possible, self.model.presence())
         return self.last
 
+    def _completed(self, request: CameraRequest) -> CameraRequest | None:
+        """``request`` with every target's key views (K, V, 1536): those it carries for
+        ``key_targets``, the others' by version from the last request (kept in turn:
+        this request's only); None when one is missing."""
+        try:
+            versions = np.asarray(request.versions, np.int64).reshape(-1)
+            targets = np.asarray(request.key_targets, np.int64).reshape(-1)
+            n_views = np.asarray(request.n_views, np.int64).reshape(-1)
+            sent = np.asarray(request.key, np.float64)
+            k, v = len(versions), int(np.shape(request.view_angles)[1])
+            if (len(n_views) != k or sent.shape != (len(targets), v, 1536)
+                    or (len(targets) and not 0 <= targets.min() <= targets.max() < k)
+                    or (k and not 1 <= n_views.min() <= n_views.max() <= v)):
+                raise ValueError
+        except (TypeError, ValueError, IndexError) as err:
+            raise DetectionError(f'camera {self.full.name!r}: malformed score request') \
+                from err
+        views = dict(self._views)
+        for j, t in enumerate(targets.tolist()):
+            views[int(versions[t])] = sent[j, :n_views[t]]
+        key = np.zeros((k, v, 1536))
+        for t in range(k):
+            got = views.get(int(versions[t]))
+            if got is None or len(got) != n_views[t]:
+                self._views = {}
+                return None
+            key[t, :n_views[t]] = got
+        self._views = {int(versions[t]): key[t, :n_views[t]] for t in range(k)}
+        return replace(request, key=key, key_targets=None, versions=None)
+
     def score(self, request: CameraRequest, frame: CameraFrame | None = None
               ) -> CameraScores | None:
         """The particles of ``request`` scored in this camera (the camera's share of the
@@ -224,8 +255,9 @@ class CameraStage:
         on ``frame`` (default: the last one :meth:`process` gave; None when there is none):
         its working image, and its foreground with the possible foreground undecided
         (what the tracker's :meth:`MeasurementModel.set_foreground` takes in one
-        process). A request without key views takes the last request's; None when there
-        was none. Raises :class:`DetectionError` for a malformed request."""
+        process). A request with ``key_targets`` takes the other targets' key views from
+        the last request by version (None when they are not there: a restarted stage).
+        Raises :class:`DetectionError` for a malformed request."""
         frame = self.last if frame is None else frame
         if frame is None:
             return None
@@ -237,13 +269,12 @@ class CameraStage:
                 integral = ForegroundIntegral(frame.foreground, undecided)
             self._scored = (frame, np.zeros((0, 0), np.int16), integral)
         _, bins, integral = self._scored
-        if request.key is None:      # the key views of the last request
-            if self._key is None:
+        if request.key_targets is not None:   # key views of earlier requests completed
+            request = self._completed(request)
+            if request is None:
                 return None
-            request = replace(request, key=self._key)
         r = _checked(request, self.full.name)
         n, k = len(r.states), len(r.key)
-        self._key = r.key
         out = CameraScores.empty(n, k)
         try:
             bins = score_camera(self._camera_args, frame.image, bins, lambda: integral,
