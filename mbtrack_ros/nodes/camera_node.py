@@ -56,6 +56,7 @@ from mbtrack_ros.core.camera import CalibrationError, RoomCalibration
 from mbtrack_ros.core.detection import DetectionError
 from mbtrack_ros.core.detection.camera_stage import (
     CameraStage, pack_masks, unpack_regions)
+from mbtrack_ros.core.likelihood import CameraRequest
 from mbtrack_ros.core.tracker import TrackerConfig, TrackerError, length_scale
 from mbtrack_ros.nodes.conversions import (
     ImageConversionError, compressed_to_rgb, image_to_rgb, mono_to_image, rgb_to_compressed,
@@ -259,6 +260,12 @@ class CameraNode(Node):
             image[:, 4 * k:4 * k + 8] = 255 - image[:, 4 * k:4 * k + 8]
             stage.process(image)
             stage.awaiting_regions = False
+        # and the scoring kernel (the first score request is then answered within the
+        # tracker's score_timeout)
+        stage.score(CameraRequest(np.zeros((1, 6)), np.zeros(1, np.int64), np.ones(1),
+                                  np.full(1, 1.7), np.full(1, 0.5), 0.45, np.zeros((1, 1)),
+                                  np.ones(1, np.int64), np.full((1, 1, 1536), 1 / 512),
+                                  False, 0.0288, 0.15, 1, 20, True, 0.3))
 
     def warn_once(self, cause: str, text: str) -> None:
         now = time.monotonic()
