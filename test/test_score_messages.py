@@ -64,3 +64,44 @@ def test_malformed_messages_are_refused(rng):
     empty = type(msg)()
     with pytest.raises(ScoreMessageError, match='0 bytes'):
         read_scores(empty)
+
+
+def test_remote_scorer_waits_until_the_timeout_then_backs_off(rng):
+    """The fusion tracker's side: an answer in time is taken; a camera that misses the
+    timeout is not waited for during the next 1, 2, 4, ... requests (an answer there
+    already is taken), and one answer in time resets the back-off; a late answer (to an
+    earlier request) is dropped."""
+    import time
+
+    from mbtrack_ros.nodes.fusion_input import RemoteScorer
+
+    sent, warned = [], []
+    scorer = RemoteScorer('cam0', sent.append, 0.05, lambda cause, text: warned.append(text))
+    scores = CameraScores(rng.random(3), rng.random(1), rng.random(3), rng.random(3))
+
+    def answer(k=-1):
+        seq, _, _ = read_request(sent[k])
+        scorer.on_answer(scores_message(seq, 0, scores))
+
+    request = _request(rng, n=3, k=1, v=1)
+    wait = scorer(request)
+    answer()
+    np.testing.assert_array_equal(wait().loglik, scores.loglik)        # in time
+    t = time.monotonic()
+    assert scorer(request)() is None and time.monotonic() - t >= 0.05  # missed: waited
+    assert warned and scorer.missed == 1
+    wait = scorer(request)                      # backing off: 1 request not waited for
+    t = time.monotonic()
+    assert wait() is None and time.monotonic() - t < 0.04
+    assert scorer(request)() is None and scorer.missed == 2            # waited, missed
+    for _ in range(2):                                                 # back-off 2
+        wait = scorer(request)
+        answer(-2)                                                     # a late answer
+        assert wait() is None
+    wait = scorer(request)                      # waited again, answered: back-off reset
+    answer()
+    assert wait() is not None
+    assert scorer(request)() is None and scorer.missed == 3
+    wait = scorer(request)                      # back-off 1, but the answer is there
+    answer()
+    assert wait() is not None and scorer.answered == 3 and scorer.asked == len(sent)

@@ -17,8 +17,8 @@ frame set's particles in its camera (the camera's share of the HJS likelihood): 
 filter's likelihood sends every camera its request
 (``<foreground_topic's namespace>/score_request``) and waits up to ``score_timeout`` for
 the answers (``.../scores``, :mod:`~mbtrack_ros.nodes.score_messages`); a camera that did
-not answer in time is scored here, as in one process, without waiting, until an answer of
-it arrives again.
+not answer in time is scored here, as in one process, and not waited for during a back-off
+(:class:`RemoteScorer`).
 """
 from __future__ import annotations
 
@@ -59,17 +59,25 @@ class RemoteScorer:
     """One camera node scoring the tracker's particles (a
     :data:`~mbtrack_ros.core.likelihood.Scorer` of :meth:`MeasurementModel.set_scorers`):
     called by the tracker's step with the camera's request, it publishes it and returns
-    the wait for the answer, at most ``timeout`` s (wall clock). After a wait in vain the
-    camera is absent: its requests still go out, but nobody waits for them (the tracker
-    scores it) until an answer of it arrives. ``stamp_ns``: the capture stamp of the
-    camera's frame in the frame set being stepped (:meth:`FusionInput.prepare`)."""
+    the wait for the answer, until ``timeout`` s (wall clock) after the request (the
+    requests of a frame set go out together, so their waits end together). A camera that
+    did not answer in time is not waited for (the tracker scores it; its requests still go
+    out) for the next 1, 2, 4, ... up to ``MAX_BACKOFF`` requests, one answer in time
+    resetting it: a dead or overloaded camera node costs the tracker at most one timeout
+    per back-off, and one that comes back is asked again within it. ``stamp_ns``: the
+    capture stamp of the camera's frame in the frame set being stepped
+    (:meth:`FusionInput.prepare`)."""
+
+    MAX_BACKOFF = 64   # requests (about 4 s at 15 Hz)
 
     def __init__(self, camera: str, publish, timeout: float, warn) -> None:
         self.camera, self.publish, self.timeout, self.warn = camera, publish, timeout, warn
         self.stamp_ns = 0
         self.asked = 0       # requests sent
         self.answered = 0    # answers with scores taken
-        self.absent = False
+        self.missed = 0      # waits in vain
+        self._backoff = 1
+        self._skip_until = 0  # requests up to this one are not waited for
         self._seq = itertools.count(1)
         self._waiting = 0    # seq of the request being waited for
         self._answer = None
@@ -79,36 +87,46 @@ class RemoteScorer:
         seq = next(self._seq)
         with self._cond:
             self._waiting, self._answer = seq, None
+        end = time.monotonic() + self.timeout
         self.publish(request_message(seq, self.stamp_ns, request))
         self.asked += 1
-        return lambda: self._wait(seq)
+        if self.asked <= self._skip_until:   # not waited for: taken if there already
+            return self._ready
+        return lambda: self._wait(end)
 
-    def _wait(self, seq: int):
-        if self.absent:
-            return None
-        end = time.monotonic() + self.timeout
+    def _ready(self):
+        with self._cond:
+            answer, self._answer, self._waiting = self._answer, None, 0
+        scores = None if answer is None else answer[1]
+        self.answered += scores is not None
+        return scores
+
+    def _wait(self, end: float):
         with self._cond:
             while self._answer is None and (left := end - time.monotonic()) > 0:
                 self._cond.wait(left)
             answer, self._answer, self._waiting = self._answer, None, 0
         if answer is None:
-            self.absent = True
+            self.missed += 1
+            self._skip_until = self.asked + self._backoff
+            self._backoff = min(2 * self._backoff, self.MAX_BACKOFF)
             self.warn(f'{self.camera}:scores', f'{self.camera}: no scores from its camera '
-                      f'node within {self.timeout} s: scored by the tracker until it answers')
+                      f'node within {self.timeout} s: scored by the tracker meanwhile')
             return None
+        self._backoff = 1
         scores = answer[1]
         self.answered += scores is not None
         return scores
 
     def on_answer(self, msg) -> None:
-        """An answer message (the executor's thread)."""
+        """An answer message (the executor's thread); one to an earlier request is late
+        and dropped."""
         try:
             seq, _, scores = read_scores(msg)
         except ScoreMessageError as err:
             self.warn(f'{self.camera}:scores', f'{self.camera}: bad scores message: {err}')
             return
         with self._cond:
-            self.absent = False    # it answers (this request or a late one): ask it again
             if seq == self._waiting:
                 self._answer = (seq, scores)
                 self._cond.notify_all()

@@ -26,7 +26,8 @@ camera.<name>.foreground_topic  string     foreground mode: the camera node's ma
 score_timeout                   double     foreground mode: wall-clock wait for a camera
                                            node's scores of the frame set's particles, s;
                                            a camera that did not answer in time is scored
-                                           by the tracker until it answers again; 0 = the
+                                           by the tracker and not waited for during a
+                                           back-off (1, 2, 4, ... 64 frame sets); 0 = the
                                            tracker scores every camera itself (0.05)
 camera.<name>.transport         string     per-camera override of ``image_transport``
 camera.<name>.camera_info_topic string     optional CameraInfo topic for a size check ('')
