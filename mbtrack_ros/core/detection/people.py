@@ -46,8 +46,9 @@ found by the **floor parallax** of the last frame set instead (:meth:`PeopleCue.
 the other cameras see behind him (an object stands there), and his outline is a
 person's (a contour/symmetry z-score about ``min_still_score``, well above the
 ``min_score`` that motion needs: furniture stands on the floor too); the two are weighed
-together (:func:`still_evidence`), so that a clear outline makes up for the floor a
-neighbour hides behind him. Where fewer than three cameras see
+together (:func:`still_evidence`), so that either, well above its threshold, makes up
+for the other falling short by up to half (the floor a neighbour hides behind him, an
+outline against a busy background). Where fewer than three cameras see
 the floor behind him he is learnt into the background, found when he moves, and the
 place he reveals is recognised as a ghost by the background's border test
 (:func:`~.background.ghost_components`).
@@ -74,7 +75,10 @@ from mbtrack_ros.core.detection.features import (
 from mbtrack_ros.core.detection.parallax import FloorParallax
 from mbtrack_ros.core.shape import BodyShape, Silhouettes, rasterize
 
-__all__ = ['PeopleCue', 'PeopleCueConfig', 'still_evidence']
+__all__ = ['PeopleCue', 'PeopleCueConfig', 'STILL_MAKE_UP', 'still_evidence']
+
+STILL_MAKE_UP = 1.5     # each still-person evidence counts up to 1.5 times its threshold
+#                         (it makes up for at most half of the other's, still_evidence)
 
 
 @dataclass(frozen=True)
@@ -105,7 +109,8 @@ class PeopleCueConfig:
             its outline alone makes it a person's (not a table's or a chair's), robust
             standard deviations (> 0); ``inf`` disables the still-person stage. A still
             place is a person when the two evidences, each in units of its threshold, sum
-            to at least 2 (:func:`still_evidence`).
+            to at least 2, neither making up for more than half of the other
+            (:func:`still_evidence`).
         max_people: largest number of person-like places marked.
         nms_radius: smallest distance between two marked places.
         refine_radius: how far a chosen place may move when it is refined with only the
@@ -168,18 +173,22 @@ class PeopleCueConfig:
 
 def still_evidence(cover: np.ndarray, score: np.ndarray, min_parallax: float,
                    min_still_score: float) -> np.ndarray:
-    """The evidence (P,) that a place which does not move holds a person:
-    ``cover / min_parallax + score / min_still_score``, the floor-parallax share ``cover``
-    (P,) (an object stands there) and the outline's contour/symmetry robust z-score
-    ``score`` (P,) (it is a person's) each in units of the value at which it alone would
-    decide. A place is a person at 2 or more: both at their thresholds, or a clearer
-    outline making up for a parallax share lowered by a neighbour hiding part of the floor
-    behind him, and the reverse. ``-inf`` where ``cover`` is 0 (the parallax test does not
-    apply: fewer than three cameras see the floor behind the place; an outline alone is
-    no person, furniture and posters have person-like ones) or ``score`` is not finite."""
+    """The evidence (P,) that a place which does not move holds a person: the sum of the
+    floor-parallax share ``cover`` (P,) (an object stands there) and the outline's
+    contour/symmetry robust z-score ``score`` (P,) (it is a person's), each in units of
+    its threshold (``min_parallax``, ``min_still_score``) and at most
+    :data:`STILL_MAKE_UP` of it. A place is a person at 2 or more: both at their
+    thresholds, or one short of its threshold by at most half and made up by the other
+    (a neighbour who hides part of the floor behind him lowers his parallax share; his
+    outline against a busy background lowers his z-score). Neither makes up for more
+    than half of the other: a cabinet fills its silhouette with parallax whatever its
+    outline, a poster has a person's outline and no parallax. ``-inf`` where ``cover`` is
+    0 (the parallax test does not apply: fewer than three cameras see the floor behind
+    the place) or ``score`` is not finite."""
     cover = np.asarray(cover, np.float64)
     score = np.asarray(score, np.float64)
-    out = cover / float(min_parallax) + score / float(min_still_score)
+    out = np.minimum(cover / float(min_parallax), STILL_MAKE_UP) \
+        + np.minimum(score / float(min_still_score), STILL_MAKE_UP)
     return np.where((cover > 0.0) & np.isfinite(score), out, -np.inf)
 
 
