@@ -105,3 +105,27 @@ def test_remote_scorer_waits_until_the_timeout_then_backs_off(rng):
     wait = scorer(request)                      # back-off 1, but the answer is there
     answer()
     assert wait() is not None and scorer.answered == 3 and scorer.asked == len(sent)
+
+
+def test_remote_scorer_refuses_scores_that_do_not_fit_the_request(rng):
+    """An answer of another shape than the request's particles and targets, or with a
+    non-finite log-likelihood, is refused at once (counted, warned): no scores, so the
+    tracker scores the camera itself; finite scores of the right shape (NaN cover is
+    'no coverage term') are taken."""
+    from mbtrack_ros.nodes.fusion_input import RemoteScorer
+
+    sent, warned = [], []
+    scorer = RemoteScorer('cam0', sent.append, 5.0, lambda cause, text: warned.append(text))
+    request = _request(rng, n=3, k=1, v=1)
+    good = CameraScores(rng.random(3), rng.random(1), rng.random(3), np.full(3, np.nan))
+    nan = replace(good, loglik=np.array([0.1, np.nan, 0.2]))
+    for bad in (CameraScores(rng.random(4), rng.random(1), rng.random(4), rng.random(4)),
+                CameraScores(rng.random(3), rng.random(2), rng.random(3), rng.random(3)),
+                nan):
+        wait = scorer(request)
+        scorer.on_answer(scores_message(read_request(sent[-1])[0], 0, bad))
+        assert wait() is None                     # at once: not after the 5 s timeout
+    assert scorer.refused == 3 and len(warned) == 3 and scorer.missed == 0
+    wait = scorer(request)
+    scorer.on_answer(scores_message(read_request(sent[-1])[0], 0, good))
+    np.testing.assert_array_equal(wait().loglik, good.loglik)

@@ -72,7 +72,8 @@ from mbtrack_ros.core.shape import BodyShape, Silhouettes, rasterize
 from mbtrack_ros.core.state import STATE_DIM, VX, VY, X, Y
 
 __all__ = ['CameraRequest', 'CameraScores', 'HJSDebug', 'LikelihoodConfig', 'LikelihoodError',
-           'LikelihoodResult', 'MeasurementModel', 'Scorer', 'score_camera']
+           'LikelihoodResult', 'MeasurementModel', 'Scorer', 'camera_constants',
+           'score_camera']
 
 
 class LikelihoodError(ValueError):
@@ -323,6 +324,12 @@ class CameraScores:
 Scorer = Callable[[CameraRequest], Callable[[], 'CameraScores | None']]
 
 
+def camera_constants(cam) -> tuple:
+    """A :class:`~mbtrack_ros.core.camera.Camera`'s constants as
+    :func:`_kernels.update_camera` takes them (``depth_row``, ``projection_parameters``)."""
+    return (*cam.depth_row, *cam.projection_parameters)
+
+
 def score_camera(camera: tuple, image: np.ndarray, bins: np.ndarray,
                  integral: Callable[[], ForegroundIntegral | None], request: CameraRequest,
                  workspaces: _Workspaces, out: CameraScores) -> np.ndarray:
@@ -331,7 +338,7 @@ def score_camera(camera: tuple, image: np.ndarray, bins: np.ndarray,
     one of the tracker's own (:meth:`MeasurementModel.hjs`) or a camera stage's
     (:meth:`~mbtrack_ros.core.detection.camera_stage.CameraStage.score`).
 
-    ``camera``: the camera's constants (``Camera.depth_row``, ``projection_parameters``);
+    ``camera``: the camera's constants (:func:`camera_constants`);
     ``image`` (H, W, 3) uint8 and its colour bins (H, W) int16 (empty (0, 0): quantised
     here); ``integral()``: the foreground's row prefix sums, called after the colour
     update (None: no coverage term). Returns the colour bins."""
@@ -797,7 +804,7 @@ class MeasurementModel:
         cam = self._camera(name)
         cached = self._camera_args.get(name)
         if cached is None or cached[0] is not cam:
-            cached = (cam, (*cam.depth_row, *cam.projection_parameters))
+            cached = (cam, camera_constants(cam))
             self._camera_args[name] = cached
         return cached[1]
 

@@ -165,10 +165,10 @@ def fusion_vs_single(recording: str | Path, config: TrackerConfig | None = None,
             for stage in stages.values():      # what ~/tracks gives a camera node
                 stage.set_tracks(xy, velocity, heights)
             t5 = time.process_time()
-            out.cpu['stages'] += t2 - t1 + t5 - t4 + scoring[0]
+            staged = t2 - t1 + t5 - t4 + scoring[0]
+            out.cpu['stages'] += staged
             if out.started is not None:
-                for key, dt in (('single', t1 - t0), ('stages', t2 - t1 + t5 - t4 + scoring[0]),
-                                ('fusion', t3 - t2)):
+                for key, dt in (('single', t1 - t0), ('stages', staged), ('fusion', t3 - t2)):
                     out.steady_cpu[key] += dt
                 if out.steady_frames % 10 == 0:
                     _time_decoding(frames.values(), out)

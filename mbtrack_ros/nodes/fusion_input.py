@@ -28,6 +28,7 @@ import time
 from collections import OrderedDict
 
 import cv2
+import numpy as np
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import CompressedImage, Image
 from std_msgs.msg import UInt8MultiArray
@@ -80,6 +81,8 @@ class RemoteScorer:
         self._skip_until = 0  # requests up to this one are not waited for
         self._seq = itertools.count(1)
         self._waiting = 0    # seq of the request being waited for
+        self._shape = (0, 0)  # (particles, targets) its answer must have
+        self.refused = 0     # answers of the wrong shape or with non-finite scores
         self._answer = None
         self._cond = threading.Condition()
 
@@ -87,6 +90,7 @@ class RemoteScorer:
         seq = next(self._seq)
         with self._cond:
             self._waiting, self._answer = seq, None
+            self._shape = (len(request.states), len(request.n_views))
         end = time.monotonic() + self.timeout
         self.publish(request_message(seq, self.stamp_ns, request))
         self.asked += 1
@@ -120,16 +124,29 @@ class RemoteScorer:
 
     def on_answer(self, msg) -> None:
         """An answer message (the executor's thread); one to an earlier request is late
-        and dropped."""
+        and dropped. Scores of another shape than the request's particles and targets, or
+        with a non-finite log-likelihood, visible or inside share, are refused (counted,
+        warned): the answer then carries no scores, and the tracker scores the camera."""
         try:
             seq, _, scores = read_scores(msg)
         except ScoreMessageError as err:
             self.warn(f'{self.camera}:scores', f'{self.camera}: bad scores message: {err}')
             return
         with self._cond:
-            if seq == self._waiting:
-                self._answer = (seq, scores)
-                self._cond.notify_all()
+            if seq != self._waiting:
+                return
+            n, k = self._shape
+            if scores is not None and not (
+                    scores.loglik.shape == scores.inside.shape == scores.cover.shape == (n,)
+                    and scores.visible.shape == (k,)
+                    and all(np.isfinite(a).all() for a in (scores.loglik, scores.visible,
+                                                            scores.inside))):
+                self.refused += 1
+                self.warn(f'{self.camera}:scores', f'{self.camera}: scores refused: not '
+                          f'{n} particles and {k} targets of finite numbers')
+                scores = None
+            self._answer = (seq, scores)
+            self._cond.notify_all()
 
 
 class FusionInput:

@@ -18,8 +18,8 @@ little endian::
               versions (K,) i64 (of each target's key views), key_targets (M,) i64 and
               their key views (M, V, 1536) f64
     answer:   b'MBSR', version u16 (1), flags u16 (1: no scores, the camera has no such
-              frame or lacks key views of earlier requests), seq u32, stamp i64, P u32, K u32; then loglik
-              (P,), visible (K,), inside (P,), cover (P,) f64
+              frame or lacks key views of earlier requests), seq u32, stamp i64, P u32,
+              K u32; then loglik (P,), visible (K,), inside (P,), cover (P,) f64
 
 ``seq`` pairs an answer with its request. The decoders raise :class:`ScoreMessageError`
 (one line) for a message that does not parse.

@@ -44,7 +44,7 @@ from mbtrack_ros.core.detection.background import (
     BackgroundConfig, BackgroundModel, BootstrapCue)
 from mbtrack_ros.core.detection.features import ForegroundIntegral
 from mbtrack_ros.core.likelihood import (
-    CameraRequest, CameraScores, LikelihoodError, _Workspaces, score_camera)
+    CameraRequest, CameraScores, LikelihoodError, _Workspaces, camera_constants, score_camera)
 from mbtrack_ros.core.shape import BodyShape, rasterize
 from mbtrack_ros.core.state import SIT, THETA, VX, VY, X, Y
 
@@ -158,7 +158,7 @@ class CameraStage:
         self._exclude: np.ndarray | None = None
         self.awaiting_regions = False  # bootstrapped; the fusion node's cue not applied yet
         self.last: CameraFrame | None = None   # the last frame processed
-        self._camera_args = (*self.camera.depth_row, *self.camera.projection_parameters)
+        self._camera_args = camera_constants(self.camera)
         self._workspaces = _Workspaces()
         # version -> (V, 1536) key views of a target, those of the last score request
         self._views: dict[int, np.ndarray] = {}
