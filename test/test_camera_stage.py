@@ -60,8 +60,8 @@ def test_fusion_gives_the_tracks_of_one_process(recording, pipeline):
     the same ids on every frame but at most three (releases a frame or two apart: both
     release the tracks of the two people walking at the end), positions
     within 7 cm (13 cm with ``pipeline_search``), mostly millimetres: the particle filter
-    amplifies the update's one-frame latency. With ``pipeline_search`` the search of a frame set reads its own masks while
-    the next set is received."""
+    amplifies the update's one-frame latency. With ``pipeline_search`` the search of a
+    frame set reads its own masks while the next set is received."""
     from mbtrack_ros.evaluation.fusion import fusion_vs_single
 
     got = fusion_vs_single(recording, TrackerConfig(detection=True, seed=7,
@@ -134,3 +134,137 @@ def test_fusion_with_jpeg_images_tracks_the_same_people(recording):
     assert raw.rows['fusion'] != jpeg.rows['fusion']     # the images did change
     a, b = (clear_mot(r.rows['fusion'], truth).mota for r in (raw, jpeg))
     assert a > 0.3 and abs(a - b) < 0.1
+
+
+def test_stage_scores_particles_as_the_tracker_does(room, rng):
+    """Brute force: a camera stage's scores of a request (CameraStage.score) are the
+    tracker's own for that camera (MeasurementModel.hjs on the same image and masks, the
+    possible foreground undecided), bit for bit, and a tracker handed the stage's scores
+    (set_scorers) gives the same log-likelihoods and visible fractions."""
+    from mbtrack_ros.core.appearance import PersonModel
+    from mbtrack_ros.core.detection.camera_stage import CameraFrame
+    from mbtrack_ros.core.likelihood import LikelihoodConfig, MeasurementModel
+
+    cam = room.cameras['cam0']
+    image = rng.integers(0, 255, (cam.height, cam.width, 3), dtype=np.uint8)
+    fg = np.zeros((cam.height, cam.width), bool)
+    fg[20:100, 30:90] = True
+    possible = np.zeros_like(fg)
+    possible[20:50, 30:60] = True
+    models = [PersonModel(1.75, 0.5, view_angles=[0.0, np.pi],
+                          histograms=rng.random((2, 3, 512))),
+              PersonModel(1.6, 0.45, view_angles=[0.0], histograms=rng.random((1, 3, 512)))]
+    particles = [np.column_stack([rng.uniform(1, 3, (40, 2)), rng.normal(0, 0.3, (40, 2)),
+                                  rng.uniform(-3, 3, 40), np.zeros(40)]) for _ in models]
+    weights = [rng.random(40) for _ in models]
+
+    def model(scorers=None):
+        m = MeasurementModel(room, LikelihoodConfig(threads=1))
+        m.set_images({'cam0': image})
+        m.set_foreground({'cam0': fg}, undecided={'cam0': possible}, neutral=0.3)
+        if scorers:
+            m.set_scorers(scorers)
+        return m
+
+    requests, replies = [], []
+    stage = CameraStage(cam)
+    stage.last = CameraFrame(image, fg, possible, fg)
+
+    def score(request):
+        requests.append(request)
+        replies.append(stage.score(request))
+        return lambda: replies[-1]
+
+    local = model().hjs(particles, weights, models)
+    tracker = model({'cam0': score})
+    remote = tracker.hjs(particles, weights, models)
+    assert len(replies) == 1 and np.isfinite(replies[0].cover).sum() > 20
+    for a, b in zip(local.loglik, remote.loglik):
+        np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(local.visible_fraction, remote.visible_fraction)
+    assert local.loglik[0].std() > 0    # the scores say something
+    # the next frame set: the key views go only once; a restarted stage, which lacks
+    # them, answers None (the tracker scores the camera itself) and gets them next time
+    tracker.set_images({'cam0': image})
+    tracker.set_foreground({'cam0': fg}, undecided={'cam0': possible}, neutral=0.3)
+    again = tracker.hjs(particles, weights, models)
+    assert requests[0].key_targets.tolist() == [0, 1] and len(requests[1].key_targets) == 0
+    stage = CameraStage(cam)
+    stage.last = CameraFrame(image, fg, possible, fg)
+    for k in range(2):
+        tracker.set_images({'cam0': image})
+        tracker.set_foreground({'cam0': fg}, undecided={'cam0': possible}, neutral=0.3)
+        restarted = tracker.hjs(particles, weights, models)
+        for a, b, c in zip(local.loglik, again.loglik, restarted.loglik):
+            np.testing.assert_array_equal(a, b)
+            np.testing.assert_array_equal(a, c)
+    assert len(requests[2].key_targets) == 0 and replies[2] is None
+    assert requests[3].key_targets.tolist() == [0, 1] and replies[3] is not None
+    # one model's key views change: only they are sent again
+    models[1].histograms = rng.random((1, 3, 512))
+    local = model().hjs(particles, weights, models)
+    for k in range(2):
+        tracker.set_images({'cam0': image})
+        tracker.set_foreground({'cam0': fg}, undecided={'cam0': possible}, neutral=0.3)
+        changed = tracker.hjs(particles, weights, models)
+        for a, b in zip(local.loglik, changed.loglik):
+            np.testing.assert_array_equal(a, b)
+    assert requests[4].key_targets.tolist() == [1] and len(requests[5].key_targets) == 0
+    # a stage with no frame answers None: the tracker scores the camera itself
+    idle = CameraStage(cam)
+    fallback = model({'cam0': lambda r: lambda: idle.score(r)}).hjs(particles, weights,
+                                                                    models)
+    for a, b in zip(local.loglik, fallback.loglik):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_stage_refuses_a_malformed_score_request(room, rng):
+    """A request whose arrays do not fit together is refused with DetectionError before a
+    kernel indexes with it; a reply of the wrong shape is refused by the tracker."""
+    from dataclasses import replace
+
+    from mbtrack_ros.core.detection import DetectionError
+    from mbtrack_ros.core.detection.camera_stage import CameraFrame
+    from mbtrack_ros.core.likelihood import (
+        CameraRequest, CameraScores, LikelihoodError, MeasurementModel)
+
+    cam = room.cameras['cam0']
+    stage = CameraStage(cam)
+    stage.last = CameraFrame(rng.integers(0, 255, (cam.height, cam.width, 3), np.uint8))
+    good = CameraRequest(np.array([[2.0, 2.0, 0, 0, 0, 0]]), np.zeros(1, np.int64),
+                         np.ones(1), np.full(1, 1.7), np.full(1, 0.5), 0.45, np.zeros((1, 1)),
+                         np.ones(1, np.int64), rng.random((1, 1, 1536)), False, 0.03, 0.15,
+                         1, 20)
+    assert stage.score(good).loglik.shape == (1,)
+    for bad in (replace(good, target=np.ones(1, np.int64)),           # no target 1
+                replace(good, n_views=np.full(1, 2, np.int64)),       # more views than keys
+                replace(good, prior=np.ones(2)),
+                replace(good, key=np.zeros((1, 1, 7)))):
+        with pytest.raises(DetectionError, match='malformed score request'):
+            stage.score(bad)
+    m = MeasurementModel(room)
+    m.set_images({'cam0': stage.last.image})
+    m.set_scorers({'cam0': lambda r: lambda: CameraScores.empty(len(r.states) + 1, 1)})
+    with pytest.raises(LikelihoodError, match='cam0: camera scores loglik'):
+        m.hjs([good.states], [np.ones(1)], [_model(rng)])
+    with pytest.raises(LikelihoodError, match='unknown camera'):
+        m.set_scorers({'nope': stage.score})
+
+
+def _model(rng):
+    from mbtrack_ros.core.appearance import PersonModel
+    return PersonModel(1.7, 0.5, view_angles=[0.0], histograms=rng.random((1, 3, 512)))
+
+
+def test_stage_scoring_leaves_the_fusion_tracks_unchanged(recording):
+    """The camera stages scoring the fusion tracker's particles (the default) or the
+    fusion tracker scoring them itself: the same fusion tracks, row for row."""
+    from mbtrack_ros.evaluation.fusion import fusion_vs_single
+
+    config = TrackerConfig(detection=True, seed=7)
+    staged = fusion_vs_single(recording, config)
+    itself = fusion_vs_single(recording, config, stage_likelihood=False)
+    assert staged.scored > 0 and itself.scored == 0
+    assert len(staged.rows['fusion']) >= 10
+    assert staged.rows['fusion'] == itself.rows['fusion']
+    assert staged.rows['single'] == itself.rows['single']

@@ -10,7 +10,8 @@ import pytest
 from conftest import make_room
 from mbtrack_ros.core.detection.parallax import FloorParallax, ParallaxEvidence
 from mbtrack_ros.core.detection.detector import _states
-from mbtrack_ros.core.detection.people import PeopleCue, PeopleCueConfig
+from mbtrack_ros.core.detection.people import (
+    STILL_MAKE_UP, PeopleCue, PeopleCueConfig, still_evidence)
 from mbtrack_ros.core.shape import BodyShape, rasterize
 
 POST = (3.0, 2.5)          # where a person stands, metres
@@ -128,6 +129,79 @@ def test_the_people_cue_finds_a_person_who_never_moves_only_with_parallax():
     assert len(off) == 0
     empty = [_render(room, post=False)] * 3
     assert len(PeopleCue(room, PeopleCueConfig(**kw)).places(empty)) == 0
+
+
+def _still_features(room, frames, **kw) -> tuple[float, float, float]:
+    """(parallax share, outline z-score) of the best still hypothesis within 0.25 m of
+    ``POST`` (nobody explained away), as the still-person stage sees them, and the
+    largest outline z-score of a place with a parallax share."""
+    cue = PeopleCue(room, PeopleCueConfig(**kw))
+    xy, score, _ = cue._evidence(frames)
+    par = FloorParallax(room, threshold=cue.config.motion_threshold)
+    shown = {n: par.decide(ev) for n, ev in par.differences(frames[-1]).items()}
+    cover = cue._parallax_cover(shown)
+    near = np.linalg.norm(xy - POST, axis=1) <= 0.25
+    best = np.flatnonzero(near)[np.argmax((cover + score)[near])]
+    return float(cover[best]), float(score[best]), float(score[cover > 0].max())
+
+
+def test_a_clear_outline_makes_up_for_a_parallax_share_below_its_threshold():
+    """The still person's floor-parallax share just below ``min_parallax`` (as when a
+    neighbour hides part of the floor behind him) and an outline half again as clear as
+    ``min_still_score``: weighed together he is a person (the parallax threshold alone
+    would miss him); with the outline just at its threshold the parallax share does not make
+    it, and the empty room gives nothing with the thresholds that find him."""
+    room = make_room(n_cameras=3)
+    kw = dict(spacing=0.2, min_views=2)
+    still = [_render(room, post=True)] * 3
+    cover, score, _ = _still_features(room, still, **kw)
+    assert 0.0 < cover and score > 0.0
+    found = dict(kw, min_parallax=cover / 0.9, min_still_score=score / 1.5)
+    places = PeopleCue(room, PeopleCueConfig(**found)).places(still)
+    assert len(places) == 1
+    assert np.linalg.norm(places[0] - POST) <= 0.25
+    weak = dict(kw, min_parallax=cover / 0.9, min_still_score=score)
+    assert len(PeopleCue(room, PeopleCueConfig(**weak)).places(still)) == 0
+    empty = [_render(room, post=False)] * 3
+    assert len(PeopleCue(room, PeopleCueConfig(**found)).places(empty)) == 0
+
+
+def test_a_parallax_share_far_above_its_threshold_does_not_make_a_poor_outline_a_person():
+    """Objects on the floor whose outlines reach at most 0.4 of ``min_still_score`` (as a
+    cabinet's) and a parallax share ten times ``min_parallax``: the share makes up for at
+    most half of the outline's threshold (``STILL_MAKE_UP``), so none is a person; with
+    the person's outline at 0.6 of the threshold the share makes up the rest."""
+    room = make_room(n_cameras=3)
+    kw = dict(spacing=0.2, min_views=2)
+    still = [_render(room, post=True)] * 3
+    cover, score, best = _still_features(room, still, **kw)
+    poor = dict(kw, min_parallax=cover / 10.0, min_still_score=best / 0.4)
+    assert len(PeopleCue(room, PeopleCueConfig(**poor)).places(still)) == 0
+    fair = dict(kw, min_parallax=cover / 10.0, min_still_score=score / 0.6)
+    places = PeopleCue(room, PeopleCueConfig(**fair)).places(still)
+    assert len(places) >= 1
+    assert np.linalg.norm(places[0] - POST) <= 0.25
+
+
+def test_still_evidence_sums_the_two_evidences_in_units_of_their_thresholds():
+    """Brute force over a grid of (share, z-score): each in units of its threshold, at
+    most ``STILL_MAKE_UP``, summed; a person at 2 or more, never where the parallax test
+    does not apply (share 0) or the outline is unseen, nor where either evidence is below
+    half its threshold."""
+    cover = np.repeat(np.linspace(0.0, 1.0, 11), 9)
+    score = np.tile(np.linspace(-1.0, 3.0, 9), 11)
+    score[::7] = -np.inf
+    got = still_evidence(cover, score, 0.5, 1.0)
+    for c, z, g in zip(cover, score, got):
+        if c == 0.0 or not np.isfinite(z):
+            assert g == -np.inf
+        else:
+            assert g == pytest.approx(min(c / 0.5, STILL_MAKE_UP) + min(z, STILL_MAKE_UP))
+    both = (cover >= 0.5) & (score >= 1.0)
+    assert np.all(got[both] >= 2.0)          # both thresholds met: always a person
+    assert np.any((got >= 2.0) & ~both)      # one of them missed, made up by the other
+    half = (cover < 0.25) | (score < 0.5)
+    assert not np.any(got[half] >= 2.0 - 1e-12)
 
 
 @pytest.mark.parametrize('k', [1, 2, 3, 4])

@@ -11,7 +11,10 @@ the fusion tracker's step in its filter and its detection; the same CPU after th
 start-up (the frame sets once every camera stage gives a foreground: without the
 background bootstrap and the fusion node's people cue, what a long run costs per frame
 set); and what reading one camera's frame costs the fusion tracker in each encoding of
-``camera_node`` (raw or PNG masks, raw or JPEG images).
+``camera_node`` (raw or PNG masks, raw or JPEG images). The camera stages score the
+fusion tracker's particles in their cameras (the bytes of a request and its reply per
+camera and frame set are printed); ``--fusion-tracker-likelihood`` leaves that to the
+fusion tracker.
 """
 from __future__ import annotations
 
@@ -43,6 +46,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help='the camera stages send their working images JPEG-coded at '
                              'quality Q (1-100; camera_node image_format jpeg, jpeg_quality '
                              'Q) instead of raw')
+    parser.add_argument('--fusion-tracker-likelihood', action='store_true',
+                        help='the fusion tracker scores its particles in every camera '
+                             'itself instead of asking the camera stages')
 
 
 def main_fusion(args: argparse.Namespace) -> int:
@@ -82,7 +88,8 @@ def main_fusion(args: argparse.Namespace) -> int:
             config = TrackerConfig.from_dict({'seed': args.seed, 'detection': True})
             calibration = RoomCalibration.load(rec / 'calibration.yaml')
             got = fusion_vs_single(rec, config, sync_options(rec, calibration),
-                                   jpeg_quality=args.fusion_jpeg)
+                                   jpeg_quality=args.fusion_jpeg,
+                                   stage_likelihood=not args.fusion_tracker_likelihood)
             truth = read_ground_truth(rec / 'ground_truth.csv')
             m = {k: clear_mot(rows, truth) for k, rows in got.rows.items()}
             gaps = np.array(got.gaps or [0.0])
@@ -119,6 +126,11 @@ def main_fusion(args: argparse.Namespace) -> int:
                   f'frames): masks PNG {dec["mask_png"]:.3f} ms, raw {dec["mask_raw"]:.3f} '
                   f'ms; image JPEG {dec["image_jpeg"]:.3f} ms, raw {dec["image_raw"]:.3f} ms',
                   flush=True)
+            if got.scored:
+                kib = {k: v / 1024 / got.scored for k, v in got.score_bytes.items()}
+                print(f'  particles scored by the camera stages: {got.scored} requests, '
+                      f'{kib["request"]:.0f} KiB each, replies {kib["reply"]:.1f} KiB',
+                      flush=True)
             doc.append({'seed': seed, 'jpeg_quality': args.fusion_jpeg,
                         'mota': {k: v.mota for k, v in m.items()},
                         'motp_mm': {k: v.motp_mm for k, v in m.items()},
@@ -127,6 +139,9 @@ def main_fusion(args: argparse.Namespace) -> int:
                         'start_up_frame_sets': got.started,
                         'steady_cpu_ms_per_frame_set': steady,
                         'start_up_cpu_ms': boot, 'read_ms_per_camera_frame': dec,
+                        'stage_likelihood': not args.fusion_tracker_likelihood,
+                        'score_requests': got.scored,
+                        'score_bytes': got.score_bytes,
                         'gap_median_m': float(np.median(gaps)), 'gap_max_m': float(gaps.max())})
     finally:
         shutil.rmtree(tmp, ignore_errors=True)

@@ -59,7 +59,7 @@ import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -71,8 +71,9 @@ from mbtrack_ros.core.detection.features import ForegroundIntegral, Spans
 from mbtrack_ros.core.shape import BodyShape, Silhouettes, rasterize
 from mbtrack_ros.core.state import STATE_DIM, VX, VY, X, Y
 
-__all__ = ['HJSDebug', 'LikelihoodConfig', 'LikelihoodError', 'LikelihoodResult',
-           'MeasurementModel']
+__all__ = ['CameraRequest', 'CameraScores', 'HJSDebug', 'LikelihoodConfig', 'LikelihoodError',
+           'LikelihoodResult', 'MeasurementModel', 'Scorer', 'camera_constants',
+           'score_camera']
 
 
 class LikelihoodError(ValueError):
@@ -209,6 +210,11 @@ def _normalised_prior_list(weights: Sequence[np.ndarray], parts: Sequence[np.nda
 _CPUS = os.cpu_count() or 1   # threads of _map by default (os.cpu_count reads /sys: once)
 _NO_BUFFER = np.zeros((1, 1, 1))   # workspace argument of the separable evaluation (unused)
 _NO_BINS = np.zeros((0, 0), np.int16)   # bins argument of a camera not quantised yet
+_BODY = BodyShape()
+#: the body profile the likelihood kernels rasterise (``BodyShape``'s fractions, half
+#: widths, segment parts and hip fraction)
+_BODY_PROFILE = (_BODY.fractions, _BODY.half_widths, _BODY.segment_parts,
+                 float(_BODY.hip_fraction))
 
 
 def _with_target_mean(values: np.ndarray, known: np.ndarray, target: np.ndarray,
@@ -221,6 +227,143 @@ def _with_target_mean(values: np.ndarray, known: np.ndarray, target: np.ndarray,
                         minlength=n_targets)
     mean = np.divide(total, mass, out=np.zeros(n_targets), where=mass > 0)
     return np.where(known, values, mean[target])
+
+
+@dataclass
+class CameraRequest:
+    """One camera's share of :meth:`MeasurementModel.hjs` / ``separable`` for a frame set:
+    what a camera stage needs to score the particles in its own image
+    (:func:`score_camera`; a fusion node sends it to each camera's
+    :meth:`~mbtrack_ros.core.detection.camera_stage.CameraStage.score`).
+
+    Attributes:
+        states: (P, 6) the K targets' particles stacked, at the camera's capture time.
+        target: (P,) int64 target index of each particle.
+        prior: (P,) normalised prior weights (each target's sum to 1).
+        heights, widths: (P,) body size of each particle's target, metres.
+        chair: hip height when sitting, metres.
+        view_angles: (K, V) key-view angles of the targets, radians (zero padded).
+        n_views: (K,) int64 key views of each target.
+        key: (K, V, 1536) key-view histograms (``appearance.key_view_stack``), or with
+            ``key_targets`` only those targets' (M, V, 1536).
+        separable: each target alone, w* = 1 (003 Eq. 3), else HJS (000 Algorithm 1).
+        two_sigma_sq: 2 sigma^2 of 000 Eq. 19.
+        d_occ: occlusion penalty of 000 Eq. 26.
+        row_step: the silhouettes' row sampling (``LikelihoodConfig.subsample``).
+        min_visible: fewer silhouette pixels leave a particle neutral in the camera
+            (``LikelihoodConfig.min_visible_pixels``).
+        coverage: count each silhouette's foreground coverage
+            (:meth:`MeasurementModel.set_foreground`).
+        neutral: the coverage an undecided pixel counts as.
+        versions: (K,) int64 version of each target's key views (a new one whenever they
+            change) or None; with it a camera stage keeps the key views it was sent and
+            ``key_targets`` (M,) int64 names the targets whose views ``key`` holds (the
+            others' came with earlier requests: the key views are most of a request's
+            bytes, and only a changed model's are sent again).
+    """
+
+    states: np.ndarray
+    target: np.ndarray
+    prior: np.ndarray
+    heights: np.ndarray
+    widths: np.ndarray
+    chair: float
+    view_angles: np.ndarray
+    n_views: np.ndarray
+    key: np.ndarray
+    separable: bool
+    two_sigma_sq: float
+    d_occ: float
+    row_step: int
+    min_visible: int
+    coverage: bool = False
+    neutral: float = 0.5
+    versions: np.ndarray | None = None
+    key_targets: np.ndarray | None = None
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of its arrays (what a message carrying it needs, about)."""
+        return sum(a.nbytes for a in (self.states, self.target, self.prior, self.heights,
+                                      self.widths, self.view_angles, self.n_views, self.key,
+                                      self.versions, self.key_targets)
+                   if a is not None)
+
+
+@dataclass
+class CameraScores:
+    """A camera's answer to a :class:`CameraRequest` (the rows of
+    :func:`_kernels.update_camera`).
+
+    Attributes:
+        loglik: (P,) -(fc + bc) / (2 sigma^2) (000 Eq. 19), 0 where the camera sees fewer
+            than ``min_visible`` pixels of the silhouette.
+        visible: (K,) prior-weighted mean visible fraction of each target.
+        inside: (P,) share of each silhouette inside the image (0 where neutral).
+        cover: (P,) foreground coverage of each silhouette with the undecided pixels at
+            ``neutral`` (NaN outside the image or without a coverage term).
+    """
+
+    loglik: np.ndarray
+    visible: np.ndarray
+    inside: np.ndarray
+    cover: np.ndarray
+
+    @classmethod
+    def empty(cls, particles: int, targets: int) -> CameraScores:
+        return cls(np.empty(particles), np.empty(targets), np.empty(particles),
+                   np.full(particles, np.nan))
+
+    @property
+    def nbytes(self) -> int:
+        return sum(a.nbytes for a in (self.loglik, self.visible, self.inside, self.cover))
+
+
+#: a camera stage scoring for the tracker (:meth:`MeasurementModel.set_scorers`): sends a
+#: request, returns the wait for its answer
+Scorer = Callable[[CameraRequest], Callable[[], 'CameraScores | None']]
+
+
+def camera_constants(cam) -> tuple:
+    """A :class:`~mbtrack_ros.core.camera.Camera`'s constants as
+    :func:`_kernels.update_camera` takes them (``depth_row``, ``projection_parameters``)."""
+    return (*cam.depth_row, *cam.projection_parameters)
+
+
+def score_camera(camera: tuple, image: np.ndarray, bins: np.ndarray,
+                 integral: Callable[[], ForegroundIntegral | None], request: CameraRequest,
+                 workspaces: _Workspaces, out: CameraScores) -> np.ndarray:
+    """Score ``request`` in one camera into ``out`` (000 Algorithm 1 "update" and the
+    coverage term, :func:`_kernels.update_camera`): the same call whether the camera is
+    one of the tracker's own (:meth:`MeasurementModel.hjs`) or a camera stage's
+    (:meth:`~mbtrack_ros.core.detection.camera_stage.CameraStage.score`).
+
+    ``camera``: the camera's constants (:func:`camera_constants`);
+    ``image`` (H, W, 3) uint8 and its colour bins (H, W) int16 (empty (0, 0): quantised
+    here); ``integral()``: the foreground's row prefix sums, called after the colour
+    update (None: no coverage term). Returns the colour bins."""
+    r = request
+    body = _BODY_PROFILE
+    rest = (int(r.row_step), float(r.d_occ), bool(r.separable), float(r.two_sigma_sq),
+            int(r.min_visible))
+
+    def run(mfg: np.ndarray, bbg: np.ndarray, wmap: np.ndarray) -> tuple:
+        return _kernels.update_camera(
+            image, bins, r.states, r.target, r.prior, r.heights, r.widths, float(r.chair),
+            *body, r.view_angles, r.n_views, r.key, *camera, *rest, mfg, bbg, wmap,
+            out.loglik, out.visible, out.inside)
+
+    if r.separable:                               # no image buffers
+        bins, *spans = run(_NO_BUFFER, _NO_BUFFER, _NO_BUFFER)
+    else:
+        with workspaces.get(image.shape[0], image.shape[1], r.key.shape[0]) as ws:
+            bins, *spans = run(*ws)
+    fg = integral() if r.coverage else None
+    if fg is not None:   # foreground coverage term on the kernel's silhouettes
+        cover, known, area = fg.coverage(Spans(*spans))
+        cover = known * cover + (1.0 - known) * r.neutral   # set_foreground
+        out.cover[:] = np.where(area > 0, cover, np.nan)
+    return bins
 
 
 class _Workspaces:
@@ -278,10 +421,13 @@ class MeasurementModel:
         self._workspaces = _Workspaces()
         self._camera_cost: dict[str, float] = {}   # seconds of a camera's last HJS update
         self._camera_args: dict[str, tuple] = {}
+        # camera name -> the camera stage that scores the particles in it (set_scorers)
+        self._scorers: dict[str, Scorer] = {}
+        # id of a model's key views -> (them, their version): a version per distinct key views
+        self._versions: dict[int, tuple[np.ndarray, int]] = {}
+        self._next_version = itertools.count()
+        self._sent_versions: dict[str, set[int]] = {}   # camera -> key views it has
         self._offsets: dict[str, float] = {}   # set_capture_offsets()
-        body = BodyShape()
-        self._profile = (body.fractions, body.half_widths, body.segment_parts,
-                         float(body.hip_fraction))
 
     # -- images ---------------------------------------------------------------------------
     def set_images(self, images: Mapping[str, np.ndarray]) -> None:
@@ -308,6 +454,47 @@ class MeasurementModel:
         self._offsets = {}
         self._foreground, self._masks_source, self._coverage_gain = {}, {}, 0.0
         self._undecided_source = None
+
+    def set_scorers(self, scorers: Mapping[str, Scorer]) -> None:
+        """Cameras whose share of :meth:`hjs` / :meth:`separable` their own stage computes:
+        camera name -> a callable that sends the camera's :class:`CameraRequest` and
+        returns a callable waiting for the answer: its :class:`CameraScores` (what
+        :func:`score_camera` gives on that camera's image and foreground), or None when
+        there is none for this frame set (no stage, no frame, too late): the camera is then
+        scored here, on the images and masks of :meth:`set_images` and
+        :meth:`set_foreground`, with the same result. Every request of a frame set is sent
+        before the first answer is awaited. Replaces the previous mapping (empty: every
+        camera scored here); kept across frames."""
+        for name in scorers:
+            if name not in self.calibration.cameras:
+                raise LikelihoodError(f'scorer for unknown camera {name!r}')
+        self._scorers = dict(scorers)
+        self._sent_versions = {}
+
+    def _key_versions(self, models: Sequence[PersonModel]) -> np.ndarray:
+        """(K,) int64 version of each model's key views: the same while they stay the same
+        array (``PersonModel`` recomputes them when its views change), a new one after."""
+        held, out = {}, np.empty(len(models), np.int64)
+        for k, m in enumerate(models):
+            views = m._completed()
+            entry = self._versions.get(id(views))
+            if entry is None or entry[0] is not views:
+                entry = (views, next(self._next_version))
+            held[id(views)] = entry     # holds the array: its id is not reused meanwhile
+            out[k] = entry[1]
+        self._versions = held
+        return out
+
+    @staticmethod
+    def _take_scores(name: str, got: CameraScores, rows: CameraScores) -> None:
+        """Copy a camera stage's scores into the camera's rows; a reply of the wrong shape
+        raises :class:`LikelihoodError`."""
+        for field_name in ('loglik', 'visible', 'inside', 'cover'):
+            src, dst = np.asarray(getattr(got, field_name)), getattr(rows, field_name)
+            if src.shape != dst.shape:
+                raise LikelihoodError(f'{name}: camera scores {field_name} have shape '
+                                      f'{src.shape}, expected {dst.shape}')
+            dst[:] = src
 
     def set_capture_offsets(self, offsets: Mapping[str, float]) -> None:
         """Capture time of each camera's image relative to the particles' time, seconds
@@ -617,7 +804,7 @@ class MeasurementModel:
         cam = self._camera(name)
         cached = self._camera_args.get(name)
         if cached is None or cached[0] is not cam:
-            cached = (cam, (*cam.depth_row, *cam.projection_parameters))
+            cached = (cam, camera_constants(cam))
             self._camera_args[name] = cached
         return cached[1]
 
@@ -638,6 +825,7 @@ class MeasurementModel:
                 if name in self._images and parts]
         t0 = time.perf_counter()
         states, target, prior, key = self._stack(parts, priors, models)
+        versions = self._key_versions(models) if self._scorers else None
         # everything a camera thread needs, prepared once: its work is then one numba call
         # that runs without the GIL (the threads do not wait for each other's Python)
         heights = np.array([m.height for m in models], dtype=np.float64)[target]
@@ -651,37 +839,47 @@ class MeasurementModel:
         cam_visible = np.empty((len(cams), n_targets))
         cam_inside = np.empty((len(cams), states.shape[0]))
         cam_cover = np.full((len(cams), states.shape[0]), np.nan)
-        shape_args = (chair, *self._profile)
-        rest = (int(self.config.subsample), float(self.config.d_occ), bool(separable),
-                2.0 * self.config.sigma ** 2, int(self.config.min_visible_pixels))
+        coverage = self._coverage_gain > 0
         timings: dict[str, float] = {'models': time.perf_counter() - t0}
+
+        def request_of(name: str) -> CameraRequest:
+            return CameraRequest(
+                self._at_capture(name, states), target, prior, heights, widths, chair, angles,
+                n_views, key, bool(separable), 2.0 * self.config.sigma ** 2,
+                float(self.config.d_occ), int(self.config.subsample),
+                int(self.config.min_visible_pixels), coverage, self._neutral)
+
+        # the cameras whose stage scores them get their requests first, all at once
+        asked = {}
+        for _, name in cams:
+            scorer = self._scorers.get(name)
+            if scorer is not None:   # the key views the stage has already are not sent
+                request = request_of(name)
+                have = self._sent_versions.get(name, ())
+                new = np.array([k for k, v in enumerate(versions.tolist()) if v not in have],
+                               np.int64)
+                asked[name] = (request, scorer(replace(request, key=key[new], key_targets=new,
+                                                       versions=versions)))
 
         def one(i: int) -> float:
             name = cams[i][1]
             t1 = time.perf_counter()
-            bins = self._bins.get(name, _NO_BINS)
-            cam_args = self._camera_arguments(name)
-            image = self._images[name]
-            cam_states = self._at_capture(name, states)
-
-            def run(mfg: np.ndarray, bbg: np.ndarray, wmap: np.ndarray) -> tuple:
-                return _kernels.update_camera(
-                    image, bins, cam_states, target, prior, heights, widths, *shape_args,
-                    angles, n_views, key, *cam_args, *rest, mfg, bbg, wmap, cam_loglik[i],
-                    cam_visible[i], cam_inside[i])
-
-            if separable:                               # no image buffers
-                bins, *spans = run(_NO_BUFFER, _NO_BUFFER, _NO_BUFFER)
+            rows = CameraScores(cam_loglik[i], cam_visible[i], cam_inside[i], cam_cover[i])
+            if name in asked:
+                request, answer = asked[name]
+                got = answer()    # the stage keeps the key views of this request only
+                self._sent_versions[name] = set(versions.tolist()) if got is not None \
+                    else set()
             else:
-                with self._workspaces.get(image.shape[0], image.shape[1], n_targets) as ws:
-                    bins, *spans = run(*ws)
-            self._bins[name] = bins
-            integral = (self._foreground_integrals().get(name)
-                        if self._coverage_gain > 0 else None)
-            if integral is not None:   # foreground coverage term on the kernel's silhouettes
-                cover, known, area = integral.coverage(Spans(*spans))
-                cover = known * cover + (1.0 - known) * self._neutral   # set_foreground
-                cam_cover[i] = np.where(area > 0, cover, np.nan)
+                request, got = request_of(name), None
+            if got is not None:                 # the camera's own stage scored them
+                self._take_scores(name, got, rows)
+            else:
+                self._bins[name] = score_camera(
+                    self._camera_arguments(name), self._images[name],
+                    self._bins.get(name, _NO_BINS),
+                    lambda: self._foreground_integrals().get(name), request,
+                    self._workspaces, rows)
             return time.perf_counter() - t1
 
         # Longest camera first (by its time in the previous call): the threads take the

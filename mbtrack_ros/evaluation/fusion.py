@@ -6,12 +6,16 @@ side: one on the images (``input_mode: images``), one fed as a fusion node is
 .CameraStage` per camera, their masks through
 :class:`~mbtrack_ros.core.detection.camera_stage.ReceivedForeground`, the bootstrap regions
 sent back, each stage given the fusion tracker's reported tracks after its step (the one
-frame of latency of the update). No DDS: the comparison isolates the split itself.
+frame of latency of the update). With ``stage_likelihood`` each camera stage also scores
+the fusion tracker's particles in its camera (:meth:`CameraStage.score` through
+:meth:`MeasurementModel.set_scorers`): the request and its answer are what would travel
+between the nodes, their CPU is the stage's. No DDS: the comparison isolates the split
+itself.
 """
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -39,8 +43,9 @@ class FusionComparison:
             tracker's steps), ``'stages'`` (all camera stages, with the JPEG coding of
             ``jpeg_quality``) and ``'fusion'`` (the fusion tracker: the masks handed over,
             JPEG decoding, its steps); the three run one after another.
-        fusion_timings: the fusion tracker's step timings summed, wall seconds:
-            ``'filter'`` (prediction, likelihood in every camera, MRF), ``'detect_search'``
+        fusion_timings: the fusion tracker's step timings summed, wall seconds, without
+            the camera stages' scoring: ``'filter'`` (prediction, likelihood in every
+            camera or the stages' answers taken, MRF), ``'detect_search'``
             (the search for new people), ``'detect'`` (all detection work, the search
             included), ``'total'``.
         started: frame sets of the start-up: up to and including the first one in which
@@ -53,6 +58,8 @@ class FusionComparison:
             (a quality-90 JPEG working image decoded), ``'image_raw'`` (copied); measured
             on every 10th frame set's frames after the start-up (``decode_frames`` camera
             frames).
+        scored: camera requests the stages answered (``stage_likelihood``);
+            ``score_bytes`` the bytes of their arrays, ``'request'`` and ``'reply'``.
     """
 
     frames: int = 0
@@ -73,6 +80,9 @@ class FusionComparison:
         default_factory=lambda: dict.fromkeys(('mask_png', 'mask_raw', 'image_jpeg',
                                                'image_raw'), 0.0))
     decode_frames: int = 0
+    scored: int = 0
+    score_bytes: dict[str, int] = field(
+        default_factory=lambda: {'request': 0, 'reply': 0})
 
     @property
     def steady_frames(self) -> int:
@@ -82,14 +92,17 @@ class FusionComparison:
 
 def fusion_vs_single(recording: str | Path, config: TrackerConfig | None = None,
                      reader_options: dict | None = None,
-                     jpeg_quality: int | None = None) -> FusionComparison:
+                     jpeg_quality: int | None = None, *,
+                     stage_likelihood: bool = True) -> FusionComparison:
     """Track ``recording`` (a recording directory) both ways; see the module docstring.
     ``config`` must enable detection (default: ``TrackerConfig(detection=True, seed=0)``,
     what ``mbtrack replay`` runs without options); ``reader_options``: keyword arguments
     of the :class:`~mbtrack_ros.recording.bag.RecordingReader` (its frame-set
     synchroniser's settings; ``mbtrack replay`` takes the recording's frame rate).
     ``jpeg_quality``: the working images reach the fusion tracker JPEG-coded at this
-    quality (``camera_node`` ``image_format: jpeg``), as it decodes them; None: raw."""
+    quality (``camera_node`` ``image_format: jpeg``), as it decodes them; None: raw.
+    ``stage_likelihood``: the camera stages score the particles in their cameras (else
+    the fusion tracker scores every camera itself)."""
     from mbtrack_ros.recording.bag import RecordingReader
 
     recording = Path(recording)
@@ -102,6 +115,24 @@ def fusion_vs_single(recording: str | Path, config: TrackerConfig | None = None,
     stages = {n: CameraStage(c, background, working_pixels=config.working_pixels)
               for n, c in calibration.cameras.items()}
     out = FusionComparison()
+    # thread CPU and wall seconds of the stages' scoring in this frame set
+    scoring = [0.0, 0.0]
+
+    def scorer(name: str):
+        def score(request):
+            t, w = time.thread_time(), time.perf_counter()
+            got = stages[name].score(request)
+            scoring[0] += time.thread_time() - t   # += of a float: atomic under the GIL
+            scoring[1] += time.perf_counter() - w
+            if got is not None:
+                out.scored += 1
+                out.score_bytes['request'] += request.nbytes
+                out.score_bytes['reply'] += got.nbytes
+            return lambda: got
+        return score
+
+    if stage_likelihood:
+        fusion.measurement.set_scorers({n: scorer(n) for n in stages})
     with RecordingReader(recording, **(reader_options or {})) as reader:
         for fs in reader.frames():
             t0 = time.process_time()
@@ -113,17 +144,20 @@ def fusion_vs_single(recording: str | Path, config: TrackerConfig | None = None,
                 coded = {n: encode_compressed(f.image, 'jpeg', quality=jpeg_quality)
                          for n, f in frames.items()}
             t2 = time.process_time()
+            scoring[:] = [0.0, 0.0]
             for n, (fmt, data) in coded.items():   # what a JPEG working image decodes to
-                frames[n].image = decode_compressed(fmt, data)
+                # (the stage keeps its own frame: it scores particles on the raw image)
+                frames[n] = replace(frames[n], image=decode_compressed(fmt, data))
             for n, regions in bank.receive(frames).items():
                 stages[n].set_regions(*regions)
             b = fusion.step(fs.stamp_ns, {n: f.image for n, f in frames.items()},
                             stamps=fs.stamps)
-            t3 = time.process_time()
+            t3 = time.process_time() - scoring[0]   # the stages' scoring is theirs
             out.cpu['single'] += t1 - t0
             out.cpu['fusion'] += t3 - t2
-            for key in out.fusion_timings:
-                out.fusion_timings[key] += b.timings.get(key, 0.0)
+            for key in out.fusion_timings:   # without the stages' scoring (the filter's)
+                out.fusion_timings[key] += b.timings.get(key, 0.0) \
+                    - (scoring[1] if key in ('filter', 'total') else 0.0)
             xy = np.array([t.mean[:2] for t in b.tracks]).reshape(-1, 2)
             velocity = np.array([t.mean[2:4] for t in b.tracks]).reshape(-1, 2)
             heights = np.array([t.height for t in b.tracks])
@@ -131,10 +165,10 @@ def fusion_vs_single(recording: str | Path, config: TrackerConfig | None = None,
             for stage in stages.values():      # what ~/tracks gives a camera node
                 stage.set_tracks(xy, velocity, heights)
             t5 = time.process_time()
-            out.cpu['stages'] += t2 - t1 + t5 - t4
+            staged = t2 - t1 + t5 - t4 + scoring[0]
+            out.cpu['stages'] += staged
             if out.started is not None:
-                for key, dt in (('single', t1 - t0), ('stages', t2 - t1 + t5 - t4),
-                                ('fusion', t3 - t2)):
+                for key, dt in (('single', t1 - t0), ('stages', staged), ('fusion', t3 - t2)):
                     out.steady_cpu[key] += dt
                 if out.steady_frames % 10 == 0:
                     _time_decoding(frames.values(), out)

@@ -24,13 +24,23 @@ update uses frame t-1's tracks), and to ``working/regions`` (the people cue of t
 bootstrap, which the fusion tracker computes from every camera; the first frame after the
 bootstrap waits for it at most ``region_wait`` seconds). Topic names are relative: start
 the node in the camera's namespace (``/<camera>``).
+
+It also scores the fusion tracker's particles in its camera: a request on
+``working/score_request`` (``std_msgs/UInt8MultiArray``,
+:mod:`~mbtrack_ros.nodes.score_messages`: the particles of the frame set, the key views
+when they changed) is answered on ``working/scores`` with the camera's share of the HJS
+likelihood on the frame of the request's stamp (:meth:`CameraStage.score`; on the raw
+working image, also with ``image_format: jpeg``), or with no scores when the frame is
+not among the last ``RECENT_FRAMES`` or the key views are missing (a restarted node: the
+tracker then scores the camera itself and sends them again). The answer runs in the
+request's callback (a few milliseconds of compiled code that the tracker waits for).
 """
 from __future__ import annotations
 
 import sys
 import threading
 import time
-from collections import deque
+from collections import OrderedDict, deque
 
 import cv2
 import numpy as np
@@ -40,22 +50,27 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import CompressedImage, Image, PointCloud2
+from std_msgs.msg import UInt8MultiArray
 
 from mbtrack_ros.core.camera import CalibrationError, RoomCalibration
 from mbtrack_ros.core.detection import DetectionError
 from mbtrack_ros.core.detection.camera_stage import (
     CameraStage, pack_masks, unpack_regions)
+from mbtrack_ros.core.likelihood import CameraRequest
 from mbtrack_ros.core.tracker import TrackerConfig, TrackerError, length_scale
 from mbtrack_ros.nodes.conversions import (
     ImageConversionError, compressed_to_rgb, image_to_rgb, mono_to_image, rgb_to_compressed,
     rgb_to_image, stamp_to_ns)
 from mbtrack_ros.nodes.messages import make_header
+from mbtrack_ros.nodes.score_messages import (
+    ScoreMessageError, read_request, scores_message)
 from mbtrack_ros.nodes.transport import use_large_shm_segment
 
 __all__ = ['CAMERA_PARAMETERS', 'CameraNode', 'cloud_columns', 'foreground_message', 'main']
 
 FOREGROUND_FORMAT = 'mono8; png compressed mono8'
 WARN_PERIOD_S = 10.0
+RECENT_FRAMES = 8   # frames kept for the tracker's score requests (about 0.5 s at 15 Hz)
 
 
 def _fr(lo: float, hi: float) -> dict:
@@ -200,6 +215,8 @@ class CameraNode(Node):
         self._warned: dict[str, float] = {}
         self.processed = 0
         self.dropped = 0
+        self.scored = 0    # score requests answered with scores
+        self._recent: OrderedDict = OrderedDict()   # stamp -> CameraFrame published
         self.seconds = 0.0  # processing time, wall clock
         if v['warm_up']:
             self._warm_up(background, int(v['tracker.working_pixels']))
@@ -221,6 +238,9 @@ class CameraNode(Node):
                                  out_qos)
         self.create_subscription(CompressedImage, 'working/regions', self._on_regions,
                                  out_qos)
+        self.pub_scores = self.create_publisher(UInt8MultiArray, 'working/scores', out_qos)
+        self.create_subscription(UInt8MultiArray, 'working/score_request',
+                                 self._on_score_request, out_qos)
         self._worker = None
         if worker:
             self._worker = threading.Thread(target=self._loop, name='camera_stage',
@@ -240,6 +260,12 @@ class CameraNode(Node):
             image[:, 4 * k:4 * k + 8] = 255 - image[:, 4 * k:4 * k + 8]
             stage.process(image)
             stage.awaiting_regions = False
+        # and the scoring kernel (the first score request is then answered within the
+        # tracker's score_timeout)
+        stage.score(CameraRequest(np.zeros((1, 6)), np.zeros(1, np.int64), np.ones(1),
+                                  np.full(1, 1.7), np.full(1, 0.5), 0.45, np.zeros((1, 1)),
+                                  np.ones(1, np.int64), np.full((1, 1, 1536), 1 / 512),
+                                  False, 0.0288, 0.15, 1, 20, True, 0.3))
 
     def warn_once(self, cause: str, text: str) -> None:
         now = time.monotonic()
@@ -299,6 +325,25 @@ class CameraNode(Node):
             self._regions = (stamp_to_ns(msg.header.stamp), packed)
             self._lock.notify_all()
 
+    def _on_score_request(self, msg: UInt8MultiArray) -> None:
+        """The tracker's particles scored on the frame of the request's stamp, answered
+        at once (no scores when the frame is gone or the request cannot be scored)."""
+        try:
+            seq, stamp, request = read_request(msg)
+        except ScoreMessageError as err:
+            self.warn_once('score', f'{self.name}: bad score request: {err}')
+            return
+        with self._lock:
+            frame = self._recent.get(stamp)
+        scores = None
+        if frame is not None:
+            try:
+                scores = self.stage.score(request, frame)
+            except DetectionError as err:
+                self.warn_once('score', f'{self.name}: score request refused: {err}')
+        self.pub_scores.publish(scores_message(seq, stamp, scores))
+        self.scored += scores is not None
+
     # -- the stage ------------------------------------------------------------------------
     def _loop(self) -> None:
         while True:
@@ -355,6 +400,10 @@ class CameraNode(Node):
             self.processed += 1
 
     def publish(self, stamp_ns: int, frame) -> None:
+        with self._lock:   # the frames the tracker may ask to score particles on
+            self._recent[stamp_ns] = frame
+            while len(self._recent) > RECENT_FRAMES:
+                self._recent.popitem(last=False)
         header = make_header(stamp_ns, self.camera.frame_id)
         if self.jpeg:
             image = rgb_to_compressed(frame.image, header, 'jpeg', quality=self.quality)
@@ -367,7 +416,7 @@ class CameraNode(Node):
         self.get_logger().info(
             f'{self.name}: {self.processed} frames processed '
             f'({1e3 * self.seconds / max(self.processed, 1):.1f} ms each), '
-            f'{self.dropped} dropped')
+            f'{self.dropped} dropped, {self.scored} score requests answered')
         with self._lock:
             self._closing = True
             self._lock.notify_all()

@@ -12,23 +12,36 @@ detection's :class:`~mbtrack_ros.core.detection.camera_stage.ReceivedForeground`
 of the background models), and the bootstrap regions of the people cue, computed here from
 every camera's frames, go back to the cameras whose model just started
 (``<foreground_topic's namespace>/regions``, PNG bit planes). The filter, detection search,
-existence and release run as in one process.
+existence and release run as in one process, except that each camera node scores the
+frame set's particles in its camera (the camera's share of the HJS likelihood): the
+filter's likelihood sends every camera its request
+(``<foreground_topic's namespace>/score_request``) and waits up to ``score_timeout`` for
+the answers (``.../scores``, :mod:`~mbtrack_ros.nodes.score_messages`); a camera that did
+not answer in time is scored here, as in one process, and not waited for during a back-off
+(:class:`RemoteScorer`).
 """
 from __future__ import annotations
 
+import itertools
+import threading
+import time
 from collections import OrderedDict
 
 import cv2
+import numpy as np
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import CompressedImage, Image
+from std_msgs.msg import UInt8MultiArray
 
 from mbtrack_ros.core.detection.camera_stage import (
     CameraFrame, ReceivedForeground, pack_regions, unpack_masks)
 from mbtrack_ros.nodes.conversions import (
     ImageConversionError, compressed_to_rgb, image_to_mono, image_to_rgb, stamp_to_ns)
 from mbtrack_ros.nodes.messages import make_header
+from mbtrack_ros.nodes.score_messages import (
+    ScoreMessageError, read_scores, request_message)
 
-__all__ = ['FusionInput']
+__all__ = ['FusionInput', 'RemoteScorer']
 
 PAIRING = 30  # unpaired stamps kept per camera (2 s at 15 Hz)
 
@@ -41,6 +54,99 @@ def _masks(msg):
     if marker.startswith('bootstrap'):
         return marker == 'bootstrap started'
     return unpack_masks(image_to_mono(msg) if raw else compressed_to_rgb(msg))
+
+
+class RemoteScorer:
+    """One camera node scoring the tracker's particles (a
+    :data:`~mbtrack_ros.core.likelihood.Scorer` of :meth:`MeasurementModel.set_scorers`):
+    called by the tracker's step with the camera's request, it publishes it and returns
+    the wait for the answer, until ``timeout`` s (wall clock) after the request (the
+    requests of a frame set go out together, so their waits end together). A camera that
+    did not answer in time is not waited for (the tracker scores it; its requests still go
+    out) for the next 1, 2, 4, ... up to ``MAX_BACKOFF`` requests, one answer in time
+    resetting it: a dead or overloaded camera node costs the tracker at most one timeout
+    per back-off, and one that comes back is asked again within it. ``stamp_ns``: the
+    capture stamp of the camera's frame in the frame set being stepped
+    (:meth:`FusionInput.prepare`)."""
+
+    MAX_BACKOFF = 64   # requests (about 4 s at 15 Hz)
+
+    def __init__(self, camera: str, publish, timeout: float, warn) -> None:
+        self.camera, self.publish, self.timeout, self.warn = camera, publish, timeout, warn
+        self.stamp_ns = 0
+        self.asked = 0       # requests sent
+        self.answered = 0    # answers with scores taken
+        self.missed = 0      # waits in vain
+        self._backoff = 1
+        self._skip_until = 0  # requests up to this one are not waited for
+        self._seq = itertools.count(1)
+        self._waiting = 0    # seq of the request being waited for
+        self._shape = (0, 0)  # (particles, targets) its answer must have
+        self.refused = 0     # answers of the wrong shape or with non-finite scores
+        self._answer = None
+        self._cond = threading.Condition()
+
+    def __call__(self, request):
+        seq = next(self._seq)
+        with self._cond:
+            self._waiting, self._answer = seq, None
+            self._shape = (len(request.states), len(request.n_views))
+        end = time.monotonic() + self.timeout
+        self.publish(request_message(seq, self.stamp_ns, request))
+        self.asked += 1
+        if self.asked <= self._skip_until:   # not waited for: taken if there already
+            return self._ready
+        return lambda: self._wait(end)
+
+    def _ready(self):
+        with self._cond:
+            answer, self._answer, self._waiting = self._answer, None, 0
+        scores = None if answer is None else answer[1]
+        self.answered += scores is not None
+        return scores
+
+    def _wait(self, end: float):
+        with self._cond:
+            while self._answer is None and (left := end - time.monotonic()) > 0:
+                self._cond.wait(left)
+            answer, self._answer, self._waiting = self._answer, None, 0
+        if answer is None:
+            self.missed += 1
+            self._skip_until = self.asked + self._backoff
+            self._backoff = min(2 * self._backoff, self.MAX_BACKOFF)
+            self.warn(f'{self.camera}:scores', f'{self.camera}: no scores from its camera '
+                      f'node within {self.timeout} s: scored by the tracker meanwhile')
+            return None
+        self._backoff = 1
+        scores = answer[1]
+        self.answered += scores is not None
+        return scores
+
+    def on_answer(self, msg) -> None:
+        """An answer message (the executor's thread); one to an earlier request is late
+        and dropped. Scores of another shape than the request's particles and targets, or
+        with a non-finite log-likelihood, visible or inside share, are refused (counted,
+        warned): the answer then carries no scores, and the tracker scores the camera."""
+        try:
+            seq, _, scores = read_scores(msg)
+        except ScoreMessageError as err:
+            self.warn(f'{self.camera}:scores', f'{self.camera}: bad scores message: {err}')
+            return
+        with self._cond:
+            if seq != self._waiting:
+                return
+            n, k = self._shape
+            if scores is not None and not (
+                    scores.loglik.shape == scores.inside.shape == scores.cover.shape == (n,)
+                    and scores.visible.shape == (k,)
+                    and all(np.isfinite(a).all() for a in (scores.loglik, scores.visible,
+                                                            scores.inside))):
+                self.refused += 1
+                self.warn(f'{self.camera}:scores', f'{self.camera}: scores refused: not '
+                          f'{n} particles and {k} targets of finite numbers')
+                scores = None
+            self._answer = (seq, scores)
+            self._cond.notify_all()
 
 
 class FusionInput:
@@ -64,6 +170,7 @@ class FusionInput:
             QoSProfile(depth=p.qos_depth, reliability=ReliabilityPolicy.RELIABLE)
         reliable = QoSProfile(depth=p.qos_depth, reliability=ReliabilityPolicy.RELIABLE)
         self.topics = {}
+        self.scorers: dict[str, RemoteScorer] = {}
         for cam in p.cameras:
             compressed = cam.transport == 'compressed'
             fg_topic = str(node.declare_parameter(
@@ -81,6 +188,18 @@ class FusionInput:
             self._regions[cam.name] = node.create_publisher(CompressedImage, regions,
                                                             reliable)
             self.topics[cam.name] = (cam.image_topic, fg_topic, regions)
+            measurement = node.tracker.measurement
+            if p.score_timeout > 0 and hasattr(measurement, 'set_scorers'):
+                working = base.rsplit('/', 1)[0]
+                pub = node.create_publisher(UInt8MultiArray, working + '/score_request',
+                                            reliable)
+                scorer = RemoteScorer(cam.name, pub.publish, p.score_timeout,
+                                      node.warn_once)
+                node.create_subscription(UInt8MultiArray, working + '/scores',
+                                         scorer.on_answer, reliable)
+                self.scorers[cam.name] = scorer
+        if self.scorers:
+            node.tracker.measurement.set_scorers(self.scorers)
 
     def _on_part(self, camera: str, msg, which: int) -> None:
         """An image (``which`` 0) or foreground message (1) of ``camera``: paired with the
@@ -129,6 +248,8 @@ class FusionInput:
         :class:`CameraFrame` s): masks to the detection, regions back to the cameras that
         started their model; ``fs.images`` become the working images."""
         frames = fs.images
+        for name, scorer in self.scorers.items():   # the frames the particles are scored on
+            scorer.stamp_ns = int(fs.stamps.get(name, fs.stamp_ns))
         if self.bank is not None:
             for name, (region, body, core) in self.bank.receive(frames).items():
                 ok, data = cv2.imencode('.png', pack_regions(region, body, core))

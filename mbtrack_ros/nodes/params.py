@@ -23,6 +23,12 @@ camera.<name>.foreground_topic  string     foreground mode: the camera node's ma
                                            (``/<name>/working/foreground``, mono8;
                                            ``.../compressed``, PNG, with the
                                            compressed transport)
+score_timeout                   double     foreground mode: wall-clock wait for a camera
+                                           node's scores of the frame set's particles, s;
+                                           a camera that did not answer in time is scored
+                                           by the tracker and not waited for during a
+                                           back-off (1, 2, 4, ... 64 frame sets); 0 = the
+                                           tracker scores every camera itself (0.05)
 camera.<name>.transport         string     per-camera override of ``image_transport``
 camera.<name>.camera_info_topic string     optional CameraInfo topic for a size check ('')
 sync.tolerance                  double     largest distance of an image's capture time
@@ -194,6 +200,7 @@ class NodeParams:
     frame_rate: float = 0.0
     time_offsets: dict[str, float] = field(default_factory=dict)
     input_mode: str = 'images'
+    score_timeout: float = 0.05
 
     @property
     def camera_names(self) -> list[str]:
@@ -216,6 +223,9 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
     'cameras': ([''], 'camera names to use; empty = all cameras of the calibration', {}),
     'input_mode': ('images', 'images | foreground: the cameras\' images, or (fusion) the '
                    'camera nodes\' working images and foreground masks', {}),
+    'score_timeout': (0.05, 'foreground mode: wall-clock wait for a camera node\'s scores of '
+                      'the particles, s; 0 = the tracker scores every camera itself',
+                      _fr(0.0, 10.0)),
     'image_transport': ('raw', 'raw | compressed: default image transport', {}),
     'image_reliability': ('best_effort', 'best_effort (sensor data QoS) | reliable: image '
                           'subscriptions; reliable loses no frame of a replayed bag', {}),
@@ -434,7 +444,7 @@ def declare_and_read(node: Node) -> tuple[NodeParams, RoomCalibration]:
         warm_up=bool(v['warm_up']), qos_depth=int(v['qos_depth']),
         outputs_persons=bool(v['outputs.persons']),
         outputs_detections=bool(v['outputs.detections']), outputs_tf=bool(v['outputs.tf']),
-        input_mode=str(v['input_mode']))
+        input_mode=str(v['input_mode']), score_timeout=float(v['score_timeout']))
     return params, calibration
 
 

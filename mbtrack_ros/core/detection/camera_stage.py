@@ -19,12 +19,19 @@ fusion node gives the same tracks as one process up to two differences:
   each stage its regions (:meth:`CameraStage.set_regions`), which a stage waits for before
   its next frame.
 
+A stage can also score the filter's particles in its camera (:meth:`CameraStage.score`):
+the camera's share of the HJS likelihood (000 Algorithm 1 "update" and the foreground
+coverage term, :func:`~mbtrack_ros.core.likelihood.score_camera`), requested by the
+fusion node with the frame set's particles (:class:`~mbtrack_ros.core.likelihood
+.CameraRequest`, :meth:`MeasurementModel.set_scorers`); the same call on the same image
+and masks as in one process, so the scores are those of one process.
+
 Masks travel as one ``(H, W) uint8`` image of bit planes (:func:`pack_masks`).
 """
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -35,6 +42,9 @@ from mbtrack_ros.core.detection import DetectionError
 from mbtrack_ros.core.detection.illumination import IlluminationNormaliser
 from mbtrack_ros.core.detection.background import (
     BackgroundConfig, BackgroundModel, BootstrapCue)
+from mbtrack_ros.core.detection.features import ForegroundIntegral
+from mbtrack_ros.core.likelihood import (
+    CameraRequest, CameraScores, LikelihoodError, _Workspaces, camera_constants, score_camera)
 from mbtrack_ros.core.shape import BodyShape, rasterize
 from mbtrack_ros.core.state import SIT, THETA, VX, VY, X, Y
 
@@ -147,6 +157,13 @@ class CameraStage:
                                                                           self.model}))
         self._exclude: np.ndarray | None = None
         self.awaiting_regions = False  # bootstrapped; the fusion node's cue not applied yet
+        self.last: CameraFrame | None = None   # the last frame processed
+        self._camera_args = camera_constants(self.camera)
+        self._workspaces = _Workspaces()
+        # version -> (V, 1536) key views of a target, those of the last score request
+        self._views: dict[int, np.ndarray] = {}
+        # (frame, its colour bins, its foreground's prefix sums) of the last frame scored
+        self._scored: tuple[CameraFrame, np.ndarray, ForegroundIntegral | None] | None = None
 
     def resize(self, image: np.ndarray) -> np.ndarray:
         """``image`` (H, W, 3) at the working size: itself when it has that size already
@@ -193,11 +210,115 @@ class CameraStage:
         fg = self.model.apply(im, defer=True)
         if fg is None:
             self.awaiting_regions = self.model.ready and not was_ready
-            return CameraFrame(im, started=self.awaiting_regions)
+            self.last = CameraFrame(im, started=self.awaiting_regions)
+            return self.last
         possible = self.model.possible_foreground_as_tested
         self.model.exclude_pending(self._exclude)
         self.model.update_pending()
-        return CameraFrame(im, fg, possible, self.model.presence())
+        self.last = CameraFrame(im, fg, possible, self.model.presence())
+        return self.last
+
+    def _completed(self, request: CameraRequest) -> CameraRequest | None:
+        """``request`` with every target's key views (K, V, 1536): those it carries for
+        ``key_targets``, the others' by version from the last request (kept in turn:
+        this request's only); None when one is missing."""
+        try:
+            versions = np.asarray(request.versions, np.int64).reshape(-1)
+            targets = np.asarray(request.key_targets, np.int64).reshape(-1)
+            n_views = np.asarray(request.n_views, np.int64).reshape(-1)
+            sent = np.asarray(request.key, np.float64)
+            k, v = len(versions), int(np.shape(request.view_angles)[1])
+            if (len(n_views) != k or sent.shape != (len(targets), v, 1536)
+                    or (len(targets) and not 0 <= targets.min() <= targets.max() < k)
+                    or (k and not 1 <= n_views.min() <= n_views.max() <= v)):
+                raise ValueError
+        except (TypeError, ValueError, IndexError) as err:
+            raise DetectionError(f'camera {self.full.name!r}: malformed score request') \
+                from err
+        views = dict(self._views)
+        for j, t in enumerate(targets.tolist()):
+            views[int(versions[t])] = sent[j, :n_views[t]]
+        key = np.zeros((k, v, 1536))
+        for t in range(k):
+            got = views.get(int(versions[t]))
+            if got is None or len(got) != n_views[t]:
+                self._views = {}
+                return None
+            key[t, :n_views[t]] = got
+        self._views = {int(versions[t]): key[t, :n_views[t]] for t in range(k)}
+        return replace(request, key=key, key_targets=None, versions=None)
+
+    def score(self, request: CameraRequest, frame: CameraFrame | None = None
+              ) -> CameraScores | None:
+        """The particles of ``request`` scored in this camera (the camera's share of the
+        fusion node's HJS likelihood, :func:`~mbtrack_ros.core.likelihood.score_camera`)
+        on ``frame`` (default: the last one :meth:`process` gave; None when there is none):
+        its working image, and its foreground with the possible foreground undecided
+        (what the tracker's :meth:`MeasurementModel.set_foreground` takes in one
+        process). A request with ``key_targets`` takes the other targets' key views from
+        the last request by version (None when they are not there: a restarted stage).
+        Raises :class:`DetectionError` for a malformed request."""
+        frame = self.last if frame is None else frame
+        if frame is None:
+            return None
+        if self._scored is None or self._scored[0] is not frame:
+            integral = None
+            if frame.foreground is not None:
+                possible = frame.possible
+                undecided = possible if possible is not None and possible.any() else None
+                integral = ForegroundIntegral(frame.foreground, undecided)
+            self._scored = (frame, np.zeros((0, 0), np.int16), integral)
+        _, bins, integral = self._scored
+        if request.key_targets is not None:   # key views of earlier requests completed
+            request = self._completed(request)
+            if request is None:
+                return None
+        r = _checked(request, self.full.name)
+        n, k = len(r.states), len(r.key)
+        out = CameraScores.empty(n, k)
+        try:
+            bins = score_camera(self._camera_args, frame.image, bins, lambda: integral,
+                                r, self._workspaces, out)
+        except LikelihoodError as err:
+            raise DetectionError(f'camera {self.full.name!r}: {err}') from err
+        self._scored = (frame, bins, integral)
+        return out
+
+
+def _checked(r: CameraRequest, name: str) -> CameraRequest:
+    """``r`` with its arrays in the kernel's types, or :class:`DetectionError` when they do
+    not fit together (a request from the network is checked before a kernel indexes with
+    it)."""
+    def arr(a, dtype, ndim):
+        a = np.ascontiguousarray(a, dtype)
+        if a.ndim != ndim:
+            raise ValueError
+        return a
+
+    try:
+        states, key = arr(r.states, np.float64, 2), arr(r.key, np.float64, 3)
+        target, n_views = arr(r.target, np.int64, 1), arr(r.n_views, np.int64, 1)
+        prior, heights, widths = (arr(a, np.float64, 1) for a in (r.prior, r.heights,
+                                                                   r.widths))
+        angles = arr(r.view_angles, np.float64, 2)
+    except (TypeError, ValueError) as err:
+        raise DetectionError(f'camera {name!r}: malformed score request') from err
+    n, k = len(states), len(key)
+    ok = (states.shape[1] == 6 and all(len(a) == n for a in (target, prior, heights, widths))
+          and key.shape[2] == 1536 and len(angles) == k and len(n_views) == k
+          and (k == 0 or (n_views.min() >= 1 and n_views.max() <= min(key.shape[1],
+                                                                      angles.shape[1])))
+          and (n == 0 or (k > 0 and target.min() >= 0 and target.max() < k))
+          and int(r.row_step) >= 1 and np.isfinite([r.two_sigma_sq, r.d_occ, r.chair,
+                                                   r.neutral]).all()
+          and r.two_sigma_sq > 0)
+    if not ok:
+        raise DetectionError(f'camera {name!r}: malformed score request ({n} particles, '
+                             f'{k} targets)')
+    return CameraRequest(states, target, prior, heights, widths, float(r.chair), angles,
+                         n_views, key, bool(r.separable), float(r.two_sigma_sq),
+                         float(r.d_occ), int(r.row_step), int(r.min_visible),
+                         bool(r.coverage), float(r.neutral))
 
 
 class _Received:

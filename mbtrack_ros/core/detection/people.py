@@ -44,8 +44,11 @@ passes at ``min_motion = 0.03``. A person who stands perfectly still during the 
 found by the **floor parallax** of the last frame set instead (:meth:`PeopleCue._still`,
 :class:`~.parallax.FloorParallax`): his silhouettes show something other than the floor
 the other cameras see behind him (an object stands there), and his outline is a
-person's (a contour/symmetry z-score of ``min_still_score``, well above the ``min_score``
-that motion needs: furniture stands on the floor too). Where fewer than three cameras see
+person's (a contour/symmetry z-score about ``min_still_score``, well above the
+``min_score`` that motion needs: furniture stands on the floor too); the two are weighed
+together (:func:`still_evidence`), so that either, well above its threshold, makes up
+for the other falling short by up to half (the floor a neighbour hides behind him, an
+outline against a busy background). Where fewer than three cameras see
 the floor behind him he is learnt into the background, found when he moves, and the
 place he reveals is recognised as a ghost by the background's border test
 (:func:`~.background.ghost_components`).
@@ -72,7 +75,10 @@ from mbtrack_ros.core.detection.features import (
 from mbtrack_ros.core.detection.parallax import FloorParallax
 from mbtrack_ros.core.shape import BodyShape, Silhouettes, rasterize
 
-__all__ = ['PeopleCue', 'PeopleCueConfig']
+__all__ = ['PeopleCue', 'PeopleCueConfig', 'STILL_MAKE_UP', 'still_evidence']
+
+STILL_MAKE_UP = 1.5     # each still-person evidence counts up to 1.5 times its threshold
+#                         (it makes up for at most half of the other's, still_evidence)
 
 
 @dataclass(frozen=True)
@@ -94,13 +100,17 @@ class PeopleCueConfig:
             (ignored with a single bootstrap frame).
         w_symmetry: weight of the colour-symmetry term against the contour term.
         min_score: smallest mean contour/symmetry robust z-score over the seeing cameras.
-        min_parallax: a place that does not move is a person only if at least this share
-            of its silhouettes' floor-backed pixels (pooled over the side cameras) shows
-            something other than the floor the other cameras see there
-            (:class:`~.parallax.FloorParallax`): an object stands there (fraction).
-        min_still_score: ... and its mean contour/symmetry robust z-score reaches this
-            (its outline is a person's, not a table's or a chair's), robust standard
-            deviations; ``inf`` disables the still-person stage.
+        min_parallax: the share of a place's floor-backed silhouette pixels (pooled over
+            the side cameras) that shows something other than the floor the other cameras
+            see there (:class:`~.parallax.FloorParallax`: an object stands there) at which
+            a place that does not move is a person on that evidence alone (fraction in
+            (0, 1]; see :func:`still_evidence`).
+        min_still_score: the mean contour/symmetry robust z-score of such a place at which
+            its outline alone makes it a person's (not a table's or a chair's), robust
+            standard deviations (> 0); ``inf`` disables the still-person stage. A still
+            place is a person when the two evidences, each in units of its threshold, sum
+            to at least 2, neither making up for more than half of the other
+            (:func:`still_evidence`).
         max_people: largest number of person-like places marked.
         nms_radius: smallest distance between two marked places.
         refine_radius: how far a chosen place may move when it is refined with only the
@@ -150,12 +160,36 @@ class PeopleCueConfig:
             raise DetectionError('people cue needs at least one orientation')
         if self.min_views < 1 or self.max_people < 0 or self.dilation < 0:
             raise DetectionError('people cue min_views >= 1, max_people >= 0, dilation >= 0')
-        if not 0.0 <= self.min_parallax <= 1.0:
-            raise DetectionError(f'people cue min_parallax must be in [0, 1], got '
+        if not 0.0 < self.min_parallax <= 1.0:
+            raise DetectionError(f'people cue min_parallax must be in (0, 1], got '
                                  f'{self.min_parallax}')
+        if not self.min_still_score > 0.0:
+            raise DetectionError(f'people cue min_still_score must be > 0, got '
+                                 f'{self.min_still_score}')
         if not 0.0 < self.min_visible <= 1.0:
             raise DetectionError(f'people cue min_visible must be in (0, 1], got '
                                  f'{self.min_visible}')
+
+
+def still_evidence(cover: np.ndarray, score: np.ndarray, min_parallax: float,
+                   min_still_score: float) -> np.ndarray:
+    """The evidence (P,) that a place which does not move holds a person: the sum of the
+    floor-parallax share ``cover`` (P,) (an object stands there) and the outline's
+    contour/symmetry robust z-score ``score`` (P,) (it is a person's), each in units of
+    its threshold (``min_parallax``, ``min_still_score``) and at most
+    :data:`STILL_MAKE_UP` of it. A place is a person at 2 or more: both at their
+    thresholds, or one short of its threshold by at most half and made up by the other
+    (a neighbour who hides part of the floor behind him lowers his parallax share; his
+    outline against a busy background lowers his z-score). Neither makes up for more
+    than half of the other: a cabinet fills its silhouette with parallax whatever its
+    outline, a poster has a person's outline and no parallax. ``-inf`` where ``cover`` is
+    0 (the parallax test does not apply: fewer than three cameras see the floor behind
+    the place) or ``score`` is not finite."""
+    cover = np.asarray(cover, np.float64)
+    score = np.asarray(score, np.float64)
+    out = np.minimum(cover / float(min_parallax), STILL_MAKE_UP) \
+        + np.minimum(score / float(min_still_score), STILL_MAKE_UP)
+    return np.where((cover > 0.0) & np.isfinite(score), out, -np.inf)
 
 
 class PeopleCue:
@@ -354,13 +388,14 @@ class PeopleCue:
     def _still(self, images: Mapping[str, np.ndarray], xy: np.ndarray, score: np.ndarray,
                taken: np.ndarray) -> np.ndarray:
         """(K + J, 2) the places ``taken`` (K, 2) followed by those of people who stand
-        still: an object on the floor (floor parallax, :class:`~.parallax.FloorParallax`,
-        over at least ``min_parallax`` of the silhouette's floor-backed pixels) whose
-        outline is a person's (mean contour/symmetry z-score ``score`` (P,) at least
-        ``min_still_score``), the largest parallax first, ``nms_radius`` apart, at most
-        ``max_people`` in all. What a chosen person explains (his body, the floor he hides
-        from the other cameras, :meth:`~.parallax.FloorParallax.decide`) is no evidence
-        for the next, nor is what the places ``taken`` explain."""
+        still: an object on the floor (floor parallax, :class:`~.parallax.FloorParallax`:
+        the share of the silhouette's floor-backed pixels that disagree) whose outline is a
+        person's (mean contour/symmetry z-score ``score`` (P,)), the two evidences combined
+        by :func:`still_evidence` (at least 2), the largest parallax first (it places the
+        object; the outline varies little over a body's width), ``nms_radius`` apart,
+        at most ``max_people`` in all. What a chosen person explains (his body, the floor
+        he hides from the other cameras, :meth:`~.parallax.FloorParallax.decide`) is no
+        evidence for the next, nor is what the places ``taken`` explain."""
         cfg = self.config
         if len(taken) >= cfg.max_people or not np.isfinite(cfg.min_still_score):
             return taken
@@ -370,8 +405,7 @@ class PeopleCue:
         evidence = {n: ev for n, ev in self._parallax.differences(images).items()
                     if n in self.cameras}
         out = [p for p in np.asarray(taken, np.float64).reshape(-1, 2)]
-        person_like = np.isfinite(score) & (score >= cfg.min_still_score)
-        while evidence and len(out) < cfg.max_people and person_like.any():
+        while evidence and len(out) < cfg.max_people:
             bodies = {n: self._region(n, np.array(out).reshape(-1, 2), cfg.height,
                                       cfg.width, 0) for n in self.calibration.cameras}
             shown = {}
@@ -379,7 +413,7 @@ class PeopleCue:
                 disagree, known = self._parallax.decide(ev, hidden=bodies)
                 shown[name] = (disagree & ~bodies[name], known & ~bodies[name])
             cover = self._parallax_cover(shown)
-            cand = person_like & (cover >= cfg.min_parallax)
+            cand = still_evidence(cover, score, cfg.min_parallax, cfg.min_still_score) >= 2.0
             if out:
                 cand &= np.linalg.norm(xy[:, None] - np.array(out)[None], axis=2
                                        ).min(axis=1) >= cfg.nms_radius
