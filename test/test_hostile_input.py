@@ -711,8 +711,8 @@ def test_d8_replay_refuses_oversized_images_before_decoding(recording, tmp_path,
     assert _replay(dst, tmp_path / 'out') == 0
     err = capsys.readouterr().err
     assert 'dropped 2 undecodable image(s)' in err and 'more than 4 times' in err
-    # the replay reads in a child process (ReaderProcess); the same reader here, with the
-    # replay's limit, never hands the oversized payloads to the decoder
+    # the replay's reader, with the replay's limit, never hands the oversized payloads to
+    # the decoder
     big = []
     real = images.cv2.imdecode
     monkeypatch.setattr(images.cv2, 'imdecode', lambda buf, *a: big.append(buf.size > 150_000)

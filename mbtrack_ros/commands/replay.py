@@ -3,11 +3,11 @@
 BAG is a rosbag2 directory (MCAP or sqlite3) or a recording directory made by
 ``mbtrack synth`` (then ``--config`` defaults to its ``calibration.yaml``). Frames are read
 with :class:`~mbtrack_ros.recording.bag.RecordingReader` and fed to the
-:class:`~mbtrack_ros.core.tracker.Tracker` as fast as possible (a child process reads,
-decodes and resizes to the tracker's working size (``--working-pixels``) the next frame
-sets while the tracker works: :class:`~mbtrack_ros.recording.reader_process.ReaderProcess`);
-``tracks.mcap`` is written by another child process
-(:mod:`mbtrack_ros.commands.output_writer`). Outputs in ``--out``:
+:class:`~mbtrack_ros.core.tracker.Tracker` as fast as possible (a reader thread decodes, and
+to the tracker's working size (``--working-pixels``) resizes, the next frame sets while
+the tracker works:
+:func:`~mbtrack_ros.recording.bag.prefetched`); ``tracks.mcap`` is written by a child
+process (:mod:`mbtrack_ros.commands.output_writer`). Outputs in ``--out``:
 
 * ``tracks.csv`` (``recording.csvfiles`` format), written row by row while tracking;
 * ``particles.npz`` with ``--save-particles`` (format of ``evaluation.posterior``).
@@ -42,11 +42,10 @@ from mbtrack_ros.core.filters import FilterError
 from mbtrack_ros.core.initiation import InitiationError, initial_tracks, plan_key_views
 from mbtrack_ros.core.likelihood import LikelihoodError
 from mbtrack_ros.core.tracker import Tracker, TrackerConfig, TrackerError
-from mbtrack_ros.recording.bag import BagError, RecordingReader
+from mbtrack_ros.recording.bag import BagError, RecordingReader, prefetched
 from mbtrack_ros.recording.calibration_io import load_calibration
 from mbtrack_ros.recording.csvfiles import (
     CsvFormatError, GroundTruthRow, TrackRow, read_ground_truth, write_tracks)
-from mbtrack_ros.recording.reader_process import ReaderProcess
 
 __all__ = ['add_parser', 'run']
 
@@ -319,11 +318,10 @@ def _collect_key_images(reader: RecordingReader, index: _FrameIndex,
     return images
 
 
-def _track_rows(tracker: Tracker, reader: RecordingReader, frames: ReaderProcess,
-                index: _FrameIndex, starts: list, args: argparse.Namespace, recorder,
-                status: dict, outputs=None) -> Iterator[TrackRow]:
-    """Tracking pass: yields the rows of tracks.csv frame by frame, from the frame sets of
-    ``frames`` (``reader``'s, read in a child process at the tracker's working size)."""
+def _track_rows(tracker: Tracker, reader: RecordingReader, index: _FrameIndex, starts: list,
+                args: argparse.Namespace, recorder, status: dict,
+                outputs=None) -> Iterator[TrackRow]:
+    """Tracking pass: yields the rows of tracks.csv frame by frame."""
     from tqdm import tqdm
 
     total = reader.frame_count
@@ -335,6 +333,11 @@ def _track_rows(tracker: Tracker, reader: RecordingReader, frames: ReaderProcess
                disable=not sys.stderr.isatty())
     known = set(tracker.calibration.cameras)
     t_start = time.perf_counter()
+    # read, decode and resize while tracking: the images of larger cameras are decoded
+    # at the tracker's working size (TrackerConfig.working_pixels), resized once in the
+    # reader thread; Tracker.step then finds them at its size
+    reader.decode_to(tracker.resized_cameras)
+    frames = prefetched(reader.frames(), depth=4)
     try:
         for fs in frames:
             if args.max_frames is not None and status['frames'] >= args.max_frames:
@@ -390,9 +393,10 @@ def _track_rows(tracker: Tracker, reader: RecordingReader, frames: ReaderProcess
     except BagError as err:
         status['bag_error'] = str(err)
     finally:
-        frames.close()  # stop the reader process before the reader closes
-        status['unplaced'] = frames.dropped_frames
-        for text in frames.warnings:
+        frames.close()  # stop the reader thread before the reader closes
+        sync = getattr(reader, 'sync', None)
+        status['unplaced'] = sync.counters.dropped_frames if sync is not None else 0
+        for text in reader.warnings:
             print(f'{_PROG}: warning: {text}', file=sys.stderr)
         if outputs is not None and status.get('last_stamp') is not None:
             try:  # the final counts; a writer error is raised by outputs.close()
@@ -401,16 +405,6 @@ def _track_rows(tracker: Tracker, reader: RecordingReader, frames: ReaderProcess
                 pass
         bar.close()
         status['wall_s'] = time.perf_counter() - t_start
-
-
-def _resized_cameras(config: TrackerConfig, calibration: RoomCalibration) -> dict:
-    """Camera name -> working camera of the cameras whose images are larger than the
-    tracker's working size (``Tracker.resized_cameras`` of a tracker built with ``config``
-    for ``calibration``)."""
-    working = config.working_calibration(calibration).cameras
-    return {n: c for n, c in sorted(working.items())
-            if (c.width, c.height) != (calibration.cameras[n].width,
-                                       calibration.cameras[n].height)}
 
 
 def _counts(status: dict) -> dict:
@@ -509,16 +503,9 @@ def run(args: argparse.Namespace) -> int:
                                          'truth')
                 # the writer's child process starts (its imports) while the tracker is built
                 outputs = _output_bag(out, calibration)
-                # so does the reader's: it reads, decodes and resizes the frame sets while
-                # the tracker works; the images of larger cameras are decoded at the
-                # tracker's working size (TrackerConfig.working_pixels, Tracker.step's one
-                # resize done there), so the input's size costs the tracker's process nothing
-                reader.decode_to(_resized_cameras(config, calibration))
-                frames = ReaderProcess(reader, depth=4)
                 try:
                     tracker = Tracker(calibration, config, rng=np.random.default_rng(args.seed))
                 except TrackerError as err:
-                    frames.close()
                     if outputs is not None:
                         outputs.discard()
                     raise _UserError(str(err)) from err
@@ -538,8 +525,8 @@ def run(args: argparse.Namespace) -> int:
                     rows: list[TrackRow] = []
 
                     def collect() -> Iterator[TrackRow]:
-                        for row in _track_rows(tracker, reader, frames, index, starts, args,
-                                               recorder, status, outputs):
+                        for row in _track_rows(tracker, reader, index, starts, args, recorder,
+                                               status, outputs):
                             rows.append(row)
                             yield row
 
@@ -555,8 +542,6 @@ def run(args: argparse.Namespace) -> int:
                     if not handed and outputs is not None:
                         outputs.discard()
                     raise
-                finally:
-                    frames.close()
         except BagError as err:
             return _error(str(err), 1)
         except (InitiationError, FilterError, CalibrationError) as err:

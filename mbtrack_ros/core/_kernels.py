@@ -1108,3 +1108,40 @@ def area_shrink(src, rows, row_w, cols, col_w, out):
             v = np.int32(acc[j] + np.float32(0.5))
             d[j] = 255 if v > 255 else (0 if v < 0 else v)
     return out
+
+
+@njit(cache=True, nogil=True)
+def block_mean(src, ky, kx, rounded, out):
+    """Integer-factor area shrink of ``src`` (H, W, C) uint8 C-contiguous into ``out``
+    (h, w, C) uint8, h = H // ky, w = W // kx: each output element is the mean of its
+    ``ky`` x ``kx`` block of input pixels (the exact area average), rounded by the table
+    ``rounded`` (255 ky kx + 1,) uint8: ``rounded[s] = (s + ky kx // 2) // (ky kx)`` (a
+    lookup instead of a division per element). Rows are summed into uint32 first (one
+    pass over the input, contiguous), then each output's ``kx`` columns."""
+    h, w, c = out.shape
+    flat = src.reshape(src.shape[0], src.shape[1] * c)
+    dst = out.reshape(h, w * c)
+    used = w * kx * c
+    acc = np.empty(used, np.uint32)
+    row = np.empty(w * c, np.uint32)
+    first = np.empty(w * c, np.int64)
+    for x in range(w):
+        for ch in range(c):
+            first[x * c + ch] = x * kx * c + ch
+    for o in range(h):
+        line = flat[o * ky]
+        for j in range(used):
+            acc[j] = line[j]
+        for k in range(1, ky):
+            line = flat[o * ky + k]
+            for j in range(used):
+                acc[j] += line[j]
+        for j in range(w * c):
+            row[j] = acc[first[j]]
+        for i in range(1, kx):
+            for j in range(w * c):
+                row[j] += acc[first[j] + i * c]
+        d = dst[o]
+        for j in range(w * c):
+            d[j] = rounded[row[j]]
+    return out

@@ -27,8 +27,8 @@ import yaml
 from mbtrack_ros.core import _kernels
 
 __all__ = ['MAX_FLOOR_SIDE', 'MAX_IMAGE_SIDE', 'MIN_FLOOR_VIEW', 'CalibrationError',
-           'Camera', 'RoomCalibration', 'area_shrink', 'check_floor_views', 'look_at',
-           'yaml_error_line']
+           'Camera', 'RoomCalibration', 'area_shrink', 'block_shrink', 'check_floor_views',
+           'look_at', 'yaml_error_line']
 
 #: largest image side a camera may declare, pixels (images larger than this are refused)
 MAX_IMAGE_SIDE = 8192
@@ -144,6 +144,36 @@ def area_shrink(image: np.ndarray, width: int, height: int) -> np.ndarray:
     cols, col_w = _column_taps(w_in, width, channels)
     out = np.empty((height, width, channels), np.uint8)
     _kernels.area_shrink(src, rows, row_w, cols, col_w, out)
+    return out[:, :, 0] if grey else out
+
+
+@lru_cache(maxsize=16)
+def _rounded_means(n: int) -> np.ndarray:
+    """(255 n + 1,) uint8: the mean of ``n`` uint8 values from their sum, rounded half
+    up (``(s + n // 2) // n``)."""
+    table = ((np.arange(255 * n + 1) + n // 2) // n).astype(np.uint8)
+    table.flags.writeable = False
+    return table
+
+
+def block_shrink(image: np.ndarray, kx: int, ky: int) -> np.ndarray:
+    """``image`` (H, W[, C]) uint8, H and W multiples of ``ky`` and ``kx``, shrunk to
+    (H / ky, W / kx) by the exact area average: each output pixel is the rounded mean of
+    its ``ky`` x ``kx`` block (``_kernels.block_mean``, no GIL; reads a C-contiguous
+    input in place). Equal to OpenCV's integer-factor ``INTER_AREA`` up to one grey level
+    of rounding."""
+    src = np.asarray(image)
+    grey = src.ndim == 2
+    if grey:
+        src = src[:, :, None]
+    h_in, w_in, channels = src.shape
+    if kx < 1 or ky < 1 or h_in % ky or w_in % kx or src.dtype != np.uint8:
+        raise ValueError(f'block_shrink: cannot shrink a {src.dtype} {w_in}x{h_in} image by '
+                         f'{kx}x{ky} blocks')
+    if not src.flags.c_contiguous:
+        src = np.ascontiguousarray(src)
+    out = np.empty((h_in // ky, w_in // kx, channels), np.uint8)
+    _kernels.block_mean(src, ky, kx, _rounded_means(kx * ky), out)
     return out[:, :, 0] if grey else out
 
 
@@ -399,19 +429,24 @@ class Camera:
         """``image`` (H, W[, C]) resized to this camera's size (area averaging, the right
         filter for shrinking), or the same array when it already has that size.
 
-        A pyramid: while half the image (both sides even) is still at least this size, it
-        is halved by exact 2x2 block means (OpenCV's integer INTER_AREA path, several times
-        faster than a fractional one); the rest is one area shrink of a uint8 image by
-        :func:`area_shrink` (OpenCV's fractional INTER_AREA up to rounding, one grey level,
-        in two thirds of its time and without the GIL). The result is the direct area
-        resize up to the rounding of the intermediate images and the block borders (within
-        a few grey levels), and equal to it when the size is a power-of-two fraction of the
-        input's (640x480 to 320x240). An image smaller than this size on a side is enlarged
-        by OpenCV's INTER_AREA."""
+        When the input's sides are integer multiples of this size (``kx`` x ``ky`` blocks,
+        640x480 or 1280x720 to 320x240) the result is the exact area average, each pixel
+        the rounded mean of its block: halved by OpenCV's 2x2 INTER_AREA path while both
+        factors are 2 (vectorised), else one pass of :func:`block_shrink` (no GIL).
+        Otherwise a pyramid: while half the image (both sides even) is still at least this
+        size, it is halved by exact 2x2 block means; the rest is one area shrink of a uint8
+        image by :func:`area_shrink` (OpenCV's fractional INTER_AREA up to rounding, one
+        grey level, in two thirds of its time and without the GIL); the result is the
+        direct area resize up to the rounding of the intermediate images and the block
+        borders. An image smaller than this size on a side is enlarged by OpenCV's
+        INTER_AREA."""
         size = (self.height, self.width)
         if image.shape[:2] == size:
             return image
         h, w = image.shape[:2]
+        if h % self.height == 0 and w % self.width == 0 and image.dtype == np.uint8 \
+                and (h // self.height, w // self.width) != (2, 2):
+            return block_shrink(image, w // self.width, h // self.height)
         while h % 2 == 0 and w % 2 == 0 and h // 2 >= self.height and w // 2 >= self.width \
                 and (h, w) != size:
             h, w = h // 2, w // 2

@@ -22,7 +22,7 @@ import re
 import threading
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
+from pathlib import Path, PurePath
 from types import TracebackType
 from typing import TypeVar
 
@@ -38,6 +38,7 @@ from mbtrack_ros.recording.cdr_images import image_view
 from mbtrack_ros.recording.csvfiles import GroundTruthRow
 from mbtrack_ros.recording.images import (
     MAX_RESCALE, ImageConversionError, decode_compressed, decode_raw, encode_compressed)
+from mbtrack_ros.recording.mcap_views import McapViewError, McapViews
 
 __all__ = [
     'GROUND_TRUTH_TOPIC', 'BagError', 'FrameSet', 'RecordingReader', 'RecordingWriter',
@@ -276,6 +277,7 @@ class RecordingReader:
         self.sync = None
         self._wanted = list(cameras) if cameras is not None else None
         self._reader: AnyReader | None = None
+        self._views: McapViews | None = None
         self._mcap_files: list[Path] = []
         self._damaged: str | None = None
         self._sizes: dict[str, tuple[int, int]] = {}  # camera -> calibrated (width, height)
@@ -298,28 +300,6 @@ class RecordingReader:
         at a reduced scale); other cameras as they are."""
         self._to = dict(cameras)
 
-    def settings(self) -> dict:
-        """What :meth:`from_settings` needs to open the same reading again (a picklable
-        dict): the constructor's options with the cameras found, the size limits of
-        :meth:`limit_image_sizes` and the sizes of :meth:`decode_to`."""
-        found = getattr(self, '_connections', None)   # set when the bag was opened
-        return dict(path=self.path, cameras=list(found) if found else self._wanted,
-                    tolerance_ns=self.tolerance_ns,
-                    frame_rate=self.frame_rate, time_offsets=dict(self.time_offsets),
-                    timeout_ns=self.timeout_ns, sizes=dict(self._sizes),
-                    max_scale=self._max_scale, decode_to=dict(self._to))
-
-    @classmethod
-    def from_settings(cls, settings: dict) -> RecordingReader:
-        """A reader (not yet opened) with the :meth:`settings` of another one."""
-        s = dict(settings)
-        sizes, max_scale, to = s.pop('sizes'), s.pop('max_scale'), s.pop('decode_to')
-        reader = cls(s.pop('path'), **s)
-        if sizes:
-            reader.limit_image_sizes(sizes, max_scale=max_scale)
-        reader.decode_to(to)
-        return reader
-
     def __enter__(self) -> RecordingReader:
         try:
             reader = AnyReader([self.path], default_typestore=typestore)
@@ -327,6 +307,7 @@ class RecordingReader:
             self._reader = reader
             self._all = {c.topic: c.msgtype for c in reader.connections}
             self._counts = {c.topic: c.msgcount for c in reader.connections}
+            self._views = _views_of(self.path)
         except Exception as err:  # rosbags raises several types for damaged bags
             files = sorted(self.path.glob('*.mcap'))
             if not files:
@@ -351,7 +332,14 @@ class RecordingReader:
             yield topic, msgtype, data
 
     def _messages(self, topics: Iterable[str]) -> Iterator[tuple[str, str, bytes]]:
+        """(topic, msgtype, cdr) of the messages on ``topics`` in time order: views into
+        the memory-mapped files of an indexed MCAP bag (:class:`McapViews`, no copy), else
+        rosbags' copies."""
         topics = set(topics)
+        if self._views is not None:
+            for topic, msgtype, _, view in self._views.messages(topics):
+                yield topic, msgtype, view
+            return
         if self._reader is None:
             yield from self._stream(topics)
             return
@@ -361,6 +349,9 @@ class RecordingReader:
 
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
                  tb: TracebackType | None) -> None:
+        if self._views is not None:
+            self._views.close()
+            self._views = None
         if self._reader is not None:
             self._reader.close()
             self._reader = None
@@ -547,6 +538,21 @@ class RecordingReader:
                                        float(p['y']), float(p['z_head']),
                                        bool(p['sitting'] > 0.5), ()) for p in pts)
         return rows
+
+
+def _views_of(bag: Path) -> McapViews | None:
+    """The messages of the rosbag2 bag directory ``bag`` read in place (:class:`McapViews`)
+    when its metadata names MCAP files without rosbag2 compression, else None (rosbags
+    reads them)."""
+    import yaml
+
+    try:
+        info = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+        if info.get('storage_identifier') != 'mcap' or info.get('compression_mode'):
+            return None
+        return McapViews([bag / PurePath(name).name for name in info['relative_file_paths']])
+    except (McapViewError, OSError, yaml.YAMLError, KeyError, TypeError):
+        return None
 
 
 def _gaps(stamps: list[int], shown: int = 3) -> str:
