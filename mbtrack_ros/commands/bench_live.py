@@ -9,7 +9,9 @@ just before the first message of the frame set, so this is when the frame set st
 out; cheaper to receive than an image: its ``source_timestamp``) and the moment the
 ``/tracker_node/people`` message with that stamp reached the listener (its
 ``received_timestamp``); the difference is the end-to-end latency. Taking both times from the
-middleware, not from the Python callbacks, keeps a busy listener out of the measurement. It also
+middleware, not from the Python callbacks, keeps a busy listener out of the measurement; the
+latency to the people message's ``source_timestamp`` (taken in the tracker as it sends it)
+also keeps out the listener's reception, which a loaded machine delays. It also
 reads the node's counters from ``/diagnostics`` and the CPU time of the tracker process from
 ``/proc/<pid>/stat``. Then ``mbtrack replay`` runs over the same recording, timed, for the
 offline speed: with the default parameters and, in a source checkout, with the fast and the
@@ -166,6 +168,10 @@ class LiveResult:
     cameras: int = 4
     tracker_threads: tuple[tuple[str, float], ...] = ()  # (thread, CPU s) of the tracker
     unanswered: tuple[int, ...] = ()  # frame indices seen on /clock without an output
+    # to the people message's sending (its DDS source_timestamp, taken in the tracker):
+    # without this listener's own reception, which a loaded machine can delay
+    sent_all: LatencyStats | None = None
+    sent_after_1s: LatencyStats | None = None
 
 
 #: kinds of bad images the soak injects, in turn
@@ -320,6 +326,7 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     images: dict[int, float] = {}
     people: dict[int, float] = {}
+    sent: dict[int, float] = {}
     tracks: dict[int, int] = {}
     diags: list[dict] = []
     lock = threading.Lock()
@@ -357,6 +364,7 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
         s = stamp_to_ns(msg.header.stamp)
         with lock:
             people.setdefault(s, t)
+            sent.setdefault(s, info['source_timestamp'] / 1e9)
             tracks[s] = len(msg.poses)
 
     def on_diag(msg) -> None:
@@ -524,6 +532,7 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
         player_log.close()
     with lock:
         images_c, people_c, diag = dict(images), dict(people), (diags[-1] if diags else {})
+        sent_c = dict(sent)
     first = min(images_c) if images_c else 0
     later = {s: t for s, t in images_c.items() if s >= first + 1_000_000_000}
     settled = {s: t for s, t in images_c.items() if s >= first + 5_000_000_000}
@@ -551,7 +560,9 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
         image_bytes_per_frame=(float(np.mean(jpegs)) if jpegs else float('nan'))
         if image_format == 'jpeg' else float(working_bytes) if camera_nodes else float('nan'),
         image_format=image_format, cameras=len(cams),
-        tracker_threads=thread_split(threads0, threads1, node.pid), unanswered=unanswered)
+        tracker_threads=thread_split(threads0, threads1, node.pid), unanswered=unanswered,
+        sent_all=latency_stats(images_c, sent_c),
+        sent_after_1s=latency_stats(later, sent_c))
 
 
 def run_offline(recording: Path, *, seed: int = 0, ground_truth: bool = False,
@@ -761,6 +772,11 @@ def main_live(args: argparse.Namespace) -> int:
           'without output); after the '
           f'first second: p50 {1e3 * b.p50:.1f} ms, p95 {1e3 * b.p95:.1f} ms; after the first '
           f'5 s: p50 {1e3 * c.p50:.1f} ms, p95 {1e3 * c.p95:.1f} ms')
+    if live.sent_all is not None:
+        e, f = live.sent_all, live.sent_after_1s
+        print(f'latency image -> people sent (the tracker\'s send time): p50 '
+              f'{1e3 * e.p50:.1f} ms, p95 {1e3 * e.p95:.1f} ms, max {1e3 * e.max:.1f} ms; '
+              f'after the first second: p50 {1e3 * f.p50:.1f} ms, p95 {1e3 * f.p95:.1f} ms')
     print(f'node counters (last /diagnostics): frame sets {d.get("frame sets")}, incomplete '
           f'{d.get("incomplete frame sets")}, dropped frames/sets {d.get("dropped frames")}, '
           f'step time {d.get("step time [ms]")} ms')
