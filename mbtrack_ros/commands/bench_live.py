@@ -162,6 +162,7 @@ class LiveResult:
     rss_mb: tuple[tuple[float, float], ...] = ()  # (s since the player started, RSS MB)
     camera_node_cpu_seconds: tuple[float, ...] = ()  # per camera node (--live-camera-nodes)
     camera_node_logs: tuple[str, ...] = ()           # their counters at the end
+    tracker_score_logs: tuple[str, ...] = ()  # the tracker's warnings, its score requests
     mask_bytes_per_frame: float = float('nan')       # mean mask message data, bytes
     image_bytes_per_frame: float = float('nan')      # mean working image data, bytes
     image_format: str = 'raw'                        # of the working images: raw | jpeg
@@ -172,6 +173,7 @@ class LiveResult:
     # without this listener's own reception, which a loaded machine can delay
     sent_all: LatencyStats | None = None
     sent_after_1s: LatencyStats | None = None
+    sent_series: tuple[tuple[float, float], ...] = ()  # (s since first frame, latency s)
 
 
 #: kinds of bad images the soak injects, in turn
@@ -520,6 +522,9 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
         spinner.join(timeout=5)
         listener.destroy_node()
         rclpy.try_shutdown(context=context)
+        log.seek(0)
+        score_lines = [ln for ln in log.read().splitlines()
+                       if 'score requests,' in ln or '[WARN]' in ln]
         log.close()
         stage_lines = []
         for stage_log in stage_logs:
@@ -539,6 +544,7 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
     cpu = cpu1 - cpu0
     wall = wall1 - wall0
     stamps, lat, _ = match_latencies(images_c, people_c)
+    sent_stamps, sent_lat, _ = match_latencies(images_c, sent_c)
     order = sorted(images_c)
     unanswered = tuple(k for k, s in enumerate(order) if s not in people_c)
     return LiveResult(
@@ -556,13 +562,15 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
         latency_series=tuple(zip(((stamps - first) / 1e9).tolist(), lat.tolist())),
         injected_bad=injected[0], rss_mb=tuple(rss),
         camera_node_cpu_seconds=stage_cpu, camera_node_logs=tuple(stage_lines),
+        tracker_score_logs=tuple(score_lines),
         mask_bytes_per_frame=float(np.mean(masks)) if masks else float('nan'),
         image_bytes_per_frame=(float(np.mean(jpegs)) if jpegs else float('nan'))
         if image_format == 'jpeg' else float(working_bytes) if camera_nodes else float('nan'),
         image_format=image_format, cameras=len(cams),
         tracker_threads=thread_split(threads0, threads1, node.pid), unanswered=unanswered,
         sent_all=latency_stats(images_c, sent_c),
-        sent_after_1s=latency_stats(later, sent_c))
+        sent_after_1s=latency_stats(later, sent_c),
+        sent_series=tuple(zip(((sent_stamps - first) / 1e9).tolist(), sent_lat.tolist())))
 
 
 def run_offline(recording: Path, *, seed: int = 0, ground_truth: bool = False,
@@ -806,7 +814,7 @@ def main_live(args: argparse.Namespace) -> int:
               f' KiB ({"JPEG" if live.image_format == "jpeg" else "raw rgb8"}), foreground '
               f'masks {live.mask_bytes_per_frame / 1024:.2f} KiB '
               f'({"PNG" if live.image_format == "jpeg" else "raw mono8"})')
-        for line in live.camera_node_logs:
+        for line in live.camera_node_logs + live.tracker_score_logs:
             print('  ' + line[line.find(']: ') + 3:] if ']: ' in line else line)
     print(f'load average before / after the live run: {load0[0]:.2f} / {load1[0]:.2f}')
     if args.json is not None:

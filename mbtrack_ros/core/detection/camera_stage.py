@@ -17,7 +17,8 @@ fusion node gives the same tracks as one process up to two differences:
 * the multi-view people cue of the online bootstrap (:class:`~.people.PeopleCue`) needs all
   cameras: the fusion node computes it from the bootstrap frames the stages sent and sends
   each stage its regions (:meth:`CameraStage.set_regions`), which a stage waits for before
-  its next frame.
+  its next update (offline, the next frame; live, the frames until they come go out
+  without foreground, :meth:`CameraStage.hold`, while the cue runs on its own thread).
 
 A stage can also score the filter's particles in its camera (:meth:`CameraStage.score`):
 the camera's share of the HJS likelihood (000 Algorithm 1 "update" and the foreground
