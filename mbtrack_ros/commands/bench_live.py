@@ -456,6 +456,20 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
                 log.seek(0)
                 raise RuntimeError(f'tracker_node did not start: {log.read()[-500:]}')
             time.sleep(0.1)
+        # with camera nodes: every one of them up (warmed up: it creates its end points
+        # after) and discovered with the tracker's end points, so that no frame set of the
+        # start counts one as missing
+        def connected(cam: str) -> bool:
+            w = f'/{cam}/working/'
+            image = w + ('image/compressed' if image_format == 'jpeg' else 'image')
+            return (listener.count_publishers(image) >= 1
+                    and listener.count_subscribers(image) >= 1
+                    and listener.count_subscribers(w + 'score_request') >= 1)
+        while camera_nodes and not all(map(connected, cams)):
+            if any(p.poll() is not None for p in stages) or time.monotonic() > deadline:
+                raise RuntimeError('the camera nodes did not come up and connect to the '
+                                   'tracker within 300 s')
+            time.sleep(0.1)
         player = subprocess.Popen(
             [sys.executable, '-m', 'mbtrack_ros.nodes.bag_player', '--ros-args',
              '-p', f'bag:={recording}', '-p', f'rate:={rate}',
