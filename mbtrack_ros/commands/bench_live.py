@@ -276,7 +276,8 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
     """Play ``recording`` to a tracker_node process and measure (see the module docstring).
 
     ``camera_nodes``: one ``camera_node`` process per camera and the tracker in fusion mode
-    (``input_mode: foreground``); their CPU and the masks' and working images' bytes are
+    (``input_mode: foreground``), the player started once each camera node is up and
+    discovered by the tracker; their CPU and the masks' and working images' bytes are
     measured too. ``image_format``: the camera nodes' working images, ``raw``
     (``sensor_msgs/Image``) or ``jpeg`` (``CompressedImage``, decoded in the tracker).
     ``cameras``: track with the first ``cameras`` cameras of the calibration only (the
