@@ -236,7 +236,7 @@ def test_camera_node_offsets_stamps_and_publishes_masks_of_the_stage(recording, 
 
     node = CameraNode(context=context, worker=False, cli_args=[
         *camera_args(recording / 'calibration.yaml', 'cam0'), '-p', 'time_offset:=-0.25',
-        '-p', f'image_format:={image_format}'])
+        '-p', f'image_format:={image_format}', '-p', 'region_wait:=0.0'])  # as the stage
     probe = Node('probe', context=context)
     got = []
     raw = image_format == 'raw'
@@ -271,6 +271,82 @@ def test_camera_node_offsets_stamps_and_publishes_masks_of_the_stage(recording, 
         for a, b in zip(unpack_masks(image_to_mono(msg) if raw else compressed_to_rgb(msg)),
                         (exp.foreground, exp.possible, exp.presence)):
             np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.ros
+def test_camera_node_sends_frames_without_foreground_until_its_regions_come(recording,
+                                                                            context):
+    """After the bootstrap the node waits for the tracker's regions without holding a
+    frame back: the frames go out at once as a bootstrapping model's (no foreground, the
+    model not updated); once the regions came, its masks are those of a stage given the
+    same regions at that frame."""
+    import cv2
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import CompressedImage, Image
+
+    from mbtrack_ros.core.detection.camera_stage import (
+        CameraStage, pack_regions, unpack_masks)
+    from mbtrack_ros.nodes.camera_node import CameraNode
+    from mbtrack_ros.nodes.conversions import image_to_mono, rgb_to_image
+    from mbtrack_ros.nodes.messages import make_header
+    from mbtrack_ros.recording.bag import RecordingReader
+
+    node = CameraNode(context=context, worker=False, cli_args=[
+        *camera_args(recording / 'calibration.yaml', 'cam0'), '-p', 'region_wait:=60.0'])
+    probe = Node('probe', context=context)
+    got = []
+    reliable = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
+    probe.create_subscription(Image, '/cam0/working/foreground', got.append, reliable)
+    regions_pub = probe.create_publisher(CompressedImage, '/cam0/working/regions', reliable)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(probe)
+    executor.add_node(node)
+    assert wait_for(lambda: (executor.spin_once(timeout_sec=0.05),
+                             node.pub_foreground.get_subscription_count() > 0
+                             and regions_pub.get_subscription_count() > 0)[1], 20.0)
+    stage = CameraStage(node.camera, node.stage.config)
+    with RecordingReader(recording) as reader:
+        frame_sets = list(reader.frames())[:14]
+    region = np.zeros((node.stage.camera.height, node.stage.camera.width), bool)
+    region[:, :region.shape[1] // 3] = True
+    kinds, started, held = [], None, 0
+    for k, fs in enumerate(frame_sets):
+        if started is not None and k == started + 4:   # the regions come after 3 frames
+            ok, data = cv2.imencode('.png', pack_regions(region, region, region))
+            regions_pub.publish(CompressedImage(header=make_header(frame_sets[started]
+                                                                   .stamp_ns, 'x'),
+                                                format='png', data=data.tobytes()))
+            assert wait_for(lambda: (executor.spin_once(timeout_sec=0.05),
+                                     node._regions is not None)[1], 20.0)
+            stage.set_regions(region, region, region)
+        t = time.monotonic()
+        node._on_image(rgb_to_image(fs.images['cam0'], make_header(fs.stamp_ns, 'x')))
+        node.process_pending()
+        assert time.monotonic() - t < 5.0          # not the 60 s of region_wait
+        if stage.awaiting_regions:
+            expected = stage.hold(fs.images['cam0'])
+            held += 1
+        else:
+            expected = stage.process(fs.images['cam0'])
+        if expected.started:
+            started = k
+        kinds.append(expected)
+    assert started is not None and held == 3 and not node.stage.awaiting_regions
+    wait_for(lambda: (executor.spin_once(timeout_sec=0.05), len(got))[1] >= len(frame_sets),
+             20.0)
+    node.destroy_node()
+    probe.destroy_node()
+    assert len(got) == len(frame_sets)
+    for k, (msg, exp) in enumerate(zip(got, kinds)):
+        if started < k <= started + 3:               # held: a bootstrapping model's
+            assert msg.encoding == 'bootstrap' and not msg.data
+        elif k > started + 3:
+            assert msg.encoding == 'mono8'
+            for a, b in zip(unpack_masks(image_to_mono(msg)),
+                            (exp.foreground, exp.possible, exp.presence)):
+                np.testing.assert_array_equal(a, b)
 
 
 def _launch_module(monkeypatch):

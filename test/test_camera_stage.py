@@ -2,6 +2,7 @@
 the tracks of one process, up to the one-frame latency of the masked background update."""
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import numpy as np
@@ -268,3 +269,47 @@ def test_stage_scoring_leaves_the_fusion_tracks_unchanged(recording):
     assert len(staged.rows['fusion']) >= 10
     assert staged.rows['fusion'] == itself.rows['fusion']
     assert staged.rows['single'] == itself.rows['single']
+
+
+def test_received_foreground_computes_the_cue_in_the_background_with_the_same_result(
+        recording):
+    """``background_cue``: the bootstrap's regions and people places are those of the
+    synchronous cue, given by a later receive() (the frame sets in between are kept but
+    do not change what the cue saw), and receive() does not wait for the cue."""
+    from dataclasses import replace
+
+    from mbtrack_ros.core.camera import RoomCalibration
+    from mbtrack_ros.core.detection.camera_stage import ReceivedForeground
+    from mbtrack_ros.recording.bag import RecordingReader
+
+    calibration = RoomCalibration.load(recording / 'calibration.yaml')
+    config = replace(TrackerConfig(), detection=True)
+    tracker = Tracker(calibration, config)
+    background = tracker.detection.config.background
+    banks = [ReceivedForeground(tracker.detection.calibration, background,
+                                background_cue=b) for b in (False, True)]
+    stages = {n: CameraStage(calibration.cameras[n], background) for n in calibration.names}
+    got: list[dict] = [{}, {}]
+    with RecordingReader(recording) as reader:
+        images = [fs.images for fs in reader.frames()]
+    k, frames, started = 0, None, None   # started: the receive() that started the models
+    deadline = time.monotonic() + 120.0
+    while not got[1] and time.monotonic() < deadline:
+        if k < len(images):  # the recording's frames, then its last again while the cue runs
+            frames = {n: (s.hold(images[k][n]) if s.awaiting_regions
+                          else s.process(images[k][n])) for n, s in stages.items()}
+        k += 1
+        for bank, out in zip(banks, got):
+            out.update(bank.receive(frames))
+        if got[0] and started is None:
+            started = k
+        elif not got[1]:
+            time.sleep(0.02)
+    assert got[0] and set(got[0]) == set(got[1]) == set(calibration.names)
+    assert k > started   # the background cue's answer came with a later call
+    for name in calibration.names:
+        for a, b in zip(got[0][name], got[1][name]):
+            np.testing.assert_array_equal(a, b)
+    places = [bank.bootstrap_cue.take_places() for bank in banks]
+    assert places[0] is not None and len(places[0])
+    np.testing.assert_array_equal(places[0], places[1])

@@ -129,3 +129,28 @@ def test_remote_scorer_refuses_scores_that_do_not_fit_the_request(rng):
     wait = scorer(request)
     scorer.on_answer(scores_message(read_request(sent[-1])[0], 0, good))
     np.testing.assert_array_equal(wait().loglik, good.loglik)
+
+
+def test_remote_scorer_neither_asks_nor_waits_for_a_camera_node_not_matched_yet(rng):
+    """While the camera node's end points are not matched (not up, or not discovered),
+    no request goes out and none is waited for, without a miss or a back-off; the first
+    request once it is matched is waited for and its answer taken."""
+    import time
+
+    from mbtrack_ros.nodes.fusion_input import RemoteScorer
+
+    sent, warned, matched = [], [], [False]
+    scorer = RemoteScorer('cam0', sent.append, 5.0, lambda cause, text: warned.append(text),
+                          ready=lambda: matched[0])
+    request = _request(rng, n=3, k=1, v=1)
+    t = time.monotonic()
+    for _ in range(3):
+        assert scorer(request)() is None
+    assert time.monotonic() - t < 1.0               # not the 5 s timeout
+    assert not sent and not warned and scorer.missed == 0 and scorer.unready == 3
+    matched[0] = True
+    wait = scorer(request)
+    scores = CameraScores(rng.random(3), rng.random(1), rng.random(3), rng.random(3))
+    scorer.on_answer(scores_message(read_request(sent[-1])[0], 0, scores))
+    np.testing.assert_array_equal(wait().loglik, scores.loglik)
+    assert scorer.asked == 1 and scorer.answered == 1

@@ -9,7 +9,9 @@ just before the first message of the frame set, so this is when the frame set st
 out; cheaper to receive than an image: its ``source_timestamp``) and the moment the
 ``/tracker_node/people`` message with that stamp reached the listener (its
 ``received_timestamp``); the difference is the end-to-end latency. Taking both times from the
-middleware, not from the Python callbacks, keeps a busy listener out of the measurement. It also
+middleware, not from the Python callbacks, keeps a busy listener out of the measurement; the
+latency to the people message's ``source_timestamp`` (taken in the tracker as it sends it)
+also keeps out the listener's reception, which a loaded machine delays. It also
 reads the node's counters from ``/diagnostics`` and the CPU time of the tracker process from
 ``/proc/<pid>/stat``. Then ``mbtrack replay`` runs over the same recording, timed, for the
 offline speed: with the default parameters and, in a source checkout, with the fast and the
@@ -160,12 +162,18 @@ class LiveResult:
     rss_mb: tuple[tuple[float, float], ...] = ()  # (s since the player started, RSS MB)
     camera_node_cpu_seconds: tuple[float, ...] = ()  # per camera node (--live-camera-nodes)
     camera_node_logs: tuple[str, ...] = ()           # their counters at the end
+    tracker_score_logs: tuple[str, ...] = ()  # the tracker's warnings, its score requests
     mask_bytes_per_frame: float = float('nan')       # mean mask message data, bytes
     image_bytes_per_frame: float = float('nan')      # mean working image data, bytes
     image_format: str = 'raw'                        # of the working images: raw | jpeg
     cameras: int = 4
     tracker_threads: tuple[tuple[str, float], ...] = ()  # (thread, CPU s) of the tracker
     unanswered: tuple[int, ...] = ()  # frame indices seen on /clock without an output
+    # to the people message's sending (its DDS source_timestamp, taken in the tracker):
+    # without this listener's own reception, which a loaded machine can delay
+    sent_all: LatencyStats | None = None
+    sent_after_1s: LatencyStats | None = None
+    sent_series: tuple[tuple[float, float], ...] = ()  # (s since first frame, latency s)
 
 
 #: kinds of bad images the soak injects, in turn
@@ -268,7 +276,8 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
     """Play ``recording`` to a tracker_node process and measure (see the module docstring).
 
     ``camera_nodes``: one ``camera_node`` process per camera and the tracker in fusion mode
-    (``input_mode: foreground``); their CPU and the masks' and working images' bytes are
+    (``input_mode: foreground``), the player started once each camera node is up and
+    discovered by the tracker; their CPU and the masks' and working images' bytes are
     measured too. ``image_format``: the camera nodes' working images, ``raw``
     (``sensor_msgs/Image``) or ``jpeg`` (``CompressedImage``, decoded in the tracker).
     ``cameras``: track with the first ``cameras`` cameras of the calibration only (the
@@ -320,6 +329,7 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     images: dict[int, float] = {}
     people: dict[int, float] = {}
+    sent: dict[int, float] = {}
     tracks: dict[int, int] = {}
     diags: list[dict] = []
     lock = threading.Lock()
@@ -357,6 +367,7 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
         s = stamp_to_ns(msg.header.stamp)
         with lock:
             people.setdefault(s, t)
+            sent.setdefault(s, info['source_timestamp'] / 1e9)
             tracks[s] = len(msg.poses)
 
     def on_diag(msg) -> None:
@@ -446,6 +457,20 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
                 log.seek(0)
                 raise RuntimeError(f'tracker_node did not start: {log.read()[-500:]}')
             time.sleep(0.1)
+        # with camera nodes: every one of them up (warmed up: it creates its end points
+        # after) and discovered with the tracker's end points, so that no frame set of the
+        # start counts one as missing
+        def connected(cam: str) -> bool:
+            w = f'/{cam}/working/'
+            image = w + ('image/compressed' if image_format == 'jpeg' else 'image')
+            return (listener.count_publishers(image) >= 1
+                    and listener.count_subscribers(image) >= 1
+                    and listener.count_subscribers(w + 'score_request') >= 1)
+        while camera_nodes and not all(map(connected, cams)):
+            if any(p.poll() is not None for p in stages) or time.monotonic() > deadline:
+                raise RuntimeError('the camera nodes did not come up and connect to the '
+                                   'tracker within 300 s')
+            time.sleep(0.1)
         player = subprocess.Popen(
             [sys.executable, '-m', 'mbtrack_ros.nodes.bag_player', '--ros-args',
              '-p', f'bag:={recording}', '-p', f'rate:={rate}',
@@ -512,6 +537,9 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
         spinner.join(timeout=5)
         listener.destroy_node()
         rclpy.try_shutdown(context=context)
+        log.seek(0)
+        score_lines = [ln for ln in log.read().splitlines()
+                       if 'score requests,' in ln or '[WARN]' in ln]
         log.close()
         stage_lines = []
         for stage_log in stage_logs:
@@ -524,12 +552,14 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
         player_log.close()
     with lock:
         images_c, people_c, diag = dict(images), dict(people), (diags[-1] if diags else {})
+        sent_c = dict(sent)
     first = min(images_c) if images_c else 0
     later = {s: t for s, t in images_c.items() if s >= first + 1_000_000_000}
     settled = {s: t for s, t in images_c.items() if s >= first + 5_000_000_000}
     cpu = cpu1 - cpu0
     wall = wall1 - wall0
     stamps, lat, _ = match_latencies(images_c, people_c)
+    sent_stamps, sent_lat, _ = match_latencies(images_c, sent_c)
     order = sorted(images_c)
     unanswered = tuple(k for k, s in enumerate(order) if s not in people_c)
     return LiveResult(
@@ -547,11 +577,15 @@ def run_live(recording: Path, *, seed: int = 0, rate: float = 1.0,
         latency_series=tuple(zip(((stamps - first) / 1e9).tolist(), lat.tolist())),
         injected_bad=injected[0], rss_mb=tuple(rss),
         camera_node_cpu_seconds=stage_cpu, camera_node_logs=tuple(stage_lines),
+        tracker_score_logs=tuple(score_lines),
         mask_bytes_per_frame=float(np.mean(masks)) if masks else float('nan'),
         image_bytes_per_frame=(float(np.mean(jpegs)) if jpegs else float('nan'))
         if image_format == 'jpeg' else float(working_bytes) if camera_nodes else float('nan'),
         image_format=image_format, cameras=len(cams),
-        tracker_threads=thread_split(threads0, threads1, node.pid), unanswered=unanswered)
+        tracker_threads=thread_split(threads0, threads1, node.pid), unanswered=unanswered,
+        sent_all=latency_stats(images_c, sent_c),
+        sent_after_1s=latency_stats(later, sent_c),
+        sent_series=tuple(zip(((sent_stamps - first) / 1e9).tolist(), sent_lat.tolist())))
 
 
 def run_offline(recording: Path, *, seed: int = 0, ground_truth: bool = False,
@@ -761,6 +795,11 @@ def main_live(args: argparse.Namespace) -> int:
           'without output); after the '
           f'first second: p50 {1e3 * b.p50:.1f} ms, p95 {1e3 * b.p95:.1f} ms; after the first '
           f'5 s: p50 {1e3 * c.p50:.1f} ms, p95 {1e3 * c.p95:.1f} ms')
+    if live.sent_all is not None:
+        e, f = live.sent_all, live.sent_after_1s
+        print(f'latency image -> people sent (the tracker\'s send time): p50 '
+              f'{1e3 * e.p50:.1f} ms, p95 {1e3 * e.p95:.1f} ms, max {1e3 * e.max:.1f} ms; '
+              f'after the first second: p50 {1e3 * f.p50:.1f} ms, p95 {1e3 * f.p95:.1f} ms')
     print(f'node counters (last /diagnostics): frame sets {d.get("frame sets")}, incomplete '
           f'{d.get("incomplete frame sets")}, dropped frames/sets {d.get("dropped frames")}, '
           f'step time {d.get("step time [ms]")} ms')
@@ -790,7 +829,7 @@ def main_live(args: argparse.Namespace) -> int:
               f' KiB ({"JPEG" if live.image_format == "jpeg" else "raw rgb8"}), foreground '
               f'masks {live.mask_bytes_per_frame / 1024:.2f} KiB '
               f'({"PNG" if live.image_format == "jpeg" else "raw mono8"})')
-        for line in live.camera_node_logs:
+        for line in live.camera_node_logs + live.tracker_score_logs:
             print('  ' + line[line.find(']: ') + 3:] if ']: ' in line else line)
     print(f'load average before / after the live run: {load0[0]:.2f} / {load1[0]:.2f}')
     if args.json is not None:

@@ -21,9 +21,11 @@ and publishes per frame, stamped with the (offset) input stamp and the camera's 
 It subscribes to the tracker's ``~/tracks`` (``tracks_topic``) and keeps the model update
 of each frame off the silhouettes of the latest tracks (one frame of latency: frame t's
 update uses frame t-1's tracks), and to ``working/regions`` (the people cue of the online
-bootstrap, which the fusion tracker computes from every camera; the first frame after the
-bootstrap waits for it at most ``region_wait`` seconds). Topic names are relative: start
-the node in the camera's namespace (``/<camera>``).
+bootstrap, which the fusion tracker computes from every camera on a thread of its own, in
+1-3 s: until the regions come, at most ``region_wait`` seconds, the frames go out as those
+of a bootstrapping model, without foreground and without updating it, so that no frame
+waits for them). Topic names are relative: start the node in the camera's namespace
+(``/<camera>``).
 
 It also scores the fusion tracker's particles in its camera: a request on
 ``working/score_request`` (``std_msgs/UInt8MultiArray``,
@@ -103,8 +105,9 @@ CAMERA_PARAMETERS = {
     'jpeg_quality': (90, 'JPEG quality of image_format jpeg', _ir(1, 100)),
     'tracks_topic': ('/tracker_node/tracks', 'the fusion tracker\'s tracks (PointCloud2)',
                      {}),
-    'region_wait': (1.0, 'seconds the first frame after the bootstrap waits for the '
-                    'tracker\'s people-cue regions', _fr(0.0, 60.0)),
+    'region_wait': (5.0, 'seconds after the bootstrap the model waits for the '
+                    'tracker\'s people-cue regions (meanwhile its frames go out without '
+                    'foreground), then goes on without', _fr(0.0, 60.0)),
     'warm_up': (True, 'run a throwaway stage on a few synthetic frames at start (loads the '
                 'compiled kernels before the first real frame)', {}),
     'max_pending': (15, 'frames queued for processing; the oldest is dropped beyond',
@@ -211,6 +214,7 @@ class CameraNode(Node):
         self._queue: deque = deque()
         self._regions: tuple[int, np.ndarray] | None = None  # (stamp, packed) received
         self._started_stamp: int | None = None
+        self._started_wall = 0.0   # monotonic time the model started (bootstrapped)
         self._closing = False
         self._warned: dict[str, float] = {}
         self.processed = 0
@@ -354,28 +358,29 @@ class CameraNode(Node):
                     return
             self.process_pending()
 
-    def _take_regions(self) -> None:
-        """Apply the bootstrap regions the tracker sent for this model's start (waiting
-        for them at most ``region_wait`` s); without them the model goes on without."""
-        deadline = time.monotonic() + self.region_wait
+    def _take_regions(self) -> bool:
+        """Apply the bootstrap regions the tracker sent for this model's start, if they
+        came; True when the model goes on (with them, or without them ``region_wait`` s
+        after its start), False while it still waits for them."""
         with self._lock:
-            while not self._closing:
-                got = self._regions
-                if got is not None and got[0] >= self._started_stamp:
-                    self._regions = None
-                    region, body, core = unpack_regions(got[1])
-                    try:
-                        self.stage.set_regions(region, body, core)
-                    except DetectionError as err:
-                        self.warn_once('regions', f'{self.name}: regions refused: {err}')
-                    break
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    self.warn_once('regions', f'{self.name}: no bootstrap regions from '
-                                   f'the tracker within {self.region_wait} s')
-                    break
-                self._lock.wait(left)
-            self.stage.awaiting_regions = False
+            got = self._regions
+            if got is not None and got[0] >= self._started_stamp:
+                self._regions = None
+            else:
+                got = None
+        if got is not None:
+            region, body, core = unpack_regions(got[1])
+            try:
+                self.stage.set_regions(region, body, core)
+            except DetectionError as err:
+                self.warn_once('regions', f'{self.name}: regions refused: {err}')
+        elif time.monotonic() - self._started_wall < self.region_wait:
+            return False
+        else:
+            self.warn_once('regions', f'{self.name}: no bootstrap regions from the '
+                           f'tracker within {self.region_wait} s: going on without')
+        self.stage.awaiting_regions = False
+        return True
 
     def process_pending(self) -> None:
         """Process every queued frame, oldest first."""
@@ -384,17 +389,21 @@ class CameraNode(Node):
                 if not self._queue or self._closing:
                     return
                 stamp, rgb = self._queue.popleft()
-            if self.stage.awaiting_regions:
-                self._take_regions()
             t0 = time.perf_counter()
             try:
-                frame = self.stage.process(rgb)
+                if self.stage.awaiting_regions and not self._take_regions():
+                    # the tracker is still computing the regions: the frame goes out as
+                    # one of a bootstrapping model (no foreground), none is held back
+                    frame = self.stage.hold(rgb)
+                else:
+                    frame = self.stage.process(rgb)
             except DetectionError as err:
                 self.dropped += 1
                 self.warn_once('stage', f'{self.name}: frame dropped: {err}')
                 continue
             if frame.started:
                 self._started_stamp = stamp
+                self._started_wall = time.monotonic()
             self.publish(stamp, frame)
             self.seconds += time.perf_counter() - t0
             self.processed += 1

@@ -10,15 +10,17 @@ one, as the camera node's ``image_format`` publishes them), paired by stamp into
 frame-set synchroniser. Before each tracker step the frame set's masks go to the
 detection's :class:`~mbtrack_ros.core.detection.camera_stage.ReceivedForeground` (in place
 of the background models), and the bootstrap regions of the people cue, computed here from
-every camera's frames, go back to the cameras whose model just started
-(``<foreground_topic's namespace>/regions``, PNG bit planes). The filter, detection search,
+every camera's frames on a thread of its own (1-3 s of CPU; the frame sets go on
+meanwhile, the waiting cameras without foreground), go back to the cameras whose model
+started (``<foreground_topic's namespace>/regions``, PNG bit planes). The filter, detection search,
 existence and release run as in one process, except that each camera node scores the
 frame set's particles in its camera (the camera's share of the HJS likelihood): the
 filter's likelihood sends every camera its request
 (``<foreground_topic's namespace>/score_request``) and waits up to ``score_timeout`` for
 the answers (``.../scores``, :mod:`~mbtrack_ros.nodes.score_messages`); a camera that did
-not answer in time is scored here, as in one process, and not waited for during a back-off
-(:class:`RemoteScorer`).
+not answer in time is scored here, as in one process, and not waited for during a back-off,
+and one whose node is not matched yet (not up, or not discovered) is scored here without
+a wait (:class:`RemoteScorer`).
 """
 from __future__ import annotations
 
@@ -56,6 +58,10 @@ def _masks(msg):
     return unpack_masks(image_to_mono(msg) if raw else compressed_to_rgb(msg))
 
 
+def _none():
+    return None
+
+
 class RemoteScorer:
     """One camera node scoring the tracker's particles (a
     :data:`~mbtrack_ros.core.likelihood.Scorer` of :meth:`MeasurementModel.set_scorers`):
@@ -67,12 +73,18 @@ class RemoteScorer:
     resetting it: a dead or overloaded camera node costs the tracker at most one timeout
     per back-off, and one that comes back is asked again within it. ``stamp_ns``: the
     capture stamp of the camera's frame in the frame set being stepped
-    (:meth:`FusionInput.prepare`)."""
+    (:meth:`FusionInput.prepare`). ``ready``: whether the camera node's request
+    subscription and answer publisher are matched (discovered) now; while they are not,
+    no request goes out and none is waited for (``unready`` counts them): a camera node
+    that is not up yet, or whose end points DDS has not discovered yet, is scored here
+    without costing a timeout or a back-off (default: always ready)."""
 
     MAX_BACKOFF = 64   # requests (about 4 s at 15 Hz)
 
-    def __init__(self, camera: str, publish, timeout: float, warn) -> None:
+    def __init__(self, camera: str, publish, timeout: float, warn, ready=None) -> None:
         self.camera, self.publish, self.timeout, self.warn = camera, publish, timeout, warn
+        self.ready = ready
+        self.unready = 0     # requests not sent: the camera node not matched
         self.stamp_ns = 0
         self.asked = 0       # requests sent
         self.answered = 0    # answers with scores taken
@@ -87,6 +99,9 @@ class RemoteScorer:
         self._cond = threading.Condition()
 
     def __call__(self, request):
+        if self.ready is not None and not self.ready():
+            self.unready += 1
+            return _none
         seq = next(self._seq)
         with self._cond:
             self._waiting, self._answer = seq, None
@@ -159,13 +174,16 @@ class FusionInput:
         detection = getattr(node.tracker, 'detection', None)
         self.bank = None
         if detection is not None:
+            # the bootstrap's people cue on its own thread: 1-3 s of CPU that would hold
+            # up the frame sets behind it (the cameras send no foreground until it is done)
             self.bank = ReceivedForeground(detection.calibration,
-                                           detection.config.background)
+                                           detection.config.background, background_cue=True)
             self.bank.prepare()
             detection.background = self.bank
         self.cameras = node.tracker.calibration.cameras  # the working size
         self._parts: dict[str, OrderedDict] = {c: OrderedDict() for c in p.camera_names}
         self._regions = {}
+        self._started: dict[str, int] = {}  # camera -> stamp of its model's start
         qos = qos_profile_sensor_data if p.image_reliability == 'best_effort' else \
             QoSProfile(depth=p.qos_depth, reliability=ReliabilityPolicy.RELIABLE)
         reliable = QoSProfile(depth=p.qos_depth, reliability=ReliabilityPolicy.RELIABLE)
@@ -193,10 +211,13 @@ class FusionInput:
                 working = base.rsplit('/', 1)[0]
                 pub = node.create_publisher(UInt8MultiArray, working + '/score_request',
                                             reliable)
-                scorer = RemoteScorer(cam.name, pub.publish, p.score_timeout,
-                                      node.warn_once)
-                node.create_subscription(UInt8MultiArray, working + '/scores',
-                                         scorer.on_answer, reliable)
+                sub = node.create_subscription(UInt8MultiArray, working + '/scores',
+                                               lambda m, c=cam.name:
+                                               self.scorers[c].on_answer(m), reliable)
+                scorer = RemoteScorer(
+                    cam.name, pub.publish, p.score_timeout, node.warn_once,
+                    ready=lambda pub=pub, sub=sub: (pub.get_subscription_count() > 0
+                                                    and sub.get_publisher_count() > 0))
                 self.scorers[cam.name] = scorer
         if self.scorers:
             node.tracker.measurement.set_scorers(self.scorers)
@@ -251,10 +272,15 @@ class FusionInput:
         for name, scorer in self.scorers.items():   # the frames the particles are scored on
             scorer.stamp_ns = int(fs.stamps.get(name, fs.stamp_ns))
         if self.bank is not None:
+            for name, f in frames.items():
+                if f.started:
+                    self._started[name] = int(fs.stamps.get(name, fs.stamp_ns))
             for name, (region, body, core) in self.bank.receive(frames).items():
                 ok, data = cv2.imencode('.png', pack_regions(region, body, core))
                 msg = CompressedImage()
-                msg.header = make_header(fs.stamps.get(name, fs.stamp_ns),
+                # stamped with the frame that started the model (the stage takes regions
+                # of its own start only, not of an earlier one after a restart)
+                msg.header = make_header(self._started.get(name, fs.stamp_ns),
                                          self.cameras[name].frame_id)
                 msg.format = 'mono8; png compressed mono8'
                 msg.data = data.tobytes()

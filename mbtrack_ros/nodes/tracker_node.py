@@ -613,6 +613,11 @@ class TrackerNode(Node):
         self.process_pending()
 
     def destroy_node(self) -> None:
+        for name, scorer in (self._fusion.scorers if self._fusion is not None else {}).items():
+            self.get_logger().info(
+                f'{name}: {scorer.asked} score requests, {scorer.answered} answered with '
+                f'scores, {scorer.missed} not in time, {scorer.refused} refused, '
+                f'{scorer.unready} not sent (camera node not matched yet)')
         with self._wake:
             self._closing = True
             self._wake.notify_all()

@@ -903,14 +903,31 @@ class BootstrapCue:
                 ) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
         """(region, body, core) masks (H, W) bool of each camera of ``started`` the cue
         places people in (:meth:`PeopleCue.regions`), from the frame sets kept."""
-        if not started or not self.frames or self.cue is None:
-            return {}
-        places = self.cue.places(self.frames)
+        places, regions = self.compute(started, self.frames)
+        self.add_places(places)
+        return regions
+
+    def compute(self, started: Sequence[str], frames: Sequence[Mapping[str, np.ndarray]]
+                ) -> tuple[np.ndarray | None, dict[str, tuple[np.ndarray, np.ndarray,
+                                                             np.ndarray]]]:
+        """(places (K, 2) m or None, regions of the cameras of ``started``) of the cue on
+        the frame sets ``frames`` (those :meth:`keep` kept); changes nothing here, so it
+        may run on another thread while frame sets are kept (then :meth:`add_places`)."""
+        if not started or not frames or self.cue is None:
+            return None, {}
+        places = self.cue.places(frames)
+        regions = self.cue.regions(frames, places=places)
+        return places, {n: regions[n] for n in started if n in regions}
+
+    def add_places(self, places: np.ndarray | None) -> None:
+        """Add the people's places (K, 2) found by :meth:`compute` to those waiting for
+        the detection (:meth:`take_places`), leaving out those within the cue's
+        ``nms_radius`` of one already waiting."""
+        if places is None:
+            return
         self.places = places if self.places is None else np.concatenate([
             self.places, places[np.linalg.norm(places[:, None] - self.places[None], axis=2)
                                 .min(axis=1, initial=np.inf) >= self.cue.config.nms_radius]])
-        regions = self.cue.regions(self.frames, places=places)
-        return {n: regions[n] for n in started if n in regions}
 
     def clear(self) -> None:
         """Forget the frame sets kept (the places found stay until taken)."""

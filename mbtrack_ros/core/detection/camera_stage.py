@@ -17,7 +17,8 @@ fusion node gives the same tracks as one process up to two differences:
 * the multi-view people cue of the online bootstrap (:class:`~.people.PeopleCue`) needs all
   cameras: the fusion node computes it from the bootstrap frames the stages sent and sends
   each stage its regions (:meth:`CameraStage.set_regions`), which a stage waits for before
-  its next frame.
+  its next update (offline, the next frame; live, the frames until they come go out
+  without foreground, :meth:`CameraStage.hold`, while the cue runs on its own thread).
 
 A stage can also score the filter's particles in its camera (:meth:`CameraStage.score`):
 the camera's share of the HJS likelihood (000 Algorithm 1 "update" and the foreground
@@ -31,6 +32,7 @@ Masks travel as one ``(H, W) uint8`` image of bit planes (:func:`pack_masks`).
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from types import SimpleNamespace
 
@@ -201,6 +203,15 @@ class CameraStage:
         self.model.set_unknown(region, foreground=body, core=core)
         self.awaiting_regions = False
 
+    def hold(self, image: np.ndarray) -> CameraFrame:
+        """A frame (H, W, 3) uint8 RGB while the model waits for its bootstrap regions
+        (:attr:`awaiting_regions`): the working image as :meth:`process` gives it, no
+        foreground, the model not updated."""
+        im = self.resize(image)
+        self.last = CameraFrame(self.illumination.normalise({self.full.name: im})[
+            self.full.name])
+        return self.last
+
     def process(self, image: np.ndarray) -> CameraFrame:
         """One frame (H, W, 3) uint8 RGB: the foreground test, then the model update kept
         off the last tracks given (:meth:`BackgroundModel.apply`)."""
@@ -364,25 +375,57 @@ class ReceivedForeground:
     the foreground of each camera comes from its :class:`CameraStage`.
 
     Per frame set: :meth:`receive` the cameras' :class:`CameraFrame` s, then run the
-    tracker step on their images. :meth:`regions` gives the bootstrap regions the cameras
-    whose model started want (the same cue as in one process)."""
+    tracker step on their images. :meth:`receive` gives the bootstrap regions the cameras
+    whose model started want (the same cue as in one process).
 
-    def __init__(self, calibration: RoomCalibration, config: BackgroundConfig) -> None:
+    ``background_cue``: compute the cue on a thread of its own instead of in
+    :meth:`receive` (a live fusion node: the cue takes 1-3 s of CPU with 4-12 cameras,
+    which would hold up every frame set behind it); the regions then come out of the first
+    :meth:`receive` after the cue is done, and its places go to the detection then. The
+    cameras that wait for them send no foreground meanwhile (a bootstrapping camera)."""
+
+    def __init__(self, calibration: RoomCalibration, config: BackgroundConfig, *,
+                 background_cue: bool = False) -> None:
         self.config = config
         self.models: dict[str, _Received] = {}
         self.bootstrap_cue = BootstrapCue(calibration, config)
+        self.background_cue = bool(background_cue)
+        self._pool: ThreadPoolExecutor | None = None
+        self._job: Future | None = None     # the cue being computed
+        self._wanted: list[str] = []        # cameras started since the job began
 
     def receive(self, frames: Mapping[str, CameraFrame]) -> dict[str, tuple]:
         """The frame set's camera frames; returns (region, body, core) per camera that
-        started its model with this frame set (to send back to its stage)."""
+        started its model with this frame set (to send back to its stage), or with
+        ``background_cue`` with an earlier one whose cue is done now."""
         for m in self.models.values():
             m.frame = None
         for name, f in frames.items():
             self.model(name).frame = f
         if not self.bootstrap_cue.enabled:
             return {}
-        self.bootstrap_cue.keep({n: f.image for n, f in frames.items()}, copy=False)
-        return self.bootstrap_cue.regions([n for n, f in frames.items() if f.started])
+        cue = self.bootstrap_cue
+        cue.keep({n: f.image for n, f in frames.items()}, copy=False)
+        started = [n for n, f in frames.items() if f.started]
+        if not self.background_cue:
+            return cue.regions(started)
+        out = {}
+        if self._job is not None and self._job.done():
+            job, self._job = self._job, None
+            try:
+                places, out = job.result()
+            except Exception as err:  # noqa: BLE001 - the cameras go on without regions
+                raise DetectionError(f'the bootstrap people cue failed: '
+                                     f'{type(err).__name__}: {err}') from err
+            cue.add_places(places)
+        self._wanted += [n for n in started if n not in self._wanted]
+        if self._wanted and self._job is None:
+            if self._pool is None:
+                self._pool = ThreadPoolExecutor(1, thread_name_prefix='bootstrap_cue')
+            # the frame sets kept so far (keep() appends to its list: a copy of it)
+            self._job = self._pool.submit(cue.compute, list(self._wanted), list(cue.frames))
+            self._wanted = []
+        return out
 
     # -- the BackgroundBank interface AutoDetection uses -----------------------------------
     def model(self, name: str) -> _Received:
