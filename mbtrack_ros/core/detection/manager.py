@@ -14,9 +14,10 @@ filter step when automatic detection is enabled:
    frames and acquire their appearance models; the tracker then adds them.
 
 Its parts by role: the parameters in :mod:`.config`, what a confirmed detection is (birth,
-move, re-identification, drop) in :mod:`.association`, the existence evidence, duplicate
-and exit judgements in :mod:`.deleter`; this module wires them with the background,
-detector, acquisition and release.
+move, re-identification, drop) in :mod:`.association` with the appearance ratio of
+:mod:`.likeness` (its samples taken here, :meth:`AutoDetection._calibrate`), the existence
+evidence, duplicate and exit judgements in :mod:`.deleter`; this module wires them with
+the background, detector, acquisition and release.
 """
 from __future__ import annotations
 
