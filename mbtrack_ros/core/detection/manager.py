@@ -679,11 +679,14 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
                    ) -> None:
         """Samples for the appearance ratio (:class:`.likeness.AppearanceRatio`) from the
         tracks followed confidently: reported, existence at least the adaptation's
-        ``min_existence`` (001 §3.2), not born or moved within ``relocate_interval``. Each
-        such track, at most once per :data:`CALIBRATION_INTERVAL`, has a model acquired
-        at its estimate (003 §4.1, the other tracks as occluders), as a detection's would
-        be; that model's distance (003 Eq. 4) to the track's own model is a "same person"
-        sample, its distances to the other confident tracks' models (other people: two
+        ``min_existence`` (001 §3.2), not born or moved within ``relocate_interval``. The
+        association weighs a track's person against somebody else within its gate, so
+        the samples are taken where that question arises: of a confident track with
+        another within ``reuse_radius`` (metres), at most once per
+        :data:`CALIBRATION_INTERVAL`, a model is acquired at its estimate (003 §4.1, the
+        other tracks as occluders), as a detection's would be; that model's distance
+        (003 Eq. 4) to the track's own model is a "same person" sample, its distances to
+        the models of the confident tracks within ``reuse_radius`` (other people: two
         tracks at once) are "different people" samples."""
         ids = [t.track_id for t in tracks]
         least = self.config.adaptation.min_existence
@@ -692,10 +695,15 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
                 and self.aux[tid].existence >= least
                 and not self._placed_recently(tid, stamp_ns)
                 and models.get(tid) is not None and models[tid].view_angles.size]
+        xy = means[sure][:, [X, Y]]
+        gate = np.hypot(*(xy[:, None] - xy[None]).T) <= self.config.reuse_radius
+        np.fill_diagonal(gate, False)
         due = int(CALIBRATION_INTERVAL * 1e9)
-        for k in sure:
+        for i, k in enumerate(sure):
             tid = ids[k]
-            if tid in self._sampled and int(stamp_ns) - self._sampled[tid] < due:
+            near = [sure[j] for j in np.flatnonzero(gate[i])]
+            if not near or (tid in self._sampled
+                            and int(stamp_ns) - self._sampled[tid] < due):
                 continue
             self._sampled[tid] = int(stamp_ns)
             rest = [j for j in range(len(tracks)) if j != k and ids[j] not in ended]
@@ -709,6 +717,6 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
                 continue
             self.likeness.add(same=model_distance(models[tid], fresh),
                               different=[model_distance(models[ids[j]], fresh)
-                                         for j in sure if j != k])
+                                         for j in near])
             _log.debug('appearance calibration after track %d: %s', tid,
                        self.likeness.describe())
