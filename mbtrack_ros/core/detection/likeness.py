@@ -11,10 +11,11 @@ on the squared distance ``u = d^2`` (the quantity of the appearance likelihood
 ``exp(-u / (2 sigma^2))``, 000 Eq. 19 / 003 Eq. 3). Each density is a 1-D Gaussian, the two
 sharing one variance (so the ratio is linear in ``u`` and falls monotonically with the
 distance), whose means and variance are estimated from samples the tracker collects
-(:meth:`~.manager.AutoDetection._calibrate`): while a track is followed confidently a model
-is acquired again at its estimate (003 §4.1) and its distance to the track's own model is a
-"same" sample, its distances to the models of the other confirmed tracks of that frame
-(other people by construction) are "different" samples.
+(:meth:`~.manager.AutoDetection._calibrate`): while a track is followed confidently with
+another within its gate a model is acquired again at its estimate (003 §4.1) and its
+distance to the track's own model is a "same" sample, its distances to the models of the
+confident tracks within the gate (other people by construction: two tracks at once) are
+"different" samples.
 
 The estimates are shrunk towards a prior worth :data:`PRIOR_SAMPLES` samples per class that
 reproduces the fixed ratio of the clutter likelihood (001 Eq. 23)::
