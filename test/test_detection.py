@@ -1938,3 +1938,36 @@ def test_no_birth_beside_a_young_track_that_looks_like_the_detection(monkeypatch
         drop = next(d for d in decided if d['action'] == 'drop (young look-alike 1)')
         assert [n[0] for n in drop['near']] == [1] and drop['near'][0][2] == -10.0, drop
     assert len(tracker.track_ids) == (2 if born else 1), tracker.track_ids
+
+
+def test_the_appearance_ratio_learns_from_two_tracks_side_by_side(monkeypatch):
+    """A person in blue and one in yellow stand 1 m apart (within each other's
+    ``reuse_radius``): once their tracks are confident, each is sampled about once a second
+    (``CALIBRATION_INTERVAL``): the model acquired again at a track's estimate is nearer its
+    own model than the neighbour's, so the learnt ratio (:class:`AppearanceRatio`) says
+    "same" for a track's own model and "different" for the neighbour's. Alone, a track
+    gives no sample (nobody within its gate to be confused with)."""
+    from mbtrack_ros.core.appearance import model_distance
+    from mbtrack_ros.core.detection.manager import CALIBRATION_INTERVAL
+
+    rng = np.random.default_rng(5)
+    calib, bgs, tracker = _painted_room_tracker(4, reach_radius=0.0)
+    blue, yellow = person(2.0, 2.5, theta=0.0), person(3.0, 2.5, theta=0.0, colours=YELLOW)
+    frames = 90
+    for k in range(frames):
+        tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, [blue, yellow], rng))
+    ratio = tracker.detection.likeness
+    same, different = ratio.counts
+    # both tracks confident after the relocate interval: about a sample a second each
+    most = 2 * (frames / FPS) / CALIBRATION_INTERVAL
+    assert 2 <= same <= most and different == same, ratio.describe()
+    m_same, m_diff, _ = ratio.parameters()
+    assert m_same < 0.7 * m_diff, ratio.describe()
+    models = [tracker.models[t] for t in tracker.track_ids]
+    assert len(models) == 2
+    assert ratio.llr(0.5 * model_distance(*models)) > 0 > ratio.llr(model_distance(*models))
+
+    alone = _painted_room_tracker(4, reach_radius=0.0)[2]
+    for k in range(60):
+        alone.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, [blue], rng))
+    assert alone.track_ids == [1] and alone.detection.likeness.counts.tolist() == [0, 0]
