@@ -16,6 +16,7 @@ from mbtrack_ros.core.detection.detector import (
 from mbtrack_ros.core.detection.features import (
     EdgeMap, ForegroundIntegral, Spans, colour_symmetry, contour_loglik, contour_loglik_spans,
     outline, span_counts, span_coverage)
+from mbtrack_ros.core.detection.likeness import AppearanceRatio
 from mbtrack_ros.core.detection.release import ReleaseConfig, Releaser, blob_coverage
 from mbtrack_ros.core.shape import TORSO, BodyShape, rasterize, render_labels
 
@@ -1233,7 +1234,7 @@ def test_a_person_re_found_soon_after_the_release_gets_the_released_id(
     """A standing person vanishes (their track is released after the 1 s timeout) and is
     detected again at the same place 0.3 s later: within ``reuse_time`` the new track takes
     the released id, in the entry zone too; with ``reuse_time`` 0, or when somebody who
-    looks different stands there (``alike_distance``; in the
+    looks different stands there (the appearance ratio; in the
     entry zone: a newcomer), a new id is issued. The id ends (``FrameResult.ended``) at the
     release when it cannot come back, ``reuse_time`` after it when nobody took it, never
     when it was taken: an id never returns after it ended."""
@@ -1643,7 +1644,7 @@ def test_a_hidden_track_1_2_m_away_is_given_back_its_person_when_she_looks_alike
     id), as a lost track's id would be given back within ``reuse_radius``; with a
     ``reuse_radius`` below 1.2 m (``relocate_radius`` 0.5 m), or when the person there is
     dressed differently
-    (``alike_distance``), a new track is born."""
+    (the appearance ratio of the two models), a new track is born."""
     from mbtrack_ros.core.detection.manager import AutoDetection
 
     rng = np.random.default_rng(5)
@@ -1713,7 +1714,7 @@ def _move_or_birth(monkeypatch, who: str, gain: float, **detection):
     """Track 1 follows a person in blue; from frame 40 she is gone and somebody (``who``:
     'same', the blue person, or 'other', dressed in yellow) stands 0.75 m from the track,
     the appearance gain of track 1's model there forced to ``gain``. Returns the tracker,
-    the decisions' actions from frame 40 and the tracks ``alike_distance`` kept back."""
+    the decisions' actions from frame 40 and the tracks the appearance ratio kept back."""
     from mbtrack_ros.core.detection.manager import AutoDetection
 
     rng = np.random.default_rng(5)
@@ -1734,25 +1735,29 @@ def _move_or_birth(monkeypatch, who: str, gain: float, **detection):
     return tracker, actions, unalike
 
 
+def _appearance_zero(monkeypatch, distance: float) -> None:
+    """Trackers made from now on start their appearance ratio with its zero at
+    ``distance`` (the prior of :class:`AppearanceRatio`), the clutter distance unchanged."""
+    from mbtrack_ros.core.detection import manager
+
+    monkeypatch.setattr(manager, 'AppearanceRatio',
+                        lambda a, sigma: AppearanceRatio(distance, sigma))
+
+
 def test_the_move_ratio_is_the_gain_and_for_a_strong_detection_the_looks():
     """:meth:`AutoDetectionConfig.move_llr` against its terms written out on a grid of
-    scores, gains (nats per side camera) and appearance distances: the gain, plus for a
-    strong detection (``beside_threshold``) the appearance ratio ``max(0, (a^2 - u^2) /
-    (2 sigma^2))`` (``a`` = ``alike_distance``), positive exactly for a look-alike. With
+    scores, gains (nats per side camera) and appearance ratios (nats): the gain, plus for a
+    strong detection (``beside_threshold``) the appearance ratio floored at 0. With
     the detection's own ratio (score less ``beside_threshold``) added, a weak detection
     beats its drop only with a gain above its score's shortfall."""
     cfg = AutoDetectionConfig()
-    sigma = 0.12
-    assert cfg.appearance_llr(0.0, sigma) == pytest.approx(0.25 / (2 * 0.12 ** 2))
     for score in (0.5, cfg.beside_threshold - 0.01, cfg.beside_threshold, 6.0):
         for gain in (-9.0, -6.0, -1.0, 0.0, 0.02, 2.6):
-            for unlike in (0.0, 0.1, 0.3, cfg.alike_distance, 0.9):
+            for looks in (-5.0, -0.1, 0.0, 0.3, 8.7):
                 strong = score >= cfg.beside_threshold
-                looks = max(0.0, (cfg.alike_distance ** 2 - unlike ** 2) / (2 * sigma ** 2))
-                assert (looks > 0) == (unlike < cfg.alike_distance)
-                want = gain + (looks if strong else 0.0)
-                got = cfg.move_llr(score, gain, unlike, sigma)
-                assert got == pytest.approx(want), (score, gain, unlike)
+                want = gain + (max(looks, 0.0) if strong else 0.0)
+                got = cfg.move_llr(score, gain, looks)
+                assert got == pytest.approx(want), (score, gain, looks)
                 if not strong:      # the move against the drop: gain over the shortfall
                     assert (score - cfg.beside_threshold + got > 0) == (
                         gain > cfg.beside_threshold - score)
@@ -1781,7 +1786,8 @@ def test_every_decision_is_logged_with_its_terms(monkeypatch, caplog):
         assert terms is not None, line
         metres, gain, unlike = map(float, terms.groups())
         assert 0.5 < metres < 1.0 and gain == -1.0
-        assert (unlike <= AutoDetectionConfig().alike_distance) == (who == 'same'), line
+        alike = AppearanceRatio(AutoDetectionConfig().clutter_distance, 0.12).alike_distance()
+        assert (unlike <= alike) == (who == 'same'), line
         assert ('support=[(1, ' in line) == (who == 'same'), line
         assert ('unalike=[(1, ' in line) == (who == 'other'), line
 
@@ -1793,12 +1799,13 @@ def test_a_doubtful_move_needs_the_detection_to_look_like_the_track(
         monkeypatch, gate, who, gain, moved):
     """The scene of :func:`_move_or_birth` with the gain in the doubtful band (-1: the
     track's model explains the detection a little worse than its own estimate). With
-    ``alike_distance`` at its default a person dressed differently is born as a new track
-    and track 1 stays, while the blue person herself still takes track 1 (her model
-    matches); with 1 the gain alone decides and track 1 is moved onto the stranger. A
-    positive gain (+1) is not doubtful: the stranger takes track 1 whatever the gate."""
-    gate = AutoDetectionConfig().alike_distance if gate is None else gate
-    monkeypatch.setattr(AutoDetectionConfig, 'alike_distance', property(lambda self: gate))
+    the appearance ratio at its prior (zero at the default ``clutter_distance``) a person
+    dressed differently is born as a new track and track 1 stays, while the blue person
+    herself still takes track 1 (her model matches); with the prior's zero at 1 the gain
+    alone decides and track 1 is moved onto the stranger. A positive gain (+1) is not
+    doubtful: the stranger takes track 1 whatever the gate."""
+    gate = AutoDetectionConfig().clutter_distance if gate is None else gate
+    _appearance_zero(monkeypatch, gate)
     tracker, actions, unalike = _move_or_birth(monkeypatch, who, gain)
     assert ('move 1' in actions) == moved, actions
     assert ('birth' in actions) == (not moved), actions
@@ -1818,7 +1825,7 @@ def test_a_look_alike_track_is_moved_by_a_negative_gain_its_looks_make_up(
         monkeypatch, who, gain, moved):
     """The scene of :func:`_move_or_birth` with a negative gain: the blue person takes
     track 1 back when the appearance ratio of her model and the track's
-    (:meth:`AutoDetectionConfig.appearance_llr`, at most 8.7 nats) makes up the gain; a
+    (:class:`AppearanceRatio`'s prior, at most 8.7 nats) makes up the gain; a
     stranger in yellow is born beside it, and so is she at a gain further down."""
     tracker, actions, _ = _move_or_birth(monkeypatch, who, gain)
     assert ('move 1' in actions) == moved, actions
@@ -1866,14 +1873,15 @@ def test_of_two_tracks_a_detection_could_move_the_one_that_looks_like_it_is_move
         monkeypatch):
     """Track 1 follows a person in blue, track 2 one in yellow; from frame 40 both are gone
     and the blue person stands 0.75 m from each track. Both tracks may be moved there
-    (gains in the doubtful band, ``alike_distance`` 1), and track 2's gain is the higher
+    (gains in the doubtful band, the appearance ratio's zero at 1), and track 2's gain is
+    the higher
     one (-1 against -2; each gain compares the detection with that track's own place).
     The track whose model is nearer the detection's in appearance is moved: track 1."""
     from mbtrack_ros.core.detection.manager import AutoDetection
 
     rng = np.random.default_rng(5)
     calib, bgs, tracker = _painted_room_tracker(4, reach_radius=0.0)
-    monkeypatch.setattr(AutoDetectionConfig, 'alike_distance', property(lambda self: 1.0))
+    _appearance_zero(monkeypatch, 1.0)
     _no_hidden_moves(monkeypatch)
     blue, yellow = person(2.0, 2.5, theta=0.0), person(3.5, 2.5, theta=0.0, colours=YELLOW)
     there = person(2.75, 2.5, theta=0.0)
@@ -1930,3 +1938,36 @@ def test_no_birth_beside_a_young_track_that_looks_like_the_detection(monkeypatch
         drop = next(d for d in decided if d['action'] == 'drop (young look-alike 1)')
         assert [n[0] for n in drop['near']] == [1] and drop['near'][0][2] == -10.0, drop
     assert len(tracker.track_ids) == (2 if born else 1), tracker.track_ids
+
+
+def test_the_appearance_ratio_learns_from_two_tracks_side_by_side(monkeypatch):
+    """A person in blue and one in yellow stand 1 m apart (within each other's
+    ``reuse_radius``): once their tracks are confident, each is sampled about once a second
+    (``CALIBRATION_INTERVAL``): the model acquired again at a track's estimate is nearer its
+    own model than the neighbour's, so the learnt ratio (:class:`AppearanceRatio`) says
+    "same" for a track's own model and "different" for the neighbour's. Alone, a track
+    gives no sample (nobody within its gate to be confused with)."""
+    from mbtrack_ros.core.appearance import model_distance
+    from mbtrack_ros.core.detection.manager import CALIBRATION_INTERVAL
+
+    rng = np.random.default_rng(5)
+    calib, bgs, tracker = _painted_room_tracker(4, reach_radius=0.0)
+    blue, yellow = person(2.0, 2.5, theta=0.0), person(3.0, 2.5, theta=0.0, colours=YELLOW)
+    frames = 90
+    for k in range(frames):
+        tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, [blue, yellow], rng))
+    ratio = tracker.detection.likeness
+    same, different = ratio.counts
+    # both tracks confident after the relocate interval: about a sample a second each
+    most = 2 * (frames / FPS) / CALIBRATION_INTERVAL
+    assert 2 <= same <= most and different == same, ratio.describe()
+    m_same, m_diff, _ = ratio.parameters()
+    assert m_same < 0.7 * m_diff, ratio.describe()
+    models = [tracker.models[t] for t in tracker.track_ids]
+    assert len(models) == 2
+    assert ratio.llr(0.5 * model_distance(*models)) > 0 > ratio.llr(model_distance(*models))
+
+    alone = _painted_room_tracker(4, reach_radius=0.0)[2]
+    for k in range(60):
+        alone.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, [blue], rng))
+    assert alone.track_ids == [1] and alone.detection.likeness.counts.tolist() == [0, 0]

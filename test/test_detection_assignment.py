@@ -10,6 +10,7 @@ import pytest
 from mbtrack_ros.core.detection.association import (
     BIRTH, DROP, PREFER_TRACK, assignment_costs, solve_assignment)
 from mbtrack_ros.core.detection.config import AutoDetectionConfig
+from mbtrack_ros.core.detection.likeness import AppearanceRatio
 
 
 def _brute_force(llr: np.ndarray, birth: np.ndarray) -> float:
@@ -84,8 +85,9 @@ def test_two_detections_competing_for_one_track_are_settled_by_the_total_ratio()
 
 def test_a_scene_decided_by_the_cost_terms_the_way_a_person_would():
     """Four detections, a reported track A, a hidden track H and a lost track L, with the
-    ratios built from the configuration's terms (``move_llr``, ``appearance_llr``, the
-    detection's score against ``beside_threshold``):
+    ratios built from the configuration's terms (``move_llr``, the appearance ratio of
+    two models before any calibration sample, the detection's score against
+    ``beside_threshold``):
 
     - d0, strong, 0.6 m from A, A's model explains it 2 nats better than A's own place:
       A drifted off its person - move A;
@@ -96,17 +98,17 @@ def test_a_scene_decided_by_the_cost_terms_the_way_a_person_would():
       fringe of A's person - drop. H (hidden, its person lost) is 3 m away, outside its
       gate, and takes nothing."""
     cfg = AutoDetectionConfig()
-    sigma = 0.12
+    ratio = AppearanceRatio(cfg.clutter_distance, 0.12).llr
     strong, weak = 6.0, 1.5
     e = np.array([strong - cfg.beside_threshold, strong, strong,
                   weak - cfg.beside_threshold])
     base = np.maximum(e, 0.0) + PREFER_TRACK
     inf = -np.inf
-    a_d0 = e[0] + cfg.move_llr(strong, 2.0, 0.6, sigma) + PREFER_TRACK
-    a_d3 = e[3] + cfg.move_llr(weak, -1.0, 0.2, sigma) + PREFER_TRACK
-    l_d1 = base[1] + cfg.appearance_llr(0.15, sigma)
-    l_d2 = base[2] + cfg.appearance_llr(0.7, sigma)     # 0: unlike, not in L's gate
-    assert l_d2 == base[2] and cfg.appearance_llr(0.15, sigma) > 0
+    a_d0 = e[0] + cfg.move_llr(strong, 2.0, ratio(0.6)) + PREFER_TRACK
+    a_d3 = e[3] + cfg.move_llr(weak, -1.0, ratio(0.2)) + PREFER_TRACK
+    l_d1 = base[1] + max(ratio(0.15), 0.0)
+    l_d2 = base[2] + max(ratio(0.7), 0.0)     # 0: unlike, not in L's gate
+    assert l_d2 == base[2] and ratio(0.15) > 0
     #                  A     H    L
     llr = np.array([[a_d0, inf, inf],
                     [inf, inf, l_d1],
@@ -116,10 +118,10 @@ def test_a_scene_decided_by_the_cost_terms_the_way_a_person_would():
     assert outcome.tolist() == [0, 2, BIRTH, DROP]
     # the same detection 0.2 m nearer A but with A's model explaining it worse than A's
     # own place and looking unlike A: a second person beside A - birth
-    llr[0, 0] = e[0] + cfg.move_llr(strong, -1.0, 0.8, sigma) + PREFER_TRACK
+    llr[0, 0] = e[0] + cfg.move_llr(strong, -1.0, ratio(0.8)) + PREFER_TRACK
     assert solve_assignment(llr, e)[0] == BIRTH
     # a look-alike of A (0.2): a track left behind where its person turned - move A
-    llr[0, 0] = e[0] + cfg.move_llr(strong, -1.0, 0.2, sigma) + PREFER_TRACK
+    llr[0, 0] = e[0] + cfg.move_llr(strong, -1.0, ratio(0.2)) + PREFER_TRACK
     assert solve_assignment(llr, e)[0] == 0
 
 
@@ -129,13 +131,13 @@ def test_a_lost_track_takes_back_a_person_near_its_place_who_does_not_look_unlik
     appearance ratio of the two models, negative for unlike ones. The place term against
     its closed form (and integrating the Gaussian over a large floor gives 1: a density);
     then a person re-found 0.3 m from where a track was lost moments ago is its person
-    even with models a little beyond ``alike_distance`` apart (0.53: two views of one
+    even with models a little beyond the clutter distance apart (0.53: two views of one
     person), not somebody dressed otherwise (0.75), and not at the gate's edge with
     that distance."""
     from mbtrack_ros.core.detection.association import place_llr
 
-    cfg = AutoDetectionConfig()
-    sigma, area, gate = 0.12, 30.0, 1.6
+    ratio = AppearanceRatio(AutoDetectionConfig().clutter_distance, 0.12).llr
+    area, gate = 30.0, 1.6
     sd = gate / 2
     for d in (0.0, 0.3, 1.0, gate):
         want = np.log(area / (2 * np.pi * sd ** 2)) - d ** 2 / (2 * sd ** 2)
@@ -145,8 +147,7 @@ def test_a_lost_track_takes_back_a_person_near_its_place_who_does_not_look_unlik
     assert g.sum() * (xs[1] - xs[0]) ** 2 == pytest.approx(1.0, rel=1e-3)
 
     def lost(metres, unlike):
-        return place_llr(metres, gate, area) + cfg.appearance_llr(unlike, sigma) \
-            - cfg.stranger_llr(unlike, sigma)
+        return place_llr(metres, gate, area) + ratio(unlike)
 
     birth = np.array([2.0, 2.0, 2.0])
     base = np.maximum(birth, 0.0) + PREFER_TRACK

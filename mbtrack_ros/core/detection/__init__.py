@@ -15,6 +15,8 @@ visibility/existence auxiliary processes (001 §3) in :mod:`mbtrack_ros.core.exi
 * :mod:`.config` - :class:`~.config.AutoDetectionConfig`, the pipeline's parameters;
 * :mod:`.association` - what a confirmed detection is: a birth, a track's person re-found
   (move), a lost track's person (reuse) or nothing (drop);
+* :mod:`.likeness` - the appearance likelihood ratio of two models (same person or not),
+  calibrated on the tracks;
 * :mod:`.deleter` - existence evidence of the tracks, duplicates, exits;
 * :mod:`.manager` - :class:`~.manager.AutoDetection`, the per-frame pipeline the tracker
   calls when ``TrackerConfig.detection`` is set.

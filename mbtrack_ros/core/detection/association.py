@@ -209,9 +209,10 @@ class DetectionAssociator:
           'hidden': a track that is not reported (existence below the report threshold,
           001 §3.2) within ``relocate_radius``: its person is somewhere near, whatever
           the gain: ``max(e, 0) + log((1 - p) / p) + A(u)`` (p the existence, A the
-          appearance term of :meth:`AutoDetectionConfig.appearance_llr`);
+          appearance ratio of the two models u apart, "same person" over "somebody
+          else", calibrated on the tracks: :meth:`.likeness.AppearanceRatio.llr`);
           'far': a hidden or doubtful track (existence below ``reuse_doubtful``) within
-          ``reuse_radius``: ``max(e, 0) + place + A(u) - S(u)`` as a lost track's, when
+          ``reuse_radius``: ``max(e, 0) + place + A(u)`` as a lost track's, when
           positive beyond ``max(e, 0)``;
           'young': a track born or moved within ``relocate_interval`` that looks like the
           detection: it lags its person, the detection is that person, nothing is done
@@ -222,9 +223,8 @@ class DetectionAssociator:
         - lost track (column ``len(keep) +`` index): released within ``reuse_time``, its
           person re-found within a gate of ``relocate_radius`` widened by
           :data:`WALK_SPEED` over the time since it was last supported (release timeout
-          and time since the release): ``max(e, 0) + place + A(u) - S(u)`` (place:
-          :func:`place_llr` on the floor's area; S: the reverse appearance ratio,
-          :meth:`AutoDetectionConfig.stranger_llr`), when the sum beyond ``max(e, 0)`` is
+          and time since the release): ``max(e, 0) + place + A(u)`` (place:
+          :func:`place_llr` on the floor's area), when the sum beyond ``max(e, 0)`` is
           positive.
 
         Each hypothesis that explains a detection by a track gets :data:`PREFER_TRACK`
@@ -249,7 +249,7 @@ class DetectionAssociator:
             unlike = likeness[tid] = model_distance(ref, model)
             near.append((int(tid), round(float(dist[j]), 2), round(gain, 3), round(unlike, 3)))
             if det.score >= cfg.beside_threshold and gain <= 0.0 \
-                    and not cfg.looks_alike(unlike):     # a stranger kept back by its looks
+                    and not self.likeness.looks_alike(unlike):   # a stranger, by its looks
                 unalike.append((int(tid), round(unlike, 3)))
         if near:
             info['near'] = near
@@ -271,12 +271,12 @@ class DetectionAssociator:
             young = self._placed_recently(tid, stamp_ns)
             here = []
             if tid in gains:
-                value = e + cfg.move_llr(det.score, gains[tid], likeness[tid],
-                                        self.sigma) + PREFER_TRACK
+                value = e + cfg.move_llr(det.score, gains[tid],
+                                         self.likeness.llr(likeness[tid])) + PREFER_TRACK
                 if value > max(e, 0.0):
                     here.append((value, 'gain'))
             if young:
-                if dist[j] <= radius and cfg.looks_alike(like(tid)):
+                if dist[j] <= radius and self.likeness.looks_alike(like(tid)):
                     here.append((base, 'young'))
             elif dist[j] <= cfg.reuse_radius:
                 hidden = self._hidden_hypothesis(tid, float(dist[j]), like, base)
@@ -310,9 +310,9 @@ class DetectionAssociator:
             unlike = model_distance(old, model)
             info.setdefault('reuse', []).append((int(tid), round(d, 2), round(unlike, 3)))
             # where: the lost person's place against a birth anywhere on the floor; who:
-            # the two models' appearance ratio, negative for unlike ones (003 Eq. 4)
-            value = place_llr(d, gate, (x1 - x0) * (y1 - y0)) \
-                + cfg.appearance_llr(unlike, self.sigma) - cfg.stranger_llr(unlike, self.sigma)
+            # the two models' appearance ratio, negative for unlike ones (003 Eq. 4,
+            # calibrated on the tracks: .likeness)
+            value = place_llr(d, gate, (x1 - x0) * (y1 - y0)) + self.likeness.llr(unlike)
             if value > 0.0:
                 row[len(keep) + i] = (base + value, 'lost')
         info['gains'] = gains
@@ -336,14 +336,13 @@ class DetectionAssociator:
             # unfloored appearance ratio, as for a lost track)
             odds = float(np.log(max(1.0 - p, 1e-9) / max(p, 1e-9)))
             unlike = like(track_id)
-            return base + max(odds, 0.0) + cfg.appearance_llr(unlike, self.sigma) \
-                - cfg.stranger_llr(unlike, self.sigma), 'hidden'
+            return base + max(odds, 0.0) + self.likeness.llr(unlike), 'hidden'
         if not reported or p < cfg.reuse_doubtful:
             # where and who, as for a lost track (its gate: reuse_radius)
             x0, y0, x1, y1 = self.calibration.floor
             unlike = like(track_id)
             value = place_llr(metres, cfg.reuse_radius, (x1 - x0) * (y1 - y0)) \
-                + cfg.appearance_llr(unlike, self.sigma) - cfg.stranger_llr(unlike, self.sigma)
+                + self.likeness.llr(unlike)
             if value > 0.0:
                 return base + value, 'far'
         return None

@@ -34,15 +34,17 @@ class AutoDetectionConfig:
             (:mod:`~mbtrack_ros.core.detection.adaptation`; ``rate`` 0 is off).
         clutter_distance: Bhattacharyya distance whose likelihood is the "not visible"
             clutter likelihood ``p_0`` (001 Eq. 23): what a model scores on something that
-            is not its person. Also :attr:`alike_distance` and the zero of the appearance
-            ratio of two models (:meth:`appearance_llr`).
+            is not its person. Also the zero of the prior appearance ratio of two models
+            (:class:`.likeness.AppearanceRatio`, which the tracks' own samples then
+            calibrate).
         relocate_interval: seconds after a track was born or moved during which it lags
             its person and its young model explains several people in a group about
             equally well: a detection assigned to it (:mod:`.association`) is dropped, not
             moved onto (the track would hop between people), unless its appearance gain is
             positive (the track's model explains the detection better than the track's own
             place): then it is moved again, once; a detection beside it that looks like it
-            (``alike_distance``) is that person, not a newcomer (assigned to it, dropped).
+            (:meth:`.likeness.AppearanceRatio.looks_alike`) is that person, not a newcomer
+            (assigned to it, dropped).
         reuse_time: seconds; a released track is *lost* for ``reuse_time``: a detection
             near where it was released (within :attr:`reuse_radius`, widened by
             :data:`WALK_SPEED` over the time since) that does not look unlike it may be
@@ -94,17 +96,6 @@ class AutoDetectionConfig:
     beside_threshold: float = 3.0
 
     @property
-    def alike_distance(self) -> float:
-        """Appearance distance (003 Eq. 4, between two appearance models) at most which a
-        track's model and a detection's show the same person: ``clutter_distance``, the
-        distance at which a model's likelihood is the clutter likelihood ``p_0`` (001
-        Eq. 23), so that a model nearer than it is likelier the person than clutter (a
-        log-likelihood ratio above 0): the zero of the appearance ratio of two models
-        (:meth:`appearance_llr`, :meth:`stranger_llr`) by which the association
-        (:mod:`.association`) weighs whether a detection is a track's person."""
-        return self.clutter_distance
-
-    @property
     def relocate_radius(self) -> float:
         """Metres; a confirmed detection this close to a current track is compared with the
         track's appearance model before it may start a new track: the appearance gain
@@ -145,45 +136,20 @@ class AutoDetectionConfig:
         lets the reuse take hidden ones."""
         return self.existence.initial_existence
 
-    def looks_alike(self, unlike: float) -> bool:
-        """Whether a track whose model is ``unlike`` (appearance distance) from a
-        detection's looks like it (``alike_distance``)."""
-        return unlike <= self.alike_distance
-
-    def move_llr(self, score: float, gain: float, unlike: float, sigma: float) -> float:
+    def move_llr(self, score: float, gain: float, appearance: float) -> float:
         """Log-likelihood ratio (nats) of "the detection (of ``score``) is the person of a
-        track whose model is ``unlike`` (appearance distance) from the detection's" over
-        "it is a new person": the appearance gain (003 Eq. 3, nats per side camera: the
-        track's model at the detection over at the track's own estimate), plus, for a
-        strong detection (``beside_threshold``), the appearance ratio of the two models
-        (:meth:`appearance_llr`; a track left behind where its person turned explains
-        them worse than its own place, but still looks like them). The association adds
-        the detection's own ratio (its score less ``beside_threshold``), so that a weak
-        detection moves a track only when the gain makes up its shortfall (weak
-        detections beside a track are often a neighbour's fringe, which looks like the
-        neighbour)."""
+        track" over "it is a new person": the appearance gain (003 Eq. 3, nats per side
+        camera: the track's model at the detection over at the track's own estimate),
+        plus, for a strong detection (``beside_threshold``), the appearance ratio of the
+        two models ``appearance`` (nats, :meth:`.likeness.AppearanceRatio.llr`) floored at
+        0 (a track left behind where its person turned explains them worse than its own
+        place, but still looks like them; a model unlike the detection says it is not
+        visible there, not that it is elsewhere). The association adds the detection's
+        own ratio (its score less ``beside_threshold``), so that a weak detection moves a
+        track only when the gain makes up its shortfall (weak detections beside a track
+        are often a neighbour's fringe, which looks like the neighbour)."""
         strong = score >= self.beside_threshold
-        return float(gain) + (self.appearance_llr(unlike, sigma) if strong else 0.0)
-
-    def appearance_llr(self, unlike: float, sigma: float) -> float:
-        """Log-likelihood ratio (nats) of "same person" over "somebody else" for two
-        appearance models ``unlike`` (003 Eq. 4) apart, with the appearance likelihood
-        ``exp(-D^2 / (2 sigma^2))`` (000 Eq. 19) against the clutter likelihood at
-        ``clutter_distance`` (:attr:`alike_distance`, 001 Eq. 23), floored at 0 (a model
-        unlike the detection says it is not visible there, not that it is elsewhere):
-        ``max(0, (alike_distance^2 - unlike^2) / (2 sigma^2))``; ``sigma`` is the
-        tracker's appearance likelihood width (8.7 nats for identical models at the
-        defaults)."""
-        return max(0.0, (self.alike_distance ** 2 - float(unlike) ** 2)
-                   / (2.0 * float(sigma) ** 2))
-
-    def stranger_llr(self, unlike: float, sigma: float) -> float:
-        """Log-likelihood ratio (nats) of "somebody else" over "the same person" for two
-        appearance models ``unlike`` (003 Eq. 4) apart, the reverse of
-        :meth:`appearance_llr`: ``max(0, (unlike^2 - alike_distance^2) / (2 sigma^2))``
-        (their difference is the unfloored ratio)."""
-        return max(0.0, (float(unlike) ** 2 - self.alike_distance ** 2)
-                   / (2.0 * float(sigma) ** 2))
+        return float(gain) + (max(0.0, float(appearance)) if strong else 0.0)
 
     def __post_init__(self) -> None:
         if not self.duplicate_margin >= 0:

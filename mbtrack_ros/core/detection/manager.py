@@ -14,9 +14,10 @@ filter step when automatic detection is enabled:
    frames and acquire their appearance models; the tracker then adds them.
 
 Its parts by role: the parameters in :mod:`.config`, what a confirmed detection is (birth,
-move, re-identification, drop) in :mod:`.association`, the existence evidence, duplicate
-and exit judgements in :mod:`.deleter`; this module wires them with the background,
-detector, acquisition and release.
+move, re-identification, drop) in :mod:`.association` with the appearance ratio of
+:mod:`.likeness` (its samples taken here, :meth:`AutoDetection._calibrate`), the existence
+evidence, duplicate and exit judgements in :mod:`.deleter`; this module wires them with
+the background, detector, acquisition and release.
 """
 from __future__ import annotations
 
@@ -28,7 +29,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from mbtrack_ros.core.appearance import PersonModel, quantize
+from mbtrack_ros.core.appearance import PersonModel, model_distance, quantize
 from mbtrack_ros.core.camera import RoomCalibration
 from mbtrack_ros.core.detection import DetectionError
 from mbtrack_ros.core.detection.acquisition import acquire
@@ -39,6 +40,7 @@ from mbtrack_ros.core.detection.camera_stage import exclusion_mask, head_heights
 from mbtrack_ros.core.detection.config import AutoDetectionConfig, Birth
 from mbtrack_ros.core.detection.deleter import TrackDeleter
 from mbtrack_ros.core.detection.detector import Detection, Detector, FrameEvidence, is_ceiling
+from mbtrack_ros.core.detection.likeness import AppearanceRatio
 from mbtrack_ros.core.detection.release import Releaser
 from mbtrack_ros.core.existence import TrackAuxiliary
 from mbtrack_ros.core.likelihood import LikelihoodConfig
@@ -48,6 +50,8 @@ from mbtrack_ros.core.state import X, Y, TrackEstimate
 __all__ = ['AutoDetection', 'AutoDetectionConfig', 'Birth']
 
 _log = logging.getLogger(__name__)
+
+CALIBRATION_INTERVAL = 1.0   # seconds between two appearance calibration samples of a track
 
 
 class _Pending(NamedTuple):
@@ -119,6 +123,9 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
         self._foreground: tuple[list[str], Future] | None = None  # start_foreground()'s job
         self._searching: tuple[_Pending, Future] | None = None    # start_search()'s job
         self.side = [n for n, c in calibration.cameras.items() if not is_ceiling(c)]
+        # the appearance ratio of two models, calibrated on the tracks (_calibrate)
+        self.likeness = AppearanceRatio(cfg.clutter_distance, self.sigma)
+        self._sampled: dict[int, int] = {}  # track id -> stamp of its last calibration sample
 
     def prepare(self) -> None:
         """Do the one-off work of the first frames ahead (the people cue's floor grid), so
@@ -150,6 +157,7 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
         self._adapted.clear()
         self._first_xy.clear()
         self._travelled.clear()
+        self._sampled.clear()
         self.detector.reset()
         self._last_stamp = None
         self._pending = None
@@ -371,10 +379,13 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
             self._adapted.pop(tid, None)
             self._first_xy.pop(tid, None)
             self._travelled.discard(tid)
+            self._sampled.pop(tid, None)
         self._note_reporting(stamp_ns, tracks, means, ended, models)
         t3 = time.perf_counter()
         if cfg.adaptation.rate > 0 and tracks and evidence:
             self._adapt(stamp_ns, tracks, models, means, sils, evidence, ended)
+        if tracks and evidence:
+            self._calibrate(stamp_ns, images, tracks, models, means, shapes, ended)
         self.timings = {'detect_render': t1 - t0, 'detect_background': t2 - t1,
                         'detect_existence': t3 - t2, 'detect_adapt': time.perf_counter() - t3}
         self._pending = _Pending(int(stamp_ns), images, tracks, models, means, shapes,
@@ -661,3 +672,51 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
         for r in self.adaptations:
             if r['action'] != 'inconsistent':
                 self._adapted[r['id']] = int(stamp_ns)
+
+    def _calibrate(self, stamp_ns: int, images: Mapping[str, np.ndarray],
+                   tracks: Sequence[TrackEstimate], models: Mapping[int, PersonModel],
+                   means: np.ndarray, shapes: Sequence[BodyShape], ended: Sequence[int]
+                   ) -> None:
+        """Samples for the appearance ratio (:class:`.likeness.AppearanceRatio`) from the
+        tracks followed confidently: reported, existence at least the adaptation's
+        ``min_existence`` (001 §3.2), not born or moved within ``relocate_interval``. The
+        association weighs a track's person against somebody else within its gate, so
+        the samples are taken where that question arises: of a confident track with
+        another within ``reuse_radius`` (metres), at most once per
+        :data:`CALIBRATION_INTERVAL`, a model is acquired at its estimate (003 §4.1, the
+        other tracks as occluders), as a detection's would be; that model's distance
+        (003 Eq. 4) to the track's own model is a "same person" sample, its distances to
+        the models of the confident tracks within ``reuse_radius`` (other people: two
+        tracks at once) are "different people" samples."""
+        ids = [t.track_id for t in tracks]
+        least = self.config.adaptation.min_existence
+        sure = [k for k, tid in enumerate(ids)
+                if tid not in ended and tid in self.aux and self.reported(tid)
+                and self.aux[tid].existence >= least
+                and not self._placed_recently(tid, stamp_ns)
+                and models.get(tid) is not None and models[tid].view_angles.size]
+        xy = means[sure][:, [X, Y]]
+        gate = np.hypot(*(xy[:, None] - xy[None]).T) <= self.config.reuse_radius
+        np.fill_diagonal(gate, False)
+        due = int(CALIBRATION_INTERVAL * 1e9)
+        for i, k in enumerate(sure):
+            tid = ids[k]
+            near = [sure[j] for j in np.flatnonzero(gate[i])]
+            if not near or (tid in self._sampled
+                            and int(stamp_ns) - self._sampled[tid] < due):
+                continue
+            self._sampled[tid] = int(stamp_ns)
+            rest = [j for j in range(len(tracks)) if j != k and ids[j] not in ended]
+            shape = models[tid].shape
+            seen = Detection(state=means[k].copy(), height=shape.height, width=shape.width,
+                             score=0.0)
+            fresh = acquire(seen, images, self.calibration, others=means[rest],
+                            other_shapes=[shapes[j] for j in rest],
+                            config=self.config.acquisition)
+            if fresh is None:
+                continue
+            self.likeness.add(same=model_distance(models[tid], fresh),
+                              different=[model_distance(models[ids[j]], fresh)
+                                         for j in near])
+            _log.debug('appearance calibration after track %d: %s', tid,
+                       self.likeness.describe())
