@@ -8,8 +8,8 @@ import pytest
 
 from mbtrack_ros.core.dynamics import DynamicsError, MotionConfig, _move, predict
 from mbtrack_ros.core.filters import (
-    FilterConfig, FilterError, HJSFilter, JointFilter, SeparableFilter, TrackingFilter,
-    summarize_particles)
+    FilterConfig, FilterError, GroupedHJSFilter, HJSFilter, JointFilter, SeparableFilter,
+    TrackingFilter, summarize_particles)
 from mbtrack_ros.core.resampling import (
     ResamplingError, effective_sample_size, normalize_log_weights, normalized_weights,
     systematic_resample)
@@ -523,6 +523,95 @@ def test_joint_filter_keeps_a_hidden_pair_in_order_and_apart():
                       use_mrf=False)
     assert (on > 0.4).all() and 0.7 < on.mean() < 1.2, on.mean()
     assert (off < 0.4).mean() > 0.2
+
+
+def test_grouped_filter_keeps_a_hidden_pair_in_order_and_apart():
+    """GroupedHJSFilter with 100 particles per person on the hidden pair above: the two
+    clouds within r form a group whose joint particles carry the exclusion, and the pair
+    keeps its order as in the joint filter; HJS (a product of marginals) loses it."""
+    grouped = _depth_gaps(GroupedHJSFilter, _ShadowMeasurement, 4, 45, particles=100)
+    hjs = _depth_gaps(HJSFilter, _ShadowMeasurement, 4, 45, particles=100)
+    assert (grouped > 0.5).all() and 0.7 < grouped.mean() < 1.3, (grouped.min(), grouped.mean())
+    assert (hjs < 0.3).mean() > 0.2
+
+
+class _CoupledMeasurement(GaussianMeasurement):
+    """Stand-in whose joint log-likelihood is not a sum over targets (a cross term), and
+    which records the joint samples it scored."""
+
+    def __init__(self, truth):
+        super().__init__(truth)
+        self.scored = []
+
+    def joint(self, joint_particles, models):
+        self.scored.append(np.array(joint_particles))
+        assert len(models) == joint_particles.shape[1]
+        return (sum(self._ll(joint_particles[:, k], k) for k in range(joint_particles.shape[1]))
+                + 3.0 * joint_particles[:, 0, 0] * joint_particles[:, 1, 1])
+
+
+def test_group_weights_are_the_joint_likelihood_times_the_exclusion_prior():
+    """Brute force on a tiny case: targets 1 and 2 within r form a group of 2 x 3 joint
+    particles; each joint particle's weight is the joint likelihood of the pair rendered
+    with target 3 at its predicted mean, times the exclusion potential (000 Eq. 16, floor
+    epsilon), enumerated by hand; target 3, far away, stays an HJS target."""
+    rng = np.random.default_rng(4)
+    cfg = FilterConfig(particles=3, motion=ZERO_NOISE, init_position_spread=0.1,
+                       init_velocity_spread=0.0, mrf_radius=0.4, mrf_epsilon=1e-3)
+    filt = GroupedHJSFilter(cfg)
+    truth = [np.zeros(2), np.array([0.35, 0.0]), np.array([3.0, 0.0])]
+    for k, t in enumerate(truth):
+        filt.add(k + 1, object(), np.r_[t, 0, 0, 0, 0], rng)
+    meas = _CoupledMeasurement(truth)
+    out = filt.step(0.1, meas, {}, rng)
+    assert filt.groups() == [(1, 2)]
+    a, b, c = (out[t].particles for t in (1, 2, 3))
+    assert a.shape == b.shape == (6, 6) and c.shape == (3, 6)
+    (scored,) = meas.scored
+    c_mean = c[:, :2].mean(axis=0)
+    expected = np.empty(6)
+    for i in range(6):
+        assert np.array_equal(scored[i, 0], a[i]) and np.array_equal(scored[i, 1], b[i])
+        assert np.allclose(scored[i, 2, :2], c_mean)
+        ll = sum(-((p[:2] - t) ** 2).sum() / (2 * 0.1 ** 2)
+                 for p, t in zip((a[i], b[i], scored[i, 2]), truth))
+        ll += 3.0 * a[i, 0] * b[i, 1]
+        prior = 1.0 if np.hypot(*(a[i, :2] - b[i, :2])) > 0.4 else 1e-3
+        expected[i] = np.exp(ll) * prior
+    expected /= expected.sum()
+    assert np.allclose(out[1].weights, expected) and np.allclose(out[2].weights, expected)
+    # the joint weights go on with the joint particles; target 3 with its likelihood alone
+    assert np.allclose(np.exp(filt.cloud(1)[1]), expected)
+    w3 = np.exp(meas._ll(c, 2) - meas._ll(c, 2).max())
+    assert np.allclose(np.exp(filt.cloud(3)[1]), w3 / w3.sum())
+
+
+def test_a_group_keeps_its_joint_particles_and_dissolves_when_apart():
+    """Rows shared in one step stay paired in the next (joint resampling, not two
+    independent ones); targets that move farther apart than r leave the group."""
+    rng = np.random.default_rng(6)
+    cfg = FilterConfig(particles=20, motion=ZERO_NOISE, init_position_spread=0.1,
+                       init_velocity_spread=0.0)
+    filt = GroupedHJSFilter(cfg)
+    truth = [np.zeros(2), np.array([0.3, 0.0])]
+    for k, t in enumerate(truth):
+        filt.add(k + 1, object(), np.r_[t, 0, 0, 0, 0], rng)
+    meas = GaussianMeasurement(truth, sigma=0.3)
+    first = filt.step(0.1, meas, {}, rng)
+    pairs = {tuple(np.r_[p, q]) for p, q in zip(first[1].particles[:, :2],
+                                                first[2].particles[:, :2])}
+    second = filt.step(0.1, meas, {}, rng)
+    assert filt.groups() == [(1, 2)]
+    for p, q in zip(second[1].particles[:, :2], second[2].particles[:, :2]):
+        assert tuple(np.r_[p, q]) in pairs
+    filt.remove(2)
+    assert filt.groups() == []
+    filt.add(3, object(), np.array([4.0, 0, 0, 0, 0, 0]), rng)
+    meas.truth = [np.zeros(2), np.array([4.0, 0.0])]
+    filt.step(0.1, meas, {}, rng)
+    filt.step(0.1, meas, {}, rng)
+    assert filt.groups() == []
+    assert all(filt.cloud(t)[0].shape == (20, 6) for t in (1, 3))
 
 
 def test_joint_filter_pushes_people_apart_where_depth_is_uncertain():
