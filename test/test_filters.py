@@ -536,54 +536,77 @@ def test_grouped_filter_keeps_a_hidden_pair_in_order_and_apart():
 
 
 class _CoupledMeasurement(GaussianMeasurement):
-    """Stand-in whose joint log-likelihood is not a sum over targets (a cross term), and
-    which records the joint samples it scored."""
+    """Stand-in whose models are the targets' indices. The HJS log-likelihood of target k
+    depends on which other targets the call holds (as occluders: a term per other target's
+    mean); the joint log-likelihood is not a sum over targets (a cross term between
+    targets 0 and 1). Records the joint samples it scored."""
 
     def __init__(self, truth):
         super().__init__(truth)
         self.scored = []
 
+    def _g(self, p, k):
+        return -((p[:, :2] - self.truth[k]) ** 2).sum(axis=1) / (2 * self.sigma ** 2)
+
+    def hjs(self, particles, weights, models):
+        out = []
+        for p, k in zip(particles, models):
+            ll = self._g(p, k)
+            for q, j in zip(particles, models):
+                if j != k:
+                    ll = ll - 1.0 / (1.0 + ((p[:, :2] - q[:, :2].mean(axis=0)) ** 2).sum(1))
+            out.append(ll)
+        return _Result(out, np.full((len(particles), 1), 0.5))
+
     def joint(self, joint_particles, models):
-        self.scored.append(np.array(joint_particles))
-        assert len(models) == joint_particles.shape[1]
-        return (sum(self._ll(joint_particles[:, k], k) for k in range(joint_particles.shape[1]))
-                + 3.0 * joint_particles[:, 0, 0] * joint_particles[:, 1, 1])
+        self.scored.append((np.array(joint_particles), list(models)))
+        col = {k: c for c, k in enumerate(models)}
+        ll = sum(self._g(joint_particles[:, c], k) for c, k in enumerate(models))
+        if 0 in col and 1 in col:
+            ll = ll + 3.0 * joint_particles[:, col[0], 0] * joint_particles[:, col[1], 1]
+        return ll
 
 
 def test_group_weights_are_the_joint_likelihood_times_the_exclusion_prior():
-    """Brute force on a tiny case: targets 1 and 2 within r form a group of 2 x 3 joint
-    particles; each joint particle's weight is the joint likelihood of the pair rendered
-    with target 3 at its predicted mean, times the exclusion potential (000 Eq. 16, floor
-    epsilon), enumerated by hand; target 3, far away, stays an HJS target."""
+    """Brute force on a tiny case: targets 0 and 1 within r form a group of 2 x 3 joint
+    particles (a, b); target 2, far away, stays an HJS target. Each joint particle's weight
+    is, enumerated by hand: the HJS likelihoods of a and of b with target 2 alone as their
+    occluder, plus the part of the joint likelihood J (with target 2 at its predicted mean)
+    that does not add up over the members, J(a, b) - J(a) - J(b), times the exclusion
+    potential (000 Eq. 16, floor epsilon)."""
     rng = np.random.default_rng(4)
     cfg = FilterConfig(particles=3, motion=ZERO_NOISE, init_position_spread=0.1,
                        init_velocity_spread=0.0, mrf_radius=0.4, mrf_epsilon=1e-3)
     filt = GroupedHJSFilter(cfg)
     truth = [np.zeros(2), np.array([0.35, 0.0]), np.array([3.0, 0.0])]
     for k, t in enumerate(truth):
-        filt.add(k + 1, object(), np.r_[t, 0, 0, 0, 0], rng)
+        filt.add(k, k, np.r_[t, 0, 0, 0, 0], rng)
     meas = _CoupledMeasurement(truth)
     out = filt.step(0.1, meas, {}, rng)
-    assert filt.groups() == [(1, 2)]
-    a, b, c = (out[t].particles for t in (1, 2, 3))
+    assert filt.groups() == [(0, 1)]
+    a, b, c = (out[t].particles for t in (0, 1, 2))
     assert a.shape == b.shape == (6, 6) and c.shape == (3, 6)
-    (scored,) = meas.scored
     c_mean = c[:, :2].mean(axis=0)
+    for jp, models in meas.scored:           # J is evaluated with target 2 at its mean
+        assert models[-1] == 2 and np.allclose(jp[:, -1, :2], c_mean)
     expected = np.empty(6)
     for i in range(6):
-        assert np.array_equal(scored[i, 0], a[i]) and np.array_equal(scored[i, 1], b[i])
-        assert np.allclose(scored[i, 2, :2], c_mean)
-        ll = sum(-((p[:2] - t) ** 2).sum() / (2 * 0.1 ** 2)
-                 for p, t in zip((a[i], b[i], scored[i, 2]), truth))
-        ll += 3.0 * a[i, 0] * b[i, 1]
+        def g(p, k):
+            return -((p[:2] - truth[k]) ** 2).sum() / (2 * 0.1 ** 2)
+
+        hjs_a = g(a[i], 0) - 1.0 / (1.0 + ((a[i, :2] - c_mean) ** 2).sum())
+        hjs_b = g(b[i], 1) - 1.0 / (1.0 + ((b[i, :2] - c_mean) ** 2).sum())
+        interaction = 3.0 * a[i, 0] * b[i, 1]       # J(a, b) - J(a) - J(b)
         prior = 1.0 if np.hypot(*(a[i, :2] - b[i, :2])) > 0.4 else 1e-3
-        expected[i] = np.exp(ll) * prior
+        expected[i] = np.exp(hjs_a + hjs_b + interaction) * prior
     expected /= expected.sum()
-    assert np.allclose(out[1].weights, expected) and np.allclose(out[2].weights, expected)
-    # the joint weights go on with the joint particles; target 3 with its likelihood alone
-    assert np.allclose(np.exp(filt.cloud(1)[1]), expected)
-    w3 = np.exp(meas._ll(c, 2) - meas._ll(c, 2).max())
-    assert np.allclose(np.exp(filt.cloud(3)[1]), w3 / w3.sum())
+    assert np.allclose(out[0].weights, expected) and np.allclose(out[1].weights, expected)
+    # the joint weights go on with the joint particles; target 2 with its HJS likelihood
+    # (all other targets its occluders) alone
+    assert np.allclose(np.exp(filt.cloud(0)[1]), expected)
+    (w2,) = [ll for ll in meas.hjs([a, b, c], None, [0, 1, 2]).loglik[2:]]
+    w2 = np.exp(w2 - w2.max())
+    assert np.allclose(np.exp(filt.cloud(2)[1]), w2 / w2.sum())
 
 
 def test_a_group_keeps_its_joint_particles_and_dissolves_when_apart():

@@ -442,12 +442,15 @@ class GroupedHJSFilter(HJSFilter):
     indices from one weight vector, each component moved by the 1-body dynamics (000
     Eq. 15). A group newly formed pairs rows drawn independently from the members' clouds
     in random order (a sample of the product of marginals); members that already shared
-    rows keep them. The group's joint weight is the joint prior and likelihood of the
-    joint filter (:class:`JointFilter`): the exclusion prior of 000 Eq. 16 within the group
-    times the depth-buffered joint likelihood (000 Eq. 19-21, 26) of the members rendered
-    together with every other target at its predicted mean. The joint particles go on to
-    the next step with that weight, so the exclusion is carried in them as in the joint
-    filter (a hidden pair keeps its order). All other targets are updated as by
+    rows keep them. N is 2 x the particles per target for a group of two (the members
+    keep as many particle states as two HJS targets). The group's joint weight
+    (:meth:`_group_loglik`) is the exclusion prior of 000 Eq. 16 within the group, as in
+    the joint filter (:class:`JointFilter`), times each member's HJS likelihood with the
+    targets outside the group as occluders, times what the depth-buffered joint
+    likelihood of the joint filter (000 Eq. 19-21, 26) adds for the members' occlusion of
+    each other in that joint particle. The joint particles go on to the next step with
+    that weight, so the exclusion is carried in them as in the joint filter (a hidden pair
+    keeps its order). All other targets are updated as by
     :class:`HJSFilter` (their occlusion maps, 000 Eq. 34, include the members' clouds);
     groups form and dissolve at every step, and members of a dissolved group go on with
     the marginals of their joint particles. Without ``config.use_mrf`` there is no
@@ -455,9 +458,8 @@ class GroupedHJSFilter(HJSFilter):
     """
 
     name = 'hjs-groups'
-    #: largest group: the joint likelihood renders N x K silhouettes per group and camera
+    #: largest group: a group of G costs G + 1 joint and G HJS evaluations of its rows
     MAX_GROUP = 2
-    ROWS_PER_MEMBER = True
 
     def __init__(self, config: FilterConfig | None = None, **kwargs: Any) -> None:
         super().__init__(config, **kwargs)
@@ -490,8 +492,7 @@ class GroupedHJSFilter(HJSFilter):
         """Resample (shared indices for rows shared before and after) and predict."""
         n = int(self.config.particles)
         new = {ids[k]: g for g, members in enumerate(groups) for k in members}
-        rows = {ids[k]: self.group_rows(n, len(members))
-                for members in groups for k in members}
+        rows = {ids[k]: n * len(members) for members in groups for k in members}
         old = {tid: g for g, members in enumerate(self._groups) for tid in members}
         indices: dict[tuple, np.ndarray] = {}
         chosen, noise = [], []
@@ -512,15 +513,13 @@ class GroupedHJSFilter(HJSFilter):
         ends = np.cumsum([c.shape[0] for c in chosen])
         return [moved[e - c.shape[0]:e] for c, e in zip(chosen, ends)]
 
-    def group_rows(self, n: int, size: int) -> int:
-        """Joint particles of a group of ``size`` targets with ``n`` particles per target."""
-        return n * size if self.ROWS_PER_MEMBER else n
-
-    def _group_loglik(self, members: list[int], particles: list[np.ndarray],
-                      models: list[Any], measurement: MeasurementModel) -> np.ndarray:
-        """(N,) log of the group's joint prior x joint likelihood per joint particle."""
+    def _joint_terms(self, members: list[int], group: list[int], particles: list[np.ndarray],
+                     models: list[Any], measurement: MeasurementModel) -> np.ndarray:
+        """(N,) depth-buffered joint log-likelihood (000 Eq. 19-21, 26) of the rows of
+        ``members`` (some of ``group``) rendered with every target outside ``group`` at its
+        predicted mean state."""
         joint = np.stack([particles[k] for k in members], axis=1)
-        others = [k for k in range(len(particles)) if k not in members]
+        others = [k for k in range(len(particles)) if k not in group]
         full = joint
         if others:
             fixed = np.empty((len(others), STATE_DIM))
@@ -530,10 +529,34 @@ class GroupedHJSFilter(HJSFilter):
                 fixed[j, SIT] = float(fixed[j, SIT] > 0.5)
             full = np.concatenate(
                 [joint, np.broadcast_to(fixed, (joint.shape[0],) + fixed.shape)], axis=1)
-        ll = np.asarray(measurement.joint(full, [models[k] for k in members + others]),
-                        dtype=np.float64)
-        return ll + exclusion_log_prior(joint, self.config.mrf_radius,
-                                        self.config.mrf_epsilon)
+        return np.asarray(measurement.joint(full, [models[k] for k in members + others]),
+                          dtype=np.float64)
+
+    def _group_loglik(self, members: list[int], particles: list[np.ndarray],
+                      models: list[Any], measurement: MeasurementModel) -> np.ndarray:
+        """(N,) log of the group's joint prior x likelihood per joint particle.
+
+        Likelihood: each member's HJS likelihood (000 Eq. 22-40) with the targets outside
+        the group as its occluders, plus the interaction of the members in the
+        depth-buffered joint likelihood J (000 Eq. 20-21, 26; :meth:`_joint_terms`),
+        J(members) - sum_k J(k) (for two, J(a, b) - J(a) - J(b)), which is constant where
+        the members do not overlap in any image. Prior: the exclusion
+        potential of 000 Eq. 16 on the joint particle.
+        """
+        total = np.zeros(particles[members[0]].shape[0])
+        for k in members:
+            keep = [j for j in range(len(particles)) if j == k or j not in members]
+            result = measurement.hjs([particles[j] for j in keep],
+                                     [np.full(particles[j].shape[0], 1.0) for j in keep],
+                                     [models[j] for j in keep])
+            total += np.asarray(result.loglik[keep.index(k)], dtype=np.float64)
+        # what J does not add up over the members: their occlusion of each other
+        total += self._joint_terms(members, members, particles, models, measurement)
+        for k in members:
+            total -= self._joint_terms([k], members, particles, models, measurement)
+        joint = np.stack([particles[k] for k in members], axis=1)
+        return total + exclusion_log_prior(joint, self.config.mrf_radius,
+                                           self.config.mrf_epsilon)
 
     def step(self, dt: float, measurement: MeasurementModel, images: dict[str, np.ndarray],
              rng: np.random.Generator) -> dict[int, TrackUpdate]:
