@@ -544,12 +544,14 @@ class _CoupledMeasurement(GaussianMeasurement):
     def __init__(self, truth):
         super().__init__(truth)
         self.scored = []
+        self.hjs_calls = []
 
     def _g(self, p, k):
         return -((p[:, :2] - self.truth[k]) ** 2).sum(axis=1) / (2 * self.sigma ** 2)
 
     def hjs(self, particles, weights, models):
         out = []
+        self.hjs_calls.append((list(models), out))
         for p, k in zip(particles, models):
             ll = self._g(p, k)
             for q, j in zip(particles, models):
@@ -567,13 +569,14 @@ class _CoupledMeasurement(GaussianMeasurement):
         return ll
 
 
-def test_group_weights_are_the_joint_likelihood_times_the_exclusion_prior():
+def test_group_weights_by_hand():
     """Brute force on a tiny case: targets 0 and 1 within r form a group of 2 x 3 joint
-    particles (a, b); target 2, far away, stays an HJS target. Each joint particle's weight
-    is, enumerated by hand: the HJS likelihoods of a and of b with target 2 alone as their
-    occluder, plus the part of the joint likelihood J (with target 2 at its predicted mean)
-    that does not add up over the members, J(a, b) - J(a) - J(b), times the exclusion
-    potential (000 Eq. 16, floor epsilon)."""
+    particles (a, b); target 2, far away, stays an HJS target. Partitioned sampling: the
+    rows are resampled by a's HJS likelihood (target 2 alone its occluder), then weighted,
+    enumerated by hand, by b's HJS likelihood (target 2 alone its occluder) plus the part
+    of the joint likelihood J (target 2 at its predicted mean) that does not add up over
+    the members, J(a, b) - J(a) - J(b), times the exclusion potential (000 Eq. 16, floor
+    epsilon)."""
     rng = np.random.default_rng(4)
     cfg = FilterConfig(particles=3, motion=ZERO_NOISE, init_position_spread=0.1,
                        init_velocity_spread=0.0, mrf_radius=0.4, mrf_epsilon=1e-3)
@@ -591,22 +594,49 @@ def test_group_weights_are_the_joint_likelihood_times_the_exclusion_prior():
         assert models[-1] == 2 and np.allclose(jp[:, -1, :2], c_mean)
     expected = np.empty(6)
     for i in range(6):
-        def g(p, k):
-            return -((p[:2] - truth[k]) ** 2).sum() / (2 * 0.1 ** 2)
-
-        hjs_a = g(a[i], 0) - 1.0 / (1.0 + ((a[i, :2] - c_mean) ** 2).sum())
-        hjs_b = g(b[i], 1) - 1.0 / (1.0 + ((b[i, :2] - c_mean) ** 2).sum())
+        hjs_b = (-((b[i, :2] - truth[1]) ** 2).sum() / (2 * 0.1 ** 2)
+                 - 1.0 / (1.0 + ((b[i, :2] - c_mean) ** 2).sum()))
         interaction = 3.0 * a[i, 0] * b[i, 1]       # J(a, b) - J(a) - J(b)
         prior = 1.0 if np.hypot(*(a[i, :2] - b[i, :2])) > 0.4 else 1e-3
-        expected[i] = np.exp(hjs_a + hjs_b + interaction) * prior
+        expected[i] = np.exp(hjs_b + interaction) * prior
     expected /= expected.sum()
     assert np.allclose(out[0].weights, expected) and np.allclose(out[1].weights, expected)
     # the joint weights go on with the joint particles; target 2 with its HJS likelihood
     # (all other targets its occluders) alone
     assert np.allclose(np.exp(filt.cloud(0)[1]), expected)
-    (w2,) = [ll for ll in meas.hjs([a, b, c], None, [0, 1, 2]).loglik[2:]]
+    assert sorted(m for m, _ in meas.hjs_calls) == [[0, 1, 2], [0, 2], [1, 2]]
+    (w2,) = [out[2] for m, out in meas.hjs_calls if m == [0, 1, 2]]
     w2 = np.exp(w2 - w2.max())
     assert np.allclose(np.exp(filt.cloud(2)[1]), w2 / w2.sum())
+
+
+def test_partitioned_sampling_resamples_the_rows_by_the_first_members_likelihood():
+    """The first partition: the rows kept are drawn by a's likelihood, so with a sharp
+    likelihood for a and none for b the group's a-components sit where a is measured,
+    b's components keep their prior spread, and the group's final weights (b's partition:
+    here the exclusion prior alone) do not carry a's likelihood again: most rows keep
+    their weight, where weighting the joint rows by a's likelihood would leave few."""
+    rng = np.random.default_rng(8)
+    cfg = FilterConfig(particles=200, motion=ZERO_NOISE, init_position_spread=0.15,
+                       init_velocity_spread=0.0)
+    filt = GroupedHJSFilter(cfg)
+    truth = [np.array([0.1, 0.0]), np.array([0.6, 0.0])]
+    for k, t in enumerate(truth):
+        filt.add(k, k, np.r_[t, 0, 0, 0, 0], rng)
+
+    class _Sharp(_CoupledMeasurement):
+        def _g(self, p, k):          # a measured to 2 cm at x = 0.1, b not at all
+            return -((p[:, :2] - self.truth[0]) ** 2).sum(1) / (2 * 0.02 ** 2) if k == 0 \
+                else np.zeros(len(p))
+
+        def joint(self, joint_particles, models):
+            return np.zeros(joint_particles.shape[0])
+
+    out = filt.step(0.1, _Sharp(truth), {}, rng)
+    assert filt.groups() == [(0, 1)]
+    assert np.abs(out[0].particles[:, :2] - truth[0]).max() < 0.1
+    assert out[1].particles[:, 0].std() > 0.05
+    assert effective_sample_size(out[0].weights) > 0.5 * 400
 
 
 def test_a_group_keeps_its_joint_particles_and_dissolves_when_apart():

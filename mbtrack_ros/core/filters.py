@@ -438,32 +438,37 @@ class GroupedHJSFilter(HJSFilter):
     exclusion radius r of each other (:func:`~mbtrack_ros.core.groups.interaction_groups`,
     at most :attr:`MAX_GROUP` targets): on them the product of marginals is not exact for
     000 Eq. 16. The targets of a group share their particle rows: row i of every member is
-    one joint particle (N joint particles per group, not N^G), resampled with one set of
-    indices from one weight vector, each component moved by the 1-body dynamics (000
-    Eq. 15). A group newly formed pairs rows drawn independently from the members' clouds
-    in random order (a sample of the product of marginals); members that already shared
-    rows keep them. N is 2 x the particles per target for a group of two (the members
-    keep as many particle states as two HJS targets). The group's joint weight
-    (:meth:`_group_loglik`) is the exclusion prior of 000 Eq. 16 within the group, as in
-    the joint filter (:class:`JointFilter`), times each member's HJS likelihood with the
-    targets outside the group as occluders, times what the depth-buffered joint
-    likelihood of the joint filter (000 Eq. 19-21, 26) adds for the members' occlusion of
-    each other in that joint particle. The joint particles go on to the next step with
-    that weight, so the exclusion is carried in them as in the joint filter (a hidden pair
-    keeps its order). All other targets are updated as by
-    :class:`HJSFilter` (their occlusion maps, 000 Eq. 34, include the members' clouds);
-    groups form and dissolve at every step, and members of a dissolved group go on with
-    the marginals of their joint particles. Without ``config.use_mrf`` there is no
-    coupling, no group, and the filter is :class:`HJSFilter` without the MRF.
+    one joint particle (N = G x the particles per target for a group of G, not N^G),
+    resampled with one set of indices from one weight vector, each component moved by the
+    1-body dynamics (000 Eq. 15). A group newly formed pairs rows drawn independently from
+    the members' clouds in random order (a sample of the product of marginals); members
+    that already shared rows keep them.
+
+    A group is weighted by partitioned sampling (MacCormick & Blake 1999,
+    :meth:`_partitioned`), so that the joint particles need not be as many as the product
+    of the members' clouds: the first member's rows are weighted by its HJS likelihood
+    with the targets outside the group as occluders (000 Eq. 22-40) and resampled, then
+    the second member's components of the chosen rows are moved and weighted by its own
+    HJS likelihood, the members' occlusion of each other in the depth-buffered joint
+    likelihood of the joint filter (000 Eq. 19-21, 26; ``J(a, b) - J(a) - J(b)``, the
+    targets outside the group at their predicted means) and the exclusion prior of 000
+    Eq. 16 (:class:`JointFilter`). The joint particles go on to the next step with that
+    weight: the exclusion is carried in them as in the joint filter, and a hidden pair
+    keeps its order. All other targets are updated as by :class:`HJSFilter` (their
+    occlusion maps, 000 Eq. 34, include the members' clouds); groups form and dissolve
+    at every step, and members of a dissolved group go on with the marginals of their
+    joint particles. Without ``config.use_mrf`` there is no coupling, no group, and the
+    filter is :class:`HJSFilter` without the MRF.
     """
 
     name = 'hjs-groups'
-    #: largest group: a group of G costs G + 1 joint and G HJS evaluations of its rows
+    #: largest group: a group of G costs G HJS and G + 1 joint evaluations of its rows
     MAX_GROUP = 2
 
     def __init__(self, config: FilterConfig | None = None, **kwargs: Any) -> None:
         super().__init__(config, **kwargs)
         self._groups: list[tuple[int, ...]] = []
+        self._unmoved: dict[int, np.ndarray] = {}   # this step's resampled rows, unmoved
 
     def groups(self) -> list[tuple[int, ...]]:
         """The track ids of each group of the last step (members share particle rows)."""
@@ -489,7 +494,8 @@ class GroupedHJSFilter(HJSFilter):
 
     def _propagate_groups(self, ids: list[int], groups: list[list[int]],
                           dt: float) -> list[np.ndarray]:
-        """Resample (shared indices for rows shared before and after) and predict."""
+        """Resample (shared indices for rows shared before and after) and predict; keeps
+        the resampled rows before the motion in ``_unmoved`` for :meth:`_partitioned`."""
         n = int(self.config.particles)
         new = {ids[k]: g for g, members in enumerate(groups) for k in members}
         rows = {ids[k]: n * len(members) for members in groups for k in members}
@@ -511,7 +517,51 @@ class GroupedHJSFilter(HJSFilter):
         move_particles(moved, dt, self.config.motion, concatenate_noise(noise),
                        floor=self.floor, exits=self.exits)
         ends = np.cumsum([c.shape[0] for c in chosen])
+        self._unmoved = dict(zip(ids, chosen))
         return [moved[e - c.shape[0]:e] for c, e in zip(chosen, ends)]
+
+    def _member_loglik(self, k: int, members: list[int], particles: list[np.ndarray],
+                       models: list[Any], measurement: MeasurementModel) -> np.ndarray:
+        """(N,) HJS log-likelihood (000 Eq. 22-40) of member k's rows with the targets
+        outside its group as occluders."""
+        keep = [j for j in range(len(particles)) if j == k or j not in members]
+        result = measurement.hjs([particles[j] for j in keep],
+                                 [np.full(particles[j].shape[0], 1.0) for j in keep],
+                                 [models[j] for j in keep])
+        return np.asarray(result.loglik[keep.index(k)], dtype=np.float64)
+
+    def _partitioned(self, ids: list[int], members: list[int], particles: list[np.ndarray],
+                     models: list[Any], measurement: MeasurementModel,
+                     dt: float) -> np.ndarray:
+        """Partitioned sampling of a group (MacCormick & Blake 1999, "A probabilistic
+        exclusion principle for tracking multiple objects"): the first member's rows,
+        moved, are weighted by its own likelihood and resampled (the rows stay joint); the
+        next member's components of the chosen rows, resampled at the start of the step
+        and not moved yet, are then moved by its dynamics and weighted by its likelihood;
+        the last weight also carries the members' occlusion of each other in the joint
+        likelihood and the exclusion prior. Replaces the members' rows in ``particles``
+        (K arrays (N_k, 6)); returns the group's final (N,) log-weights."""
+        first, rest = members[0], members[1:]
+        m = particles[first].shape[0]
+        stream = self._streams[ids[first]]
+        ll = self._member_loglik(first, members, particles, models, measurement)
+        for j, k in enumerate(rest):
+            idx = systematic_resample(np.exp(ll - ll.max()), m, stream)
+            for done in members[:j + 1]:
+                particles[done] = particles[done][idx]
+            base = self._unmoved[ids[k]][idx].copy()
+            own = self._streams[ids[k]]
+            move_particles(base, dt, self.config.motion,
+                           draw_motion_noise(m, dt, self.config.motion, own),
+                           floor=self.floor, exits=self.exits)
+            particles[k] = base
+            ll = self._member_loglik(k, members, particles, models, measurement)
+        total = ll + self._joint_terms(members, members, particles, models, measurement)
+        for k in members:
+            total -= self._joint_terms([k], members, particles, models, measurement)
+        joint = np.stack([particles[k] for k in members], axis=1)
+        return total + exclusion_log_prior(joint, self.config.mrf_radius,
+                                           self.config.mrf_epsilon)
 
     def _joint_terms(self, members: list[int], group: list[int], particles: list[np.ndarray],
                      models: list[Any], measurement: MeasurementModel) -> np.ndarray:
@@ -531,32 +581,6 @@ class GroupedHJSFilter(HJSFilter):
                 [joint, np.broadcast_to(fixed, (joint.shape[0],) + fixed.shape)], axis=1)
         return np.asarray(measurement.joint(full, [models[k] for k in members + others]),
                           dtype=np.float64)
-
-    def _group_loglik(self, members: list[int], particles: list[np.ndarray],
-                      models: list[Any], measurement: MeasurementModel) -> np.ndarray:
-        """(N,) log of the group's joint prior x likelihood per joint particle.
-
-        Likelihood: each member's HJS likelihood (000 Eq. 22-40) with the targets outside
-        the group as its occluders, plus the interaction of the members in the
-        depth-buffered joint likelihood J (000 Eq. 20-21, 26; :meth:`_joint_terms`),
-        J(members) - sum_k J(k) (for two, J(a, b) - J(a) - J(b)), which is constant where
-        the members do not overlap in any image. Prior: the exclusion
-        potential of 000 Eq. 16 on the joint particle.
-        """
-        total = np.zeros(particles[members[0]].shape[0])
-        for k in members:
-            keep = [j for j in range(len(particles)) if j == k or j not in members]
-            result = measurement.hjs([particles[j] for j in keep],
-                                     [np.full(particles[j].shape[0], 1.0) for j in keep],
-                                     [models[j] for j in keep])
-            total += np.asarray(result.loglik[keep.index(k)], dtype=np.float64)
-        # what J does not add up over the members: their occlusion of each other
-        total += self._joint_terms(members, members, particles, models, measurement)
-        for k in members:
-            total -= self._joint_terms([k], members, particles, models, measurement)
-        joint = np.stack([particles[k] for k in members], axis=1)
-        return total + exclusion_log_prior(joint, self.config.mrf_radius,
-                                           self.config.mrf_epsilon)
 
     def step(self, dt: float, measurement: MeasurementModel, images: dict[str, np.ndarray],
              rng: np.random.Generator) -> dict[int, TrackUpdate]:
@@ -582,7 +606,7 @@ class GroupedHJSFilter(HJSFilter):
             log_prior = [np.log(p) for p in prior]
         grouped = set()
         for members in groups:
-            lw = self._group_loglik(members, particles, models, measurement)
+            lw = self._partitioned(ids, members, particles, models, measurement, dt)
             for k in members:
                 loglik[k], log_prior[k] = lw, np.zeros(n[k])
                 grouped.add(k)
