@@ -639,6 +639,24 @@ def test_partitioned_sampling_resamples_the_rows_by_the_first_members_likelihood
     assert effective_sample_size(out[0].weights) > 0.5 * 400
 
 
+def test_a_group_member_nothing_scores_is_resampled_flat():
+    """A member whose likelihood is -inf or NaN everywhere (no camera sees it) does not
+    stop the step: its partition resamples the rows uniformly."""
+    rng = np.random.default_rng(9)
+    filt = GroupedHJSFilter(FilterConfig(particles=10, init_position_spread=0.1))
+    truth = [np.zeros(2), np.array([0.3, 0.0])]
+    for k, t in enumerate(truth):
+        filt.add(k, k, np.r_[t, 0, 0, 0, 0], rng)
+
+    class _Blind(_CoupledMeasurement):
+        def _g(self, p, k):
+            return np.full(len(p), -np.inf) if k == 0 else np.full(len(p), np.nan)
+
+    out = filt.step(0.1, _Blind(truth), {}, rng)
+    assert filt.groups() == [(0, 1)]
+    assert np.allclose(out[0].weights, 1 / 20) and np.isfinite(out[1].mean).all()
+
+
 def test_a_group_keeps_its_joint_particles_and_dissolves_when_apart():
     """Rows shared in one step stay paired in the next (joint resampling, not two
     independent ones); targets that move farther apart than r leave the group."""

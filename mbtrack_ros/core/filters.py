@@ -482,6 +482,7 @@ class GroupedHJSFilter(HJSFilter):
     def reset(self) -> None:
         super().reset()
         self._groups = []
+        self._unmoved = {}
 
     def _find_groups(self, ids: list[int]) -> list[list[int]]:
         """Positions in ``ids`` of the groups of this step, from the clouds it starts from."""
@@ -546,7 +547,8 @@ class GroupedHJSFilter(HJSFilter):
         stream = self._streams[ids[first]]
         ll = self._member_loglik(first, members, particles, models, measurement)
         for j, k in enumerate(rest):
-            idx = systematic_resample(np.exp(ll - ll.max()), m, stream)
+            lw, _ = normalize_log_weights(ll)          # NaN and all -inf: flat
+            idx = systematic_resample(np.exp(lw), m, stream)
             for done in members[:j + 1]:
                 particles[done] = particles[done][idx]
             base = self._unmoved[ids[k]][idx].copy()
