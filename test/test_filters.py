@@ -8,8 +8,8 @@ import pytest
 
 from mbtrack_ros.core.dynamics import DynamicsError, MotionConfig, _move, predict
 from mbtrack_ros.core.filters import (
-    FilterConfig, FilterError, HJSFilter, JointFilter, SeparableFilter, TrackingFilter,
-    summarize_particles)
+    FilterConfig, FilterError, GroupedHJSFilter, HJSFilter, JointFilter, SeparableFilter,
+    TrackingFilter, summarize_particles)
 from mbtrack_ros.core.resampling import (
     ResamplingError, effective_sample_size, normalize_log_weights, normalized_weights,
     systematic_resample)
@@ -523,6 +523,166 @@ def test_joint_filter_keeps_a_hidden_pair_in_order_and_apart():
                       use_mrf=False)
     assert (on > 0.4).all() and 0.7 < on.mean() < 1.2, on.mean()
     assert (off < 0.4).mean() > 0.2
+
+
+def test_grouped_filter_keeps_a_hidden_pair_in_order_and_apart():
+    """GroupedHJSFilter with 100 particles per person on the hidden pair above: the two
+    clouds within r form a group whose joint particles carry the exclusion, and the pair
+    keeps its order as in the joint filter; HJS (a product of marginals) loses it."""
+    grouped = _depth_gaps(GroupedHJSFilter, _ShadowMeasurement, 4, 45, particles=100)
+    hjs = _depth_gaps(HJSFilter, _ShadowMeasurement, 4, 45, particles=100)
+    assert (grouped > 0.5).all() and 0.7 < grouped.mean() < 1.3, (grouped.min(), grouped.mean())
+    assert (hjs < 0.3).mean() > 0.2
+
+
+class _CoupledMeasurement(GaussianMeasurement):
+    """Stand-in whose models are the targets' indices. The HJS log-likelihood of target k
+    depends on which other targets the call holds (as occluders: a term per other target's
+    mean); the joint log-likelihood is not a sum over targets (a cross term between
+    targets 0 and 1). Records the joint samples it scored."""
+
+    def __init__(self, truth):
+        super().__init__(truth)
+        self.scored = []
+        self.hjs_calls = []
+
+    def _g(self, p, k):
+        return -((p[:, :2] - self.truth[k]) ** 2).sum(axis=1) / (2 * self.sigma ** 2)
+
+    def hjs(self, particles, weights, models):
+        out = []
+        self.hjs_calls.append((list(models), out))
+        for p, k in zip(particles, models):
+            ll = self._g(p, k)
+            for q, j in zip(particles, models):
+                if j != k:
+                    ll = ll - 1.0 / (1.0 + ((p[:, :2] - q[:, :2].mean(axis=0)) ** 2).sum(1))
+            out.append(ll)
+        return _Result(out, np.full((len(particles), 1), 0.5))
+
+    def joint(self, joint_particles, models):
+        self.scored.append((np.array(joint_particles), list(models)))
+        col = {k: c for c, k in enumerate(models)}
+        ll = sum(self._g(joint_particles[:, c], k) for c, k in enumerate(models))
+        if 0 in col and 1 in col:
+            ll = ll + 3.0 * joint_particles[:, col[0], 0] * joint_particles[:, col[1], 1]
+        return ll
+
+
+def test_group_weights_by_hand():
+    """Brute force on a tiny case: targets 0 and 1 within r form a group of 2 x 3 joint
+    particles (a, b); target 2, far away, stays an HJS target. Partitioned sampling: the
+    rows are resampled by a's HJS likelihood (target 2 alone its occluder), then weighted,
+    enumerated by hand, by b's HJS likelihood (target 2 alone its occluder) plus the part
+    of the joint likelihood J (target 2 at its predicted mean) that does not add up over
+    the members, J(a, b) - J(a) - J(b), times the exclusion potential (000 Eq. 16, floor
+    epsilon)."""
+    rng = np.random.default_rng(4)
+    cfg = FilterConfig(particles=3, motion=ZERO_NOISE, init_position_spread=0.1,
+                       init_velocity_spread=0.0, mrf_radius=0.4, mrf_epsilon=1e-3)
+    filt = GroupedHJSFilter(cfg)
+    truth = [np.zeros(2), np.array([0.35, 0.0]), np.array([3.0, 0.0])]
+    for k, t in enumerate(truth):
+        filt.add(k, k, np.r_[t, 0, 0, 0, 0], rng)
+    meas = _CoupledMeasurement(truth)
+    out = filt.step(0.1, meas, {}, rng)
+    assert filt.groups() == [(0, 1)]
+    a, b, c = (out[t].particles for t in (0, 1, 2))
+    assert a.shape == b.shape == (6, 6) and c.shape == (3, 6)
+    c_mean = c[:, :2].mean(axis=0)
+    for jp, models in meas.scored:           # J is evaluated with target 2 at its mean
+        assert models[-1] == 2 and np.allclose(jp[:, -1, :2], c_mean)
+    expected = np.empty(6)
+    for i in range(6):
+        hjs_b = (-((b[i, :2] - truth[1]) ** 2).sum() / (2 * 0.1 ** 2)
+                 - 1.0 / (1.0 + ((b[i, :2] - c_mean) ** 2).sum()))
+        interaction = 3.0 * a[i, 0] * b[i, 1]       # J(a, b) - J(a) - J(b)
+        prior = 1.0 if np.hypot(*(a[i, :2] - b[i, :2])) > 0.4 else 1e-3
+        expected[i] = np.exp(hjs_b + interaction) * prior
+    expected /= expected.sum()
+    assert np.allclose(out[0].weights, expected) and np.allclose(out[1].weights, expected)
+    # the joint weights go on with the joint particles; target 2 with its HJS likelihood
+    # (all other targets its occluders) alone
+    assert np.allclose(np.exp(filt.cloud(0)[1]), expected)
+    assert sorted(m for m, _ in meas.hjs_calls) == [[0, 1, 2], [0, 2], [1, 2]]
+    (w2,) = [out[2] for m, out in meas.hjs_calls if m == [0, 1, 2]]
+    w2 = np.exp(w2 - w2.max())
+    assert np.allclose(np.exp(filt.cloud(2)[1]), w2 / w2.sum())
+
+
+def test_partitioned_sampling_resamples_the_rows_by_the_first_members_likelihood():
+    """The first partition: the rows kept are drawn by a's likelihood, so with a sharp
+    likelihood for a and none for b the group's a-components sit where a is measured,
+    b's components keep their prior spread, and the group's final weights (b's partition:
+    here the exclusion prior alone) do not carry a's likelihood again: most rows keep
+    their weight, where weighting the joint rows by a's likelihood would leave few."""
+    rng = np.random.default_rng(8)
+    cfg = FilterConfig(particles=200, motion=ZERO_NOISE, init_position_spread=0.15,
+                       init_velocity_spread=0.0)
+    filt = GroupedHJSFilter(cfg)
+    truth = [np.array([0.1, 0.0]), np.array([0.6, 0.0])]
+    for k, t in enumerate(truth):
+        filt.add(k, k, np.r_[t, 0, 0, 0, 0], rng)
+
+    class _Sharp(_CoupledMeasurement):
+        def _g(self, p, k):          # a measured to 2 cm at x = 0.1, b not at all
+            return -((p[:, :2] - self.truth[0]) ** 2).sum(1) / (2 * 0.02 ** 2) if k == 0 \
+                else np.zeros(len(p))
+
+        def joint(self, joint_particles, models):
+            return np.zeros(joint_particles.shape[0])
+
+    out = filt.step(0.1, _Sharp(truth), {}, rng)
+    assert filt.groups() == [(0, 1)]
+    assert np.abs(out[0].particles[:, :2] - truth[0]).max() < 0.1
+    assert out[1].particles[:, 0].std() > 0.05
+    assert effective_sample_size(out[0].weights) > 0.5 * 400
+
+
+def test_a_group_member_nothing_scores_is_resampled_flat():
+    """A member whose likelihood is -inf or NaN everywhere (no camera sees it) does not
+    stop the step: its partition resamples the rows uniformly."""
+    rng = np.random.default_rng(9)
+    filt = GroupedHJSFilter(FilterConfig(particles=10, init_position_spread=0.1))
+    truth = [np.zeros(2), np.array([0.3, 0.0])]
+    for k, t in enumerate(truth):
+        filt.add(k, k, np.r_[t, 0, 0, 0, 0], rng)
+
+    class _Blind(_CoupledMeasurement):
+        def _g(self, p, k):
+            return np.full(len(p), -np.inf) if k == 0 else np.full(len(p), np.nan)
+
+    out = filt.step(0.1, _Blind(truth), {}, rng)
+    assert filt.groups() == [(0, 1)]
+    assert np.allclose(out[0].weights, 1 / 20) and np.isfinite(out[1].mean).all()
+
+
+def test_a_group_keeps_its_joint_particles_and_dissolves_when_apart():
+    """Rows shared in one step stay paired in the next (joint resampling, not two
+    independent ones); targets that move farther apart than r leave the group."""
+    rng = np.random.default_rng(6)
+    cfg = FilterConfig(particles=20, motion=ZERO_NOISE, init_position_spread=0.1,
+                       init_velocity_spread=0.0)
+    filt = GroupedHJSFilter(cfg)
+    truth = [np.zeros(2), np.array([0.3, 0.0])]
+    for k, t in enumerate(truth):
+        filt.add(k + 1, object(), np.r_[t, 0, 0, 0, 0], rng)
+    meas = GaussianMeasurement(truth, sigma=0.3)
+    first = filt.step(0.1, meas, {}, rng)
+    pairs = {tuple(np.r_[p, q]) for p, q in zip(first[1].particles[:, :2],
+                                                first[2].particles[:, :2])}
+    second = filt.step(0.1, meas, {}, rng)
+    assert filt.groups() == [(1, 2)]
+    for p, q in zip(second[1].particles[:, :2], second[2].particles[:, :2]):
+        assert tuple(np.r_[p, q]) in pairs
+    filt.remove(2)
+    assert filt.groups() == []
+    filt.add(3, object(), np.array([4.0, 0, 0, 0, 0, 0]), rng)
+    meas.truth = [np.zeros(2), np.array([4.0, 0.0])]
+    filt.step(0.1, meas, {}, rng)
+    filt.step(0.1, meas, {}, rng)
+    assert filt.groups() == []
+    assert all(filt.cloud(t)[0].shape == (20, 6) for t in (1, 3))
 
 
 def test_joint_filter_pushes_people_apart_where_depth_is_uncertain():

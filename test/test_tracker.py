@@ -59,7 +59,7 @@ def make(algorithm='hjs', truth=((1.0, 1.0), (3.0, 3.0)), **kw):
     return Tracker(room(), cfg, measurement=StandIn([np.array(t) for t in truth]))
 
 
-@pytest.mark.parametrize('algorithm', ['hjs', 'separable', 'joint'])
+@pytest.mark.parametrize('algorithm', ['hjs', 'hjs-groups', 'separable', 'joint'])
 def test_ids_increase_and_are_never_reused(algorithm):
     tr = make(algorithm)
     a = tr.add_track(Model(), [1, 1, 0, 0, 0, 0], 0)
@@ -172,7 +172,7 @@ def test_config_validation(kw, msg):
 def test_unknown_algorithm_and_from_dict():
     with pytest.raises(TrackerError, match='unknown algorithm'):
         Tracker(room(), TrackerConfig(algorithm='nope'), measurement=StandIn([np.zeros(2)]))
-    assert {'hjs', 'separable', 'joint'} <= set(available_filters())
+    assert {'hjs', 'hjs-groups', 'separable', 'joint'} <= set(available_filters())
     cfg = TrackerConfig.from_dict({'particles': 30, 'motion': {'velocity_noise': 0.3}})
     assert cfg.particles == 30 and cfg.motion == MotionConfig(velocity_noise=0.3)
     with pytest.raises(TrackerError, match='unknown key'):

@@ -81,7 +81,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                              'from a tracker_node parameter file (config/*.yaml); the '
                              'options below override it')
     parser.add_argument('--algorithm', default=None,
-                        help='hjs (default), separable, joint, or a registered baseline')
+                        help='hjs (default), hjs-groups, separable, joint, or a registered '
+                        'baseline')
     parser.add_argument('--particles', type=int, default=None, metavar='N',
                         help='particles per person (default 100, at most 100000)')
     parser.add_argument('--joint-particles', type=int, default=None, metavar='N',

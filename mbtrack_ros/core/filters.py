@@ -48,11 +48,12 @@ import numpy as np
 
 from mbtrack_ros.core.dynamics import (
     MotionConfig, concatenate_noise, draw_motion_noise, move_particles, predict)
+from mbtrack_ros.core.groups import interaction_groups
 from mbtrack_ros.core.mrf import belief_propagation
 from mbtrack_ros.core.resampling import (
     ResamplingError, normalize_log_weight_rows, normalize_log_weights, systematic_indices,
     systematic_resample)
-from mbtrack_ros.core.state import STATE_DIM, THETA, VX, VY, X, Y
+from mbtrack_ros.core.state import SIT, STATE_DIM, THETA, VX, VY, X, Y
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
     from mbtrack_ros.core.appearance import PersonModel
@@ -61,9 +62,10 @@ if TYPE_CHECKING:  # pragma: no cover - typing only
     from mbtrack_ros.core.tracker import TrackerConfig
 
 __all__ = [
-    'PLUGIN_MODULES', 'FilterConfig', 'FilterError', 'HJSFilter', 'JointFilter',
+    'PLUGIN_MODULES', 'FilterConfig', 'FilterError', 'GroupedHJSFilter', 'HJSFilter',
+    'JointFilter',
     'SeparableFilter', 'TrackUpdate', 'TrackingFilter', 'available_filters', 'make_filter',
-    'register_filter', 'summarize_particles',
+    'exclusion_log_prior', 'register_filter', 'summarize_particles',
 ]
 
 
@@ -192,6 +194,28 @@ def _visible_rows(result: Any, count: int, names: list[str]) -> list[dict[str, f
         return [{} for _ in range(count)]
     rows = vf[:count].tolist()
     return [dict(zip(names, rows[k])) if k < len(rows) else {} for k in range(count)]
+
+
+def exclusion_log_prior(joint: np.ndarray, radius: float, epsilon: float) -> np.ndarray:
+    """Log of the joint spatial-exclusion prior of joint samples (000 Eq. 16).
+
+    Args:
+        joint: (N, K, 6) joint samples of K targets.
+        radius: exclusion radius r, metres.
+        epsilon: floor of the potential (as :func:`~mbtrack_ros.core.mrf.exclusion_potential`).
+
+    Returns:
+        (N,) ``sum_{h<k} log max(delta(|x^h - x^k| > r), epsilon)`` over the target pairs.
+    """
+    n, k_count = joint.shape[:2]
+    out = np.zeros(n)
+    r2 = radius ** 2
+    log_eps = np.log(epsilon)
+    for h in range(k_count):
+        for k in range(h + 1, k_count):
+            d2 = ((joint[:, h, X:Y + 1] - joint[:, k, X:Y + 1]) ** 2).sum(axis=1)
+            out += np.where(d2 > r2, 0.0, log_eps)
+    return out
 
 
 class _MarginalParticleFilter:
@@ -407,6 +431,203 @@ class HJSFilter(_MarginalParticleFilter):
         return updates
 
 
+class GroupedHJSFilter(HJSFilter):
+    """HJS with joint sampling of the targets the exclusion prior couples (000 §III, §II-A).
+
+    Each step starts by finding the groups of targets whose particle clouds come within the
+    exclusion radius r of each other (:func:`~mbtrack_ros.core.groups.interaction_groups`,
+    at most :attr:`MAX_GROUP` targets): on them the product of marginals is not exact for
+    000 Eq. 16. The targets of a group share their particle rows: row i of every member is
+    one joint particle (N = G x the particles per target for a group of G, not N^G),
+    resampled with one set of indices from one weight vector, each component moved by the
+    1-body dynamics (000 Eq. 15). A group newly formed pairs rows drawn independently from
+    the members' clouds in random order (a sample of the product of marginals); members
+    that already shared rows keep them.
+
+    A group is weighted by partitioned sampling (MacCormick & Blake 1999,
+    :meth:`_partitioned`), so that the joint particles need not be as many as the product
+    of the members' clouds: the first member's rows are weighted by its HJS likelihood
+    with the targets outside the group as occluders (000 Eq. 22-40) and resampled, then
+    the second member's components of the chosen rows are moved and weighted by its own
+    HJS likelihood, the members' occlusion of each other in the depth-buffered joint
+    likelihood of the joint filter (000 Eq. 19-21, 26; ``J(a, b) - J(a) - J(b)``, the
+    targets outside the group at their predicted means) and the exclusion prior of 000
+    Eq. 16 (:class:`JointFilter`). The joint particles go on to the next step with that
+    weight: the exclusion is carried in them as in the joint filter, and a hidden pair
+    keeps its order. All other targets are updated as by :class:`HJSFilter` (their
+    occlusion maps, 000 Eq. 34, include the members' clouds); groups form and dissolve
+    at every step, and members of a dissolved group go on with the marginals of their
+    joint particles. Without ``config.use_mrf`` there is no coupling, no group, and the
+    filter is :class:`HJSFilter` without the MRF.
+    """
+
+    name = 'hjs-groups'
+    #: largest group: a group of G costs G HJS and G + 1 joint evaluations of its rows
+    MAX_GROUP = 2
+
+    def __init__(self, config: FilterConfig | None = None, **kwargs: Any) -> None:
+        super().__init__(config, **kwargs)
+        self._groups: list[tuple[int, ...]] = []
+        self._unmoved: dict[int, np.ndarray] = {}   # this step's resampled rows, unmoved
+
+    def groups(self) -> list[tuple[int, ...]]:
+        """The track ids of each group of the last step (members share particle rows)."""
+        return list(self._groups)
+
+    def remove(self, track_id: int) -> None:
+        super().remove(track_id)
+        kept = [tuple(t for t in g if t != track_id) for g in self._groups]
+        self._groups = [g for g in kept if len(g) > 1]
+
+    def reset(self) -> None:
+        super().reset()
+        self._groups = []
+        self._unmoved = {}
+
+    def _find_groups(self, ids: list[int]) -> list[list[int]]:
+        """Positions in ``ids`` of the groups of this step, from the clouds it starts from."""
+        cfg = self.config
+        if not cfg.use_mrf or len(ids) < 2:
+            return []
+        return interaction_groups(
+            [self._particles[t][:, X:Y + 1] for t in ids],
+            [np.exp(self._logw[t]) for t in ids], cfg.mrf_radius, self.MAX_GROUP)
+
+    def _propagate_groups(self, ids: list[int], groups: list[list[int]],
+                          dt: float) -> list[np.ndarray]:
+        """Resample (shared indices for rows shared before and after) and predict; keeps
+        the resampled rows before the motion in ``_unmoved`` for :meth:`_partitioned`."""
+        n = int(self.config.particles)
+        new = {ids[k]: g for g, members in enumerate(groups) for k in members}
+        rows = {ids[k]: n * len(members) for members in groups for k in members}
+        old = {tid: g for g, members in enumerate(self._groups) for tid in members}
+        indices: dict[tuple, np.ndarray] = {}
+        chosen, noise = [], []
+        for tid in ids:
+            stream = self._streams[tid]
+            m = rows.get(tid, n)
+            unit = (('joint', old[tid], new[tid]) if tid in old and tid in new
+                    else ('single', tid))
+            if unit not in indices:
+                indices[unit] = systematic_resample(np.exp(self._logw[tid]), m, stream)
+                if tid in new:     # rows of a group in random order: pairs them at random
+                    indices[unit] = indices[unit][stream.permutation(m)]
+            chosen.append(self._particles[tid][indices[unit]])
+            noise.append(draw_motion_noise(m, dt, self.config.motion, stream))
+        moved = np.concatenate(chosen)
+        move_particles(moved, dt, self.config.motion, concatenate_noise(noise),
+                       floor=self.floor, exits=self.exits)
+        ends = np.cumsum([c.shape[0] for c in chosen])
+        self._unmoved = dict(zip(ids, chosen))
+        return [moved[e - c.shape[0]:e] for c, e in zip(chosen, ends)]
+
+    def _member_loglik(self, k: int, members: list[int], particles: list[np.ndarray],
+                       models: list[Any], measurement: MeasurementModel) -> np.ndarray:
+        """(N,) HJS log-likelihood (000 Eq. 22-40) of member k's rows with the targets
+        outside its group as occluders."""
+        keep = [j for j in range(len(particles)) if j == k or j not in members]
+        result = measurement.hjs([particles[j] for j in keep],
+                                 [np.full(particles[j].shape[0], 1.0) for j in keep],
+                                 [models[j] for j in keep])
+        return np.asarray(result.loglik[keep.index(k)], dtype=np.float64)
+
+    def _partitioned(self, ids: list[int], members: list[int], particles: list[np.ndarray],
+                     models: list[Any], measurement: MeasurementModel,
+                     dt: float) -> np.ndarray:
+        """Partitioned sampling of a group (MacCormick & Blake 1999, "A probabilistic
+        exclusion principle for tracking multiple objects"): the first member's rows,
+        moved, are weighted by its own likelihood and resampled (the rows stay joint); the
+        next member's components of the chosen rows, resampled at the start of the step
+        and not moved yet, are then moved by its dynamics and weighted by its likelihood;
+        the last weight also carries the members' occlusion of each other in the joint
+        likelihood and the exclusion prior. Replaces the members' rows in ``particles``
+        (K arrays (N_k, 6)); returns the group's final (N,) log-weights."""
+        first, rest = members[0], members[1:]
+        m = particles[first].shape[0]
+        stream = self._streams[ids[first]]
+        ll = self._member_loglik(first, members, particles, models, measurement)
+        for j, k in enumerate(rest):
+            lw, _ = normalize_log_weights(ll)          # NaN and all -inf: flat
+            idx = systematic_resample(np.exp(lw), m, stream)
+            for done in members[:j + 1]:
+                particles[done] = particles[done][idx]
+            base = self._unmoved[ids[k]][idx].copy()
+            own = self._streams[ids[k]]
+            move_particles(base, dt, self.config.motion,
+                           draw_motion_noise(m, dt, self.config.motion, own),
+                           floor=self.floor, exits=self.exits)
+            particles[k] = base
+            ll = self._member_loglik(k, members, particles, models, measurement)
+        total = ll + self._joint_terms(members, members, particles, models, measurement)
+        for k in members:
+            total -= self._joint_terms([k], members, particles, models, measurement)
+        joint = np.stack([particles[k] for k in members], axis=1)
+        return total + exclusion_log_prior(joint, self.config.mrf_radius,
+                                           self.config.mrf_epsilon)
+
+    def _joint_terms(self, members: list[int], group: list[int], particles: list[np.ndarray],
+                     models: list[Any], measurement: MeasurementModel) -> np.ndarray:
+        """(N,) depth-buffered joint log-likelihood (000 Eq. 19-21, 26) of the rows of
+        ``members`` (some of ``group``) rendered with every target outside ``group`` at its
+        predicted mean state."""
+        joint = np.stack([particles[k] for k in members], axis=1)
+        others = [k for k in range(len(particles)) if k not in group]
+        full = joint
+        if others:
+            fixed = np.empty((len(others), STATE_DIM))
+            for j, k in enumerate(others):
+                m = particles[k].shape[0]
+                fixed[j], _ = summarize_particles(particles[k], np.full(m, 1.0 / m))
+                fixed[j, SIT] = float(fixed[j, SIT] > 0.5)
+            full = np.concatenate(
+                [joint, np.broadcast_to(fixed, (joint.shape[0],) + fixed.shape)], axis=1)
+        return np.asarray(measurement.joint(full, [models[k] for k in members + others]),
+                          dtype=np.float64)
+
+    def step(self, dt: float, measurement: MeasurementModel, images: dict[str, np.ndarray],
+             rng: np.random.Generator) -> dict[int, TrackUpdate]:
+        self.timings = {}
+        self.stats = {}
+        ids = self.track_ids()
+        if not ids:
+            return {}
+        t0 = time.perf_counter()
+        groups = self._find_groups(ids)
+        particles = self._propagate_groups(ids, groups, dt)
+        t1 = time.perf_counter()
+        n = [p.shape[0] for p in particles]
+        independent = [np.full(m, 1.0 / m) for m in n]
+        prior = independent
+        if self.config.use_mrf:
+            prior = self._exclusion_prior(ids, particles, independent)
+        t2 = time.perf_counter()
+        models = [self._models[t] for t in ids]
+        result = measurement.hjs(particles, independent, models)   # as HJSFilter.step
+        loglik = [np.asarray(ll, dtype=np.float64) for ll in result.loglik]
+        with np.errstate(divide='ignore'):
+            log_prior = [np.log(p) for p in prior]
+        grouped = set()
+        for members in groups:
+            lw = self._partitioned(ids, members, particles, models, measurement, dt)
+            for k in members:
+                loglik[k], log_prior[k] = lw, np.zeros(n[k])
+                grouped.add(k)
+        t3 = time.perf_counter()
+        updates = self._finish(ids, particles, log_prior, loglik, result)
+        if self.config.use_mrf and len(ids) > 1:
+            # separable targets: carried on with the likelihood alone (HJSFilter.step);
+            # group members keep the joint weights _finish stored
+            for k, tid in enumerate(ids):
+                if k not in grouped:
+                    self._logw[tid], _ = normalize_log_weights(loglik[k])
+        self._groups = [tuple(ids[k] for k in members) for members in groups]
+        self.stats['groups'] = float(len(groups))
+        self.stats['grouped_tracks'] = float(len(grouped))
+        self.timings = {'predict': t1 - t0, 'mrf': t2 - t1, 'update': t3 - t2,
+                        'posterior': time.perf_counter() - t3}
+        return updates
+
+
 class SeparableFilter(_MarginalParticleFilter):
     """K independent particle filters (000 §II-A): same dynamics, blind likelihood, no MRF."""
 
@@ -503,13 +724,8 @@ class JointFilter:
         joint = flat.reshape(n, k_count, STATE_DIM)
         log_prior = np.zeros(n)
         if self.config.use_mrf and k_count > 1:
-            r2 = self.config.mrf_radius ** 2
-            log_eps = np.log(self.config.mrf_epsilon)
-            for h in range(k_count):
-                for k in range(h + 1, k_count):
-                    d2 = ((joint[:, h, X:Y + 1] - joint[:, k, X:Y + 1]) ** 2).sum(axis=1)
-                    # 000 Eq. 16: joint exclusion prior, same soft-floored potential as BP
-                    log_prior += np.where(d2 > r2, 0.0, log_eps)
+            log_prior = exclusion_log_prior(joint, self.config.mrf_radius,
+                                            self.config.mrf_epsilon)
         t1 = time.perf_counter()
         ll = np.asarray(measurement.joint(joint, list(self._models)), dtype=np.float64)
         if ll.shape != (n,):
@@ -577,3 +793,4 @@ def _particle_factory(cls: type) -> FilterFactory:
 register_filter('hjs', _particle_factory(HJSFilter))
 register_filter('separable', _particle_factory(SeparableFilter))
 register_filter('joint', _particle_factory(JointFilter))
+register_filter('hjs-groups', _particle_factory(GroupedHJSFilter))

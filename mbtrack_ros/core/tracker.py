@@ -44,7 +44,8 @@ class TrackerConfig:
     """Everything that parameterises a tracking run (validated on construction).
 
     Attributes:
-        algorithm: 'hjs', 'separable', 'joint' (or a registered baseline: 'pdaf', ...).
+        algorithm: 'hjs', 'hjs-groups', 'separable', 'joint' (or a registered baseline:
+            'pdaf', ...).
         particles: particles per target (HJS, separable; 000 §VI: 100).
         joint_particles: joint particles of the joint filter (000 §VI-B: 10^4).
         sigma: likelihood width sigma (000 Eq. 19).

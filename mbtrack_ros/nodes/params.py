@@ -65,7 +65,7 @@ outputs.detections              bool       ~/detections vision_msgs/Detection3DA
                                            (true; needs vision_msgs)
 outputs.tf                      bool       person_<id> frames on /tf (true; needs
                                            tf2_msgs)
-tracker.algorithm               string     hjs | separable | joint | registered baseline
+tracker.algorithm               string     hjs | hjs-groups | separable | joint | registered baseline
 tracker.particles               int        particles per target (100)
 tracker.subsample               int        likelihood on every k-th image row, 1-8 (1; a
                                            speed option that costs accuracy)
@@ -256,7 +256,8 @@ GLOBAL_PARAMETERS: dict[str, tuple[Any, str, dict[str, Any]]] = {
                            'vision_msgs)', {}),
     'outputs.tf': (True, 'a person_<id> frame per track on /tf under the output frame '
                    '(needs tf2_msgs)', {}),
-    'tracker.algorithm': ('hjs', 'hjs | separable | joint | a registered baseline', {}),
+    'tracker.algorithm': ('hjs', 'hjs | hjs-groups | separable | joint | a registered baseline',
+                          {}),
     'tracker.particles': (100, 'particles per target (000 §VI)', _ir(1, MAX_PARTICLES)),
     'tracker.subsample': (1, 'likelihood on every k-th image row (speed option)', _ir(1, 8)),
     'tracker.pipeline_search': (False, 'search frame t for new people on a worker thread '
