@@ -93,3 +93,22 @@ def playing(recording: Path, nodes: list, context, *, rate: float, threads: int,
         spinner.join(timeout=5)
         for node in nodes:
             node.destroy_node()
+
+
+def write_bag(path: Path, messages, compressed_chunks: bool = False) -> Path:
+    """A rosbag2 MCAP bag at ``path`` of ``messages`` [(topic, msg, log time ns)], written in
+    that order (zstd-compressed chunks with ``compressed_chunks``)."""
+    from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
+
+    from mbtrack_ros.recording.bag import typestore
+    writer = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)
+    if compressed_chunks:
+        writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
+    conns = {}
+    with writer:
+        for topic, msg, t in messages:
+            if topic not in conns:
+                conns[topic] = writer.add_connection(topic, msg.__msgtype__,
+                                                     typestore=typestore)
+            writer.write(conns[topic], t, typestore.serialize_cdr(msg, msg.__msgtype__))
+    return path

@@ -12,9 +12,8 @@ import cv2
 import numpy as np
 import pytest
 from rosbags.highlevel import AnyReader
-from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
 
-from conftest import make_room
+from conftest import make_room, write_bag
 from mbtrack_ros.core.camera import area_shrink, block_shrink
 from mbtrack_ros.recording.bag import RecordingReader, typestore
 from mbtrack_ros.recording.cdr_images import COMPRESSED, IMAGE, CdrError, image_view
@@ -43,19 +42,7 @@ def _compressed(rng, kind: str, w: int, h: int, stamp_ns: int):
                          data=np.frombuffer(data, dtype=np.uint8))
 
 
-def _bag(path, messages, compressed_chunks: bool = False):
-    """A rosbag2 MCAP bag of ``messages`` [(topic, msg, log time ns)], in that order."""
-    writer = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)
-    if compressed_chunks:
-        writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
-    conns = {}
-    with writer:
-        for topic, msg, t in messages:
-            if topic not in conns:
-                conns[topic] = writer.add_connection(topic, msg.__msgtype__,
-                                                     typestore=typestore)
-            writer.write(conns[topic], t, typestore.serialize_cdr(msg, msg.__msgtype__))
-    return path
+_bag = write_bag
 
 
 def _rosbags_messages(path, topics):

@@ -9,8 +9,8 @@ import pytest
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer as McapWriter
 from rosbags.highlevel import AnyReader
-from rosbags.rosbag2 import StoragePlugin, Writer
 
+from conftest import write_bag
 import mbtrack_ros.recording.bag as bag_module
 from mbtrack_ros.recording.bag import BagError, RecordingReader, typestore
 from mbtrack_ros.recording.mcap_views import McapViewError, McapViews
@@ -51,15 +51,7 @@ def _recording(path, rng, frames: int = 7):
         if k:
             messages.append(('/cam2/image_raw', _image(rng, 32, 24, t - 66_666_660),
                              t - 66_666_660))
-    writer = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)
-    conns = {}
-    with writer:
-        for topic, msg, t in messages:
-            if topic not in conns:
-                conns[topic] = writer.add_connection(topic, msg.__msgtype__,
-                                                     typestore=typestore)
-            writer.write(conns[topic], t, typestore.serialize_cdr(msg, msg.__msgtype__))
-    return path
+    return write_bag(path, messages)
 
 
 def _rewrite(bag, compression: CompressionType, chunk_size: int):

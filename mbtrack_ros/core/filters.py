@@ -381,6 +381,19 @@ class HJSFilter(_MarginalParticleFilter):
         self.stats['bp_kl'] = float(bp.kl)
         return bp.weights
 
+    def _predict(self, ids: list[int], dt: float) -> list[np.ndarray]:
+        """Resampled and moved particles of each target (000 Eq. 15); a hook for
+        :class:`GroupedHJSFilter`."""
+        return self._propagate(ids, dt)
+
+    def _joint_weights(self, ids: list[int], particles: list[np.ndarray], models: list,
+                       measurement: MeasurementModel, dt: float, loglik: list[np.ndarray],
+                       log_prior: list[np.ndarray]) -> set[int]:
+        """Replace, in place, the log-likelihood and log-prior of the targets weighed
+        jointly; their positions in ``ids`` (none here: a hook for
+        :class:`GroupedHJSFilter`)."""
+        return set()
+
     def step(self, dt: float, measurement: MeasurementModel, images: dict[str, np.ndarray],
              rng: np.random.Generator) -> dict[int, TrackUpdate]:
         self.timings = {}
@@ -389,7 +402,7 @@ class HJSFilter(_MarginalParticleFilter):
         if not ids:
             return {}
         t0 = time.perf_counter()
-        particles = self._propagate(ids, dt)
+        particles = self._predict(ids, dt)
         t1 = time.perf_counter()
         n = [p.shape[0] for p in particles]
         independent = [np.full(m, 1.0 / m) for m in n]
@@ -407,10 +420,13 @@ class HJSFilter(_MarginalParticleFilter):
         # propagated one; the occluders are weighed by it, and the exclusion acts once, in
         # the estimate below.
         result = measurement.hjs(particles, independent, models)
-        t3 = time.perf_counter()
+        loglik = [np.asarray(ll, dtype=np.float64) for ll in result.loglik]
         with np.errstate(divide='ignore'):
             log_prior = [np.log(p) for p in prior]
-        updates = self._finish(ids, particles, log_prior, result.loglik, result)
+        joint = self._joint_weights(ids, particles, models, measurement, dt, loglik,
+                                    log_prior)
+        t3 = time.perf_counter()
+        updates = self._finish(ids, particles, log_prior, loglik, result)
         if self.config.use_mrf and len(ids) > 1:
             # The exclusion is a constraint on the joint state at every time step (000
             # Eq. 13); a hard one is idempotent, delta^T = delta, so the exact joint filter
@@ -422,10 +438,11 @@ class HJSFilter(_MarginalParticleFilter):
             # tracks apart frame after frame. The particles are therefore carried on with
             # the weights of the independently propagated prior times the likelihood
             # (prior to BP: uniform), and every step's estimate carries one copy of the
-            # exclusion, the exact marginal of 000 Eq. 16 for two targets.
+            # exclusion, the exact marginal of 000 Eq. 16 for two targets. Targets weighed
+            # jointly keep the joint weights _finish stored.
             for k, tid in enumerate(ids):
-                self._logw[tid], _ = normalize_log_weights(
-                    np.asarray(result.loglik[k], dtype=np.float64))
+                if k not in joint:
+                    self._logw[tid], _ = normalize_log_weights(loglik[k])
         self.timings = {'predict': t1 - t0, 'mrf': t2 - t1, 'update': t3 - t2,
                         'posterior': time.perf_counter() - t3}
         return updates
@@ -468,6 +485,7 @@ class GroupedHJSFilter(HJSFilter):
     def __init__(self, config: FilterConfig | None = None, **kwargs: Any) -> None:
         super().__init__(config, **kwargs)
         self._groups: list[tuple[int, ...]] = []
+        self._step_groups: list[list[int]] = []     # this step's groups, positions in ids
         self._unmoved: dict[int, np.ndarray] = {}   # this step's resampled rows, unmoved
 
     def groups(self) -> list[tuple[int, ...]]:
@@ -584,48 +602,27 @@ class GroupedHJSFilter(HJSFilter):
         return np.asarray(measurement.joint(full, [models[k] for k in members + others]),
                           dtype=np.float64)
 
-    def step(self, dt: float, measurement: MeasurementModel, images: dict[str, np.ndarray],
-             rng: np.random.Generator) -> dict[int, TrackUpdate]:
-        self.timings = {}
-        self.stats = {}
-        ids = self.track_ids()
-        if not ids:
-            return {}
-        t0 = time.perf_counter()
-        groups = self._find_groups(ids)
-        particles = self._propagate_groups(ids, groups, dt)
-        t1 = time.perf_counter()
-        n = [p.shape[0] for p in particles]
-        independent = [np.full(m, 1.0 / m) for m in n]
-        prior = independent
-        if self.config.use_mrf:
-            prior = self._exclusion_prior(ids, particles, independent)
-        t2 = time.perf_counter()
-        models = [self._models[t] for t in ids]
-        result = measurement.hjs(particles, independent, models)   # as HJSFilter.step
-        loglik = [np.asarray(ll, dtype=np.float64) for ll in result.loglik]
-        with np.errstate(divide='ignore'):
-            log_prior = [np.log(p) for p in prior]
-        grouped = set()
-        for members in groups:
+    def _predict(self, ids: list[int], dt: float) -> list[np.ndarray]:
+        """This step's groups (:meth:`_find_groups`), then their shared-row resampling and
+        the motion (:meth:`_propagate_groups`)."""
+        self._step_groups = self._find_groups(ids)
+        return self._propagate_groups(ids, self._step_groups, dt)
+
+    def _joint_weights(self, ids: list[int], particles: list[np.ndarray], models: list,
+                       measurement: MeasurementModel, dt: float, loglik: list[np.ndarray],
+                       log_prior: list[np.ndarray]) -> set[int]:
+        """Each group's members weighed by partitioned sampling (:meth:`_partitioned`):
+        their joint log-weight as the log-likelihood, a flat log-prior."""
+        grouped: set[int] = set()
+        for members in self._step_groups:
             lw = self._partitioned(ids, members, particles, models, measurement, dt)
             for k in members:
-                loglik[k], log_prior[k] = lw, np.zeros(n[k])
+                loglik[k], log_prior[k] = lw, np.zeros(particles[k].shape[0])
                 grouped.add(k)
-        t3 = time.perf_counter()
-        updates = self._finish(ids, particles, log_prior, loglik, result)
-        if self.config.use_mrf and len(ids) > 1:
-            # separable targets: carried on with the likelihood alone (HJSFilter.step);
-            # group members keep the joint weights _finish stored
-            for k, tid in enumerate(ids):
-                if k not in grouped:
-                    self._logw[tid], _ = normalize_log_weights(loglik[k])
-        self._groups = [tuple(ids[k] for k in members) for members in groups]
-        self.stats['groups'] = float(len(groups))
+        self._groups = [tuple(ids[k] for k in members) for members in self._step_groups]
+        self.stats['groups'] = float(len(self._step_groups))
         self.stats['grouped_tracks'] = float(len(grouped))
-        self.timings = {'predict': t1 - t0, 'mrf': t2 - t1, 'update': t3 - t2,
-                        'posterior': time.perf_counter() - t3}
-        return updates
+        return grouped
 
 
 class SeparableFilter(_MarginalParticleFilter):
