@@ -65,7 +65,8 @@ outputs.detections              bool       ~/detections vision_msgs/Detection3DA
                                            (true; needs vision_msgs)
 outputs.tf                      bool       person_<id> frames on /tf (true; needs
                                            tf2_msgs)
-tracker.algorithm               string     hjs | hjs-groups | separable | joint | registered baseline
+tracker.algorithm               string     hjs | hjs-groups | separable | joint | a registered
+                                           baseline
 tracker.particles               int        particles per target (100)
 tracker.subsample               int        likelihood on every k-th image row, 1-8 (1; a
                                            speed option that costs accuracy)
