@@ -53,7 +53,7 @@ from mbtrack_ros.core.mrf import belief_propagation
 from mbtrack_ros.core.resampling import (
     ResamplingError, normalize_log_weight_rows, normalize_log_weights, systematic_indices,
     systematic_resample)
-from mbtrack_ros.core.state import SIT, STATE_DIM, THETA, VX, VY, X, Y
+from mbtrack_ros.core.state import STATE_DIM, THETA, VX, VY, X, Y
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
     from mbtrack_ros.core.appearance import PersonModel
@@ -312,10 +312,17 @@ class _MarginalParticleFilter:
                 stream = self._streams[tid]
                 chosen.append(self._particles[tid][systematic_resample(np.exp(lw), n, stream)])
                 noise.append(draw_motion_noise(n, dt, self.config.motion, stream))
-        moved = np.concatenate(chosen) if len(chosen) > 1 else chosen[0]
+        return self._move(chosen, noise, dt)
+
+    def _move(self, chosen: list[np.ndarray], noise: list, dt: float) -> list[np.ndarray]:
+        """The resampled particles ``chosen`` (K arrays (N_k, 6), left as they are) moved
+        by the 1-body dynamics with their drawn ``noise`` in one pass (000 Eq. 15):
+        views of one (sum N_k, 6) array."""
+        moved = np.concatenate(chosen)
         move_particles(moved, dt, self.config.motion, concatenate_noise(noise),
                        floor=self.floor, exits=self.exits)
-        return [moved[k * n:(k + 1) * n] for k in range(len(ids))]
+        ends = np.cumsum([c.shape[0] for c in chosen])
+        return [moved[e - c.shape[0]:e] for c, e in zip(chosen, ends)]
 
     def _finish(self, ids: list[int], particles: list[np.ndarray],
                 log_prior: list[np.ndarray], loglik: list[np.ndarray],
@@ -532,12 +539,8 @@ class GroupedHJSFilter(HJSFilter):
                     indices[unit] = indices[unit][stream.permutation(m)]
             chosen.append(self._particles[tid][indices[unit]])
             noise.append(draw_motion_noise(m, dt, self.config.motion, stream))
-        moved = np.concatenate(chosen)
-        move_particles(moved, dt, self.config.motion, concatenate_noise(noise),
-                       floor=self.floor, exits=self.exits)
-        ends = np.cumsum([c.shape[0] for c in chosen])
         self._unmoved = dict(zip(ids, chosen))
-        return [moved[e - c.shape[0]:e] for c, e in zip(chosen, ends)]
+        return self._move(chosen, noise, dt)
 
     def _member_loglik(self, k: int, members: list[int], particles: list[np.ndarray],
                        models: list[Any], measurement: MeasurementModel) -> np.ndarray:
@@ -595,8 +598,8 @@ class GroupedHJSFilter(HJSFilter):
             fixed = np.empty((len(others), STATE_DIM))
             for j, k in enumerate(others):
                 m = particles[k].shape[0]
+                # the mean's SIT is p(sitting): rasterised as sitting from 0.5 on
                 fixed[j], _ = summarize_particles(particles[k], np.full(m, 1.0 / m))
-                fixed[j, SIT] = float(fixed[j, SIT] > 0.5)
             full = np.concatenate(
                 [joint, np.broadcast_to(fixed, (joint.shape[0],) + fixed.shape)], axis=1)
         return np.asarray(measurement.joint(full, [models[k] for k in members + others]),

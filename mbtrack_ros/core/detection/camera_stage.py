@@ -207,16 +207,18 @@ class CameraStage:
         """A frame (H, W, 3) uint8 RGB while the model waits for its bootstrap regions
         (:attr:`awaiting_regions`): the working image as :meth:`process` gives it, no
         foreground, the model not updated."""
-        im = self.resize(image)
-        self.last = CameraFrame(self.illumination.normalise({self.full.name: im})[
-            self.full.name])
+        self.last = CameraFrame(self._working(image))
         return self.last
+
+    def _working(self, image: np.ndarray) -> np.ndarray:
+        """``image`` at the working size, its illumination normalised against the model."""
+        im = self.resize(image)
+        return self.illumination.normalise({self.full.name: im})[self.full.name]
 
     def process(self, image: np.ndarray) -> CameraFrame:
         """One frame (H, W, 3) uint8 RGB: the foreground test, then the model update kept
         off the last tracks given (:meth:`BackgroundModel.apply`)."""
-        im = self.resize(image)
-        im = self.illumination.normalise({self.full.name: im})[self.full.name]
+        im = self._working(image)
         was_ready = self.model.ready
         fg = self.model.apply(im, defer=True)
         if fg is None:

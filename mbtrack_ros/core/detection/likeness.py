@@ -58,6 +58,7 @@ class AppearanceRatio:
         self.prior_var = (2.0 * a * s) ** 2
         self._u = np.zeros((2, WINDOW))          # ring buffers: row 0 same, row 1 different
         self._n = np.zeros(2, np.int64)          # samples added per class (ever)
+        self._fit: tuple[float, float, float] | None = None   # parameters(), until add()
 
     def add(self, same: np.ndarray | float = (), different: np.ndarray | float = ()) -> None:
         """Add distances (003 Eq. 4) of models known to show one person (``same``) and of
@@ -71,6 +72,7 @@ class AppearanceRatio:
             slots = (self._n[c] + np.arange(d.size)) % WINDOW
             self._u[c, slots] = d * d
             self._n[c] += d.size
+            self._fit = None
 
     @property
     def counts(self) -> np.ndarray:
@@ -81,7 +83,10 @@ class AppearanceRatio:
         """(mean of u = d^2 for one person, mean for different people, shared standard
         deviation), shrunk towards the prior: ``mean_c = (k m0_c + sum u) / (k + n_c)``,
         ``var = (2 k v0 + sum_c sum (u - mean(u_c))^2) / (2 k + n_same + n_different)``
-        with ``k`` = :data:`PRIOR_SAMPLES`."""
+        with ``k`` = :data:`PRIOR_SAMPLES`; computed once per change of the samples (the
+        association asks for every pair it weighs)."""
+        if self._fit is not None:
+            return self._fit
         k = float(PRIOR_SAMPLES)
         n = self.counts
         means = np.empty(2)
@@ -92,7 +97,8 @@ class AppearanceRatio:
             if n[c]:
                 scatter += float(((u - u.mean()) ** 2).sum())
         var = (2.0 * k * self.prior_var + scatter) / (2.0 * k + n.sum())
-        return float(means[0]), float(means[1]), float(np.sqrt(var))
+        self._fit = (float(means[0]), float(means[1]), float(np.sqrt(var)))
+        return self._fit
 
     def llr(self, unlike: np.ndarray | float) -> np.ndarray | float:
         """``log N(d^2; m_same, s) - log N(d^2; m_diff, s)`` (nats) for distances ``unlike``

@@ -718,5 +718,6 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
             self.likeness.add(same=model_distance(models[tid], fresh),
                               different=[model_distance(models[ids[j]], fresh)
                                          for j in near])
-            _log.debug('appearance calibration after track %d: %s', tid,
-                       self.likeness.describe())
+            if _log.isEnabledFor(logging.DEBUG):
+                _log.debug('appearance calibration after track %d: %s', tid,
+                           self.likeness.describe())
