@@ -153,6 +153,23 @@ def test_bad_inputs_raise_evaluation_error():
         clear_mot([tr(0, 1, float('nan'), 0.0)], truth)
 
 
+def test_coalescence_counts_the_frames_with_two_tracks_on_one_person():
+    from mbtrack_ros.evaluation.clear_mot import coalescence
+
+    truth = walk(1, range(10), 2.0) + walk(2, range(10), 3.0)
+    tracks = [tr(r.frame, r.person_id, r.x, r.y) for r in truth]     # one track each
+    assert coalescence(tracks, truth) == 0.0
+    # frames 6-9: track 2 leaves its person for person 1 (0.1 m from him): coalesced
+    moved = [tr(t.frame, t.track_id, t.x + 0.1, 2.0) if t.track_id == 2 and t.frame >= 6
+             else t for t in tracks]
+    assert coalescence(moved, truth) == pytest.approx(4 / 10)
+    # beyond the threshold of everyone it is on nobody: no coalescence, only a miss
+    away = [tr(t.frame, t.track_id, t.x, 9.0) if t.track_id == 2 and t.frame >= 6 else t
+            for t in tracks]
+    assert coalescence(away, truth) == 0.0
+    assert coalescence(moved, truth, threshold_m=0.05) == 0.0
+
+
 def _reference_clear_mot(tracks, truth, threshold):
     """Brute-force CLEAR MOT (Bernardin & Stiefelhagen 2008) as py-motmetrics defines it:
     a person keeps its last matched track while that track is within the threshold (also

@@ -126,7 +126,7 @@ def _replay(recording: Path, out: Path, alg: str, n: int, seed: int, max_frames:
             *, mrf: bool = True, d_occ: float = 0.15, sigma: float = 0.12,
             params: Path | None = None) -> dict:
     from mbtrack_ros.cli import main
-    from mbtrack_ros.evaluation.clear_mot import clear_mot
+    from mbtrack_ros.evaluation.clear_mot import clear_mot, coalescence
     from mbtrack_ros.evaluation.posterior import posterior_mass
     from mbtrack_ros.recording.csvfiles import read_ground_truth, read_tracks
 
@@ -172,6 +172,7 @@ def _replay(recording: Path, out: Path, alg: str, n: int, seed: int, max_frames:
             'motp_mm': result.motp_mm, 'miss_rate': result.miss_rate,
             'false_positive_rate': result.false_positive_rate,
             'mismatches': result.mismatches, 'mass_0_5': at_05,
+            'coalescence': coalescence(tracks, truth),
             'mass_0_25': at_025, 'curve': curve}
 
 

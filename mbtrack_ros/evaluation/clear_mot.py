@@ -32,7 +32,7 @@ from mbtrack_ros.recording.csvfiles import GroundTruthRow, TrackRow
 
 __all__ = [
     'ClearMotResult', 'PersonFrameMatches', 'PersonStats', 'SequenceTable', 'TrackStats',
-    'clear_mot', 'combine_results', 'evaluate_many',
+    'clear_mot', 'coalescence', 'combine_results', 'evaluate_many',
 ]
 
 _MM_METRICS = ('mota', 'motp', 'num_misses', 'num_false_positives', 'num_switches',
@@ -243,6 +243,37 @@ def _evaluation_frames(gt_frames: np.ndarray, t_stamp: np.ndarray,
     near = np.minimum(np.abs(extra - gt_frames[idx - 1]), np.abs(extra - gt_frames[
         np.minimum(idx, gt_frames.size - 1)]))
     return np.union1d(gt_frames, extra[near >= period / 2])
+
+
+def coalescence(tracks: Sequence[TrackRow], truth: Sequence[GroundTruthRow], *,
+                threshold_m: float = 0.5) -> float:
+    """Share of the ground-truth frames in which two or more tracks are on one person: the
+    coalescence of 000 §VI-C (trackers of people who look alike locking onto one of them).
+
+    A track is on the person nearest to it at that frame, if at most ``threshold_m``
+    (metres) away; frames are the ground-truth stamps, track rows are matched to them by
+    ``stamp_ns``. 0.0 without ground truth."""
+    g_stamp, _, gx, gy = _truth_arrays(truth)
+    t_stamp, _, tx, ty = _track_arrays(tracks)
+    frames = np.unique(g_stamp)
+    if frames.size == 0:
+        return 0.0
+    g_order, t_order = np.argsort(g_stamp, kind='stable'), np.argsort(t_stamp, kind='stable')
+    g_bounds = np.searchsorted(g_stamp[g_order], frames, side='left'), \
+        np.searchsorted(g_stamp[g_order], frames, side='right')
+    t_bounds = np.searchsorted(t_stamp[t_order], frames, side='left'), \
+        np.searchsorted(t_stamp[t_order], frames, side='right')
+    merged = 0
+    for f in range(frames.size):
+        g = g_order[g_bounds[0][f]:g_bounds[1][f]]
+        t = t_order[t_bounds[0][f]:t_bounds[1][f]]
+        if t.size < 2:
+            continue
+        d = np.hypot(tx[t, None] - gx[None, g], ty[t, None] - gy[None, g])   # (tracks, people)
+        nearest = np.argmin(d, axis=1)
+        on = nearest[d[np.arange(t.size), nearest] <= threshold_m]
+        merged += int(on.size > np.unique(on).size)
+    return merged / frames.size
 
 
 def clear_mot(tracks: Sequence[TrackRow], truth: Sequence[GroundTruthRow], *,
