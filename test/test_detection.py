@@ -505,7 +505,6 @@ def test_release_after_the_configured_time():
     calib = make_room()
     cam = calib.cameras['cam4']
     rel = Releaser(calib, ReleaseConfig(timeout=1.0))
-    assert rel.deciding == ['cam4']
     states = np.array([[2.0, 2.0, 0, 0, 0, 0], [4.0, 3.0, 0, 0, 0, 0]])
     sil = rasterize(cam, states, BodyShape())
     fg_both = (sil.mask(0) > 0) | (sil.mask(1) > 0)

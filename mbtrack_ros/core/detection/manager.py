@@ -316,11 +316,9 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
         # 3. support, visibility and existence
         ended: list[int] = []
         if tracks:
-            if evidence:
-                supported, coverage = self.releaser.support(evidence, sils, means, tops)
-            else:
-                supported = np.ones(len(tracks), bool)
-                coverage = {}
+            coverage = {}
+            if evidence:   # its verdict: self.releaser.kept (the coverage is existence's)
+                _, coverage = self.releaser.support(evidence, sils, means, tops)
 
             def colour(name: str) -> np.ndarray | None:
                 """Colour bins of a camera this frame, quantised at most once."""
@@ -348,6 +346,9 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
             existence = [self.aux[t.track_id].existence for t in tracks]
             if evidence:  # 4. release (only once the background exists)
                 ids = [t.track_id for t in tracks]
+                # the existence weighs the coverage evidence (001 §3.2): the release's own
+                # verdict is only the spare and doorway rules' (Releaser.kept)
+                supported = self.releaser.kept
                 ended = self.releaser.exited(ids, means[:, [X, Y]])
                 if ended:            # the others go on; the releaser forgets the exited
                     keep = [k for k, i in enumerate(ids) if i not in ended]

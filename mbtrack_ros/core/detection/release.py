@@ -1,12 +1,19 @@
 """Release of tracks that lost their foreground support (003 §4.3).
 
-A track is supported in a frame when the rendered silhouette of its estimate is covered by
-foreground (coverage >= ``min_coverage``) in at least one camera that should see it
-(silhouette at least ``min_area`` pixels in the image). When the room has a ceiling camera
-only the ceiling cameras decide (003 §4.3 analyses the top-down view); otherwise the corner
-cameras do. A track unsupported - or whose existence probability (001 §3.2, see
-:mod:`mbtrack_ros.core.existence`) is below ``existence_threshold`` - for ``timeout``
-seconds in a row is terminated.
+A track's foreground support in a frame is the coverage of its rendered silhouette (the
+share of it that is foreground) in every camera that sees it (silhouette at least
+``min_area`` pixels in the image; a top-down camera's cylinder blob counts twice, clipped
+to 1, see :func:`blob_coverage`), weighed together as the existence process weighs them
+(001 §3.2, :func:`~mbtrack_ros.core.existence.coverage_log_ratio`): each camera is a
+witness whose log-likelihood ratio "a person" over "nobody" is ``2 k (f_c - f_s)``, neutral
+at ``min_coverage``, and the track is supported when their sum is positive. No camera
+decides alone: a person sitting on a chair by a wall covers a small share of the top-down
+camera's blob and most of the side views' silhouettes. When the caller filters the
+existence probability (001 §3.2, :mod:`mbtrack_ros.core.existence`), which accumulates
+that evidence with the appearance's over time, the existence replaces the frame's coverage
+verdict (:attr:`Releaser.kept`): a track whose existence is below ``existence_threshold``
+(or that is spare, or unsupported in a doorway, below) for ``timeout`` seconds in a row is
+terminated.
 
 **Spare tracks.** A track that lost its person often moves on to somebody nearby who is
 tracked already (a crowd at the door): its silhouette still lies on foreground, so the
@@ -208,13 +215,15 @@ class ReleaseConfig:
 
     Attributes:
         timeout: seconds without support before a track ends (003 §4.3: 1 s).
-        min_coverage: foreground coverage of the silhouette that counts as support.
-        min_blob_coverage: the same for the cylinder blob of a top-down camera (the hull of
-            the floor and head circles is about twice a person's image; an empty floor
-            region gives ~0).
+        min_coverage: foreground coverage (fraction of the silhouette in [0, 1]) at which a
+            camera's view is neutral evidence of support (module docstring); the
+            existence process's neutral coverage too.
+        min_blob_coverage: the coverage of a top-down camera's cylinder blob at which it
+            covers a track (the hull of the floor and head circles is about twice a
+            person's image; an empty floor region gives ~0): for the doorway rule.
         min_area: pixels (at 320x240, scaled with the image) for a camera to see a track.
-        use_ceiling: let top-down cameras alone decide when the room has one.
-        existence_threshold: existence below this also counts as unsupported (0 disables).
+        existence_threshold: existence probability below which a track counts as
+            unsupported (001 §3.2; 0 disables).
         merge_radius, merge_time: two tracks closer than ``merge_radius`` metres for
             ``merge_time`` seconds follow the same person; the younger one (larger id) is
             released (a person re-detected next to a lagging track), or, when the caller
@@ -252,7 +261,6 @@ class ReleaseConfig:
     min_coverage: float = 0.3
     min_blob_coverage: float = 0.12
     min_area: int = 30
-    use_ceiling: bool = True
     existence_threshold: float = 0.1
     merge_radius: float = 0.35
     merge_time: float = 0.5
@@ -291,9 +299,6 @@ class Releaser:
                  ) -> None:
         self.calibration = calibration
         self.config = config or ReleaseConfig()
-        ceiling = [n for n, c in calibration.cameras.items() if is_ceiling(c)]
-        self.deciding = ceiling if (ceiling and self.config.use_ceiling) \
-            else [n for n in calibration.cameras if n not in ceiling] or ceiling
         self._since: dict[int, int] = {}
         self._spare_run: set[int] = set()       # spare on a frame of their unsupported time
         self._good_since: dict[int, int] = {}   # ... of those, supported again since
@@ -305,6 +310,7 @@ class Releaser:
         self._exclusive: np.ndarray | None = None   # ... their exclusive_support(), cached
         self.doorway = np.zeros(0, bool)  # ... in a doorway, seen but not covered by the
         #                                     door-wall cameras (doorway_timeout applies)
+        self.kept = np.zeros(0, bool)     # ... neither spare nor unsupported in a doorway
 
     def support(self, evidence: Mapping[str, FrameEvidence], silhouettes: Mapping[str, object],
                 states: np.ndarray | None = None, heights: np.ndarray | None = None
@@ -319,17 +325,20 @@ class Releaser:
                 silhouettes.
 
         Returns:
-            supported: (K,) bool (False for spare tracks, which are also kept in
-                ``self.spare``).
+            supported: (K,) bool, the frame's pooled coverage evidence is positive (module
+                docstring); False for spare tracks (also kept in ``self.spare``) and for
+                tracks the door-wall cameras see without covering them (``self.doorway``).
+                ``self.kept`` is the same verdict without the coverage evidence, for a
+                caller whose existence process weighs that evidence.
             coverage: camera -> (K,) coverage (NaN where the camera does not see the track);
-                all cameras with evidence, not only the deciding ones; blob coverages are
-                doubled (clipped to 1) to be comparable with silhouette coverages.
+                all cameras with evidence; blob coverages are doubled (clipped to 1) to be
+                comparable with silhouette coverages.
         """
         cfg = self.config
         coverage: dict[str, np.ndarray] = {}
         seen: dict[str, np.ndarray] = {}         # camera -> (K,) sees the track
         covered: dict[str, np.ndarray] = {}      # camera -> (K,) sees it on foreground
-        supported = None
+        evidence_sum = None                      # (K,) pooled coverage log-ratio / 2k
         for name, sil in silhouettes.items():
             if name not in evidence:
                 continue
@@ -346,13 +355,14 @@ class Releaser:
             scale = 2.0 if blob else 1.0
             coverage[name] = np.where(sees, np.minimum(scale * cov, 1.0), np.nan)
             seen[name], covered[name] = sees, sees & (cov >= threshold)
-            if supported is None:
-                supported = np.zeros(cov.shape, bool)
-            if name in self.deciding:
-                supported |= covered[name]
-        if supported is None:
+            # the camera's witness (001 §3.2, existence.coverage_log_ratio, per 2k)
+            vote = np.where(sees, coverage[name] - cfg.min_coverage, 0.0)
+            evidence_sum = vote if evidence_sum is None else evidence_sum + vote
+        if evidence_sum is None:
             k = len(next(iter(silhouettes.values())).offsets) - 1 if silhouettes else 0
-            supported = np.zeros(k, bool)
+            evidence_sum = np.zeros(k)
+        supported = evidence_sum > 0.0
+        kept = np.ones(len(supported), bool)
         self.doorway = np.zeros(len(supported), bool)
         if cfg.doorway_band > 0 and states is not None and self.calibration.exits:
             # in front of a door only the cameras on the door's wall count (module docstring)
@@ -364,6 +374,7 @@ class Releaser:
                     watched |= front & seen[name]
                     held |= front & covered[name]
             supported = np.where(watched, held, supported)
+            kept = np.where(watched, held, kept)
             # the short timeout is for this evidence only: a track the wall cameras cover
             # that is spare (a crowd at the door) or fading keeps the ordinary one
             self.doorway = watched & ~held
@@ -381,6 +392,7 @@ class Releaser:
                 fgs, sils, cfg.spare_support, least, None if states is None else states[:, :2],
                 cfg.spare_radius if states is not None else np.inf)
             supported = supported & ~self.spare
+        self.kept = kept & ~self.spare
         return supported, coverage
 
     def exclusive_support(self) -> np.ndarray:
