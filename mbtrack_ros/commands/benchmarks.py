@@ -125,6 +125,11 @@ def _num(x: float, digits: int = 0, unit: str = '') -> str:
     return '-' if x is None or not math.isfinite(x) else f'{x:.{digits}f}{unit}'
 
 
+def _rate(x: float) -> str:
+    """A frame rate with two significant digits at least (1.2, 35, 186)."""
+    return _num(x, 1 if math.isfinite(x) and x < 10 else 0)
+
+
 def _figure(width: float, height: float):
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
@@ -720,7 +725,8 @@ def _lanz_report(results: list[dict], out: Path) -> Report:
     runs: dict[tuple[str, str, int], list[dict]] = {}
     for r in results:
         runs.setdefault((r['recording'], r['algorithm'], r['particles']), []).append(r)
-    seqs = list(dict.fromkeys(r['recording'] for r in results))
+    present = set(r['recording'] for r in results)
+    seqs = [s for s in _LANZ if s in present] + sorted(present - set(_LANZ))
     order = [(alg, n) for alg, n in _LANZ_RUNS] + [_LANZ_JOINT[1:]]
     n_seeds = len(runs[seqs[0], 'hjs', 100])
     lines = [f'Mean ± standard deviation over {n_seeds} recording seed(s); N particles per '
@@ -745,7 +751,7 @@ def _lanz_report(results: list[dict], out: Path) -> Report:
                 f'{_mean_sd([r["mismatches"] for r in group])} | '
                 f'{_mean_sd([r["mass_0_5"] for r in group], digits=2)} | '
                 f'{_mean_sd([r.get("coalescence", math.nan) for r in group], 100, 1, " %")} | '
-                f'{_num(_mean([r["frames_per_s"] for r in group]), 0)} |')
+                f'{_rate(_mean([r["frames_per_s"] for r in group]))} |')
             group = [r for r in group if r.get('curve')]
             if group:
                 curves[label] = (np.array(group[0]['curve'][0]),
