@@ -11,7 +11,7 @@ from conftest import make_room
 from mbtrack_ros.core.detection.parallax import FloorParallax, ParallaxEvidence
 from mbtrack_ros.core.detection.detector import _states
 from mbtrack_ros.core.detection.people import (
-    STILL_MAKE_UP, PeopleCue, PeopleCueConfig, still_evidence)
+    REFUTE_SHARE, STILL_ACCEPT, STILL_MAKE_UP, PeopleCue, PeopleCueConfig, still_evidence)
 from mbtrack_ros.core.shape import BodyShape, rasterize
 
 POST = (3.0, 2.5)          # where a person stands, metres
@@ -149,8 +149,9 @@ def test_a_clear_outline_makes_up_for_a_parallax_share_below_its_threshold():
     """The still person's floor-parallax share just below ``min_parallax`` (as when a
     neighbour hides part of the floor behind him) and an outline half again as clear as
     ``min_still_score``: weighed together he is a person (the parallax threshold alone
-    would miss him); with the outline just at its threshold the parallax share does not make
-    it, and the empty room gives nothing with the thresholds that find him."""
+    would miss him); with the outline at three quarters of its threshold the two fall short of
+    ``STILL_ACCEPT`` and he is not, and the empty room gives nothing with the
+    thresholds that find him."""
     room = make_room(n_cameras=3)
     kw = dict(spacing=0.2, min_views=2)
     still = [_render(room, post=True)] * 3
@@ -160,7 +161,8 @@ def test_a_clear_outline_makes_up_for_a_parallax_share_below_its_threshold():
     places = PeopleCue(room, PeopleCueConfig(**found)).places(still)
     assert len(places) == 1
     assert np.linalg.norm(places[0] - POST) <= 0.25
-    weak = dict(kw, min_parallax=cover / 0.9, min_still_score=score)
+    weak = dict(kw, min_parallax=cover / 0.9, min_still_score=score / 0.75)
+    assert 0.9 + 0.75 < STILL_ACCEPT
     assert len(PeopleCue(room, PeopleCueConfig(**weak)).places(still)) == 0
     empty = [_render(room, post=False)] * 3
     assert len(PeopleCue(room, PeopleCueConfig(**found)).places(empty)) == 0
@@ -185,7 +187,7 @@ def test_a_parallax_share_far_above_its_threshold_does_not_make_a_poor_outline_a
 
 def test_still_evidence_sums_the_two_evidences_in_units_of_their_thresholds():
     """Brute force over a grid of (share, z-score): each in units of its threshold, at
-    most ``STILL_MAKE_UP``, summed; a person at 2 or more, never where the parallax test
+    most ``STILL_MAKE_UP``, summed; a person at ``STILL_ACCEPT`` or more, never where the parallax test
     does not apply (share 0) or the outline is unseen, nor where either evidence is below
     half its threshold."""
     cover = np.repeat(np.linspace(0.0, 1.0, 11), 9)
@@ -198,10 +200,10 @@ def test_still_evidence_sums_the_two_evidences_in_units_of_their_thresholds():
         else:
             assert g == pytest.approx(min(c / 0.5, STILL_MAKE_UP) + min(z, STILL_MAKE_UP))
     both = (cover >= 0.5) & (score >= 1.0)
-    assert np.all(got[both] >= 2.0)          # both thresholds met: always a person
-    assert np.any((got >= 2.0) & ~both)      # one of them missed, made up by the other
+    assert np.all(got[both] >= STILL_ACCEPT)     # both thresholds met: always a person
+    assert np.any((got >= STILL_ACCEPT) & ~both)  # one missed, made up by the other
     half = (cover < 0.25) | (score < 0.5)
-    assert not np.any(got[half] >= 2.0 - 1e-12)
+    assert not np.any(got[half] >= STILL_ACCEPT - 1e-12)
 
 
 @pytest.mark.parametrize('k', [1, 2, 3, 4])
@@ -252,3 +254,52 @@ def test_a_still_place_needs_a_third_view_of_the_floor_behind_it(n_known, third_
     i = int(np.argmin(np.linalg.norm(cue.xy[:cue.n_places] - POST, axis=1)))
     counted = n_known >= 3 or (n_known == 2 and third_share >= 0.1)
     assert cover[i] == (1.0 if counted else 0.0)
+
+
+@pytest.mark.parametrize('third_share', [0.0, 0.05, 0.3, 1.0])
+def test_a_view_that_sees_the_floor_agree_refutes_a_still_place(third_share):
+    """An object stands where it stands in every view: a place whose floor two views
+    show differently but a third view, seeing the floor behind more than a tenth of the
+    silhouette, shows as the floor (disagreeing on less than ``REFUTE_SHARE`` of what it
+    tests) has no parallax cover, however much the two others disagree; a third view
+    that disagrees on more keeps the pooled share (brute force per place and
+    orientation)."""
+    room = make_room(n_cameras=3)
+    cue = PeopleCue(room, PeopleCueConfig(spacing=0.2, min_views=2))
+    rng = np.random.default_rng(11)
+    shown = {}
+    for k, name in enumerate(room.cameras):
+        cam = room.cameras[name]
+        share = 1.0 if k < 2 else third_share
+        shown[name] = (rng.random((cam.height, cam.width)) < share,
+                       np.ones((cam.height, cam.width), bool))
+    cover = cue._parallax_cover(shown)
+    n_or, n = len(cue.config.orientations), cue.n_places
+    want = np.zeros(n_or * n)
+    for hyp in range(n_or * n):
+        hits = known = 0
+        views = refuted = False
+        counts = []
+        for name, (disagree, kn) in shown.items():
+            seen = cue._seen[name]
+            w = np.flatnonzero(seen.index == hyp)
+            if not len(w):
+                counts.append(None)
+                continue
+            sp = seen.spans
+            a, b = sp.offsets[w[0]], sp.offsets[w[0] + 1]
+            px = [(r, x) for r, x0, x1 in zip(sp.row[a:b], sp.x0[a:b], sp.x1[a:b])
+                  for x in range(x0, x1)]
+            h = sum(disagree[r, x] for r, x in px)
+            counts.append((h, len(px)))
+        tested = [c for c in counts if c is not None and c[1] >= 0.1 * max(c[1], 1)]
+        if sum(c is not None and c[1] >= 0.25 * max(c[1], 1) for c in counts) >= 2 \
+                and len(tested) >= 3 \
+                and not any(h < REFUTE_SHARE * k for h, k in tested):
+            want[hyp] = sum(h for h, _ in tested) / max(sum(k for _, k in tested), 1)
+    want = want.reshape(n_or, n).max(axis=0)
+    np.testing.assert_allclose(cover, want)
+    if third_share < REFUTE_SHARE:
+        assert not cover.any()
+    else:
+        assert cover.max() > 0.0

@@ -97,7 +97,8 @@ def test_fast_places_equal_the_straightforward_greedy_choice():
     # low thresholds: many candidates, several explaining-away rounds
     cue = PeopleCue(room, PeopleCueConfig(spacing=0.25, min_views=2, min_motion=0.01,
                                           min_score=-1.0, max_people=5, nms_radius=0.5,
-                                          refine_radius=0.0))       # the greedy choice
+                                          refine_radius=0.0,        # the greedy choice
+                                          min_still_score=np.inf))  # of moving places only
     frames = _frames(room, rng)
     score, _, places = _straightforward(cue, frames)
     _, fast_score, _ = cue.score(frames)
@@ -145,7 +146,7 @@ def test_refined_places_equal_the_straightforward_refinement():
     room = make_room(n_cameras=3)
     frames = _frames(room, np.random.default_rng(5))
     kw = dict(spacing=0.25, min_views=2, min_motion=0.01, min_score=-1.0, max_people=5,
-              nms_radius=0.5)
+              nms_radius=0.5, min_still_score=np.inf)     # moving places only
     greedy = PeopleCue(room, PeopleCueConfig(**kw, refine_radius=0.0)).places(frames)
     cue = PeopleCue(room, PeopleCueConfig(**kw, refine_radius=0.6))
     refined = cue.places(frames)

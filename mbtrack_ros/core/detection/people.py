@@ -48,7 +48,10 @@ person's (a contour/symmetry z-score about ``min_still_score``, well above the
 ``min_score`` that motion needs: furniture stands on the floor too); the two are weighed
 together (:func:`still_evidence`), so that either, well above its threshold, makes up
 for the other falling short by up to half (the floor a neighbour hides behind him, an
-outline against a busy background). Where fewer than three cameras see
+outline against a busy background). An object stands where it stands in *every* view:
+a camera that sees the floor behind the place and shows it as the floor refutes it
+(:meth:`PeopleCue._parallax_cover`), however much the other views disagree there (their
+lines of sight meet other objects). Where fewer than three cameras see
 the floor behind him he is learnt into the background, found when he moves, and the
 place he reveals is recognised as a ghost by the background's border test
 (:func:`~.background.ghost_components`).
@@ -75,9 +78,13 @@ from mbtrack_ros.core.detection.features import (
 from mbtrack_ros.core.detection.parallax import FloorParallax
 from mbtrack_ros.core.shape import BodyShape, Silhouettes, rasterize
 
-__all__ = ['PeopleCue', 'PeopleCueConfig', 'STILL_MAKE_UP', 'still_evidence']
+__all__ = ['PeopleCue', 'PeopleCueConfig', 'REFUTE_SHARE', 'STILL_ACCEPT', 'STILL_MAKE_UP',
+           'still_evidence']
 
-STILL_MAKE_UP = 1.5     # each still-person evidence counts up to 1.5 times its threshold
+STILL_ACCEPT = 1.7      # still_evidence (in units of the thresholds) at which a place is a person
+STILL_MAKE_UP = STILL_ACCEPT - 0.5   # each evidence counts up to this: neither makes up
+#                                      for more than half of the other's threshold
+REFUTE_SHARE = 0.1      # a view that tests a place's floor and disagrees on less refutes it
 #                         (it makes up for at most half of the other's, still_evidence)
 
 
@@ -108,9 +115,9 @@ class PeopleCueConfig:
         min_still_score: the mean contour/symmetry robust z-score of such a place at which
             its outline alone makes it a person's (not a table's or a chair's), robust
             standard deviations (> 0); ``inf`` disables the still-person stage. A still
-            place is a person when the two evidences, each in units of its threshold, sum
-            to at least 2, neither making up for more than half of the other
-            (:func:`still_evidence`).
+            place no view refutes is a person when the two evidences, each in units of
+            its threshold, sum to at least :data:`STILL_ACCEPT`, neither making up for
+            more than half of the other (:func:`still_evidence`).
         max_people: largest number of person-like places marked.
         nms_radius: smallest distance between two marked places.
         refine_radius: how far a chosen place may move when it is refined with only the
@@ -177,8 +184,10 @@ def still_evidence(cover: np.ndarray, score: np.ndarray, min_parallax: float,
     floor-parallax share ``cover`` (P,) (an object stands there) and the outline's
     contour/symmetry robust z-score ``score`` (P,) (it is a person's), each in units of
     its threshold (``min_parallax``, ``min_still_score``) and at most
-    :data:`STILL_MAKE_UP` of it. A place is a person at 2 or more: both at their
-    thresholds, or one short of its threshold by at most half and made up by the other
+    :data:`STILL_MAKE_UP` of it. A place is a person at :data:`STILL_ACCEPT` or more
+    (both near their thresholds, the parallax share of a place that no view refutes:
+    :meth:`PeopleCue._parallax_cover`), or one short of its threshold by at most half and
+    made up by the other
     (a neighbour who hides part of the floor behind him lowers his parallax share; his
     outline against a busy background lowers his z-score). Neither makes up for more
     than half of the other: a cabinet fills its silhouette with parallax whatever its
@@ -391,7 +400,7 @@ class PeopleCue:
         still: an object on the floor (floor parallax, :class:`~.parallax.FloorParallax`:
         the share of the silhouette's floor-backed pixels that disagree) whose outline is a
         person's (mean contour/symmetry z-score ``score`` (P,)), the two evidences combined
-        by :func:`still_evidence` (at least 2), the largest parallax first (it places the
+        by :func:`still_evidence` (at least :data:`STILL_ACCEPT`), the largest parallax first (it places the
         object; the outline varies little over a body's width), ``nms_radius`` apart,
         at most ``max_people`` in all. What a chosen person explains (his body, the floor
         he hides from the other cameras, :meth:`~.parallax.FloorParallax.decide`) is no
@@ -413,7 +422,7 @@ class PeopleCue:
                 disagree, known = self._parallax.decide(ev, hidden=bodies)
                 shown[name] = (disagree & ~bodies[name], known & ~bodies[name])
             cover = self._parallax_cover(shown)
-            cand = still_evidence(cover, score, cfg.min_parallax, cfg.min_still_score) >= 2.0
+            cand = still_evidence(cover, score, cfg.min_parallax, cfg.min_still_score) >= STILL_ACCEPT
             if out:
                 cand &= np.linalg.norm(xy[:, None] - np.array(out)[None], axis=2
                                        ).min(axis=1) >= cfg.nms_radius
@@ -431,18 +440,27 @@ class PeopleCue:
         fewer than three behind a tenth of it: two views' disagreements meet also where
         nothing stands (a phantom of the two-view visual hull: one view's line of sight
         meets one object, the other's another, as between two chairs in a row), and a
-        third view that sees the floor there refutes it."""
+        third view that sees the floor there refutes it. Likewise 0 where any camera that
+        sees the floor behind a tenth of the silhouette disagrees on less than
+        :data:`REFUTE_SHARE` of it: an object on the floor stands in every view's line of
+        sight (the visual hull is the intersection of the views' silhouette cones), so a
+        view that shows the floor there refutes it, however much the others' disagreements
+        (other objects on their lines of sight) weigh in the pooled share."""
         n = len(self.states)
         hits, known = np.zeros(n), np.zeros(n)
         views, third = np.zeros(n, np.int64), np.zeros(n, np.int64)
+        refuted = np.zeros(n, bool)
         for name, (disagree, kn) in shown.items():
             seen_hyp = self._seen[name]
             h, k, area = ForegroundIntegral(disagree, ~kn).counts(seen_hyp.spans)
             hits[seen_hyp.index] += h
             known[seen_hyp.index] += k
             views[seen_hyp.index] += k >= 0.25 * np.maximum(area, 1)
-            third[seen_hyp.index] += k >= 0.1 * np.maximum(area, 1)
-        cover = np.where((views >= 2) & (third >= 3), hits / np.maximum(known, 1.0), 0.0)
+            tests = k >= 0.1 * np.maximum(area, 1)
+            third[seen_hyp.index] += tests
+            refuted[seen_hyp.index] |= tests & (h < REFUTE_SHARE * k)
+        cover = np.where((views >= 2) & (third >= 3) & ~refuted,
+                         hits / np.maximum(known, 1.0), 0.0)
         return cover.reshape(len(self.config.orientations), self.n_places).max(axis=0)
 
     def _refine(self, xy: np.ndarray, score: np.ndarray, ok: np.ndarray,
