@@ -412,6 +412,7 @@ def test_hjs_weighs_occluders_by_the_independent_prior_and_the_estimate_by_the_b
             assert moved > 1e-3 and filt.stats['bp_iterations'] >= 1
         else:
             assert moved < 1e-12 and 'bp_iterations' not in filt.stats
+            assert all(out[t].own is None for t in (1, 2))
 
 
 class _OccludedMeasurement(GaussianMeasurement):
@@ -449,7 +450,7 @@ def test_the_exclusion_moves_the_estimates_and_never_the_particles():
         runs[use_mrf] = ([filt.cloud(k)[:2] for k in range(2)], [out[k].mean for k in range(2)])
     for (p_on, w_on), (p_off, w_off) in zip(runs[True][0], runs[False][0]):
         np.testing.assert_array_equal(p_on, p_off)
-        np.testing.assert_allclose(w_on, w_off, rtol=0, atol=1e-12)  # normalised apart
+        np.testing.assert_array_equal(w_on, w_off)
     assert max(np.abs(a - b)[:2].max() for a, b in zip(runs[True][1], runs[False][1])) > 1e-3
 
 
@@ -699,7 +700,8 @@ def test_joint_filter_pushes_people_apart_where_depth_is_uncertain():
 def test_particles_carry_the_likelihood_and_the_estimate_one_copy_of_the_exclusion():
     """HJSFilter: the step's estimate weighs its particles by BP belief x likelihood (000
     Eq. 18, 41); the particles go on to the next step weighted by the likelihood alone,
-    so the exclusion messages are not multiplied in again every frame."""
+    so the exclusion messages are not multiplied in again every frame, and the update
+    keeps that posterior as the target's own (``TrackUpdate.own``)."""
     from mbtrack_ros.core.mrf import belief_propagation
 
     rng = np.random.default_rng(3)
@@ -719,6 +721,11 @@ def test_particles_carry_the_likelihood_and_the_estimate_one_copy_of_the_exclusi
         post = beliefs[k] * lik
         np.testing.assert_allclose(out[tid].weights, post / post.sum(), rtol=1e-9)
         assert np.abs(out[tid].weights - np.exp(logw)).max() > 1e-3   # the MRF acted
+        # the target's own posterior: the weights the particles carry on, and their mean
+        own = out[tid].own
+        np.testing.assert_array_equal(own.weights, np.exp(logw))
+        np.testing.assert_array_equal(own.particles, out[tid].particles)
+        np.testing.assert_allclose(own.mean, summarize_particles(parts, np.exp(logw))[0])
 
 
 def test_summarize_particles_matches_numpy():

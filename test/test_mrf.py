@@ -230,3 +230,62 @@ def test_exclusion_leaves_well_measured_people_where_they_stand():
     assert abs(free - 0.45) < 0.005
     assert abs(_estimated_gap(TrackerConfig().mrf_radius) - free) < 0.005
     assert _estimated_gap(0.5) - free > 0.03
+
+
+def _two_close_walkers(use_mrf, frames=30):
+    """A detecting tracker (painted room, 4 side cameras and a ceiling camera) on two
+    people walking side by side, 1.2 m apart, then closing in to 0.4 m centre to centre:
+    per frame the reported (id, mean, existence, particles), the filter's clouds at the
+    end and per frame the means the track management read."""
+    from test_detection import FPS, _detecting_tracker, backgrounds, make_room, paint, person
+
+    calib = make_room()
+    bgs = backgrounds(calib)
+    tracker = _detecting_tracker(calib, bgs, seed=3, use_mrf=use_mrf)
+    managed = []            # what the track management read, frame by frame
+    update = tracker.detection.update
+
+    def reading_update(stamp, images, tracks, models, **kwargs):
+        managed.append({t.track_id: t.mean.copy() for t in tracks})
+        return update(stamp, images, tracks, models, **kwargs)
+
+    tracker.detection.update = reading_update
+    yellow = ((215, 175, 145), (200, 190, 40), (150, 40, 120))
+    out = []
+    for k in range(frames):
+        x, close = 2.0 + 0.04 * k, 0.02 * min(k, 20)
+        people = [person(x, 2.0 + close, theta=0.0),
+                  person(x, 3.2 - close, theta=0.0, colours=yellow)]
+        res = tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, people,
+                                                           np.random.default_rng(k)))
+        out.append([(t.track_id, t.mean.copy(), t.existence, t.particles) for t in res.tracks])
+    clouds = {t: tracker.filter.cloud(t)[:2] for t in tracker.filter.track_ids()}
+    return out, clouds, managed
+
+
+def test_the_exclusion_changes_the_reported_estimates_and_not_the_tracks():
+    """With automatic detection, two people walking side by side closer than the tracks'
+    clouds spread: the MRF (000 Eq. 16-18) moves the reported estimates, and the track
+    management, which reads each target's own posterior, decides as without it: the same
+    tracks, existence probabilities and particle clouds frame by frame."""
+    on, clouds_on, managed_on = _two_close_walkers(True)
+    off, clouds_off, managed_off = _two_close_walkers(False)
+    assert max(len(f) for f in on) == 2          # both people are tracks
+    moved = 0.0
+    for a, b in zip(on, off):
+        assert [t[0] for t in a] == [t[0] for t in b]
+        for (_, mean_a, ex_a, parts_a), (_, mean_b, ex_b, parts_b) in zip(a, b):
+            assert ex_a == ex_b
+            np.testing.assert_array_equal(parts_a, parts_b)
+            moved = max(moved, float(np.abs(mean_a[:2] - mean_b[:2]).max()))
+    assert moved > 1e-3                          # the MRF acted on the estimates
+    # the track management read the targets' own posteriors, bit for bit as without it
+    assert len(managed_on) == len(managed_off) == len(on)
+    for a, b in zip(managed_on, managed_off):
+        assert a.keys() == b.keys()
+        for tid in a:
+            np.testing.assert_array_equal(a[tid], b[tid])
+    assert clouds_on.keys() == clouds_off.keys()
+    for t in clouds_on:
+        np.testing.assert_array_equal(clouds_on[t][0], clouds_off[t][0])
+        np.testing.assert_array_equal(clouds_on[t][1], clouds_off[t][1])

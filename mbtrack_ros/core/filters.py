@@ -83,6 +83,11 @@ class TrackUpdate:
         visible_fraction: per camera name, expected visible fraction of the silhouette.
         particles: (N, 6) posterior particles, or None (Kalman-based filters).
         weights: (N,) normalised posterior weights, or None.
+        own: the target's own posterior where the estimate above also carries the
+            spatial-exclusion prior of the other targets (HJS with the MRF, 000 Eq. 16-18):
+            the same particles weighted by prior x likelihood alone, as the filter carries
+            them on; None where the estimate is the target's own posterior. The track
+            management reads it (see :class:`~mbtrack_ros.core.tracker.Tracker`).
     """
 
     mean: np.ndarray
@@ -90,6 +95,7 @@ class TrackUpdate:
     visible_fraction: dict[str, float] = field(default_factory=dict)
     particles: np.ndarray | None = None
     weights: np.ndarray | None = None
+    own: TrackUpdate | None = None
 
 
 @runtime_checkable
@@ -369,7 +375,8 @@ class HJSFilter(_MarginalParticleFilter):
     weighs the particles by BP belief x likelihood; the particles go on to the next step
     weighted by the likelihood alone, so that every estimate carries one copy of the
     exclusion and the particles none (see the comments in :meth:`step`;
-    docs/hjs_fidelity.md).
+    docs/hjs_fidelity.md). ``TrackUpdate.own`` is the estimate without the exclusion,
+    the posterior the particles carry on.
     """
 
     name = 'hjs'
@@ -428,11 +435,11 @@ class HJSFilter(_MarginalParticleFilter):
         # the estimate below.
         result = measurement.hjs(particles, independent, models)
         loglik = [np.asarray(ll, dtype=np.float64) for ll in result.loglik]
-        with np.errstate(divide='ignore'):
-            log_prior = [np.log(p) for p in prior]
+        log_prior = [np.log(p) for p in independent]
         joint = self._joint_weights(ids, particles, models, measurement, dt, loglik,
                                     log_prior)
         t3 = time.perf_counter()
+        # the targets' own posteriors, prior x likelihood, which the particles carry on
         updates = self._finish(ids, particles, log_prior, loglik, result)
         if self.config.use_mrf and len(ids) > 1:
             # The exclusion is a constraint on the joint state at every time step (000
@@ -445,11 +452,20 @@ class HJSFilter(_MarginalParticleFilter):
             # tracks apart frame after frame. The particles are therefore carried on with
             # the weights of the independently propagated prior times the likelihood
             # (prior to BP: uniform), and every step's estimate carries one copy of the
-            # exclusion, the exact marginal of 000 Eq. 16 for two targets. Targets weighed
-            # jointly keep the joint weights _finish stored.
+            # exclusion, BP belief x likelihood, the exact marginal of 000 Eq. 16 for two
+            # targets; the target's own posterior stays with it (TrackUpdate.own).
+            # Targets weighed jointly carry the exclusion in their joint weights.
             for k, tid in enumerate(ids):
-                if k not in joint:
-                    self._logw[tid], _ = normalize_log_weights(loglik[k])
+                if k in joint:
+                    continue
+                with np.errstate(divide='ignore'):
+                    lw, _ = normalize_log_weights(np.log(prior[k]) + loglik[k])
+                w = np.exp(lw)
+                mean, cov = summarize_particles(particles[k], w)
+                own = updates[tid]
+                updates[tid] = TrackUpdate(mean=mean, covariance=cov,
+                                           visible_fraction=own.visible_fraction,
+                                           particles=particles[k], weights=w, own=own)
         self.timings = {'predict': t1 - t0, 'mrf': t2 - t1, 'update': t3 - t2,
                         'posterior': time.perf_counter() - t3}
         return updates

@@ -342,6 +342,17 @@ def _pixels_scaled(config, scale: float):
     return replace(config, background=background, detector=detector)
 
 
+def _reported(track: TrackEstimate, update) -> TrackEstimate:
+    """``track`` (the target's own posterior, as the track management read it) with the
+    estimate of the filter's ``update`` (a ``TrackUpdate``): where the estimate carries the
+    spatial-exclusion prior (``update.own`` set) a copy with its mean, covariance and
+    weights, else ``track`` itself."""
+    if update.own is None:
+        return track
+    return replace(track, mean=update.mean, covariance=update.covariance,
+                   particles=update.particles, weights=update.weights)
+
+
 class Tracker:
     """Tracks people across frames with the configured algorithm.
 
@@ -588,9 +599,13 @@ class Tracker:
             raise
         self._last_stamp = stamp_ns
         self._steps += 1
+        # the track management reads each target's own posterior (TrackUpdate.own): the
+        # spatial-exclusion prior corrects the reported estimate only, as it leaves the
+        # particles alone, so the tracks the filter carries on, their release, existence,
+        # re-finding and appearance models do not depend on it
         tracks = []
         for tid in sorted(updates):
-            u = updates[tid]
+            u = updates[tid].own or updates[tid]
             tracks.append(TrackEstimate(
                 track_id=tid, mean=u.mean, covariance=u.covariance,
                 height=self._heights.get(tid, float('nan')),
@@ -624,6 +639,7 @@ class Tracker:
             if search:
                 self.search()
             timings.update(self.detection.timings)
+        tracks = [_reported(t, updates[t.track_id]) for t in tracks]
         timings['total'] = time.perf_counter() - t0
         return FrameResult(stamp_ns=stamp_ns, tracks=tracks, ended=ended, timings=timings,
                            released=released)
