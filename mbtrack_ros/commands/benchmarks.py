@@ -1088,8 +1088,8 @@ BENCHMARKS: list[Benchmark] = [
     Benchmark(
         'rooms', 'Room families, automatic detection, fresh recordings',
         f'{_ROOM_SEEDS} recordings per room family of `mbtrack synth FAMILY --seed S '
-        f'--frames {_ROOM_FRAMES}` (seeds from {FRESH_SEED}; `crowd`: 6-10 people, its recordings of up to '
-        f'{_CROWD_TARGET} also in a row of their own, '
+        f'--frames {_ROOM_FRAMES}` (seeds from {FRESH_SEED}; `crowd`: 6-10 people, its '
+        f'recordings of up to {_CROWD_TARGET} also in a row of their own, '
         '`occupied`: everyone present from the first frame, `two-cameras` and '
         '`three-cameras`: corner cameras only, `large-room`: 10 x 8 m with six cameras, '
         '`two-doors`: a second doorway, `real-room`: every condition of the next table), '

@@ -81,11 +81,13 @@ from mbtrack_ros.core.shape import BodyShape, Silhouettes, rasterize
 __all__ = ['PeopleCue', 'PeopleCueConfig', 'REFUTE_SHARE', 'STILL_ACCEPT', 'STILL_MAKE_UP',
            'still_evidence']
 
-STILL_ACCEPT = 1.7      # still_evidence (in units of the thresholds) at which a place is a person
-STILL_MAKE_UP = STILL_ACCEPT - 0.5   # each evidence counts up to this: neither makes up
-#                                      for more than half of the other's threshold
-REFUTE_SHARE = 0.1      # a view that tests a place's floor and disagrees on less refutes it
-#                         (it makes up for at most half of the other's, still_evidence)
+#: still_evidence (in units of the thresholds) at which a place is a person
+STILL_ACCEPT = 1.7
+#: each evidence counts up to this: neither makes up for more than half of the other's
+#: threshold (still_evidence)
+STILL_MAKE_UP = STILL_ACCEPT - 0.5
+#: a view that tests a place's floor and disagrees on less of it than this share refutes it
+REFUTE_SHARE = 0.1
 
 
 @dataclass(frozen=True)
@@ -400,8 +402,9 @@ class PeopleCue:
         still: an object on the floor (floor parallax, :class:`~.parallax.FloorParallax`:
         the share of the silhouette's floor-backed pixels that disagree) whose outline is a
         person's (mean contour/symmetry z-score ``score`` (P,)), the two evidences combined
-        by :func:`still_evidence` (at least :data:`STILL_ACCEPT`), the largest parallax first (it places the
-        object; the outline varies little over a body's width), ``nms_radius`` apart,
+        by :func:`still_evidence` (at least :data:`STILL_ACCEPT`), the largest parallax
+        first (it places the object; the outline varies little over a body's width),
+        ``nms_radius`` apart,
         at most ``max_people`` in all. What a chosen person explains (his body, the floor
         he hides from the other cameras, :meth:`~.parallax.FloorParallax.decide`) is no
         evidence for the next, nor is what the places ``taken`` explain."""
@@ -422,7 +425,8 @@ class PeopleCue:
                 disagree, known = self._parallax.decide(ev, hidden=bodies)
                 shown[name] = (disagree & ~bodies[name], known & ~bodies[name])
             cover = self._parallax_cover(shown)
-            cand = still_evidence(cover, score, cfg.min_parallax, cfg.min_still_score) >= STILL_ACCEPT
+            cand = still_evidence(cover, score, cfg.min_parallax,
+                                  cfg.min_still_score) >= STILL_ACCEPT
             if out:
                 cand &= np.linalg.norm(xy[:, None] - np.array(out)[None], axis=2
                                        ).min(axis=1) >= cfg.nms_radius
