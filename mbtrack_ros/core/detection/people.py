@@ -82,7 +82,7 @@ __all__ = ['PeopleCue', 'PeopleCueConfig', 'REFUTE_SHARE', 'STILL_ACCEPT', 'STIL
            'still_evidence']
 
 #: still_evidence (in units of the thresholds) at which a place is a person
-STILL_ACCEPT = 1.7
+STILL_ACCEPT = 2.0
 #: each evidence counts up to this: neither makes up for more than half of the other's
 #: threshold (still_evidence)
 STILL_MAKE_UP = STILL_ACCEPT - 0.5
