@@ -234,6 +234,20 @@ def test_decide_is_the_lower_median_of_the_cameras_that_see_the_floor_point(k):
                 assert not disagree[y, x]
 
 
+def _three_views(seed: int, known=(1.0, 1.0, 1.0), disagree=(1.0, 1.0, 1.0)):
+    """A people cue of a 3-camera room and the floor-parallax images of its cameras:
+    camera k's pixels tested (the floor seen) with probability ``known[k]``, disagreeing
+    with probability ``disagree[k]``."""
+    room = make_room(n_cameras=3)
+    cue = PeopleCue(room, PeopleCueConfig(spacing=0.2, min_views=2))
+    rng = np.random.default_rng(seed)
+    shown = {}
+    for k, name in enumerate(room.cameras):
+        size = (room.cameras[name].height, room.cameras[name].width)
+        shown[name] = (rng.random(size) < disagree[k], rng.random(size) < known[k])
+    return cue, shown
+
+
 @pytest.mark.parametrize('n_known, third_share', [(1, 0.0), (2, 0.0), (2, 0.05), (2, 0.2),
                                                   (3, 0.0)])
 def test_a_still_place_needs_a_third_view_of_the_floor_behind_it(n_known, third_share):
@@ -241,15 +255,9 @@ def test_a_still_place_needs_a_third_view_of_the_floor_behind_it(n_known, third_
     visual hull): the parallax cover of a place counts only when two cameras see the floor
     behind a quarter of its silhouette and a third behind a tenth; then it is the pooled
     share of those pixels that disagree (here all of them)."""
-    room = make_room(n_cameras=3)
-    cue = PeopleCue(room, PeopleCueConfig(spacing=0.2, min_views=2))
-    rng = np.random.default_rng(7)
-    shown = {}
-    for k, name in enumerate(room.cameras):
-        cam = room.cameras[name]
-        disagree = np.ones((cam.height, cam.width), bool)
-        share = 1.0 if k < n_known else third_share if k == n_known else 0.0
-        shown[name] = (disagree, rng.random((cam.height, cam.width)) < share)
+    shares = [1.0 if k < n_known else third_share if k == n_known else 0.0
+              for k in range(3)]
+    cue, shown = _three_views(7, known=shares)
     cover = cue._parallax_cover(shown)
     i = int(np.argmin(np.linalg.norm(cue.xy[:cue.n_places] - POST, axis=1)))
     counted = n_known >= 3 or (n_known == 2 and third_share >= 0.1)
@@ -264,15 +272,7 @@ def test_a_view_that_sees_the_floor_agree_refutes_a_still_place(third_share):
     tests) has no parallax cover, however much the two others disagree; a third view
     that disagrees on more keeps the pooled share (brute force per place and
     orientation)."""
-    room = make_room(n_cameras=3)
-    cue = PeopleCue(room, PeopleCueConfig(spacing=0.2, min_views=2))
-    rng = np.random.default_rng(11)
-    shown = {}
-    for k, name in enumerate(room.cameras):
-        cam = room.cameras[name]
-        share = 1.0 if k < 2 else third_share
-        shown[name] = (rng.random((cam.height, cam.width)) < share,
-                       np.ones((cam.height, cam.width), bool))
+    cue, shown = _three_views(11, disagree=[1.0, 1.0, third_share])
     cover = cue._parallax_cover(shown)
     n_or, n = len(cue.config.orientations), cue.n_places
     want = np.zeros(n_or * n)
@@ -290,10 +290,12 @@ def test_a_view_that_sees_the_floor_agree_refutes_a_still_place(third_share):
             a, b = sp.offsets[w[0]], sp.offsets[w[0] + 1]
             px = [(r, x) for r, x0, x1 in zip(sp.row[a:b], sp.x0[a:b], sp.x1[a:b])
                   for x in range(x0, x1)]
-            h = sum(disagree[r, x] for r, x in px)
-            counts.append((h, len(px)))
-        tested = [c for c in counts if c is not None and c[1] >= 0.1 * max(c[1], 1)]
-        if sum(c is not None and c[1] >= 0.25 * max(c[1], 1) for c in counts) >= 2 \
+            h = sum(bool(disagree[r, x] and kn[r, x]) for r, x in px)
+            k = sum(bool(kn[r, x]) for r, x in px)
+            counts.append((h, k, len(px)))
+        seen = [c for c in counts if c is not None]
+        tested = [(h, k) for h, k, area in seen if k >= 0.1 * max(area, 1)]
+        if sum(k >= 0.25 * max(area, 1) for _, k, area in seen) >= 2 \
                 and len(tested) >= 3 \
                 and not any(h < REFUTE_SHARE * k for h, k in tested):
             want[hyp] = sum(h for h, _ in tested) / max(sum(k for _, k in tested), 1)
