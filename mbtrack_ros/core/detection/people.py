@@ -453,18 +453,27 @@ class PeopleCue:
         n = len(self.states)
         hits, known = np.zeros(n), np.zeros(n)
         views, third = np.zeros(n, np.int64), np.zeros(n, np.int64)
+        seeing = np.zeros(n, np.int64)
+        weakest = np.full(n, np.inf)
         refuted = np.zeros(n, bool)
         for name, (disagree, kn) in shown.items():
             seen_hyp = self._seen[name]
             h, k, area = ForegroundIntegral(disagree, ~kn).counts(seen_hyp.spans)
             hits[seen_hyp.index] += h
             known[seen_hyp.index] += k
+            seeing[seen_hyp.index] += 1
             views[seen_hyp.index] += k >= 0.25 * np.maximum(area, 1)
             tests = k >= 0.1 * np.maximum(area, 1)
             third[seen_hyp.index] += tests
             refuted[seen_hyp.index] |= tests & (h < REFUTE_SHARE * k)
-        cover = np.where((views >= 2) & (third >= 3) & ~refuted,
-                         hits / np.maximum(known, 1.0), 0.0)
+            weakest[seen_hyp.index] = np.where(
+                tests, np.minimum(weakest[seen_hyp.index], h / np.maximum(k, 1.0)),
+                weakest[seen_hyp.index])
+        pooled = hits / np.maximum(known, 1.0)
+        # no third view to refute a phantom of the two-view hull: the weaker view decides
+        cover = np.where(third >= 3, pooled, np.minimum(pooled, weakest))
+        cover = np.where((views >= 2) & (third >= np.minimum(3, seeing)) & ~refuted,
+                         cover, 0.0)
         return cover.reshape(len(self.config.orientations), self.n_places).max(axis=0)
 
     def _refine(self, xy: np.ndarray, score: np.ndarray, ok: np.ndarray,
