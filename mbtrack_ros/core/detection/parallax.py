@@ -20,8 +20,9 @@ At least half of the other cameras that see the floor point must disagree, and a
 tested only where two or more see it, so that a person in front of the floor point in
 one of them (an occlusion, not a disagreement) does not count; where only one other
 camera can see the floor point at all (always in a two-camera room) that one is asked,
-and the occlusion it cannot tell from a disagreement is left to the caller. :class:`~.people.PeopleCue` uses it for the people who stand still while the
-background is bootstrapped.
+and the occlusion it cannot tell from a disagreement is left to the caller.
+:class:`~.people.PeopleCue` uses it for the people who stand still while the background
+is bootstrapped.
 """
 from __future__ import annotations
 
