@@ -475,6 +475,82 @@ def test_a_person_in_the_doorway_hidden_in_one_camera_is_detected_by_the_others(
         for k in range(12)]
     assert run_detector(calib, shown)                          # found when seen by all
 
+def _two_camera_room() -> RoomCalibration:
+    """The painted room with two opposite corner cameras only (cam0, cam2)."""
+    full = make_room(ceiling=False)
+    return RoomCalibration({n: full.cameras[n] for n in ('cam0', 'cam2')}, full.floor,
+                           entry_zones=full.entry_zones)
+
+
+def _behind_a_track(calib, rng, background):
+    """Frames of a tracked person standing at (2.0, 1.8) and a walker behind him as cam0
+    sees it, and per frame the cameras' track masks (the tracked person rendered 0.8 m
+    wide): in cam0 the walker is mostly covered by the track. ``background``: whether the
+    walker is painted at all (else the place behind the track is empty)."""
+    a = person(2.0, 1.8, theta=0.7, colours=(SKIN, (180, 40, 40), (60, 60, 140)))
+    walk = [person(3.2 + 0.05 * k, 2.9 - 0.03 * k, theta=-0.5) for k in range(10)]
+    frames = [paint(calib, background, [], rng) for _ in range(5)]
+    frames += [paint(calib, background, [a, w], rng) for w in walk]
+    tracks = {n: render_labels(c, a[0], BodyShape(1.9, 0.8)) > 0
+              for n, c in calib.cameras.items()}
+    return a, walk, frames, tracks
+
+
+def test_a_walker_hidden_by_a_track_in_one_of_two_cameras_is_found_by_the_other():
+    """Two cameras; in cam0 a new person walks behind a tracked one (most of his
+    silhouette is the track's, so cam0 cannot tell): cam0 neither supports nor refutes
+    him, and cam2 alone confirms him (within 0.25 m) while he is hidden, not only once
+    both cameras see him."""
+    calib = _two_camera_room()
+    rng = np.random.default_rng(5)
+    a, walk, frames, tracks = _behind_a_track(calib, rng, backgrounds(calib))
+    det = Detector(calib, DetectorConfig())
+    bank = BackgroundBank(BackgroundConfig(bootstrap_frames=5, bootstrap_stride=1))
+    found = []
+    for k, images in enumerate(frames):
+        fg = bank.apply(images)
+        if not fg:
+            continue
+        ev = {n: FrameEvidence(images[n], fg[n], tracks=tracks[n],
+                               motion=bank.models[n].recent_motion()) for n in fg}
+        found += [(k, d) for d in det.step(ev, track_xy=a[0][None, :2])]
+    assert found
+    k, d = found[0]
+    assert k <= 9                      # while cam0 cannot see him
+    assert set(d.coverage) == {'cam2'}
+    assert np.linalg.norm(d.xy - walk[k - 5][0][:2]) <= 0.25
+
+
+@pytest.mark.parametrize('shows', ['person', 'background'])
+def test_a_camera_hides_a_place_only_if_what_it_sees_of_it_is_not_background(shows):
+    """A camera in which tracks cover most of a hypothesis counts towards ``min_views``
+    only when the part it does see is foreground; where that part is background it sees
+    the place empty, and the other camera alone is not enough (brute force over the
+    pixels of the hypothesis)."""
+    calib = _two_camera_room()
+    det = Detector(calib, DetectorConfig())
+    state = np.array([3.3, 2.84, 0.0, 0.0, -0.5, 0.0])
+    shape = BodyShape(1.75, 0.5)
+    track = np.array([2.0, 1.8, 0.0, 0.0, 0.7, 0.0])
+    ev = {}
+    for n, cam in calib.cameras.items():
+        sil = render_labels(cam, state, shape) > 0
+        tr = (render_labels(cam, track, BodyShape(1.9, 0.8)) > 0) if n == 'cam0' \
+            else np.zeros_like(sil)
+        fg = sil.copy() if (n == 'cam2' or shows == 'person') else np.zeros_like(sil)
+        ev[n] = FrameEvidence(np.zeros(sil.shape + (3,), np.uint8), fg, tracks=tr)
+        if n == 'cam0':
+            area, known = sil.sum(), (sil & ~tr).sum()
+            assert known < det.config.min_known * area          # cam0: hidden
+            assert known >= det._min_area(cam)                  # but sees a part
+            seen_fg = (fg & sil & ~tr).sum() / known
+    score, views, _ = det._score(ev, state[None], np.array([1.75]), np.array([0.5]),
+                                 full=False)
+    assert views[0] == 1
+    hidden = not seen_fg < det.config.veto_coverage
+    assert np.isfinite(score[0]) == hidden == (shows == 'person')
+
+
 # -- acquisition and release -------------------------------------------------------------
 def test_acquisition_uses_unoccluded_views_only():
     rng = np.random.default_rng(6)

@@ -79,7 +79,10 @@ class DetectorConfig:
             earlier but lets more false hypotheses through.
         excuse_radius: metres; see ``excuse_weakest``.
         min_views: cameras that must see a hypothesis (in image, mostly not hidden by
-            tracks, at least ``min_area`` pixels).
+            tracks, at least ``min_area`` pixels); a camera in which tracked people hide
+            it counts towards them (not seen is not absent: in a two-camera room a person
+            behind a tracked one in one view is confirmed by the other), unless what it
+            does see of it is background, and at least one camera must see it.
         min_known: fraction of the silhouette not covered by tracks for a camera to count.
         min_area: smallest silhouette area in pixels at 320x240 (scaled with the image).
         w_coverage, w_contour, w_symmetry: weights of the three log responses.
@@ -369,14 +372,20 @@ class Detector:
 
     def _view_terms(self, name: str, ev: FrameEvidence, sil, *, full: bool,
                     context=None, ctx_index: np.ndarray | None = None
-                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Per-hypothesis (log response, seeing flag, coverage) of one camera."""
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Per-hypothesis (log response, seeing flag, coverage, hidden flag) of one camera:
+        hidden where the silhouette is in the image (``min_area`` pixels) but mostly
+        covered by tracks (less than ``min_known`` of it known), unless what the camera
+        does see of it (``min_area`` pixels or more) is background (coverage below
+        ``veto_coverage``): there it sees the place empty."""
         cfg = self.config
         cam = self.calibration.cameras[name]
         fg_n, kn_n, area = ev.integral.counts(sil)
         cov = np.where(kn_n > 0, fg_n / np.maximum(kn_n, 1.0), 0.0)
         known = np.where(area > 0, kn_n / np.maximum(area, 1.0), 0.0)
         sees = (kn_n >= self._min_area(cam)) & (known >= cfg.min_known)
+        hidden = (area >= self._min_area(cam)) & ~sees \
+            & ~((kn_n >= self._min_area(cam)) & (cov < cfg.veto_coverage))
         resp = cfg.w_coverage * np.log(np.maximum(cov, cfg.coverage_floor) / cfg.coverage_ref)
         if context is not None:
             # foreground around the hypothesis (a larger standing body at the same place)
@@ -394,7 +403,13 @@ class Detector:
             sym = colour_symmetry(ev.image, sil, bins=ev.bins)
             resp = resp + cfg.w_symmetry * np.where(np.isfinite(sym),
                                                     cfg.symmetry_ref - sym, 0.0)
-        return np.where(sees, resp, 0.0), sees, np.where(sees, cov, np.nan)
+        return np.where(sees, resp, 0.0), sees, np.where(sees, cov, np.nan), hidden
+
+    def _enough_views(self, views: np.ndarray, hidden: np.ndarray) -> np.ndarray:
+        """(N,) bool: ``min_views`` cameras see a hypothesis, a camera in which tracked
+        people hide it counting towards them (it would see the place; not seen is not
+        absent) as long as one camera sees it."""
+        return (views >= 1) & (views + hidden >= self.config.min_views)
 
     def _in_entry(self, xy: np.ndarray) -> np.ndarray:
         """(N,) hypotheses in an entry zone, all False unless ``excuse_weakest``."""
@@ -420,6 +435,7 @@ class Detector:
         n = states.shape[0]
         total = np.zeros(n)
         views = np.zeros(n, np.int64)
+        hidden = np.zeros(n, np.int64)
         covs, side = [], []
         key = np.round(states[:, [X, Y]] / 1e-3).astype(np.int64)
         _, first, ctx_index = np.unique(key, axis=0, return_index=True, return_inverse=True)
@@ -439,10 +455,12 @@ class Detector:
             both = rasterize(self.calibration.cameras[name], both_states, self.shape,
                              heights=both_heights, widths=both_widths)
             sil, context = both.select(0, n), both.select(n, n + m)
-            resp, sees, cov = self._view_terms(name, ev, sil, full=full, context=context,
-                                               ctx_index=ctx_index.ravel())
+            resp, sees, cov, hid = self._view_terms(name, ev, sil, full=full,
+                                                    context=context,
+                                                    ctx_index=ctx_index.ravel())
             total += resp
             views += sees
+            hidden += hid
             covs.append(cov)
             side.append(not self.ceiling[name])
         covs = np.asarray(covs).reshape(len(covs), n)
@@ -450,7 +468,7 @@ class Detector:
         vetoed, _ = _vetoes(covs, np.asarray(side, bool), cfg.veto_coverage,
                             self._excusable(xy, self._in_entry(xy), track_xy),
                             cfg.min_views + 1)
-        total = np.where((views >= cfg.min_views) & ~vetoed, total, -np.inf)
+        total = np.where(self._enough_views(views, hidden) & ~vetoed, total, -np.inf)
         return total, views, covs
 
     def coarse(self, evidence: Mapping[str, FrameEvidence], *,
@@ -460,13 +478,15 @@ class Detector:
         m = len(self.coarse_states)
         total = np.zeros(m)
         views = np.zeros(m, np.int64)
+        hidden = np.zeros(m, np.int64)
         covs, side = [], []
         for name, ev in evidence.items():
             if name not in self._coarse:
                 continue
-            resp, sees, cov = self._view_terms(name, ev, self._coarse[name], full=False)
+            resp, sees, cov, hid = self._view_terms(name, ev, self._coarse[name], full=False)
             total += resp
             views += sees
+            hidden += hid
             covs.append(cov)
             side.append(not self.ceiling[name])
         covs = np.asarray(covs).reshape(len(covs), m)
@@ -474,7 +494,7 @@ class Detector:
         vetoed, counted = _vetoes(covs, np.asarray(side, bool), cfg.veto_coverage,
                                   excusable, cfg.min_views + 1)
         mean_cov = np.where(counted, covs, 0.0).sum(axis=0) / np.maximum(counted.sum(axis=0), 1)
-        ok = (views >= cfg.min_views) & ~vetoed & (mean_cov >= cfg.coarse_coverage)
+        ok = self._enough_views(views, hidden) & ~vetoed & (mean_cov >= cfg.coarse_coverage)
         if track_xy is not None and len(track_xy):
             d = np.linalg.norm(self.coarse_xy[:, None, :] - np.asarray(track_xy)[None], axis=2)
             ok &= d.min(axis=1) > cfg.exclusion_radius

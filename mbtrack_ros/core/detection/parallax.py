@@ -18,9 +18,11 @@ outside the range of the other camera's 3x3 neighbourhood) and to the cameras' d
 exposure (a per-channel gain, the median of the pixels' ratios over the floor both see).
 At least half of the other cameras that see the floor point must disagree, and a pixel is
 tested only where two or more see it, so that a person in front of the floor point in
-one of them (an occlusion, not a disagreement) does not count; a two-camera room gets no
-parallax. :class:`~.people.PeopleCue` uses it for the people who stand still while the
-background is bootstrapped.
+one of them (an occlusion, not a disagreement) does not count; where only one other
+camera can see the floor point at all (always in a two-camera room) that one is asked,
+and the occlusion it cannot tell from a disagreement is left to the caller.
+:class:`~.people.PeopleCue` uses it for the people who stand still while the background
+is bootstrapped.
 """
 from __future__ import annotations
 
@@ -112,8 +114,11 @@ class FloorParallax:
         """``(disagree, known)``, two (H, W) bool masks of one camera: the pixels whose
         floor point at least half of the other cameras that see it show differently
         (difference above ``threshold``), and the pixels where that was tested: those
-        whose floor point at least two other cameras see (with one, a person here and
-        one hiding the floor point from it there look alike). ``hidden``
+        whose floor point at least two other cameras see, or the one other camera that
+        sees it at all (``seen`` before ``hidden``: the test asks what the room's
+        cameras can answer). With one, a person here and one hiding the floor point from
+        it there look alike; the caller tells them apart (:class:`~.people.PeopleCue`
+        requires the views to agree place by place). ``hidden``
         (camera -> (H, W) bool, e.g. people's silhouettes) are pixels of the other
         cameras that show something in front of the floor: no evidence about it."""
         seen = evidence.seen.copy()
@@ -124,7 +129,7 @@ class FloorParallax:
                                 borderMode=cv2.BORDER_CONSTANT, borderValue=0)
                 seen[k] &= hit == 0
         count = seen.sum(axis=0)
-        known = count >= 2
+        known = (count >= np.minimum(2, evidence.seen.sum(axis=0))) & (count >= 1)
         # the lower median over the cameras that see the floor point: at least half of
         # them show it differently (an occlusion in one of two is no disagreement)
         ranked = np.sort(np.where(seen, evidence.diff, np.inf), axis=0)

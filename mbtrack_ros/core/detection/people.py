@@ -51,10 +51,12 @@ for the other falling short by up to half (the floor a neighbour hides behind hi
 outline against a busy background). An object stands where it stands in *every* view:
 a camera that sees the floor behind the place and shows it as the floor refutes it
 (:meth:`PeopleCue._parallax_cover`), however much the other views disagree there (their
-lines of sight meet other objects). Where fewer than three cameras see
-the floor behind him he is learnt into the background, found when he moves, and the
-place he reveals is recognised as a ghost by the background's border test
-(:func:`~.background.ghost_components`).
+lines of sight meet other objects). The test asks as many views as see the place, up to
+three: in a room (or a corner of it) that only two cameras see, the two views' agreement
+is all there is, and the weaker of the two decides (no third view can refute a phantom of
+the two-view hull). Where fewer than two cameras see the floor behind him he is learnt
+into the background, found when he moves, and the place he reveals is recognised as a
+ghost by the background's border test (:func:`~.background.ghost_components`).
 
 OpenCV's HOG people detector (``cv2.HOGDescriptor``) would be the obvious single-view cue,
 but OpenCV 5 moved it out of the main package (``opencv-python-headless`` 5.0 has no
@@ -194,8 +196,8 @@ def still_evidence(cover: np.ndarray, score: np.ndarray, min_parallax: float,
     outline against a busy background lowers his z-score). Neither makes up for more
     than half of the other: a cabinet fills its silhouette with parallax whatever its
     outline, a poster has a person's outline and no parallax. ``-inf`` where ``cover`` is
-    0 (the parallax test does not apply: fewer than three cameras see the floor behind
-    the place) or ``score`` is not finite."""
+    0 (the parallax test does not apply: too few cameras see the floor behind the place,
+    :meth:`PeopleCue._parallax_cover`) or ``score`` is not finite."""
     cover = np.asarray(cover, np.float64)
     score = np.asarray(score, np.float64)
     out = np.minimum(cover / float(min_parallax), STILL_MAKE_UP) \
@@ -441,10 +443,16 @@ class PeopleCue:
         the other cameras' floor, pooled over the cameras ``shown`` (name -> (disagree,
         known) (H, W) bool), best orientation; 0 where fewer than two cameras see floor
         behind a quarter of the silhouette (one view cannot place an object in depth) or
-        fewer than three behind a tenth of it: two views' disagreements meet also where
-        nothing stands (a phantom of the two-view visual hull: one view's line of sight
-        meets one object, the other's another, as between two chairs in a row), and a
-        third view that sees the floor there refutes it. Likewise 0 where any camera that
+        fewer than three behind a tenth of it, of the cameras that see the place
+        (silhouette mostly in the image; all of them when fewer than three do): two views'
+        disagreements meet also where nothing stands (a phantom of the two-view visual
+        hull: one view's line of sight meets one object, the other's another, as between
+        two chairs in a row, or a person in front of the place in one view and the floor
+        his body hides from it in the other), and a third view that sees the floor there
+        refutes it. Where only two views test the place (no third sees it), the share is
+        the smaller of the two views' own shares, not the pooled one (which the view
+        closer to the place, with the larger silhouette, would dominate): each of them
+        must show the object. Likewise 0 where any camera that
         sees the floor behind a tenth of the silhouette disagrees on less than
         :data:`REFUTE_SHARE` of it: an object on the floor stands in every view's line of
         sight (the visual hull is the intersection of the views' silhouette cones), so a
@@ -453,18 +461,27 @@ class PeopleCue:
         n = len(self.states)
         hits, known = np.zeros(n), np.zeros(n)
         views, third = np.zeros(n, np.int64), np.zeros(n, np.int64)
+        seeing = np.zeros(n, np.int64)
+        weakest = np.full(n, np.inf)
         refuted = np.zeros(n, bool)
         for name, (disagree, kn) in shown.items():
             seen_hyp = self._seen[name]
             h, k, area = ForegroundIntegral(disagree, ~kn).counts(seen_hyp.spans)
             hits[seen_hyp.index] += h
             known[seen_hyp.index] += k
+            seeing[seen_hyp.index] += 1
             views[seen_hyp.index] += k >= 0.25 * np.maximum(area, 1)
             tests = k >= 0.1 * np.maximum(area, 1)
             third[seen_hyp.index] += tests
             refuted[seen_hyp.index] |= tests & (h < REFUTE_SHARE * k)
-        cover = np.where((views >= 2) & (third >= 3) & ~refuted,
-                         hits / np.maximum(known, 1.0), 0.0)
+            weakest[seen_hyp.index] = np.where(
+                tests, np.minimum(weakest[seen_hyp.index], h / np.maximum(k, 1.0)),
+                weakest[seen_hyp.index])
+        pooled = hits / np.maximum(known, 1.0)
+        # no third view to refute a phantom of the two-view hull: the weaker view decides
+        cover = np.where(third >= 3, pooled, np.minimum(pooled, weakest))
+        cover = np.where((views >= 2) & (third >= np.minimum(3, seeing)) & ~refuted,
+                         cover, 0.0)
         return cover.reshape(len(self.config.orientations), self.n_places).max(axis=0)
 
     def _refine(self, xy: np.ndarray, score: np.ndarray, ok: np.ndarray,
