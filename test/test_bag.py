@@ -1,9 +1,6 @@
 """rosbag2 recordings: written with rosbags, read back with rosbags and the mcap reader."""
 from __future__ import annotations
 
-import os
-import sys
-import threading
 from pathlib import Path
 
 import numpy as np
@@ -163,18 +160,6 @@ def test_prefetched_order_error_position_and_early_stop():
     assert len(produced) <= 2 + 3 + 2
     with pytest.raises(ValueError):
         next(prefetched([], depth=0))
-
-
-@pytest.mark.skipif(sys.platform != 'linux', reason='a thread has a niceness of its own on Linux')
-def test_prefetched_reads_at_the_niceness_asked_and_leaves_the_caller_at_its_own():
-    def nice() -> int:
-        return os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
-
-    caller = nice()
-    seen = list(prefetched((nice() for _ in range(3)), depth=1, niceness=5))
-    assert seen == [min(caller + 5, 19)] * 3
-    assert nice() == caller
-    assert list(prefetched((nice() for _ in range(2)), depth=1)) == [caller] * 2
 
 
 def test_incomplete_sets_name_the_missing_camera(tmp_path, room, rng):

@@ -50,9 +50,9 @@ from mbtrack_ros.recording.csvfiles import (
 __all__ = ['add_parser', 'run']
 
 _PROG = 'mbtrack replay'
-# The reader thread and the tracks.mcap writer run at this niceness above the replay: they
-# take the CPU the tracker's threads leave.
-_BACKGROUND_NICENESS = 10
+# The tracks.mcap writer runs at this niceness above the replay: it takes the CPU the
+# tracker's threads leave.
+_WRITER_NICENESS = 10
 # /diagnostics of tracks.mcap: one message per second of message time (as the node's
 # diagnostics_period) and one with the final counts
 _DIAGNOSTICS_PERIOD_NS = 1_000_000_000
@@ -338,7 +338,7 @@ def _track_rows(tracker: Tracker, reader: RecordingReader, index: _FrameIndex, s
     # at the tracker's working size (TrackerConfig.working_pixels), resized once in the
     # reader thread; Tracker.step then finds them at its size
     reader.decode_to(tracker.resized_cameras)
-    frames = prefetched(reader.frames(), depth=4, niceness=_BACKGROUND_NICENESS)
+    frames = prefetched(reader.frames(), depth=4)
     try:
         for fs in frames:
             if args.max_frames is not None and status['frames'] >= args.max_frames:
@@ -431,7 +431,7 @@ def _output_bag(out: Path, calibration: RoomCalibration):
         shutil.rmtree(path)  # replaced like tracks.csv
     return BackgroundWriter(functools.partial(output_bag_writer, path, list(calibration.names),
                                               calibration.frame_id),
-                            process=True, wait=False, niceness=_BACKGROUND_NICENESS)
+                            process=True, wait=False, niceness=_WRITER_NICENESS)
 
 
 def _writer_ready(outputs: BackgroundWriter | None) -> None:

@@ -17,10 +17,8 @@ driver and a motion-capture bridge would write them. No rclpy is imported here.
 """
 from __future__ import annotations
 
-import os
 import queue
 import re
-import sys
 import threading
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
@@ -577,20 +575,7 @@ def _gaps(stamps: list[int], shown: int = 3) -> str:
 _T_item = TypeVar('_T_item')
 
 
-def _lower_thread_priority(niceness: int) -> None:
-    """Raise the calling thread's niceness by ``niceness`` (best effort: on Linux a thread
-    has a niceness of its own; elsewhere, or when refused, nothing changes)."""
-    if sys.platform != 'linux':  # elsewhere the call would lower the whole process
-        return
-    try:
-        tid = threading.get_native_id()
-        os.setpriority(os.PRIO_PROCESS, tid, os.getpriority(os.PRIO_PROCESS, tid) + niceness)
-    except (AttributeError, OSError):
-        pass
-
-
-def prefetched(items: Iterable[_T_item], depth: int = 4,
-               niceness: int = 0) -> Iterator[_T_item]:
+def prefetched(items: Iterable[_T_item], depth: int = 4) -> Iterator[_T_item]:
     """Iterate ``items`` in a background thread, at most ``depth`` items ahead, in order.
 
     For :meth:`RecordingReader.frames`: reading, decompressing and decoding the next frame
@@ -598,10 +583,7 @@ def prefetched(items: Iterable[_T_item], depth: int = 4,
     numba/OpenCV work of the caller release the GIL). An exception raised by ``items``
     (e.g. :class:`BagError` at a damaged chunk) is raised here after every item produced
     before it, so the caller sees the same sequence as without prefetching. Closing the
-    iterator early (``break``) stops the thread at its next item. ``niceness`` > 0 raises
-    the thread's niceness by that much where the system schedules threads by it (Linux;
-    elsewhere nothing changes): the reading then takes the CPU the caller's threads leave
-    and does not stall their parallel sections, which wait for their slowest thread.
+    iterator early (``break``) stops the thread at its next item.
     """
     if depth < 1:
         raise ValueError(f'depth must be >= 1, got {depth}')
@@ -618,8 +600,6 @@ def prefetched(items: Iterable[_T_item], depth: int = 4,
         return False
 
     def work() -> None:
-        if niceness > 0:
-            _lower_thread_priority(niceness)
         try:
             for item in items:
                 if not put(('item', item)):
