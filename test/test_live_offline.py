@@ -192,7 +192,9 @@ def live_tracks(recording: Path, seed: int, *, sync_timeout: float = 5.0,
     try:
         with playing(recording, [node, listener], context, rate=0.5, threads=len(cameras) + 3,
                      timeout=90):
-            deadline = time.monotonic() + 30
+            # the node may still be working through the sets the player sent at its rate
+            # (on a slow machine tens of seconds): wait for the last one, within a bound
+            deadline = time.monotonic() + 180
             while time.monotonic() < deadline:
                 with lock:
                     if last in got:
