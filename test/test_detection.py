@@ -475,6 +475,7 @@ def test_a_person_in_the_doorway_hidden_in_one_camera_is_detected_by_the_others(
         for k in range(12)]
     assert run_detector(calib, shown)                          # found when seen by all
 
+
 def _two_camera_room() -> RoomCalibration:
     """The painted room with two opposite corner cameras only (cam0, cam2)."""
     full = make_room(ceiling=False)
@@ -485,8 +486,8 @@ def _two_camera_room() -> RoomCalibration:
 def _behind_a_track(calib, rng, background):
     """Frames of a tracked person standing at (2.0, 1.8) and a walker behind him as cam0
     sees it, and per frame the cameras' track masks (the tracked person rendered 0.8 m
-    wide): in cam0 the walker is mostly covered by the track. ``background``: whether the
-    walker is painted at all (else the place behind the track is empty)."""
+    wide): in cam0 the walker is mostly covered by the track. ``background``: the
+    cameras' empty-room images, the first 5 frames (for the background bootstrap)."""
     a = person(2.0, 1.8, theta=0.7, colours=(SKIN, (180, 40, 40), (60, 60, 140)))
     walk = [person(3.2 + 0.05 * k, 2.9 - 0.03 * k, theta=-0.5) for k in range(10)]
     frames = [paint(calib, background, [], rng) for _ in range(5)]

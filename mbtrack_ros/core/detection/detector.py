@@ -383,9 +383,9 @@ class Detector:
         fg_n, kn_n, area = ev.integral.counts(sil)
         cov = np.where(kn_n > 0, fg_n / np.maximum(kn_n, 1.0), 0.0)
         known = np.where(area > 0, kn_n / np.maximum(area, 1.0), 0.0)
-        sees = (kn_n >= self._min_area(cam)) & (known >= cfg.min_known)
-        hidden = (area >= self._min_area(cam)) & ~sees \
-            & ~((kn_n >= self._min_area(cam)) & (cov < cfg.veto_coverage))
+        min_area = self._min_area(cam)
+        sees = (kn_n >= min_area) & (known >= cfg.min_known)
+        hidden = (area >= min_area) & ~sees & ~((kn_n >= min_area) & (cov < cfg.veto_coverage))
         resp = cfg.w_coverage * np.log(np.maximum(cov, cfg.coverage_floor) / cfg.coverage_ref)
         if context is not None:
             # foreground around the hypothesis (a larger standing body at the same place)
