@@ -179,6 +179,31 @@ def test_refined_places_stand_on_the_people_of_a_synth_bootstrap():
     assert np.linalg.norm(truth[:, None] - both[None], axis=2).min(axis=1).max() < 0.15
 
 
+def test_every_person_of_a_full_room_is_found_not_a_fixed_number():
+    """Eight people walking in a 4 x 3.2 m area of the synth room from the first frame:
+    the cue marks all eight, each 0.3 m or closer; the nms spacing, not a count, bounds
+    the places (a cap of six leaves two people to be found once the background is
+    learnt)."""
+    from mbtrack_ros.synth.presets import Preset
+
+    def populate(crowd) -> None:
+        for _ in range(8):
+            crowd.add(tuple(crowd.random_free_point(min_gap=1.0)), behaviour='area',
+                      area=(3.0, 2.5, 2.0, 1.6, 0.0), speed_range=(0.8, 1.0))
+
+    synth = Synthesizer(Preset('eight', 'eight walking', 6, None, populate), seed=1,
+                        frames=6)
+    rendered = list(synth)
+    frames = [f.images for f in rendered]
+    truth = np.array([[g.x, g.y] for g in rendered[-1].ground_truth])
+    assert len(truth) == 8
+    places = PeopleCue(synth.calibration).places(frames)
+    assert len(places) == 8
+    assert np.linalg.norm(truth[:, None] - places[None], axis=2).min(axis=1).max() < 0.3
+    capped = PeopleCue(synth.calibration, PeopleCueConfig(max_people=6)).places(frames)
+    assert len(capped) == 6
+
+
 def test_seen_hypotheses_boxes_hold_their_spans():
     """The explaining-away update skips hypotheses by box: every span must lie inside."""
     cue = PeopleCue(make_room(n_cameras=2), PeopleCueConfig(spacing=0.3))

@@ -441,10 +441,12 @@ def test_room_family_presets_have_their_cameras_doors_and_crowds():
     assert counts[0] == 4 and 6 <= max(counts) <= 10
     counts, _ = simulate('occupied', 30)
     assert counts[0] >= 4 and min(counts) < counts[0]  # present at the start, some leave
+    counts, _ = simulate('full-room', 45)
+    assert 7 <= counts[0] <= 8 and min(counts) < counts[0]
     _, doors = simulate('two-doors', 60)
     assert doors == {0, 1}  # people come in through both doors
     counts, _ = simulate('eight-cameras', 12)
     assert counts[0] == 4 and max(counts) == 8
-    for name in ('crowd', 'occupied', 'two-cameras', 'three-cameras', 'large-room',
+    for name in ('crowd', 'occupied', 'full-room', 'two-cameras', 'three-cameras', 'large-room',
                  'eight-cameras', 'twelve-cameras', 'two-doors'):
         assert get_preset(f'{name}-short').frames < get_preset(name).frames

@@ -285,8 +285,8 @@ def _clear_room_report(results: list[dict], out: Path) -> Report:
 # ------------------------------------------------------------------------- room families
 
 #: the room families of ``mbtrack synth`` (issue targets in the table's note)
-ROOM_FAMILIES = ('clear-room', 'crowd', 'occupied', 'two-cameras', 'three-cameras',
-                 'large-room', 'two-doors', 'real-room')
+ROOM_FAMILIES = ('clear-room', 'crowd', 'occupied', 'full-room', 'two-cameras',
+                 'three-cameras', 'large-room', 'two-doors', 'real-room')
 _ROOM_SEEDS = 5          # recordings per family (seeds from FRESH_SEED)
 _CROWD_TARGET = 8        # #51's crowd target holds for crowds of up to this many people
 _ROOM_FRAMES = 300       # 20 s at 15 Hz
@@ -1092,7 +1092,8 @@ BENCHMARKS: list[Benchmark] = [
         f'{_ROOM_SEEDS} recordings per room family of `mbtrack synth FAMILY --seed S '
         f'--frames {_ROOM_FRAMES}` (seeds from {FRESH_SEED}; `crowd`: 6-10 people, its '
         f'recordings of up to {_CROWD_TARGET} also in a row of their own, '
-        '`occupied`: everyone present from the first frame, `two-cameras` and '
+        '`occupied`: 4-5 people present from the first frame, `full-room`: 7-8, '
+        '`two-cameras` and '
         '`three-cameras`: corner cameras only, `large-room`: 10 x 8 m with six cameras, '
         '`two-doors`: a second doorway, `real-room`: every condition of the next table), '
         'each tracked with the defaults and automatic detection (`mbtrack replay REC --out '

@@ -106,6 +106,14 @@ def _occupied(crowd: Crowd) -> None:
                            (15.0, 40.0), 5, 1, 12.0)
 
 
+def _full(crowd: Crowd) -> None:
+    """Seven or eight people in the room from the first frame, leaving after 10-40 s;
+    later others come in."""
+    top = int(crowd.rng.integers(7, 9))
+    _present_then_arriving(crowd, top, (10.0, 40.0), (6.0, 15.0), (15.0, 40.0), top, 1,
+                           12.0)
+
+
 def _large(crowd: Crowd) -> None:
     """Three people present, up to six in all over the visit."""
     _present_then_arriving(crowd, 3, (20.0, 60.0), (3.0, 10.0), (20.0, 60.0), 6, 3, 1.0)
@@ -159,6 +167,9 @@ _BASE = (
     Preset('occupied', 'the clear-room room and cameras occupied from the first frame by '
            '4-5 people who move and leave (some after 4 s); others come in later '
            '(450 frames, 30 s)', 450, None, _occupied),
+    Preset('full-room', 'the clear-room room and cameras occupied from the first frame by '
+           '7-8 people who move and leave after 10-40 s; others come in later (450 frames, '
+           '30 s)', 450, None, _full),
     Preset('two-cameras', 'clear-room with only two opposite corner cameras (300 frames)',
            300, ('cam0', 'cam2'), _clear_room),
     Preset('three-cameras', 'clear-room with three corner cameras, no ceiling camera '
@@ -181,7 +192,7 @@ _BASE = (
 
 _SHORT_FRAMES = {'lanz-seq1': 40, 'lanz-seq2': 40, 'lanz-seq3': 30, 'lanz-seq4': 45,
                  'clear-room': 45, 'empty-room': 10, 'real-room': 45, 'crowd': 45,
-                 'occupied': 45, 'two-cameras': 45, 'three-cameras': 45, 'large-room': 45,
+                 'occupied': 45, 'full-room': 45, 'two-cameras': 45, 'three-cameras': 45, 'large-room': 45,
                  'eight-cameras': 45, 'twelve-cameras': 45, 'two-doors': 45}
 
 PRESETS: dict[str, Preset] = {}

@@ -122,7 +122,8 @@ class PeopleCueConfig:
             place no view refutes is a person when the two evidences, each in units of
             its threshold, sum to at least :data:`STILL_ACCEPT`, neither making up for
             more than half of the other (:func:`still_evidence`).
-        max_people: largest number of person-like places marked.
+        max_people: largest number of person-like places marked; ``None`` (default):
+            as many as the evidence shows, which places ``nms_radius`` apart bound.
         nms_radius: smallest distance between two marked places.
         refine_radius: how far a chosen place may move when it is refined with only the
             other places' bodies explained away (0 disables; see ``PeopleCue._refine``).
@@ -152,7 +153,7 @@ class PeopleCueConfig:
     min_score: float = 0.0
     min_parallax: float = 0.5
     min_still_score: float = 1.0
-    max_people: int = 6
+    max_people: int | None = None
     nms_radius: float = 0.7
     refine_radius: float = 0.5
     refine_share: float = 0.9
@@ -169,7 +170,7 @@ class PeopleCueConfig:
             raise DetectionError('people cue spacing and sizes must be > 0')
         if not self.orientations:
             raise DetectionError('people cue needs at least one orientation')
-        if self.min_views < 1 or self.max_people < 0 or self.dilation < 0:
+        if self.min_views < 1 or (self.max_people or 0) < 0 or self.dilation < 0:
             raise DetectionError('people cue min_views >= 1, max_people >= 0, dilation >= 0')
         if not 0.0 < self.min_parallax <= 1.0:
             raise DetectionError(f'people cue min_parallax must be in (0, 1], got '
@@ -229,6 +230,13 @@ class PeopleCue:
         self._seen = {n: _SeenHypotheses.of(self._sils[n], cfg, calibration.cameras[n])
                       for n in self.cameras}
         self._parallax: FloorParallax | None = None    # built on first use
+
+    @property
+    def max_places(self) -> int:
+        """The most places :meth:`places` marks: ``max_people``, or without it the floor
+        grid's places (``nms_radius`` apart, far fewer are ever chosen)."""
+        cap = self.config.max_people
+        return self.n_places if cap is None else int(cap)
 
     @staticmethod
     def _kernel(radius: int) -> np.ndarray:
@@ -357,17 +365,18 @@ class PeopleCue:
         frames = list(frames)
         xy, score, moved = self._evidence(frames)
         ok = np.isfinite(score) & (score >= cfg.min_score)
-        if cfg.max_people == 0 or not ok.any():
+        cap = self.max_places
+        if cap == 0 or not ok.any():
             return np.zeros((0, 2))
         if not moved:
             good = np.flatnonzero(ok)
-            keep = _nms(xy[good], score[good], cfg.nms_radius, cfg.max_people)
+            keep = _nms(xy[good], score[good], cfg.nms_radius, cap)
             return xy[good[keep]]
         original = moved
         moved = {n: mv.copy() for n, mv in moved.items()}
         cov = {n: self._coverage(n, mv) for n, mv in moved.items()}
         chosen: list[int] = []
-        while len(chosen) < cfg.max_people:
+        while len(chosen) < cap:
             motion = self._min_over_cameras(cov)
             cand = ok & (motion >= cfg.min_motion)
             if chosen:
@@ -377,7 +386,7 @@ class PeopleCue:
                 break
             best = int(np.flatnonzero(cand)[np.argmax(motion[cand])])
             chosen.append(best)
-            if len(chosen) == cfg.max_people:
+            if len(chosen) == cap:
                 break
             for name, mv in moved.items():     # explained: not evidence for others
                 explained = mv & self._region(name, xy[best:best + 1], cfg.region_height,
@@ -411,7 +420,8 @@ class PeopleCue:
         he hides from the other cameras, :meth:`~.parallax.FloorParallax.decide`) is no
         evidence for the next, nor is what the places ``taken`` explain."""
         cfg = self.config
-        if len(taken) >= cfg.max_people or not np.isfinite(cfg.min_still_score):
+        cap = self.max_places
+        if len(taken) >= cap or not np.isfinite(cfg.min_still_score):
             return taken
         if self._parallax is None:
             self._parallax = FloorParallax(self.calibration,
@@ -419,7 +429,7 @@ class PeopleCue:
         evidence = {n: ev for n, ev in self._parallax.differences(images).items()
                     if n in self.cameras}
         out = [p for p in np.asarray(taken, np.float64).reshape(-1, 2)]
-        while evidence and len(out) < cfg.max_people:
+        while evidence and len(out) < cap:
             bodies = {n: self._region(n, np.array(out).reshape(-1, 2), cfg.height,
                                       cfg.width, 0) for n in self.calibration.cameras}
             shown = {}
