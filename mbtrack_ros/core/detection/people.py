@@ -42,7 +42,8 @@ first few dozen floor places of a frame (furniture and posters are person-like t
 motion over the first frames (0.1 s) singles him out, and a person who barely moves still
 passes at ``min_motion = 0.03``. A person who stands perfectly still during the bootstrap is
 found by the **floor parallax** of the last frame set instead (:meth:`PeopleCue._still`,
-:class:`~.parallax.FloorParallax`): his silhouettes show something other than the floor
+:class:`~.parallax.FloorParallax`): the core of his silhouettes (the body's axis strip,
+which he fills in every view whatever his build) shows something other than the floor
 the other cameras see behind him (an object stands there), and his outline is a
 person's (a contour/symmetry z-score about ``min_still_score``, well above the
 ``min_score`` that motion needs: furniture stands on the floor too); the two are weighed
@@ -111,8 +112,8 @@ class PeopleCueConfig:
             (ignored with a single bootstrap frame).
         w_symmetry: weight of the colour-symmetry term against the contour term.
         min_score: smallest mean contour/symmetry robust z-score over the seeing cameras.
-        min_parallax: the share of a place's floor-backed silhouette pixels (pooled over
-            the side cameras) that shows something other than the floor the other cameras
+        min_parallax: the share of a place's floor-backed core pixels (``core_width``;
+            pooled over the side cameras) that shows something other than the floor the other cameras
             see there (:class:`~.parallax.FloorParallax`: an object stands there) at which
             a place that does not move is a person on that evidence alone (fraction in
             (0, 1]; see :func:`still_evidence`).
@@ -133,7 +134,8 @@ class PeopleCueConfig:
             yet known (larger than a person: arms, a lean, the grid's position error), so
             that no part of the person is learnt into the background.
         dilation: pixels by which those silhouettes grow.
-        core_width: width of the body's core, metres (see :meth:`PeopleCue.regions`).
+        core_width: width of the body's core, metres: the strip the floor-parallax test
+            measures and a hypothesis must cover (see :meth:`PeopleCue.regions`).
         edge_min_pixels: smallest edge component of the contour feature, pixels.
         The possible foreground inside the region is the silhouette of the tested body
         (``height`` x ``width``): a person-sized blob the detector can localise.
@@ -229,6 +231,11 @@ class PeopleCue:
                       for n in self.cameras}
         self._seen = {n: _SeenHypotheses.of(self._sils[n], cfg, calibration.cameras[n])
                       for n in self.cameras}
+        # the body's core (``core_width`` wide) of the hypotheses each camera sees: what
+        # the floor-parallax test measures (:meth:`_parallax_cover`)
+        core = BodyShape(height=cfg.height, width=cfg.core_width)
+        self._core = {n: _take(rasterize(calibration.cameras[n], self.states, core),
+                               self._seen[n].index) for n in self.cameras}
         self._parallax: FloorParallax | None = None    # built on first use
 
     @property
@@ -449,10 +456,14 @@ class PeopleCue:
 
     def _parallax_cover(self, shown: Mapping[str, tuple[np.ndarray, np.ndarray]]
                         ) -> np.ndarray:
-        """(P,) share of each place's floor-backed silhouette pixels that disagree with
-        the other cameras' floor, pooled over the cameras ``shown`` (name -> (disagree,
-        known) (H, W) bool), best orientation; 0 where fewer than two cameras see floor
-        behind a quarter of the silhouette (one view cannot place an object in depth) or
+        """(P,) share of each place's floor-backed core pixels that disagree with the
+        other cameras' floor, pooled over the cameras ``shown`` (name -> (disagree,
+        known) (H, W) bool), best orientation. The core is the body's ``core_width`` axis
+        strip: a person standing at the place fills it in every view whatever his build,
+        whereas his share of the whole ``width`` silhouette depends on how wide he is
+        against the model (arms, legs apart, a slim person). 0 where fewer than two
+        cameras see floor behind a quarter of the core (one view cannot place an object
+        in depth) or
         fewer than three behind a tenth of it, of the cameras that see the place
         (silhouette mostly in the image; all of them when fewer than three do): two views'
         disagreements meet also where nothing stands (a phantom of the two-view visual
@@ -463,7 +474,7 @@ class PeopleCue:
         the smaller of the two views' own shares, not the pooled one (which the view
         closer to the place, with the larger silhouette, would dominate): each of them
         must show the object. Likewise 0 where any camera that
-        sees the floor behind a tenth of the silhouette disagrees on less than
+        sees the floor behind a tenth of the core disagrees on less than
         :data:`REFUTE_SHARE` of it: an object on the floor stands in every view's line of
         sight (the visual hull is the intersection of the views' silhouette cones), so a
         view that shows the floor there refutes it, however much the others' disagreements
@@ -476,7 +487,7 @@ class PeopleCue:
         refuted = np.zeros(n, bool)
         for name, (disagree, kn) in shown.items():
             seen_hyp = self._seen[name]
-            h, k, area = ForegroundIntegral(disagree, ~kn).counts(seen_hyp.spans)
+            h, k, area = ForegroundIntegral(disagree, ~kn).counts(self._core[name])
             hits[seen_hyp.index] += h
             known[seen_hyp.index] += k
             seeing[seen_hyp.index] += 1
