@@ -412,6 +412,8 @@ def test_detector_without_ceiling_camera_and_config_errors():
         DetectorConfig(zones='room')
     with pytest.raises(DetectionError):
         DetectorConfig(fine_spacing=0.0)
+    with pytest.raises(DetectionError, match='depth_range'):
+        DetectorConfig(depth_range=-0.1)
 
 
 def test_veto_with_the_weakest_view_excused_equals_a_loop_over_hypotheses():
@@ -550,6 +552,69 @@ def test_a_camera_hides_a_place_only_if_what_it_sees_of_it_is_not_background(sho
     assert views[0] == 1
     hidden = not seen_fg < det.config.veto_coverage
     assert np.isfinite(score[0]) == hidden == (shows == 'person')
+
+
+@pytest.mark.parametrize('name', ['cam0', 'cam2'])
+def test_refinement_searches_the_depth_along_a_line_of_sight(name):
+    """A search started 0.6 m from a person along one camera's line of sight through him
+    (the depth that view cannot tell, farther than the fine window reaches) ends at the
+    person: the refinement also tests the places on the cameras' lines of sight, and it
+    ends within the fine spacing of the best of the places on that line tested one by one
+    (brute force over the line, 5 cm apart)."""
+    calib = _two_camera_room()
+    det = Detector(calib, DetectorConfig(sitting=False))
+    truth = np.array([3.1, 2.3])
+    state = np.array([*truth, 0.0, 0.0, 0.0, 0.0])
+    images = paint(calib, backgrounds(calib), [person(*truth, theta=0.0, h=1.75, w=0.5)],
+                   np.random.default_rng(3))
+    ev = {n: FrameEvidence(images[n], render_labels(c, state, BodyShape(1.75, 0.5)) > 0)
+          for n, c in calib.cameras.items()}
+    u = truth - calib.cameras[name].center[:2]
+    u /= np.linalg.norm(u)
+    assert 0.6 > det.config.fine_radius + det.config.fine_spacing
+    found = det._refine(ev, truth + 0.6 * u, np.zeros((0, 2)))
+    assert found is not None
+    assert np.linalg.norm(found.xy - truth) <= 0.1
+    line = truth + np.arange(-0.6, 0.61, 0.05)[:, None] * u[None]
+    states = np.zeros((len(line), 6))
+    states[:, :2] = line
+    brute, _, _ = det._score(ev, states, np.full(len(line), 1.75), np.full(len(line), 0.5),
+                             full=True)
+    best = line[int(np.argmax(brute))]
+    assert np.linalg.norm(best - truth) <= 0.1
+    assert np.linalg.norm(found.xy - best) <= det.config.fine_spacing + 1e-9
+
+
+def test_line_places_beside_a_track_compare_only_when_no_more_hidden():
+    """``Detector._comparable``: a place farther than ``beside_radius`` from every track
+    always compares with the window's best; one beside a track only when in no camera
+    more of its silhouette is covered by tracks than of the best's (brute force over the
+    rendered masks; the tracks' mask is a track's silhouette and a random patch)."""
+    rng = np.random.default_rng(12)
+    calib = _two_camera_room()
+    det = Detector(calib, DetectorConfig(), beside_radius=1.0)
+    track = np.array([3.0, 2.5, 0.0, 0.0, 0.0, 0.0])
+    best = np.array([3.65, 3.05, 0.0, 0.0, 0.0, 0.0])     # behind the track in cam0
+    states = np.zeros((40, 6))
+    states[:, :2] = rng.uniform([1.0, 0.8], [5.0, 4.2], (40, 2))
+    shape = BodyShape(1.75, 0.5)
+    ev, tracks = {}, {}
+    for n, cam in calib.cameras.items():
+        tracks[n] = render_labels(cam, track, BodyShape(1.9, 0.8)) > 0
+        tracks[n][rng.integers(0, H - 20):, :rng.integers(20, W)] |= n == 'cam2'
+        ev[n] = FrameEvidence(np.zeros((H, W, 3), np.uint8), np.zeros((H, W), bool),
+                              tracks=tracks[n])
+
+    def known(n, state):
+        m = render_labels(calib.cameras[n], state, shape) > 0
+        return (m & ~tracks[n]).sum() / m.sum() if m.sum() else 1.0
+
+    got = det._comparable(ev, best, states, track[None, :2], 1.75, 0.5)
+    want = [np.hypot(*(s[:2] - track[:2])) > 1.0
+            or all(known(n, s) >= known(n, best) for n in calib.cameras) for s in states]
+    np.testing.assert_array_equal(got, want)
+    assert 0 < got.sum() < len(got) and not all(
+        np.hypot(*(s[:2] - track[:2])) > 1.0 for s in states[got])
 
 
 # -- acquisition and release -------------------------------------------------------------

@@ -95,6 +95,12 @@ class DetectorConfig:
         confirm_radius: largest position change between confirming frames.
         exclusion_radius: hypotheses this close to a track are not tested.
         nms_radius: non-maximum-suppression radius between detections.
+        depth_range: metres; the fine search also tests the places on each side camera's
+            line of sight through the best place of its window, up to this far from it
+            (:meth:`Detector._sight_lines`): a view fixes the bearing of a person but hardly
+            the depth, and where the views' evidence disagrees about the depth (a view that
+            sees only part of the body, the edge of a door, a nearer person) the window
+            around a coarse point can hold the wrong one. 0 turns it off.
         max_candidates: coarse neighbourhoods refined per frame (a fixed budget that bounds
             the search time; the neighbourhoods of candidates being confirmed go first).
         min_motion: fraction of recently moving pixels of the silhouette (in every side
@@ -144,6 +150,7 @@ class DetectorConfig:
     exclusion_radius: float = 0.5
     nms_radius: float = 0.6
     max_candidates: int = 3
+    depth_range: float = 0.8
     min_motion: float = 0.05
     min_speed: float = 0.3
     max_speed: float = 2.0
@@ -153,6 +160,8 @@ class DetectorConfig:
     def __post_init__(self) -> None:
         if not self.excuse_radius >= 0:
             raise DetectionError('detector excuse_radius must be >= 0')
+        if not self.depth_range >= 0:
+            raise DetectionError('detector depth_range must be >= 0')
         for name in ('coarse_spacing', 'fine_spacing', 'nms_radius', 'confirm_radius'):
             if not getattr(self, name) > 0:
                 raise DetectionError(f'detector {name} must be > 0')
@@ -341,12 +350,18 @@ class Detector:
         calibration: the room; only its cameras (any subset) and floor/entry zones are used.
         config: search parameters.
         shape: body profile used for the hypotheses (sizes are overridden per hypothesis).
+        beside_radius: metres; within this distance of a track a detection may be the
+            track's own person (the association's ``relocate_radius``); there the search
+            along lines of sight takes only places no more hidden by tracks than the
+            window's best (:meth:`_comparable`). Default: ``exclusion_radius``.
     """
 
     def __init__(self, calibration: RoomCalibration, config: DetectorConfig | None = None, *,
-                 shape: BodyShape | None = None) -> None:
+                 shape: BodyShape | None = None, beside_radius: float | None = None) -> None:
         self.calibration = calibration
         self.config = cfg = config or DetectorConfig()
+        self.beside_radius = cfg.exclusion_radius if beside_radius is None \
+            else float(beside_radius)
         self.shape = shape or BodyShape(height=cfg.coarse_height, width=cfg.coarse_width)
         self.ceiling = {n: is_ceiling(c) for n, c in calibration.cameras.items()}
         zones = list(calibration.entry_zones)
@@ -560,12 +575,7 @@ class Detector:
         r = cfg.fine_radius
         off = np.arange(-r, r + 1e-9, cfg.fine_spacing)
         gx, gy = np.meshgrid(off, off)
-        xy = centre + np.stack([gx.ravel(), gy.ravel()], axis=1)
-        x0, y0, x1, y1 = self._bounds()
-        xy = xy[(xy[:, 0] >= x0) & (xy[:, 0] <= x1) & (xy[:, 1] >= y0) & (xy[:, 1] <= y1)]
-        if len(track_xy):
-            d = np.linalg.norm(xy[:, None] - track_xy[None], axis=2).min(axis=1)
-            xy = xy[d > cfg.exclusion_radius]
+        xy = self._admissible(centre + np.stack([gx.ravel(), gy.ravel()], axis=1), track_xy)
         if xy.size == 0:
             return None
         # step 1: position and pose with the mean size
@@ -579,6 +589,18 @@ class Detector:
         best = int(np.argmax(score))
         if not np.isfinite(score[best]):
             return None
+        if cfg.depth_range > 0:
+            # step 1b: the depth along each camera's line of sight through the best place
+            ray = self._sight_lines(states[best, [X, Y]], track_xy)
+            if len(ray):
+                rs = np.concatenate([_states(ray, 0.0, p) for p in poses])
+                k = len(rs)
+                rscore, _, _ = self._score(evidence, rs, np.full(k, h0), np.full(k, w0),
+                                           full=True, track_xy=track_xy)
+                rscore[~self._comparable(evidence, states[best], rs, track_xy, h0, w0)] = -np.inf
+                rb = int(np.argmax(rscore))
+                if rscore[rb] > score[best]:
+                    states, score, best = rs, rscore, rb
         # step 2: size and orientation at the best position, then the position at half
         # the fine spacing with the best size (separately: 24 + 9 hypotheses, not 216)
         bx = states[best, [X, Y]]
@@ -616,6 +638,71 @@ class Detector:
         return Detection(state=states2[b].copy(), height=float(H[b]), width=float(W[b]),
                          score=float(score2[b]), coverage=coverage,
                          motion=min(motion) if motion else float('inf'))
+
+    def _comparable(self, evidence: Mapping[str, FrameEvidence], best: np.ndarray,
+                    states: np.ndarray, track_xy: np.ndarray, height: float, width: float
+                    ) -> np.ndarray:
+        """(N,) bool: hypotheses ``states`` whose scores compare with that of ``best``
+        (a state) on the same evidence: farther than ``beside_radius`` from every track,
+        or in no camera more of their silhouette (``height``, ``width``, metres) covered
+        by tracks than of ``best``'s. The coverage of a silhouette is measured on the part
+        no track covers, so beside a track - whose person the hypothesis may be - a place
+        that hides its misfit behind the track would score as if it fitted; a track
+        farther away covers a part of a place because it stands between it and the
+        camera."""
+        if not len(track_xy):
+            return np.ones(len(states), bool)
+        d = np.linalg.norm(states[:, None, [X, Y]] - track_xy[None], axis=2).min(axis=1)
+        far = d > self.beside_radius
+        if far.all():
+            return far
+        open_ = np.ones(len(states), bool)      # no more covered than best in any camera
+        both = np.concatenate([best[None], states])
+        for name, ev in evidence.items():
+            if name not in self.calibration.cameras or ev.tracks is None:
+                continue
+            sil = rasterize(self.calibration.cameras[name], both, self.shape,
+                            heights=np.full(len(both), height),
+                            widths=np.full(len(both), width))
+            _, known, area = ev.integral.counts(sil)
+            frac = np.where(area > 0, known / np.maximum(area, 1.0), 1.0)
+            open_ &= frac[1:] >= frac[0]
+        return far | open_
+
+    def _admissible(self, xy: np.ndarray, track_xy: np.ndarray) -> np.ndarray:
+        """The floor places (K, 2) inside the search bounds and farther than
+        ``exclusion_radius`` from every track."""
+        x0, y0, x1, y1 = self._bounds()
+        xy = xy[(xy[:, 0] >= x0) & (xy[:, 0] <= x1) & (xy[:, 1] >= y0) & (xy[:, 1] <= y1)]
+        if len(track_xy) and len(xy):
+            d = np.linalg.norm(xy[:, None] - track_xy[None], axis=2).min(axis=1)
+            xy = xy[d > self.config.exclusion_radius]
+        return xy
+
+    def _sight_lines(self, place: np.ndarray, track_xy: np.ndarray) -> np.ndarray:
+        """(K, 2) floor places on the lines of sight of the side cameras through ``place``
+        (the floor line from the camera's foot point through it): farther than
+        ``fine_radius`` (the window's reach) and within ``depth_range`` of it,
+        ``fine_spacing`` apart, admissible (:meth:`_admissible`). Along such a line
+        the camera's view of a body changes little (its bearing stays, its size and foot
+        row change slowly), so the depth is what the other views' evidence decides, and
+        their best agreement may lie farther than the window around a coarse point
+        reaches."""
+        cfg = self.config
+        t = np.arange(-cfg.depth_range, cfg.depth_range + 1e-9, cfg.fine_spacing)
+        t = t[np.abs(t) > cfg.fine_radius + 1e-9]   # nearer: within the window's reach
+        lines = []
+        for name, cam in self.calibration.cameras.items():
+            if self.ceiling[name]:
+                continue                # looking down, it sees the floor place itself
+            u = np.asarray(place, np.float64) - cam.center[:2]
+            norm = float(np.hypot(*u))
+            if norm < 1e-6:
+                continue
+            lines.append(place + t[:, None] * (u / norm)[None])
+        if not lines:
+            return np.zeros((0, 2))
+        return self._admissible(np.concatenate(lines), track_xy)
 
     def _bounds(self) -> tuple[float, float, float, float]:
         z = np.asarray(self.zones, dtype=np.float64)

@@ -97,7 +97,7 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
         self.config = cfg = config or AutoDetectionConfig()
         self.sigma = float(sigma)
         self.background = BackgroundBank(cfg.background, calibration=calibration)
-        self.detector = Detector(calibration, cfg.detector)
+        self.detector = Detector(calibration, cfg.detector, beside_radius=cfg.relocate_radius)
         self.releaser = Releaser(calibration, cfg.release)
         self.aux: dict[int, TrackAuxiliary] = {}
         self._last_stamp: int | None = None
