@@ -192,8 +192,8 @@ _BASE = (
 
 _SHORT_FRAMES = {'lanz-seq1': 40, 'lanz-seq2': 40, 'lanz-seq3': 30, 'lanz-seq4': 45,
                  'clear-room': 45, 'empty-room': 10, 'real-room': 45, 'crowd': 45,
-                 'occupied': 45, 'full-room': 45, 'two-cameras': 45, 'three-cameras': 45, 'large-room': 45,
-                 'eight-cameras': 45, 'twelve-cameras': 45, 'two-doors': 45}
+                 'occupied': 45, 'full-room': 45, 'two-cameras': 45, 'three-cameras': 45,
+                 'large-room': 45, 'eight-cameras': 45, 'twelve-cameras': 45, 'two-doors': 45}
 
 PRESETS: dict[str, Preset] = {}
 for _p in _BASE:

@@ -113,8 +113,9 @@ class PeopleCueConfig:
         w_symmetry: weight of the colour-symmetry term against the contour term.
         min_score: smallest mean contour/symmetry robust z-score over the seeing cameras.
         min_parallax: the share of a place's floor-backed core pixels (``core_width``;
-            pooled over the side cameras) that shows something other than the floor the other cameras
-            see there (:class:`~.parallax.FloorParallax`: an object stands there) at which
+            pooled over the side cameras) that shows something other than the floor the
+            other cameras see there (:class:`~.parallax.FloorParallax`: an object stands
+            there) at which
             a place that does not move is a person on that evidence alone (fraction in
             (0, 1]; see :func:`still_evidence`).
         min_still_score: the mean contour/symmetry robust z-score of such a place at which
