@@ -115,9 +115,8 @@ class PeopleCueConfig:
         min_parallax: the share of a place's floor-backed core pixels (``core_width``;
             pooled over the side cameras) that shows something other than the floor the
             other cameras see there (:class:`~.parallax.FloorParallax`: an object stands
-            there) at which
-            a place that does not move is a person on that evidence alone (fraction in
-            (0, 1]; see :func:`still_evidence`).
+            there) at which a place that does not move is a person on that evidence alone
+            (fraction in (0, 1]; see :func:`still_evidence`).
         min_still_score: the mean contour/symmetry robust z-score of such a place at which
             its outline alone makes it a person's (not a table's or a chair's), robust
             standard deviations (> 0); ``inf`` disables the still-person stage. A still
