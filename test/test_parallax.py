@@ -220,8 +220,8 @@ def test_a_parallax_share_far_above_its_threshold_does_not_make_a_poor_outline_a
 def test_still_evidence_sums_the_two_evidences_in_units_of_their_thresholds():
     """Brute force over a grid of (share, z-score): each in units of its threshold, at
     most ``STILL_MAKE_UP``, summed; a person at ``STILL_ACCEPT`` or more, never where the
-    parallax test does not apply (share 0) or the outline is unseen, nor where either evidence is below
-    half its threshold."""
+    parallax test does not apply (share 0) or the outline is unseen, nor where either
+    evidence is below half its threshold."""
     cover = np.repeat(np.linspace(0.0, 1.0, 11), 9)
     score = np.tile(np.linspace(-1.0, 3.0, 9), 11)
     score[::7] = -np.inf

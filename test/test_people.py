@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+import pytest
 
 from conftest import make_room
+from mbtrack_ros.core.detection import DetectionError
 from mbtrack_ros.core.detection.background import median_frame
 from mbtrack_ros.core.detection.detector import _max_span_width
 from mbtrack_ros.core.detection.features import (
@@ -202,6 +204,8 @@ def test_every_person_of_a_full_room_is_found_not_a_fixed_number():
     assert np.linalg.norm(truth[:, None] - places[None], axis=2).min(axis=1).max() < 0.3
     capped = PeopleCue(synth.calibration, PeopleCueConfig(max_people=6)).places(frames)
     assert len(capped) == 6
+    with pytest.raises(DetectionError, match='max_people'):
+        PeopleCueConfig(max_people=-1)
 
 
 def test_seen_hypotheses_boxes_hold_their_spans():

@@ -172,8 +172,10 @@ class PeopleCueConfig:
             raise DetectionError('people cue spacing and sizes must be > 0')
         if not self.orientations:
             raise DetectionError('people cue needs at least one orientation')
-        if self.min_views < 1 or (self.max_people or 0) < 0 or self.dilation < 0:
-            raise DetectionError('people cue min_views >= 1, max_people >= 0, dilation >= 0')
+        capped_below_zero = self.max_people is not None and self.max_people < 0
+        if self.min_views < 1 or capped_below_zero or self.dilation < 0:
+            raise DetectionError('people cue min_views >= 1, max_people >= 0 or None, '
+                                 'dilation >= 0')
         if not 0.0 < self.min_parallax <= 1.0:
             raise DetectionError(f'people cue min_parallax must be in (0, 1], got '
                                  f'{self.min_parallax}')
@@ -234,8 +236,8 @@ class PeopleCue:
         # the body's core (``core_width`` wide) of the hypotheses each camera sees: what
         # the floor-parallax test measures (:meth:`_parallax_cover`)
         core = BodyShape(height=cfg.height, width=cfg.core_width)
-        self._core = {n: _take(rasterize(calibration.cameras[n], self.states, core),
-                               self._seen[n].index) for n in self.cameras}
+        self._core = {n: rasterize(calibration.cameras[n], self.states[self._seen[n].index],
+                                   core) for n in self.cameras}
         self._parallax: FloorParallax | None = None    # built on first use
 
     @property
