@@ -619,11 +619,20 @@ def test_prior_list_equals_target_by_target_normalisation():
         _normalised_prior_list([np.ones(3), np.ones(2)], parts, False)
 
 
-def _brute_coverage(mm, camera, state, model, mask):
-    """Foreground fraction of one state's rendered silhouette, pixel by pixel (NaN when the
-    silhouette is outside the image)."""
-    body = mm.render_labels(camera, state, model) > 0
-    return float((body & mask).sum() / body.sum()) if body.any() else float('nan')
+def _brute_term(mm, camera, states, model, mask, prior, neutral=0.5, undecided=None):
+    """The coverage term's ``f`` of each state (N,) in one camera, pixel by pixel: every
+    silhouette pixel adds ``F_u - neutral`` (an undecided pixel 0), the sum is divided by
+    the prior-weighted mean silhouette area (pixels in the image) and ``neutral`` added; a
+    silhouette outside the image gets the prior-weighted mean of the others' ``f``."""
+    bodies = [mm.render_labels(camera, s, model) > 0 for s in states]
+    und = np.zeros(mask.shape, bool) if undecided is None else undecided
+    area = np.array([b.sum() for b in bodies], float)
+    excess = np.array([((b & mask & ~und).sum() - neutral * (b & ~und).sum()) for b in bodies])
+    inside = area > 0
+    ref = np.sum(prior[inside] * area[inside]) / np.sum(prior[inside])
+    f = np.where(inside, neutral + excess / ref, np.nan)
+    f[~inside] = np.sum(prior[inside] * f[inside]) / np.sum(prior[inside])
+    return f
 
 
 @pytest.mark.parametrize('separable', [False, True])
@@ -653,12 +662,8 @@ def test_coverage_term_adds_gain_times_brute_force_coverage(separable):
         prior = np.full(5, 0.2) if separable else weights[k] / weights[k].sum()
         term = np.zeros(5)
         for cam in cams:
-            f = np.array([_brute_coverage(mm, cam.name, s, models[k], masks[cam.name])
-                          for s in particles[k]])
-            inside = np.isfinite(f)
-            # outside the image: the target's prior-weighted mean coverage in that camera
-            f[~inside] = np.sum(prior[inside] * f[inside]) / np.sum(prior[inside])
-            term += gain * f
+            term += gain * _brute_term(mm, cam.name, particles[k], models[k],
+                                       masks[cam.name], prior)
         np.testing.assert_allclose(with_term[k] - plain[k], term, atol=1e-9)
         assert np.ptp(term) > 0.1                  # the term tells the particles apart
     mm.set_images(images)                          # a new frame clears the masks
@@ -669,8 +674,9 @@ def test_coverage_term_adds_gain_times_brute_force_coverage(separable):
 @pytest.mark.parametrize('separable', [False, True])
 def test_undecided_pixels_count_as_the_neutral_coverage_in_the_term(separable):
     """With undecided background pixels, each counts as ``neutral`` in the particle's
-    coverage, whatever its mask value: ``(fg on decided + neutral x undecided) / area``,
-    pixel by pixel; a particle on undecided pixels alone gets ``gain x neutral``."""
+    coverage, whatever its mask value: it adds nothing to the foreground excess
+    ``fg - neutral x area`` (pixel by pixel); a particle on undecided pixels alone gets
+    ``gain x neutral``."""
     rng = np.random.default_rng(23)
     cams = _two_cameras()
     mm = MeasurementModel(_room(*cams), LikelihoodConfig(min_visible_pixels=1))
@@ -700,17 +706,12 @@ def test_undecided_pixels_count_as_the_neutral_coverage_in_the_term(separable):
     shares = []
     for cam in cams:
         und = undecided[cam.name]
-        und = np.zeros((cam.height, cam.width), bool) if und is None else und
-        f = np.full(6, np.nan)
-        for i, state in enumerate(particles[0]):
+        term += gain * _brute_term(mm, cam.name, particles[0], models[0], masks[cam.name],
+                                   prior, neutral, und)
+        for state in particles[0]:
             body = mm.render_labels(cam.name, state, models[0]) > 0
-            if body.any():
-                f[i] = ((body & masks[cam.name] & ~und).sum() + neutral * (body & und).sum()
-                        ) / body.sum()
+            if body.any() and und is not None:
                 shares.append((body & und).sum() / body.sum())
-        inside = np.isfinite(f)
-        f[~inside] = np.sum(prior[inside] * f[inside]) / np.sum(prior[inside])
-        term += gain * f
     assert max(shares) > 0.3 and min(shares) < 0.1    # some particles on undecided pixels
     np.testing.assert_allclose(with_term - plain, term, atol=1e-9)
     with pytest.raises(LikelihoodError, match='neutral coverage'):
@@ -737,6 +738,34 @@ def test_coverage_term_prefers_the_foreground_over_a_look_alike_background():
     mm.set_foreground(masks, 2.0)
     scored = mm.hjs(parts, [np.ones(2)], models[:1]).loglik[0]
     assert scored[0] > scored[1] + 3.0              # 2 cameras x gain 2 x (1 - 0)
+
+
+def test_a_place_along_the_line_of_sight_inside_the_blob_loses_to_the_person():
+    """Farther along a camera's line of sight a body's image is smaller and lies inside the
+    person's blob: its foreground fraction is as high as the person's own, so colour and a
+    plain coverage fraction cannot tell the depth. Counted per pixel, the foreground it
+    leaves unexplained weighs against it; nearer, the larger silhouette covers background
+    and loses too."""
+    cam = _camera('front', (0.0, -4.0, 1.3), size=(96, 72), focal=110.0)
+    mm = MeasurementModel(_room(cam), LikelihoodConfig(min_visible_pixels=5))
+    colours = [((230, 190, 160), (200, 30, 30), (30, 30, 200))]
+    model = _flat_model(colours[0], 1.75)
+    places = np.zeros((3, 6))
+    places[1, Y] = 0.7                               # 0.7 m farther along the sight line
+    places[2, Y] = -0.7                              # 0.7 m nearer
+    person = mm.render_labels('front', places[0], model) > 0
+    farther = mm.render_labels('front', places[1], model) > 0
+    assert (farther & person).sum() == farther.sum() < 0.8 * person.sum()
+    gain = 2.0
+    mm.set_images({'front': np.full((72, 96, 3), 90, np.uint8)})   # no colour evidence
+    mm.set_foreground({'front': person}, gain)
+    scored = mm.hjs([places], [np.ones(3)], [model]).loglik[0]
+    expected = gain * _brute_term(mm, 'front', places, model, person, np.full(3, 1 / 3))
+    np.testing.assert_allclose(scored - scored[0], expected - expected[0], atol=1e-9)
+    # a plain fraction scores the farther place as the person's (all of it is foreground);
+    # counted per pixel the blob it leaves unexplained tells them apart, and the nearer
+    # place covers background
+    assert scored[0] - scored[1] > 0.1 * gain and scored[0] - scored[2] > 0.1 * gain
 
 
 def test_a_particle_on_the_person_beats_one_on_a_guessed_blob():
@@ -783,8 +812,10 @@ def test_coverage_masks_and_gain_are_checked():
     plain = mm.hjs(particles, [np.ones(4)], models).loglik[0]
     mm.set_foreground({'nowhere': np.zeros((3, 3), bool)}, 1.0)   # unknown camera: no term
     np.testing.assert_array_equal(mm.hjs(particles, [np.ones(4)], models).loglik[0], plain)
-    mm.set_foreground({'front': np.ones((36, 48), bool)}, 1.0)    # front fully covered: +gain
-    np.testing.assert_allclose(mm.hjs(particles, [np.ones(4)], models).loglik[0], plain + 1.0)
+    mm.set_foreground({'front': np.ones((36, 48), bool)}, 1.0)    # front fully covered
+    np.testing.assert_allclose(mm.hjs(particles, [np.ones(4)], models).loglik[0], plain
+                               + _brute_term(mm, 'front', particles[0], models[0],
+                                             np.ones((36, 48), bool), np.full(4, 0.25)))
 
 
 def test_coverage_masks_from_a_callable_are_fetched_once_and_give_the_same_term():

@@ -39,10 +39,12 @@ doorway. The exit's strip between the floor's edge and the wall is in front of t
 camera and scored as usual.
 
 With automatic detection the frame's foreground masks come too
-(:meth:`MeasurementModel.set_foreground`): each particle then gains ``k f_c`` per camera
-(``k``: ``LikelihoodConfig.coverage_gain``),
-``f_c`` the foreground fraction of its silhouette, counted on the spans the camera's kernel
-rasterised.
+(:meth:`MeasurementModel.set_foreground`): each particle then gains ``k f`` per camera
+(``k``: ``LikelihoodConfig.coverage_gain``), ``f`` its silhouette's foreground counted
+pixel by pixel on the spans the camera's kernel rasterised (:func:`explained_cover`: each
+pixel adds ``F_u - f_s``, per the target's mean silhouette area), so that a smaller
+silhouette inside a person's blob (farther along the line of sight, sitting, partly off
+the image) does not score as the person's own.
 
 How w* enters the foreground term (000 Eq. 33): the image histogram of a part is
 accumulated with per-pixel weight w*(u); the rendered (model) histogram of a part is
@@ -73,7 +75,7 @@ from mbtrack_ros.core.state import STATE_DIM, VX, VY, X, Y
 
 __all__ = ['CameraRequest', 'CameraScores', 'HJSDebug', 'LikelihoodConfig', 'LikelihoodError',
            'LikelihoodResult', 'MeasurementModel', 'Scorer', 'camera_constants',
-           'score_camera']
+           'explained_cover', 'score_camera']
 
 
 class LikelihoodError(ValueError):
@@ -98,9 +100,10 @@ class LikelihoodConfig:
             update w* = 1 and the fraction is the share inside the image).
         subsample: use every k-th image row of the silhouettes (speed option).
         threads: cameras evaluated in parallel threads (0: one per CPU core, 1: serial).
-        coverage_gain: ``k`` of the foreground-coverage term ``k f_c`` (nats per camera
-            at full coverage, ``f_c`` in [0, 1] the foreground fraction of a particle's
-            silhouette) that the frame's foreground masks add to the log-likelihood
+        coverage_gain: ``k`` of the foreground-coverage term ``k f`` (nats per camera;
+            ``f`` the foreground of a particle's silhouette counted per pixel, 1 for a
+            silhouette of its target's mean area all on foreground, :func:`explained_cover`)
+            that the frame's foreground masks add to the log-likelihood
             (:meth:`MeasurementModel.set_foreground`, module docstring); 0: colour alone.
             Larger holds tracks on the foreground more firmly (better MOTP, fewer
             identity switches) at the cost of the colour evidence's say.
@@ -229,6 +232,42 @@ def _with_target_mean(values: np.ndarray, known: np.ndarray, target: np.ndarray,
     return np.where(known, values, mean[target])
 
 
+def explained_cover(cover: np.ndarray, area: np.ndarray, target: np.ndarray,
+                    prior: np.ndarray, neutral: float) -> np.ndarray:
+    """Foreground coverage in the units of the coverage term, counted per pixel.
+
+    Each pixel a silhouette covers in the image is a witness with log-ratio ``F_u - f_s``
+    ("a person here" against "background here", 000 Eq. 20 with a binary observation:
+    ``F_u`` 1 on foreground, ``f_s`` = ``neutral`` the coverage at which the evidence is
+    neutral, the existence process's ``min_coverage``); the silhouette's evidence is their
+    sum, ``area (cover - f_s)``, per reference area: the prior-weighted mean silhouette
+    area ``a_k`` of the particle's target in this camera. Returned as the coverage a
+    silhouette of the reference area would need for the same sum, ``f_s + (cover - f_s)
+    area / a_k``, so that the term ``k f`` keeps its scale.
+
+    A plain foreground fraction favours any silhouette lying inside a person's blob: a
+    hypothesis farther along a camera's line of sight (smaller), one partly off the image
+    (the pixels outside count nothing) or a sitting one all cover only foreground. Summed
+    over pixels the foreground a hypothesis leaves unexplained weighs against it, and so
+    does the background a nearer, larger one covers. (On background alone the sum favours
+    the smaller silhouette, which a person farther away would have: a track that lost its
+    person drifts away from the cameras rather than stay put.)
+
+    Args:
+        cover: (P,) foreground fraction of each silhouette's pixels in the image.
+        area: (P,) those pixels; 0 for a silhouette outside the image.
+        target, prior: (P,) target index and prior weight of each particle.
+        neutral: ``f_s`` in [0, 1].
+    """
+    n_targets = int(target.max()) + 1 if len(target) else 0
+    seen = area > 0
+    mass = np.bincount(target, weights=prior * seen, minlength=n_targets)
+    total = np.bincount(target, weights=prior * area, minlength=n_targets)
+    ref = np.divide(total, mass, out=np.ones(n_targets), where=mass > 0)
+    ref = np.where(ref > 0, ref, 1.0)
+    return neutral + (cover - neutral) * area / ref[target]
+
+
 @dataclass
 class CameraRequest:
     """One camera's share of :meth:`MeasurementModel.hjs` / ``separable`` for a frame set:
@@ -301,7 +340,8 @@ class CameraScores:
         visible: (K,) prior-weighted mean visible fraction of each target.
         inside: (P,) share of each silhouette inside the image (0 where neutral).
         cover: (P,) foreground coverage of each silhouette with the undecided pixels at
-            ``neutral`` (NaN outside the image or without a coverage term).
+            ``neutral``, counted per pixel (:func:`explained_cover`; NaN outside the image
+            or without a coverage term).
     """
 
     loglik: np.ndarray
@@ -362,7 +402,8 @@ def score_camera(camera: tuple, image: np.ndarray, bins: np.ndarray,
     if fg is not None:   # foreground coverage term on the kernel's silhouettes
         cover, known, area = fg.coverage(Spans(*spans))
         cover = known * cover + (1.0 - known) * r.neutral   # set_foreground
-        out.cover[:] = np.where(area > 0, cover, np.nan)
+        out.cover[:] = np.where(area > 0, explained_cover(cover, area, r.target, r.prior,
+                                                          r.neutral), np.nan)
     return bins
 
 
@@ -536,11 +577,11 @@ class MeasurementModel:
                        | Callable[[], Mapping[str, np.ndarray | None]] | None = None,
                        neutral: float = 0.5) -> None:
         """Take the frame's foreground masks (H, W) bool (003 §4.2) for a coverage term in
-        the ``hjs`` and ``separable`` log-likelihoods: ``gain * f_c(x)`` per camera (``gain``
-        None: ``config.coverage_gain``), with
-        ``f_c`` the foreground fraction of the particle's silhouette: ``p(f | x) ∝ exp(k f)``,
-        the exponential in f that the existence update's evidence uses
-        (:func:`~mbtrack_ros.core.existence.coverage_log_ratio`).
+        the ``hjs`` and ``separable`` log-likelihoods: ``gain * f(x)`` per camera (``gain``
+        None: ``config.coverage_gain``), with ``f`` the particle's foreground coverage
+        ``f_c`` counted per pixel (:func:`explained_cover`, ``neutral`` its ``f_s``):
+        ``p(f | x) ∝ exp(k f)``, the exponential in the coverage that the existence
+        update's evidence uses (:func:`~mbtrack_ros.core.existence.coverage_log_ratio`).
         The colour likelihood alone lets a track whose person stands still drift onto
         background that resembles them.
 
