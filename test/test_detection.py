@@ -1986,7 +1986,9 @@ def test_a_track_placed_moments_ago_is_moved_again_by_a_positive_gain_once(
     within ``relocate_interval`` of that move and is dropped, unless the gain is positive
     (track 1's model explains her better than its own place): then it is moved again, once -
     the third detection, within the interval of a move made that way, is dropped. (The
-    actions are what is asserted: alone in the room she is followed back either way.)"""
+    actions are what is asserted. With a negative gain nothing moves track 1 back to her:
+    its particles, 0.75 m from her and on empty floor, find her again only by their random
+    walk, and when is chance; that run ends as she moves on at frame 60.)"""
     from mbtrack_ros.core.detection.manager import AutoDetection
 
     rng = np.random.default_rng(5)
@@ -1994,7 +1996,7 @@ def test_a_track_placed_moments_ago_is_moved_again_by_a_positive_gain_once(
     _no_hidden_moves(monkeypatch)
     here, there = person(2.0, 2.5, theta=0.0), person(2.75, 2.5, theta=0.0)
     actions = []
-    for k in range(70):
+    for k in range(70 if gain > 0 else 60):
         if k == 40:
             assert tracker.track_ids == [1]
             monkeypatch.setattr(AutoDetection, '_explains', lambda self, *a: gain)
@@ -2112,3 +2114,39 @@ def test_the_appearance_ratio_learns_from_two_tracks_side_by_side(monkeypatch):
     for k in range(60):
         alone.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, [blue], rng))
     assert alone.track_ids == [1] and alone.detection.likeness.counts.tolist() == [0, 0]
+
+
+@pytest.mark.parametrize('ghost_edge_ratio', [1.5, 0.0])
+def test_a_person_who_keeps_still_while_untracked_is_found_again(ghost_edge_ratio):
+    """She walks in and stops; her track is lost (removed) while she keeps perfectly still.
+    No pixel of her moves, so the motion that proves a new person is no ghost is missing;
+    her outline is in the frame, not in the background model (the border test of ghost
+    detection read the other way), which proves her there: a track is on her again within
+    a second. With the border test off (``ghost_edge_ratio`` 0) nothing proves a still
+    person, and she stays untracked."""
+    from dataclasses import replace
+
+    calib, bgs, tracker = _painted_room_tracker(3)
+    cfg = tracker.detection.config       # the detection's border test (the model's own
+    tracker.detection.config = replace(  # ghost removal is left as it is)
+        cfg, background=replace(cfg.background, ghost_edge_ratio=ghost_edge_ratio))
+    rng = np.random.default_rng(11)
+    stop = (2.6, 2.5)
+    k = 0
+    for k in range(40):                          # in at frame 3, still from frame 16
+        x = min(1.95 + 0.05 * k, stop[0])
+        who = [person(x, stop[1], theta=0.0)] if k >= 3 else []
+        tracker.step(int(round(k * 1e9 / FPS)), paint(calib, bgs, who, rng))
+    assert len(tracker.track_ids) == 1           # tracked while she walked
+    tracker.remove_track(tracker.track_ids[0])   # lost while she keeps still
+    found = None
+    for k in range(40, 40 + FPS):
+        result = tracker.step(int(round(k * 1e9 / FPS)),
+                              paint(calib, bgs, [person(*stop, theta=0.0)], rng))
+        near = [t for t in result.tracks if np.hypot(*(t.mean[:2] - stop)) < 0.3]
+        if near and found is None:
+            found = k
+    if ghost_edge_ratio > 0:
+        assert found is not None and found - 40 <= FPS - 3
+    else:
+        assert found is None

@@ -711,9 +711,11 @@ class Detector:
 
     # -- over time ------------------------------------------------------------------------
     def step(self, evidence: Mapping[str, FrameEvidence], *,
-             track_xy: np.ndarray | None = None, stamp_ns: int | None = None
-             ) -> list[Detection]:
-        """Detections confirmed in ``confirm_frames`` consecutive frames (then forgotten).
+             track_xy: np.ndarray | None = None, stamp_ns: int | None = None,
+             still: bool = False) -> list[Detection]:
+        """Detections confirmed in ``confirm_frames`` consecutive frames (then forgotten):
+        those with recent motion (``min_motion``), and with ``still`` those without too
+        (``Detection.motion`` below ``min_motion``; the caller must tell them from ghosts).
 
         With ``stamp_ns`` the positions of the confirming frames give the velocity of a
         confirmed detection (state ``vx, vy``) and, when faster than ``min_speed``, its
@@ -742,8 +744,9 @@ class Detector:
                 used.add(match)
                 det.motion = max(det.motion, self._candidates[match].motion)
             # a ghost (background change left by someone who was there while the model was
-            # bootstrapped) never moves; people who appear do
-            if det.frames >= cfg.confirm_frames and det.motion >= cfg.min_motion:
+            # bootstrapped) never moves; people who appear do (``still``: the caller
+            # proves a still one present by other evidence)
+            if det.frames >= cfg.confirm_frames and (still or det.motion >= cfg.min_motion):
                 self._velocity(det)
                 if det.state[SIT] >= 0.5 and self._walking(det):
                     det = self._standing(evidence, det, track_xy)

@@ -460,12 +460,19 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
                 others = np.concatenate([others, np.array([d.state for d, _ in present])])
                 other_shapes = other_shapes + [m.shape for _, m in present]
             confirmed = self.detector.step(pending.evidence, track_xy=others[:, [X, Y]],
-                                           stamp_ns=pending.stamp_ns)
+                                           stamp_ns=pending.stamp_ns, still=True)
+            ratio = self.config.background.ghost_edge_ratio
+            least = self.detector.config.min_motion
             for det in confirmed:
-                outline = self._ghost_outline(det, pending.evidence)
-                if outline is not None:
-                    ghosts.append((det, *outline))
+                g_model, g_frame, masks = self._outline(det, pending.evidence)
+                if ratio > 0 and masks and g_model > ratio * g_frame:
+                    for n, mask in masks.items():   # learnt at the next update
+                        self.background.models[n].learn_next(mask)
+                    ghosts.append((det, g_model, g_frame))
                     continue
+                if det.motion < least and not (ratio > 0 and masks
+                                               and g_frame > ratio * g_model):
+                    continue    # still, and not shown to be somebody there now
                 model = acquire(det, pending.images, self.calibration, others=others,
                                 other_shapes=other_shapes, config=self.config.acquisition)
                 if model is None:
@@ -510,23 +517,23 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
                 out.append((det, model))
         return out
 
-    def _ghost_outline(self, det: Detection, evidence: Mapping[str, FrameEvidence]
-                       ) -> tuple[float, float] | None:
-        """(model, frame) outline gradients of a confirmed detection that is a ghost, or
-        None; the ghost's silhouettes are learnt into the background at its next update.
+    def _outline(self, det: Detection, evidence: Mapping[str, FrameEvidence]
+                 ) -> tuple[float, float, dict[str, np.ndarray]]:
+        """Whose outline a confirmed detection's foreground has: (model, frame) outline
+        gradients summed over the side cameras that judge it, and their silhouette masks
+        (H, W) bool (none: no camera judges it).
 
         The background's border test (:func:`~.background.ghost_components`) applied to
         the foreground of the detection's silhouette (within 4 pixels at 320x240) instead
-        of a whole foreground component: summed over the side cameras that have a
-        background model, the colour gradient along that foreground's outline (other
-        tracks' silhouettes left out) is ``ghost_edge_ratio`` times larger in the model
-        than in the frame - the outline is that of somebody learnt into the model who has
-        left, not of somebody in the frame. The component test misses such a ghost when
-        its foreground touches a person standing beside it (their outline is in the
-        frame)."""
-        ratio = self.config.background.ghost_edge_ratio
-        if ratio <= 0:
-            return None
+        of a whole foreground component: the colour gradient along that foreground's
+        outline (other tracks' silhouettes left out), in the model and in the frame, in
+        each side camera with a background model where at least half of the outline
+        counts. ``ghost_edge_ratio`` times larger in the model: a ghost, the outline of
+        somebody learnt into the model who has left (the component test misses such a
+        ghost when its foreground touches a person standing beside it, whose outline is in
+        the frame); that many times larger in the frame: somebody there now, which is the
+        proof a detection without recent motion needs (a person who stood still while no
+        track followed her); in between the test does not decide."""
         shape = BodyShape(det.height, det.width)
         model_sum = frame_sum = 0.0
         masks = {}
@@ -544,11 +551,7 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
                 model_sum += g_model
                 frame_sum += g_frame
                 masks[n] = mask
-        if not masks or not model_sum > ratio * frame_sum:
-            return None
-        for n, mask in masks.items():
-            self.background.models[n].learn_next(mask)
-        return model_sum, frame_sum
+        return model_sum, frame_sum, masks
 
     def _settle(self, pending: _Pending, found: _Found) -> list[Birth]:
         """Births and moves from the detections of :meth:`_find`, decided jointly
