@@ -61,8 +61,8 @@ def test_fusion_gives_the_tracks_of_one_process(recording, pipeline):
     the same ids on every frame but at most three (releases a frame or two apart: both
     release the tracks of the two people walking at the end), positions
     within 14 cm on one frame (13 cm with ``pipeline_search``), mostly millimetres: the
-    particle filter amplifies the update's one-frame latency. With ``pipeline_search`` the search of a
-    frame set reads its own masks while the next set is received."""
+    particle filter amplifies the update's one-frame latency. With ``pipeline_search`` the
+    search of a frame set reads its own masks while the next set is received."""
     from mbtrack_ros.evaluation.fusion import fusion_vs_single
 
     got = fusion_vs_single(recording, TrackerConfig(detection=True, seed=7,
