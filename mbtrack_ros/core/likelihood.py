@@ -263,8 +263,7 @@ def explained_cover(cover: np.ndarray, area: np.ndarray, target: np.ndarray,
     seen = area > 0
     mass = np.bincount(target, weights=prior * seen, minlength=n_targets)
     total = np.bincount(target, weights=prior * area, minlength=n_targets)
-    ref = np.divide(total, mass, out=np.ones(n_targets), where=mass > 0)
-    ref = np.where(ref > 0, ref, 1.0)
+    ref = np.divide(total, mass, out=np.ones(n_targets), where=mass > 0)  # > 0 where seen
     return neutral + (cover - neutral) * area / ref[target]
 
 

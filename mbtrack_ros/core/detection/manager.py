@@ -464,14 +464,15 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
             ratio = self.config.background.ghost_edge_ratio
             least = self.detector.config.min_motion
             for det in confirmed:
-                g_model, g_frame, masks = self._outline(det, pending.evidence)
-                if ratio > 0 and masks and g_model > ratio * g_frame:
+                # the border test (off with ratio 0: no ghost is dropped, no still one taken)
+                g_model, g_frame, masks = self._outline(det, pending.evidence) \
+                    if ratio > 0 else (0.0, 0.0, {})
+                if masks and g_model > ratio * g_frame:
                     for n, mask in masks.items():   # learnt at the next update
                         self.background.models[n].learn_next(mask)
                     ghosts.append((det, g_model, g_frame))
                     continue
-                if det.motion < least and not (ratio > 0 and masks
-                                               and g_frame > ratio * g_model):
+                if det.motion < least and not (masks and g_frame > ratio * g_model):
                     continue    # still, and not shown to be somebody there now
                 model = acquire(det, pending.images, self.calibration, others=others,
                                 other_shapes=other_shapes, config=self.config.acquisition)

@@ -465,8 +465,7 @@ class PeopleCue:
         whereas his share of the whole ``width`` silhouette depends on how wide he is
         against the model (arms, legs apart, a slim person). 0 where fewer than two
         cameras see floor behind a quarter of the core (one view cannot place an object
-        in depth) or
-        fewer than three behind a tenth of it, of the cameras that see the place
+        in depth) or fewer than three behind a tenth of it, of the cameras that see the place
         (silhouette mostly in the image; all of them when fewer than three do): two views'
         disagreements meet also where nothing stands (a phantom of the two-view visual
         hull: one view's line of sight meets one object, the other's another, as between
