@@ -55,42 +55,64 @@ def context():
 
 
 @contextmanager
-def playing(recording: Path, nodes: list, context, *, rate: float, threads: int,
+def spinning(nodes: list, context):
+    """Dispatch the callbacks of ``nodes`` on a thread of their own with the tracker
+    node's executor (``make_executor('events')``, as ``tracker_node`` spins) until the
+    block ends. The Python ``MultiThreadedExecutor`` rebuilds its wait set in a loop that
+    holds the GIL and starved the in-process tracker's step thread (12 ms of CPU per step
+    took 0.1-1 s)."""
+    from mbtrack_ros.nodes.tracker_node import make_executor
+
+    executor = make_executor('events', context=context)
+    for node in nodes:
+        executor.add_node(node)
+    stop = threading.Event()
+
+    def spin() -> None:
+        while not stop.is_set() and context.ok():
+            executor.spin_once(timeout_sec=0.1)
+
+    spinner = threading.Thread(target=spin, daemon=True)
+    spinner.start()
+    try:
+        yield executor
+    finally:
+        stop.set()
+        spinner.join(timeout=5)
+        executor.shutdown()
+
+
+@contextmanager
+def playing(recording: Path, nodes: list, context, *, rate: float,
             timeout: float, topics: list[str] | None = None, ready=None):
-    """Spin ``nodes`` in a multi-threaded executor while ``bag_player`` (its own process)
+    """Spin ``nodes`` (:func:`spinning`) while ``bag_player`` (its own process)
     plays ``recording`` at ``rate`` (only ``topics`` if given); yields once the player has
     finished (its exit code is checked). ``ready`` (no argument, returns bool), if given, is
     polled for up to 60 s before the player starts: DDS discovery of the test's subscriptions
     takes its time on a loaded machine, and messages published before it are lost. On exit:
     player killed if still running, executor stopped, nodes destroyed."""
-    from rclpy.executors import MultiThreadedExecutor
-
-    executor = MultiThreadedExecutor(num_threads=threads, context=context)
-    for node in nodes:
-        executor.add_node(node)
-    spinner = threading.Thread(target=executor.spin, daemon=True)
-    spinner.start()
-    if ready is not None:
-        deadline = time.monotonic() + 60
-        while not ready():
-            assert time.monotonic() < deadline, 'the test subscriptions never matched'
-            time.sleep(0.1)
-    player = subprocess.Popen(
-        [sys.executable, '-m', 'mbtrack_ros.nodes.bag_player', '--ros-args',
-         '-p', f'bag:={recording}', '-p', f'rate:={rate}', '-p', 'wait_for_subscribers:=true',
-         '-p', 'start_delay:=1.0']
-        + (['-p', f'topics:=[{", ".join(topics)}]'] if topics else []),
-        cwd=REPO, env=dict(os.environ, PYTHONPATH=str(REPO)), stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT, text=True)
     try:
-        out, _ = player.communicate(timeout=timeout)
-        assert player.returncode == 0, out
-        yield
+        with spinning(nodes, context):
+            if ready is not None:
+                deadline = time.monotonic() + 60
+                while not ready():
+                    assert time.monotonic() < deadline, 'the test subscriptions never matched'
+                    time.sleep(0.1)
+            player = subprocess.Popen(
+                [sys.executable, '-m', 'mbtrack_ros.nodes.bag_player', '--ros-args',
+                 '-p', f'bag:={recording}', '-p', f'rate:={rate}',
+                 '-p', 'wait_for_subscribers:=true', '-p', 'start_delay:=1.0']
+                + (['-p', f'topics:=[{", ".join(topics)}]'] if topics else []),
+                cwd=REPO, env=dict(os.environ, PYTHONPATH=str(REPO)), stdout=subprocess.PIPE,
+                stderr=subprocess.STDOUT, text=True)
+            try:
+                out, _ = player.communicate(timeout=timeout)
+                assert player.returncode == 0, out
+                yield
+            finally:
+                if player.poll() is None:
+                    player.kill()
     finally:
-        if player.poll() is None:
-            player.kill()
-        executor.shutdown()
-        spinner.join(timeout=5)
         for node in nodes:
             node.destroy_node()
 

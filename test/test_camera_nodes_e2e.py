@@ -7,6 +7,7 @@ import subprocess
 import sys
 import threading
 import time
+from contextlib import ExitStack
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +17,7 @@ import pytest
 os.environ['ROS_DOMAIN_ID'] = str(30 + os.getpid() % 70)
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 
-from conftest import REPO  # noqa: E402
+from conftest import REPO, spinning  # noqa: E402
 
 KILL, BACK = 12, 18       # frames at which the camera node of DYING dies and comes back
 DYING = 'cam1'
@@ -55,7 +56,6 @@ def wait_for(condition, timeout: float) -> bool:
 def test_tracker_keeps_tracking_when_a_camera_node_dies_and_picks_it_up_again(
         recording, context):
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-    from rclpy.executors import MultiThreadedExecutor
     from rclpy.node import Node
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import CompressedImage, Image, PointCloud2
@@ -109,11 +109,8 @@ def test_tracker_keeps_tracking_when_a_camera_node_dies_and_picks_it_up_again(
             probe.create_subscription(Image, f'/{c}/working/foreground', on_mask(c),
                                       reliable)
     probe.create_subscription(DiagnosticArray, '/diagnostics', on_diag, reliable)
-    executor = MultiThreadedExecutor(num_threads=4, context=context)
-    for node in [tracker, probe, *stages]:
-        executor.add_node(node)
-    spinner = threading.Thread(target=executor.spin, daemon=True)
-    spinner.start()
+    spin = ExitStack()
+    spin.enter_context(spinning([tracker, probe, *stages], context))
     dying = start_camera_process(calibration, DYING)
     def readers(camera: str) -> set[bytes]:
         """The DDS endpoint ids of the readers of a camera's image topic."""
@@ -156,8 +153,7 @@ def test_tracker_keeps_tracking_when_a_camera_node_dies_and_picks_it_up_again(
                 dying.wait(timeout=10)
             except subprocess.TimeoutExpired:
                 dying.kill()
-        executor.shutdown()
-        spinner.join(timeout=5)
+        spin.close()
         for node in [tracker, probe, *stages]:
             node.destroy_node()
     stamps = [fs.stamp_ns for fs in frame_sets]

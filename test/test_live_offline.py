@@ -190,7 +190,7 @@ def live_tracks(recording: Path, seed: int, *, sync_timeout: float = 5.0,
     listener.create_subscription(PointCloud2, '/tracker_node/tracks', on_tracks,
                                  QoSProfile(depth=500, reliability=ReliabilityPolicy.RELIABLE))
     try:
-        with playing(recording, [node, listener], context, rate=0.5, threads=len(cameras) + 3,
+        with playing(recording, [node, listener], context, rate=0.5,
                      timeout=90):
             # the node may still be working through the sets the player sent at its rate
             # (on a slow machine tens of seconds): wait for the last one, within a bound

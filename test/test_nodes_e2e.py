@@ -6,6 +6,7 @@ import os
 import py_compile
 import threading
 import time
+from contextlib import ExitStack
 from pathlib import Path
 
 import numpy as np
@@ -16,10 +17,9 @@ import yaml
 os.environ['ROS_DOMAIN_ID'] = str(100 + os.getpid() % 100)
 
 import rclpy  # noqa: E402
-from rclpy.executors import MultiThreadedExecutor  # noqa: E402
 from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
 
-from conftest import REPO, playing  # noqa: E402
+from conftest import REPO, playing, spinning  # noqa: E402
 from mbtrack_ros.core.dynamics import MotionConfig  # noqa: E402
 from mbtrack_ros.nodes import tracker_node  # noqa: E402
 from mbtrack_ros.nodes.params import ParamsError  # noqa: E402
@@ -392,7 +392,7 @@ def test_end_to_end_bag_player_tracker_subscriber(recording, context, tmp_path):
     listener.create_subscription(DiagnosticArray, '/diagnostics', keep('diagnostics'), qos)
     # subscribing is what switches the debug image on
     listener.create_subscription(Image, '/tracker_node/debug/cam0/occlusion', keep('debug'), qos)
-    with playing(recording, [node, listener], context, rate=1.0, threads=3, timeout=60):
+    with playing(recording, [node, listener], context, rate=1.0, timeout=60):
         # let the last frame sets through (a cold numba cache compiles for a while, and a
         # slow machine's node works through the sets for tens of seconds after the player)
         deadline = time.monotonic() + 180
@@ -485,10 +485,8 @@ def test_bag_player_loops_and_publishes_clock(recording, context):
     clocks = []
     listener.create_subscription(Clock, '/clock', lambda m: clocks.append(
         m.clock.sec * 1_000_000_000 + m.clock.nanosec), 1000)
-    executor = MultiThreadedExecutor(num_threads=2, context=context)
-    executor.add_node(listener)
-    spinner = threading.Thread(target=executor.spin, daemon=True)
-    spinner.start()
+    spin = ExitStack()
+    spin.enter_context(spinning([listener], context))
     time.sleep(1.0)  # discovery of the /clock subscription
     thread = threading.Thread(target=player.play, daemon=True)
     thread.start()
@@ -508,8 +506,7 @@ def test_bag_player_loops_and_publishes_clock(recording, context):
         time.sleep(0.3)
     finally:
         player.stop()
-        executor.shutdown()
-        spinner.join(timeout=5)
+        spin.close()
         player.destroy_node()
         listener.destroy_node()
     assert clocks and min(clocks) == first and max(clocks) <= last

@@ -175,7 +175,7 @@ def test_rep155_consumer_follows_the_tracks(recording, tmp_path):
                     and consumer.count_publishers('/tf') > 0
                     and reference.count_publishers('/tracker_node/tracks') > 0)
 
-        with playing(recording, [consumer, reference], context, rate=0.5, threads=3,
+        with playing(recording, [consumer, reference], context, rate=0.5,
                      timeout=240, topics=[f'/{CAMERA}/image_raw'], ready=matched):
             deadline = time.monotonic() + 180
             while time.monotonic() < deadline:
