@@ -146,19 +146,13 @@ def test_a_spare_track_that_the_door_wall_cameras_cover_keeps_the_ordinary_timeo
 def test_the_track_of_a_person_who_walked_out_ends_sooner_with_the_doorway_rule(band):
     """test_exits' clip of one person walking out (seed 4, corner cameras only): the track
     stays behind at the door (sent off by the velocity fitted to its detection's jumped
-    places, which the detector now drops: ``max_speed`` raised here). The plain support
-    timeout ended it 1.13 s after the person
-    crossed the wall (their last ground-truth row), the doorway rule 0.40 s after (tracker
-    seeds 1-5; on seed 0 the person got a second track on the way in, ended 1.00 and 0.87
-    s after). The median over tracker seeds 0-2 is compared. The reach is off
-    (``reach_radius`` 0): it moves the lagging track after its person into the exit (ended
-    0.2 s after without the doorway rule), which is not what this compares. The motion is
-    the coupled one of 000 (``orientation_follows_velocity``), with which the track lags:
-    with the default motion its velocity follows the person and the track ends 0.40 s
-    after their last row without the doorway rule too (1.13 s with the coupled motion).
-    Without the doorway rule the track may also outlive the clip: two of the four cameras
-    still see 0.4-0.9 of its silhouette at the door covered, above the support coverage,
-    and its existence stays high."""
+    places, which the detector now drops: ``max_speed`` raised here). Without the
+    doorway rule the existence process ends it 0.80-0.93 s after the person crossed the
+    wall (their last ground-truth row), with the rule 0.60 s after (tracker seeds 0-2; the
+    median over them is compared). The reach is off (``reach_radius`` 0): it moves the
+    lagging track after its person into the exit, which is not what this compares. The
+    motion is the coupled one of 000 (``orientation_follows_velocity``), with which the
+    track lags."""
     from mbtrack_ros.core.dynamics import MotionConfig
     from mbtrack_ros.core.tracker import Tracker, TrackerConfig
     from mbtrack_ros.synth import Synthesizer

@@ -8,6 +8,7 @@ import pytest
 from mbtrack_ros.core.detection import DetectionError
 from mbtrack_ros.core.detection.detector import FrameEvidence
 from mbtrack_ros.core.detection.release import ReleaseConfig, Releaser, spare_tracks
+from mbtrack_ros.core.camera import RoomCalibration
 from mbtrack_ros.core.shape import BodyShape, rasterize
 
 from conftest import make_room
@@ -52,6 +53,62 @@ def test_exclusive_support_equals_the_per_pixel_count():
     spare, support = spare_tracks(fgs, sils, min_support=0.0)
     assert not spare.any()
     assert np.allclose(support, _straightforward_support(fgs, sils, len(tracks)))
+
+
+def test_the_existence_evidence_per_camera_counts_the_pixels_no_other_kept_track_covers():
+    """Releaser.exclusive_views against per-track masks: a track's exclusive pixels are
+    those of its silhouette that no other track covers, a spare track not counted among
+    the others; the share of the silhouette and the foreground among them."""
+    room = make_room(160, 120, 4)
+    people = [(2.0, 2.0), (2.45, 2.2), (4.0, 3.0)]
+    tracks = [(2.0, 2.05), (2.5, 2.2), (2.3, 1.9), (4.1, 3.0), (1.0, 4.0), (2.05, 2.1)]
+    fgs, sils = _scene(room, people, tracks)
+    image = np.zeros((120, 160, 3), np.uint8)
+    evidence = {n: FrameEvidence(image, fg) for n, fg in zip(room.cameras, fgs)}
+    rel = Releaser(room, ReleaseConfig())
+    rel.support(evidence, dict(zip(room.cameras, sils)))
+    assert rel.spare.any() and not rel.spare.all()
+    assert set(rel.exclusive_views) == set(room.cameras)
+    k = len(tracks)
+    for name, fg, sil in zip(room.cameras, fgs, sils):
+        masks = np.array([sil.mask(i) > 0 for i in range(k)])
+        share, cov = rel.exclusive_views[name]
+        for i in range(k):
+            others = masks[[j for j in range(k) if j != i and not rel.spare[j]]].any(axis=0)
+            own = masks[i] & ~others
+            area = masks[i].sum()
+            if area < ReleaseConfig().min_area * 160 * 120 / (320 * 240):
+                assert np.isnan(share[i]) and np.isnan(cov[i])
+                continue
+            assert share[i] == pytest.approx(own.sum() / area)
+            if own.any():
+                assert cov[i] == pytest.approx((own & fg).sum() / own.sum())
+            else:
+                assert np.isnan(cov[i])
+
+
+def test_a_track_in_front_of_a_tracked_person_along_a_line_of_sight_has_evidence_against_it():
+    """Two cameras 90 degrees apart; a person with her track, and a second track 0.5 m
+    nearer to cam0 on cam0's line of sight through her. In cam0 the second track's
+    silhouette lies on her foreground, but those pixels are hers (her track explains them);
+    in cam2 it stands on empty floor. The whole silhouettes' evidence sum_c (f_c - f_s)
+    favours the second track; the exclusive evidence sum_c share_c (f_c - f_s) is against
+    it and for her track."""
+    full = make_room(160, 120, 3)
+    room = RoomCalibration({n: full.cameras[n] for n in ('cam0', 'cam2')}, full.floor)
+    person = np.array([3.0, 2.5])
+    eye = np.array([0.1, 0.1])
+    ahead = person - 0.5 * (person - eye) / np.linalg.norm(person - eye)
+    fgs, sils = _scene(room, [person], [person, ahead])
+    image = np.zeros((120, 160, 3), np.uint8)
+    evidence = {n: FrameEvidence(image, fg) for n, fg in zip(room.cameras, fgs)}
+    rel = Releaser(room, ReleaseConfig(spare_support=0.0))
+    _, coverage = rel.support(evidence, dict(zip(room.cameras, sils)))
+    f_s = ReleaseConfig().min_coverage
+    assert sum(cov[1] - f_s for cov in coverage.values()) > 0.0
+    evidence_sum = sum(np.nan_to_num(share * (cov - f_s))
+                       for share, cov in rel.exclusive_views.values())
+    assert evidence_sum[0] > 0.0 > evidence_sum[1]
 
 
 def test_a_spare_track_beside_a_tracked_person_is_found_and_the_tracked_one_kept():

@@ -264,6 +264,7 @@ class TrackAuxiliary:
                loglik_hidden: Mapping[str, float],
                coverage: Mapping[str, float] | None = None,
                visible_fraction: Mapping[str, float] | None = None,
+               coverage_weights: Mapping[str, float] | None = None,
                neutral_coverage: float = 0.5) -> None:
         """One filtering step of all auxiliary processes of the track.
 
@@ -275,6 +276,9 @@ class TrackAuxiliary:
             coverage: camera -> foreground coverage of the track's silhouette in [0, 1].
             visible_fraction: camera -> expected visible fraction under the prior (w*);
                 weights the camera's evidence (1 when omitted).
+            coverage_weights: camera -> weight of its coverage evidence, when it differs
+                from ``visible_fraction`` (the share of the silhouette whose pixels are
+                evidence of this track alone).
             neutral_coverage: the coverage at which a camera's coverage evidence is
                 neutral (:func:`coverage_log_ratio`).
         """
@@ -302,7 +306,8 @@ class TrackAuxiliary:
                 pv = min(prior, cfg.visibility_cap)
                 mix = _logaddexp(_log(pv) + l1 - l0, _log1p_neg(pv))
                 log_ratio_e += cfg.appearance_weight * w * mix
-        log_ratio_e = coverage_log_ratio(coverage, visible_fraction, cfg.support_gain,
+        log_ratio_e = coverage_log_ratio(coverage, coverage_weights if coverage_weights
+                                         is not None else visible_fraction, cfg.support_gain,
                                          log_ratio_e, neutral_coverage)
         A_e = transition(cfg.birth, cfg.death, dt)
         self.existence, _ = binary_step(self.existence, A_e, 0.0, log_ratio_e)

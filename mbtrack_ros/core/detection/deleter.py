@@ -230,8 +230,15 @@ class TrackDeleter:
             # sees (top-down cameras are not used by the filter and weigh 1)
             weights = {n: (float(t.visible_fraction.get(n, 1.0)) if n in self.side else 1.0)
                        for n in set(cov) | set(vis)}
+            # the coverage evidence of a side camera: the silhouette's pixels no other
+            # track explains (Releaser.exclusive_views), weighted by their share
+            cover_weights = dict(weights)
+            for n, (share, excl) in self.releaser.exclusive_views.items():
+                if n in cov and k < len(share) and np.isfinite(share[k]):
+                    cover_weights[n] = float(share[k])
+                    cov[n] = float(excl[k]) if np.isfinite(excl[k]) else 0.0
             neutral = self.releaser.config.min_coverage     # support counts for existence
-            best = (coverage_log_ratio(cov, weights, cfg.existence.support_gain,
+            best = (coverage_log_ratio(cov, cover_weights, cfg.existence.support_gain,
                                        neutral=neutral)
                     if reach is not None and cov else 0.0)
             if best < 0.0:
@@ -240,10 +247,11 @@ class TrackDeleter:
                 for place, ring in zip(places, rings):
                     ring, evidence = self._ring_evidence(ring, cov, weights)
                     if evidence > best:
-                        cov, best = ring, evidence
+                        cov, best, cover_weights = ring, evidence, weights
                         if evidence > 0.0:
                             self.reach_moves[t.track_id] = place
             aux.update(dt, loglik_visible=vis, loglik_hidden=hid, coverage=cov,
-                       visible_fraction=weights, neutral_coverage=neutral)
+                       visible_fraction=weights, coverage_weights=cover_weights,
+                       neutral_coverage=neutral)
             t.visibility = dict(aux.visibility)
             t.existence = float(aux.existence)

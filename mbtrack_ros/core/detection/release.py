@@ -11,9 +11,10 @@ decides alone: a person sitting on a chair by a wall covers a small share of the
 camera's blob and most of the side views' silhouettes. When the caller filters the
 existence probability (001 §3.2, :mod:`mbtrack_ros.core.existence`), which accumulates
 that evidence with the appearance's over time, the existence replaces the frame's coverage
-verdict (:attr:`Releaser.kept`): a track whose existence is below ``existence_threshold``
-(or that is spare, or unsupported in a doorway, below) for ``timeout`` seconds in a row is
-terminated.
+verdict (:attr:`Releaser.kept`), with each side camera's coverage counted on the pixels
+no other track covers (:attr:`Releaser.exclusive_views`): a track whose existence is
+below ``existence_threshold`` (or that is spare, or unsupported in a doorway, below) for
+``timeout`` seconds in a row is terminated.
 
 **Spare tracks.** A track that lost its person often moves on to somebody nearby who is
 tracked already (a crowd at the door): its silhouette still lies on foreground, so the
@@ -209,6 +210,36 @@ def spare_tracks(foregrounds: Sequence[np.ndarray], silhouettes: Sequence[object
                                       one, 0, 0)
 
 
+def _exclusive_views(names: Sequence[str], side: tuple, spare: np.ndarray
+                     ) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Per side camera of ``names`` the (K,) share of each track's silhouette that no
+    other track covers (spare tracks left out of the others) and (K,) the foreground
+    coverage of those exclusive pixels (NaN where a track has none, or the camera does not
+    see it). ``side`` is :class:`Releaser`'s (foregrounds, silhouettes, min areas, K).
+
+    The pixels another track's silhouette covers are explained by that track whether or
+    not this one exists, so only the exclusive pixels are evidence of this track's
+    existence (001 §3.2 with the pixel-level observation of 000 Eq. 20): their foreground
+    is the likelihood ratio's data, their share of the silhouette its weight."""
+    out: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    fgs, sils, least, k = side
+    if not k:
+        return out
+    for name, fg, sil, small in zip(names, fgs, sils, least):
+        count = np.zeros(np.shape(fg), np.float64)         # kept tracks covering each pixel
+        _kernels.accumulate_spans(count, sil.row, sil.x0, sil.x1, sil.offsets,
+                                  (~spare).astype(np.float64), 0, 0)
+        own_fg, own, area = span_counts(fg, sil, unknown=count >= 2)
+        if spare.any():      # a spare track is not counted: any count over it is another
+            s_fg, s_own, _ = span_counts(fg, sil, unknown=count >= 1)
+            own_fg, own = np.where(spare, s_fg, own_fg), np.where(spare, s_own, own)
+        sees = area >= small
+        share = np.where(sees, own / np.maximum(area, 1.0), np.nan)
+        cov = np.where(sees & (own > 0), own_fg / np.maximum(own, 1.0), np.nan)
+        out[name] = (share, cov)
+    return out
+
+
 @dataclass(frozen=True)
 class ReleaseConfig:
     """Parameters of the track release.
@@ -311,6 +342,9 @@ class Releaser:
         self.doorway = np.zeros(0, bool)  # ... in a doorway, seen but not covered by the
         #                                     door-wall cameras (doorway_timeout applies)
         self.kept = np.zeros(0, bool)     # ... neither spare nor unsupported in a doorway
+        self.exclusive_views: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # per side
+        #   camera (K,) share of each silhouette no other kept track covers and (K,) its
+        #   foreground coverage there (:func:`_exclusive_views`)
 
     def support(self, evidence: Mapping[str, FrameEvidence], silhouettes: Mapping[str, object],
                 states: np.ndarray | None = None, heights: np.ndarray | None = None
@@ -393,6 +427,7 @@ class Releaser:
                 cfg.spare_radius if states is not None else np.inf)
             supported = supported & ~self.spare
         self.kept = kept & ~self.spare
+        self.exclusive_views = _exclusive_views(side, self._side, self.spare)
         return supported, coverage
 
     def exclusive_support(self) -> np.ndarray:
