@@ -58,9 +58,8 @@ def context():
 def spinning(nodes: list, context):
     """Dispatch the callbacks of ``nodes`` on a thread of their own with the tracker
     node's executor (``make_executor('events')``, as ``tracker_node`` spins) until the
-    block ends. The Python ``MultiThreadedExecutor`` rebuilds its wait set in a loop that
-    holds the GIL and starved the in-process tracker's step thread (12 ms of CPU per step
-    took 0.1-1 s)."""
+    block ends. (The Python ``MultiThreadedExecutor`` rebuilds its wait set in a loop that
+    holds the GIL and starves an in-process tracker's step thread.)"""
     from mbtrack_ros.nodes.tracker_node import make_executor
 
     executor = make_executor('events', context=context)
