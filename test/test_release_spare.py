@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from mbtrack_ros.core.camera import RoomCalibration
 from mbtrack_ros.core.detection import DetectionError
 from mbtrack_ros.core.detection.detector import FrameEvidence
 from mbtrack_ros.core.detection.release import ReleaseConfig, Releaser, spare_tracks
-from mbtrack_ros.core.camera import RoomCalibration
 from mbtrack_ros.core.shape import BodyShape, rasterize
 
 from conftest import make_room

@@ -234,7 +234,7 @@ class TrackDeleter:
             # track explains (Releaser.exclusive_views), weighted by their share
             cover_weights = dict(weights)
             for n, (share, excl) in self.releaser.exclusive_views.items():
-                if n in cov and k < len(share) and np.isfinite(share[k]):
+                if n in cov and np.isfinite(share[k]):
                     cover_weights[n] = float(share[k])
                     cov[n] = float(excl[k]) if np.isfinite(excl[k]) else 0.0
             neutral = self.releaser.config.min_coverage     # support counts for existence

@@ -144,6 +144,14 @@ def paint_blobs(mask: np.ndarray, camera: Camera, xy: np.ndarray, heights: np.nd
             mask[y0:y0 + inside.shape[0], x0:x0 + inside.shape[1]] |= inside
 
 
+def _covering(shape: tuple[int, int], sil: object, weights: np.ndarray) -> np.ndarray:
+    """(H, W) float64 count of the silhouettes covering each pixel, silhouette i counted
+    ``weights[i]`` times (0: left out)."""
+    count = np.zeros(shape, np.float64)
+    _kernels.accumulate_spans(count, sil.row, sil.x0, sil.x1, sil.offsets, weights, 0, 0)
+    return count
+
+
 def spare_tracks(foregrounds: Sequence[np.ndarray], silhouettes: Sequence[object],
                  min_support: float, min_area: Sequence[float] | None = None,
                  xy: np.ndarray | None = None, radius: float = np.inf
@@ -182,10 +190,7 @@ def spare_tracks(foregrounds: Sequence[np.ndarray], silhouettes: Sequence[object
         near = np.linalg.norm(xy[:, None] - xy[None], axis=2) < radius
     np.fill_diagonal(near, False)
     for fg, sil in zip(foregrounds, silhouettes):
-        count = np.zeros(np.shape(fg), np.float64)          # tracks covering each pixel
-        _kernels.accumulate_spans(count, sil.row, sil.x0, sil.x1, sil.offsets,
-                                  np.ones(k), 0, 0)
-        counts.append(count)
+        counts.append(_covering(np.shape(fg), sil, np.ones(k)))
     while True:
         total = np.zeros(k)
         seen = np.zeros(k)
@@ -226,9 +231,7 @@ def _exclusive_views(names: Sequence[str], side: tuple, spare: np.ndarray
     if not k:
         return out
     for name, fg, sil, small in zip(names, fgs, sils, least):
-        count = np.zeros(np.shape(fg), np.float64)         # kept tracks covering each pixel
-        _kernels.accumulate_spans(count, sil.row, sil.x0, sil.x1, sil.offsets,
-                                  (~spare).astype(np.float64), 0, 0)
+        count = _covering(np.shape(fg), sil, (~spare).astype(np.float64))
         own_fg, own, area = span_counts(fg, sil, unknown=count >= 2)
         if spare.any():      # a spare track is not counted: any count over it is another
             s_fg, s_own, _ = span_counts(fg, sil, unknown=count >= 1)
