@@ -78,3 +78,34 @@ def test_places_of_cameras_started_apart_are_kept_once_until_taken():
     cue.regions(['cam1'])
     np.testing.assert_allclose(cue.take_places(), [[1.0, 1.0], [3.0, 2.0], [5.0, 4.0]])
     assert cue.take_places() is None
+
+
+def test_the_existence_evidence_counts_the_bootstrap_possible_people_as_undecided(monkeypatch):
+    """While the people present at the start are tracked, their places are still the
+    bootstrap's possible foreground (not yet seen without a track over them): the frame
+    evidence the release and existence weigh carries exactly those pixels as undecided
+    (FrameEvidence.undecided, counted at the neutral coverage), not as foreground."""
+    from mbtrack_ros.core.detection.release import Releaser
+    from mbtrack_ros.core.tracker import Tracker, TrackerConfig
+
+    synth = Synthesizer('occupied', seed=101, frames=12)
+    tracker = Tracker(synth.calibration, TrackerConfig(detection=True, particles=50, seed=1),
+                      rng=np.random.default_rng(1))
+    seen = []
+    support = Releaser.support
+
+    def recording(self, evidence, *args, **kwargs):
+        for name, ev in evidence.items():
+            expected = tracker.detection.background.model(name).possible_foreground_as_tested
+            seen.append((ev.undecided, expected))
+        return support(self, evidence, *args, **kwargs)
+
+    monkeypatch.setattr(Releaser, 'support', recording)
+    for frame in synth:
+        tracker.step(frame.stamp_ns, frame.images)
+    assert seen and any(undecided is not None for undecided, _ in seen)
+    for undecided, expected in seen:
+        if undecided is None:
+            assert not expected.any()
+        else:
+            assert np.array_equal(undecided, expected)

@@ -87,6 +87,52 @@ def test_the_existence_evidence_per_camera_counts_the_pixels_no_other_kept_track
                 assert np.isnan(cov[i])
 
 
+def test_undecided_pixels_count_at_the_neutral_coverage_in_the_existence_evidence():
+    """The background bootstrap's possible-person pixels (FrameEvidence.undecided) are
+    foreground until seen without a track over them; a track standing on them keeps them
+    undecided. The coverage and the exclusive views count each such pixel as f_s of a
+    foreground pixel, against per-track masks; a track whose silhouette lies wholly on
+    undecided foreground (the place a person stood when the tracker started) has neutral
+    evidence, not the full coverage it has when they are taken for foreground."""
+    room = make_room(160, 120, 4)
+    people = [(2.0, 2.0), (4.0, 3.0)]
+    tracks = [(2.0, 2.05), (2.3, 1.9), (4.0, 3.0)]
+    fgs, sils = _scene(room, people, tracks)
+    f_s = ReleaseConfig().min_coverage
+    image = np.zeros((120, 160, 3), np.uint8)
+    undecided = []
+    for fg, sil in zip(fgs, sils):       # the third person's place, and a stripe elsewhere
+        unsure = sil.mask(2) > 0
+        unsure[:, 70:80] = True
+        undecided.append(unsure)
+    evidence = {n: FrameEvidence(image, fg, undecided=u)
+                for n, fg, u in zip(room.cameras, fgs, undecided)}
+    rel = Releaser(room, ReleaseConfig(spare_support=0.0))
+    _, coverage = rel.support(evidence, dict(zip(room.cameras, sils)))
+    least = ReleaseConfig().min_area * 160 * 120 / (320 * 240)
+    k = len(tracks)
+    for name, fg, sil, unsure in zip(room.cameras, fgs, sils, undecided):
+        masks = np.array([sil.mask(i) > 0 for i in range(k)])
+        share, cov = rel.exclusive_views[name]
+        for i in range(k):
+            area = masks[i].sum()
+            if area < least:
+                assert np.isnan(coverage[name][i]) and np.isnan(cov[i])
+                continue
+            counted = (masks[i] & fg & ~unsure).sum() + f_s * (masks[i] & unsure).sum()
+            assert coverage[name][i] == pytest.approx(counted / area)
+            own = masks[i] & ~masks[[j for j in range(k) if j != i]].any(axis=0)
+            assert share[i] == pytest.approx(own.sum() / area)
+            if own.any():
+                counted = (own & fg & ~unsure).sum() + f_s * (own & unsure).sum()
+                assert cov[i] == pytest.approx(counted / own.sum())
+        assert coverage[name][2] == pytest.approx(f_s)
+    plain = Releaser(room, ReleaseConfig(spare_support=0.0))
+    _, taken = plain.support({n: FrameEvidence(image, fg) for n, fg in zip(room.cameras, fgs)},
+                             dict(zip(room.cameras, sils)))
+    assert all(cov[2] > 0.9 for cov in taken.values())
+
+
 def test_a_track_in_front_of_a_tracked_person_along_a_line_of_sight_has_evidence_against_it():
     """Two cameras 90 degrees apart; a person with her track, and a second track 0.5 m
     nearer to cam0 on cam0's line of sight through her. In cam0 the second track's

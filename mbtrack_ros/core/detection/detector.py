@@ -225,6 +225,9 @@ class FrameEvidence:
         image: (H, W, 3) uint8 RGB.
         foreground: (H, W) bool foreground mask.
         tracks: (H, W) bool pixels covered by the rendered silhouettes of current tracks.
+        undecided: (H, W) bool pixels whose foreground is undecided (the background
+            bootstrap's possible people, ``BackgroundModel.possible_foreground_as_tested``);
+            the existence evidence counts them at the neutral coverage (None: none).
         motion: (H, W) bool pixels that moved recently (None: not checked).
         edge_min_pixels, edge_neighbourhood: edge validation (``DetectorConfig``).
     """
@@ -232,6 +235,7 @@ class FrameEvidence:
     image: np.ndarray
     foreground: np.ndarray
     tracks: np.ndarray | None = None
+    undecided: np.ndarray | None = None
     motion: np.ndarray | None = None
     edge_min_pixels: int = 12
     edge_neighbourhood: int = 7

@@ -196,8 +196,13 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
         a known background (the bootstrap's possible people,
         ``possible_foreground_as_tested``), None where there are none; waits for that
         foreground like :meth:`started_foreground`."""
+        return self._possible(self.started_foreground())
+
+    def _possible(self, foreground: Mapping[str, np.ndarray]) -> dict[str, np.ndarray | None]:
+        """Per camera of ``foreground`` its background model's possible foreground as the
+        last test used it, None where there is none (or it has another shape)."""
         out: dict[str, np.ndarray | None] = {}
-        for name, fg in self.started_foreground().items():
+        for name, fg in foreground.items():
             mask = self.background.model(name).possible_foreground_as_tested
             out[name] = mask if mask.shape == fg.shape and mask.any() else None
         return out
@@ -308,7 +313,9 @@ class AutoDetection(DetectionAssociator, TrackDeleter):
         self.background.exclude_pending(masks)
         known_bins = dict(bins or {})
         det = self.config.detector
-        evidence = {n: FrameEvidence(images[n], fg[n], masks[n], _bins=known_bins.get(n),
+        undecided = self._possible(fg)
+        evidence = {n: FrameEvidence(images[n], fg[n], masks[n], undecided.get(n),
+                                     _bins=known_bins.get(n),
                                      edge_min_pixels=det.edge_min_pixels,
                                      edge_neighbourhood=det.edge_neighbourhood)
                     for n in fg}

@@ -12,9 +12,13 @@ camera's blob and most of the side views' silhouettes. When the caller filters t
 existence probability (001 §3.2, :mod:`mbtrack_ros.core.existence`), which accumulates
 that evidence with the appearance's over time, the existence replaces the frame's coverage
 verdict (:attr:`Releaser.kept`), with each side camera's coverage counted on the pixels
-no other track covers (:attr:`Releaser.exclusive_views`): a track whose existence is
-below ``existence_threshold`` (or that is spare, or unsupported in a doorway, below) for
-``timeout`` seconds in a row is terminated.
+no other track covers (:attr:`Releaser.exclusive_views`). The background bootstrap's
+possible-person pixels (``FrameEvidence.undecided``: foreground by guess until seen
+without a track over them, which the track standing on them prevents) count at the
+neutral coverage ``min_coverage``, as in the filter's coverage term, not as foreground
+(:func:`neutral_counts`). A track whose existence is below ``existence_threshold`` (or
+that is spare, or unsupported in a doorway, below) for ``timeout`` seconds in a row is
+terminated.
 
 **Spare tracks.** A track that lost its person often moves on to somebody nearby who is
 tracked already (a crowd at the door): its silhouette still lies on foreground, so the
@@ -60,9 +64,10 @@ from mbtrack_ros.core import _kernels
 from mbtrack_ros.core.camera import Camera, RoomCalibration
 from mbtrack_ros.core.detection import DetectionError
 from mbtrack_ros.core.detection.detector import FrameEvidence, is_ceiling
-from mbtrack_ros.core.detection.features import span_counts, span_coverage
+from mbtrack_ros.core.detection.features import span_counts
 
-__all__ = ['ReleaseConfig', 'Releaser', 'blob_coverage', 'paint_blobs', 'spare_tracks']
+__all__ = ['ReleaseConfig', 'Releaser', 'blob_coverage', 'neutral_counts', 'paint_blobs',
+           'spare_tracks']
 
 
 def _blob_windows(camera: Camera, xy: np.ndarray, heights: np.ndarray, radius: float,
@@ -215,26 +220,47 @@ def spare_tracks(foregrounds: Sequence[np.ndarray], silhouettes: Sequence[object
                                       one, 0, 0)
 
 
+def neutral_counts(foreground: np.ndarray, spans: object, shared: np.ndarray | None = None,
+                   undecided: np.ndarray | None = None, neutral: float = 0.0
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(K,) foreground pixels, pixels and area of each silhouette of ``spans`` outside the
+    (H, W) bool ``shared`` pixels, the ``undecided`` ones among them counted as ``neutral``
+    foreground each (float: a fraction of a pixel).
+
+    An undecided pixel (the background bootstrap's possible person, not yet seen without a
+    track over it) is no evidence either way: the existence evidence counts it at the
+    neutral coverage, as the filter's coverage term does (``set_foreground(undecided=)``).
+    Without undecided pixels this is :func:`span_counts` with ``unknown=shared``."""
+    own_fg, own, area = span_counts(foreground, spans, unknown=shared)
+    if undecided is None or not np.any(undecided):
+        return own_fg, own, area
+    either = undecided if shared is None else (undecided | shared)
+    known_fg, known, _ = span_counts(foreground, spans, unknown=either)
+    return known_fg + neutral * (own - known), own, area
+
+
 def _exclusive_views(names: Sequence[str], side: tuple, spare: np.ndarray
                      ) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """Per side camera of ``names`` the (K,) share of each track's silhouette that no
     other track covers (spare tracks left out of the others) and (K,) the foreground
-    coverage of those exclusive pixels (NaN where a track has none, or the camera does not
-    see it). ``side`` is :class:`Releaser`'s (foregrounds, silhouettes, min areas, K).
+    coverage of those exclusive pixels, undecided pixels at the neutral coverage
+    (:func:`neutral_counts`; NaN where a track has none, or the camera does not see it).
+    ``side`` is :class:`Releaser`'s (foregrounds, silhouettes, min areas, undecided masks,
+    neutral coverage, K).
 
     The pixels another track's silhouette covers are explained by that track whether or
     not this one exists, so only the exclusive pixels are evidence of this track's
     existence (001 §3.2 with the pixel-level observation of 000 Eq. 20): their foreground
     is the likelihood ratio's data, their share of the silhouette its weight."""
     out: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-    fgs, sils, least, k = side
+    fgs, sils, least, undecided, neutral, k = side
     if not k:
         return out
-    for name, fg, sil, small in zip(names, fgs, sils, least):
+    for name, fg, sil, small, unsure in zip(names, fgs, sils, least, undecided):
         count = _covering(np.shape(fg), sil, (~spare).astype(np.float64))
-        own_fg, own, area = span_counts(fg, sil, unknown=count >= 2)
+        own_fg, own, area = neutral_counts(fg, sil, count >= 2, unsure, neutral)
         if spare.any():      # a spare track is not counted: any count over it is another
-            s_fg, s_own, _ = span_counts(fg, sil, unknown=count >= 1)
+            s_fg, s_own, _ = neutral_counts(fg, sil, count >= 1, unsure, neutral)
             own_fg, own = np.where(spare, s_fg, own_fg), np.where(spare, s_own, own)
         sees = area >= small
         share = np.where(sees, own / np.maximum(area, 1.0), np.nan)
@@ -387,7 +413,10 @@ class Releaser:
                                           heights)
                 threshold = cfg.min_blob_coverage
             else:
-                cov, _, area = span_coverage(evidence[name].foreground, sil)
+                fg_n, _, area = neutral_counts(evidence[name].foreground, sil,
+                                               undecided=evidence[name].undecided,
+                                               neutral=cfg.min_coverage)
+                cov = np.where(area > 0, fg_n / np.maximum(area, 1.0), 0.0)
             sees = area >= cfg.min_area * cam.width * cam.height / (320.0 * 240.0)
             scale = 2.0 if blob else 1.0
             coverage[name] = np.where(sees, np.minimum(scale * cov, 1.0), np.nan)
@@ -421,10 +450,11 @@ class Releaser:
         cams = [self.calibration.cameras[n] for n in side]
         self._side = ([evidence[n].foreground for n in side], [silhouettes[n] for n in side],
                       [cfg.min_area * c.width * c.height / (320.0 * 240.0) for c in cams],
+                      [evidence[n].undecided for n in side], cfg.min_coverage,
                       len(supported))
         self._exclusive = None
         if cfg.spare_support > 0 and side and len(supported) > 1:
-            fgs, sils, least, _ = self._side
+            fgs, sils, least, *_ = self._side
             self.spare, _ = spare_tracks(
                 fgs, sils, cfg.spare_support, least, None if states is None else states[:, :2],
                 cfg.spare_radius if states is not None else np.inf)
@@ -441,7 +471,7 @@ class Releaser:
         if self._exclusive is None:
             if self._side is None:
                 return np.zeros(0)
-            fgs, sils, least, k = self._side
+            fgs, sils, least, *_, k = self._side
             self._exclusive = spare_tracks(fgs, sils, 0.0, least)[1] if fgs \
                 else np.full(k, np.nan)
         return self._exclusive
