@@ -56,6 +56,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -239,28 +240,37 @@ def neutral_counts(foreground: np.ndarray, spans: object, shared: np.ndarray | N
     return known_fg + neutral * (own - known), own, area
 
 
-def _exclusive_views(names: Sequence[str], side: tuple, spare: np.ndarray
+class _SideViews(NamedTuple):
+    """The side cameras' inputs of one :meth:`Releaser.support` call, camera by camera."""
+
+    foregrounds: list[np.ndarray]        # (H, W) bool
+    silhouettes: list[object]            # the K tracks' spans
+    min_area: list[float]                # pixels for a camera to see a track
+    undecided: list[np.ndarray | None]   # (H, W) bool (FrameEvidence.undecided)
+    neutral: float                       # the coverage an undecided pixel counts as
+    k: int                               # tracks
+
+
+def _exclusive_views(names: Sequence[str], side: _SideViews, spare: np.ndarray
                      ) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """Per side camera of ``names`` the (K,) share of each track's silhouette that no
     other track covers (spare tracks left out of the others) and (K,) the foreground
     coverage of those exclusive pixels, undecided pixels at the neutral coverage
     (:func:`neutral_counts`; NaN where a track has none, or the camera does not see it).
-    ``side`` is :class:`Releaser`'s (foregrounds, silhouettes, min areas, undecided masks,
-    neutral coverage, K).
 
     The pixels another track's silhouette covers are explained by that track whether or
     not this one exists, so only the exclusive pixels are evidence of this track's
     existence (001 §3.2 with the pixel-level observation of 000 Eq. 20): their foreground
     is the likelihood ratio's data, their share of the silhouette its weight."""
     out: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-    fgs, sils, least, undecided, neutral, k = side
-    if not k:
+    if not side.k:
         return out
-    for name, fg, sil, small, unsure in zip(names, fgs, sils, least, undecided):
+    for name, fg, sil, small, unsure in zip(names, side.foregrounds, side.silhouettes,
+                                            side.min_area, side.undecided):
         count = _covering(np.shape(fg), sil, (~spare).astype(np.float64))
-        own_fg, own, area = neutral_counts(fg, sil, count >= 2, unsure, neutral)
+        own_fg, own, area = neutral_counts(fg, sil, count >= 2, unsure, side.neutral)
         if spare.any():      # a spare track is not counted: any count over it is another
-            s_fg, s_own, _ = neutral_counts(fg, sil, count >= 1, unsure, neutral)
+            s_fg, s_own, _ = neutral_counts(fg, sil, count >= 1, unsure, side.neutral)
             own_fg, own = np.where(spare, s_fg, own_fg), np.where(spare, s_own, own)
         sees = area >= small
         share = np.where(sees, own / np.maximum(area, 1.0), np.nan)
@@ -366,7 +376,7 @@ class Releaser:
         # per close pair: summed exclusive support of each track and frames summed
         self._close_support: dict[tuple[int, int], tuple[float, float, int]] = {}
         self.spare = np.zeros(0, bool)    # tracks of the last support() that were spare
-        self._side: tuple | None = None   # the last support()'s side-camera inputs
+        self._side: _SideViews | None = None   # the last support()'s side-camera inputs
         self._exclusive: np.ndarray | None = None   # ... their exclusive_support(), cached
         self.doorway = np.zeros(0, bool)  # ... in a doorway, seen but not covered by the
         #                                     door-wall cameras (doorway_timeout applies)
@@ -448,15 +458,15 @@ class Releaser:
         side = [n for n in silhouettes if n in evidence
                 and not is_ceiling(self.calibration.cameras[n])]
         cams = [self.calibration.cameras[n] for n in side]
-        self._side = ([evidence[n].foreground for n in side], [silhouettes[n] for n in side],
-                      [cfg.min_area * c.width * c.height / (320.0 * 240.0) for c in cams],
-                      [evidence[n].undecided for n in side], cfg.min_coverage,
-                      len(supported))
+        self._side = _SideViews(
+            [evidence[n].foreground for n in side], [silhouettes[n] for n in side],
+            [cfg.min_area * c.width * c.height / (320.0 * 240.0) for c in cams],
+            [evidence[n].undecided for n in side], cfg.min_coverage, len(supported))
         self._exclusive = None
         if cfg.spare_support > 0 and side and len(supported) > 1:
-            fgs, sils, least, *_ = self._side
             self.spare, _ = spare_tracks(
-                fgs, sils, cfg.spare_support, least, None if states is None else states[:, :2],
+                self._side.foregrounds, self._side.silhouettes, cfg.spare_support,
+                self._side.min_area, None if states is None else states[:, :2],
                 cfg.spare_radius if states is not None else np.inf)
             supported = supported & ~self.spare
         self.kept = kept & ~self.spare
@@ -471,9 +481,10 @@ class Releaser:
         if self._exclusive is None:
             if self._side is None:
                 return np.zeros(0)
-            fgs, sils, least, *_, k = self._side
-            self._exclusive = spare_tracks(fgs, sils, 0.0, least)[1] if fgs \
-                else np.full(k, np.nan)
+            side = self._side
+            self._exclusive = spare_tracks(side.foregrounds, side.silhouettes, 0.0,
+                                           side.min_area)[1] if side.foregrounds \
+                else np.full(side.k, np.nan)
         return self._exclusive
 
     def exited(self, ids: Sequence[int], xy: np.ndarray) -> list[int]:
