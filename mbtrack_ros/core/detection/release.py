@@ -66,6 +66,7 @@ from mbtrack_ros.core.camera import Camera, RoomCalibration
 from mbtrack_ros.core.detection import DetectionError
 from mbtrack_ros.core.detection.detector import FrameEvidence, is_ceiling
 from mbtrack_ros.core.detection.features import span_counts
+from mbtrack_ros.core.shape import Silhouettes
 
 __all__ = ['ReleaseConfig', 'Releaser', 'blob_coverage', 'neutral_counts', 'paint_blobs',
            'spare_tracks']
@@ -150,7 +151,7 @@ def paint_blobs(mask: np.ndarray, camera: Camera, xy: np.ndarray, heights: np.nd
             mask[y0:y0 + inside.shape[0], x0:x0 + inside.shape[1]] |= inside
 
 
-def _covering(shape: tuple[int, int], sil: object, weights: np.ndarray) -> np.ndarray:
+def _covering(shape: tuple[int, int], sil: Silhouettes, weights: np.ndarray) -> np.ndarray:
     """(H, W) float64 count of the silhouettes covering each pixel, silhouette i counted
     ``weights[i]`` times (0: left out)."""
     count = np.zeros(shape, np.float64)
@@ -221,7 +222,7 @@ def spare_tracks(foregrounds: Sequence[np.ndarray], silhouettes: Sequence[object
                                       one, 0, 0)
 
 
-def neutral_counts(foreground: np.ndarray, spans: object, shared: np.ndarray | None = None,
+def neutral_counts(foreground: np.ndarray, spans: Silhouettes, shared: np.ndarray | None = None,
                    undecided: np.ndarray | None = None, neutral: float = 0.0
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(K,) foreground pixels, pixels and area of each silhouette of ``spans`` outside the
@@ -244,7 +245,7 @@ class _SideViews(NamedTuple):
     """The side cameras' inputs of one :meth:`Releaser.support` call, camera by camera."""
 
     foregrounds: list[np.ndarray]        # (H, W) bool
-    silhouettes: list[object]            # the K tracks' spans
+    silhouettes: list[Silhouettes]       # the K tracks' silhouettes
     min_area: list[float]                # pixels for a camera to see a track
     undecided: list[np.ndarray | None]   # (H, W) bool (FrameEvidence.undecided)
     neutral: float                       # the coverage an undecided pixel counts as
