@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 from mbtrack_ros.cli import main
@@ -117,3 +118,24 @@ def test_ghosts_and_people_found_at_the_start():
     assert _ghosts(tracks, result, 1.0) == 2
     assert _found_at_start(result, 1.0) == {'start_people': 2, 'start_found': 1}
     assert _found_at_start(result, 2.5) == {'start_people': 2, 'start_found': 2}
+
+
+def test_the_paired_difference_of_hjs_and_separable_is_mean_and_standard_error():
+    """HJS - separable MOTA over recordings as mean ± standard error of the paired
+    differences (percentage points) and the recordings on which HJS is ahead and behind:
+    against scipy's standard error of the mean and a count on random results; one
+    recording gives its difference alone, none a dash."""
+    from scipy.stats import sem
+
+    from mbtrack_ros.commands.benchmarks import _paired_difference
+
+    rng = np.random.default_rng(3)
+    hjs, sep = rng.uniform(0.4, 1.0, 12), rng.uniform(0.4, 1.0, 12)
+    runs = [{'mota': h, 'separable': {'mota': s}} for h, s in zip(hjs, sep)]
+    d = 100 * (hjs - sep)
+    ahead, behind = sum(x >= 0.05 for x in d), sum(x <= -0.05 for x in d)
+    assert ahead + behind == 12
+    assert _paired_difference(runs) == (f'{d.mean():+.1f} ± {sem(d):.1f} (HJS ahead on '
+                                        f'{ahead}, behind on {behind} of 12)')
+    assert _paired_difference(runs[:1]) == f'{d[0]:+.1f}'
+    assert _paired_difference([]) == '-'
