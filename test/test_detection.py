@@ -1933,6 +1933,39 @@ def test_every_decision_is_logged_with_its_terms(monkeypatch, caplog):
         assert ('unalike=[(1, ' in line) == (who == 'other'), line
 
 
+def test_no_birth_for_a_detection_whose_foreground_the_tracks_explain(monkeypatch):
+    """The birth's ratio of the association is -inf when the detection, as one more track,
+    would have less foreground of its own (exclusive support, ``release.spare_tracks``)
+    than the existence's neutral coverage f_s: in the scene of :func:`_move_or_birth` the
+    stranger in yellow 0.75 m from track 1 stands mostly on foreground of her own and is
+    born; with her exclusive support just below f_s (the fringes of tracked people that
+    meet on a phantom of the two-view hull) the same detection is dropped as explained
+    by the tracks, and no track is added."""
+    from mbtrack_ros.core.detection.manager import AutoDetection
+    from mbtrack_ros.core.detection.release import ReleaseConfig
+
+    f_s = ReleaseConfig().min_coverage
+    decided = []
+    decide = AutoDetection._decide
+    monkeypatch.setattr(AutoDetection, '_decide',
+                        lambda self, info: (decided.append(info), decide(self, info)))
+    tracker, actions, _ = _move_or_birth(monkeypatch, 'other', -1.0)
+    born = [d for d in decided if d['action'] == 'birth' and 'near' in d]
+    assert born and all(d['own'] >= f_s for d in born), decided
+    assert 'drop (explained by the tracks)' not in actions
+
+    real = AutoDetection._exclusive_support
+
+    def covered(self, *args):
+        alone, with_it, spare, _ = real(self, *args)
+        return alone, with_it, spare, f_s - 0.01
+
+    monkeypatch.setattr(AutoDetection, '_exclusive_support', covered)
+    tracker, actions, _ = _move_or_birth(monkeypatch, 'other', -1.0)
+    assert 'birth' not in actions and 'drop (explained by the tracks)' in actions, actions
+    assert tracker.track_ids == [1]
+
+
 @pytest.mark.parametrize('gate, who, gain, moved', [
     (None, 'other', -1.0, False), (1.0, 'other', -1.0, True), (None, 'same', -1.0, True),
     (None, 'other', 1.0, True)])

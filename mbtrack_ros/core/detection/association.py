@@ -133,7 +133,9 @@ class DetectionAssociator:
                 info['action'] = 'birth'
                 out.append(Birth(model=model, state=state, detection=det))
             elif col == DROP:
-                info['action'] = 'drop (weak beside a track)' if birth[i] < 0 else 'drop'
+                info['action'] = ('drop (explained by the tracks)' if birth[i] == -np.inf
+                                  else 'drop (weak beside a track)' if birth[i] < 0
+                                  else 'drop')
             elif col >= len(keep):          # a lost track's person re-found
                 tid = lost[col - len(keep)][0]
                 rival = max(((v, j) for j, (v, how) in labels[i].items()
@@ -200,7 +202,14 @@ class DetectionAssociator:
 
         - birth: ``e = score - beside_threshold`` when a current track is within
           ``relocate_radius`` (a person rarely appears next to another: the prior odds of
-          such a birth), else ``score`` (the detector's combined log response);
+          such a birth), else ``score`` (the detector's combined log response); none
+          (``-inf``) when the detection, as one more track, would have less foreground of
+          its own than a person's support: its exclusive support (the foreground in the
+          pixels of its silhouettes that no current track covers, per silhouette pixel,
+          over the side cameras: :func:`.release.spare_tracks`) below the coverage the
+          existence process takes as neutral, f_s (``release.min_coverage``, 001 §3.2).
+          The fringes of tracked people in two views meet on such places (phantoms of
+          the two-view hull) and are mostly covered by those people's tracks;
         - current track (column ``keep`` index), the best of:
           'gain': the detection is the track's person, the track having drifted off them:
           ``e + move_llr`` (:meth:`AutoDetectionConfig.move_llr`: the appearance gain of
@@ -257,6 +266,13 @@ class DetectionAssociator:
             info['unalike'] = unalike
         e = float(det.score) - (cfg.beside_threshold if near else 0.0)
         base = max(e, 0.0) + PREFER_TRACK
+        born, with_it = e, np.zeros(len(keep))
+        if len(keep):       # how much of its foreground the tracks explain already
+            _, with_it, _, own = self._exclusive_support(det, model, tracks, keep, means,
+                                                          models, evidence)
+            info['own'] = round(own, 3)
+            if own < cfg.release.min_coverage:
+                born = -np.inf
 
         def like(tid: int) -> float:
             if tid not in likeness:
@@ -290,12 +306,10 @@ class DetectionAssociator:
             # exclusive support with the detection as one more track: a track that keeps
             # move_support of it stands on a person of its own, the detection is another
             # (its 'gain' and 'young' hypotheses go; a hidden track's stays)
-            support = self._exclusive_support(det, model, tracks, keep, means, models,
-                                              evidence)[1]
-            info['support'] = [(int(tracks[keep[j]].track_id), round(float(support[j]), 3))
+            info['support'] = [(int(tracks[keep[j]].track_id), round(float(with_it[j]), 3))
                                for j in checked]
             for j in checked:
-                if support[j] >= cfg.move_support:
+                if with_it[j] >= cfg.move_support:
                     options[j] = [o for o in options[j] if o[1] not in ('gain', 'young')]
         row: dict[int, tuple[float, str]] = {j: max(here) for j, here in options.items()
                                              if here}
@@ -317,7 +331,7 @@ class DetectionAssociator:
                 row[len(keep) + i] = (base + value, 'lost')
         info['gains'] = gains
         info['likeness'] = {t: round(u, 3) for t, u in likeness.items()}
-        return info, e, row
+        return info, born, row
 
     def _hidden_hypothesis(self, track_id: int, metres: float, like, base: float
                            ) -> tuple[float, str] | None:
@@ -368,7 +382,7 @@ class DetectionAssociator:
                            tracks: Sequence[TrackEstimate], keep: Sequence[int],
                            means: np.ndarray, models: Mapping[int, PersonModel],
                            evidence: Mapping[str, FrameEvidence]
-                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
         """Exclusive support (:func:`release.spare_tracks`, side cameras) of the tracks
         ``keep`` (the frame's live tracks) as they are and with the detection added as one
         more track, and whether each is spare now (the release's ``spare_support`` and
@@ -379,14 +393,16 @@ class DetectionAssociator:
         track on a person of its own keeps it.
 
         Returns:
-            support without the detection (K,), support with it (K,), spare (K,) bool.
+            support without the detection (K,), support with it (K,), spare (K,) bool,
+            and the detection's own exclusive support as one more track (``inf`` when no
+            side camera or no track).
         """
         rel = self.config.release
         side = [n for n in self.side if n in evidence]
         k = len(keep)
         if not side or k == 0:
             nan = np.full(k, np.nan)
-            return nan, nan.copy(), np.zeros(k, bool)
+            return nan, nan.copy(), np.zeros(k, bool), float('inf')
         states = np.concatenate([means[list(keep)], det.state[None].astype(np.float64)])
         shapes = [self._shape(models.get(tracks[j].track_id), tracks[j]) for j in keep]
         cams = [self.calibration.cameras[n] for n in side]
@@ -398,7 +414,8 @@ class DetectionAssociator:
                                     least, xy[:k], rel.spare_radius)
         # min_support 0: nobody is spare, every track's exclusive support is returned
         _, beside = spare_tracks(fgs, sils, 0.0, least)
-        return alone, beside[:k], spare
+        own = float(beside[k]) if np.isfinite(beside[k]) else float('inf')
+        return alone, beside[:k], spare, own
 
     def _explains(self, model: PersonModel, track: np.ndarray, candidate: np.ndarray,
                   evidence: Mapping[str, FrameEvidence]) -> float:
