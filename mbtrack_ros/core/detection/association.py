@@ -268,8 +268,8 @@ class DetectionAssociator:
         base = max(e, 0.0) + PREFER_TRACK
         born, with_it = e, np.zeros(len(keep))
         if len(keep):       # how much of its foreground the tracks explain already
-            _, with_it, _, own = self._exclusive_support(det, model, tracks, keep, means,
-                                                          models, evidence)
+            with_it, own = self._exclusive_support(det, model, tracks, keep, means, models,
+                                                   evidence)
             info['own'] = round(own, 3)
             if own < cfg.release.min_coverage:
                 born = -np.inf
@@ -382,40 +382,36 @@ class DetectionAssociator:
                            tracks: Sequence[TrackEstimate], keep: Sequence[int],
                            means: np.ndarray, models: Mapping[int, PersonModel],
                            evidence: Mapping[str, FrameEvidence]
-                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+                           ) -> tuple[np.ndarray, float]:
         """Exclusive support (:func:`release.spare_tracks`, side cameras) of the tracks
-        ``keep`` (the frame's live tracks) as they are and with the detection added as one
-        more track, and whether each is spare now (the release's ``spare_support`` and
-        ``spare_radius``).
+        ``keep`` (the frame's live tracks) with the detection added as one more track, and
+        the detection's own.
 
         A track whose foreground is the detection's person loses it when the detection
         becomes a track: its person is the detection's (a track lagging behind them); a
-        track on a person of its own keeps it.
+        track on a person of its own keeps it. A detection whose foreground the tracks
+        cover has little of its own.
 
         Returns:
-            support without the detection (K,), support with it (K,), spare (K,) bool,
-            and the detection's own exclusive support as one more track (``inf`` when no
-            side camera or no track).
+            the tracks' support with the detection (K,), NaN where no side camera sees a
+            track; the detection's (``inf`` when no side camera sees it or there is no
+            track).
         """
         rel = self.config.release
         side = [n for n in self.side if n in evidence]
         k = len(keep)
         if not side or k == 0:
-            nan = np.full(k, np.nan)
-            return nan, nan.copy(), np.zeros(k, bool), float('inf')
+            return np.full(k, np.nan), float('inf')
         states = np.concatenate([means[list(keep)], det.state[None].astype(np.float64)])
         shapes = [self._shape(models.get(tracks[j].track_id), tracks[j]) for j in keep]
         cams = [self.calibration.cameras[n] for n in side]
         sils = [rasterize(c, states, shapes + [model.shape]) for c in cams]
         fgs = [evidence[n].foreground for n in side]
         least = [rel.min_area * c.width * c.height / (320.0 * 240.0) for c in cams]
-        xy = states[:, [X, Y]]
-        spare, alone = spare_tracks(fgs, [s.select(0, k) for s in sils], rel.spare_support,
-                                    least, xy[:k], rel.spare_radius)
-        # min_support 0: nobody is spare, every track's exclusive support is returned
-        _, beside = spare_tracks(fgs, sils, 0.0, least)
-        own = float(beside[k]) if np.isfinite(beside[k]) else float('inf')
-        return alone, beside[:k], spare, own
+        # min_support 0: nobody is spare, every exclusive support is returned
+        _, support = spare_tracks(fgs, sils, 0.0, least)
+        own = float(support[k]) if np.isfinite(support[k]) else float('inf')
+        return support[:k], own
 
     def _explains(self, model: PersonModel, track: np.ndarray, candidate: np.ndarray,
                   evidence: Mapping[str, FrameEvidence]) -> float:
