@@ -282,6 +282,83 @@ def _clear_room_report(results: list[dict], out: Path) -> Report:
     return Report('\n'.join(lines), tuple(plots))
 
 
+# ------------------------------------------------- clear-room regression suite (#51)
+
+#: #51's regression suite: ``mbtrack synth clear-room --seed S`` (2 min, people entering and
+#: leaving) for S = 1, 2, 3, with the ceiling camera (``crS``) and without (``crncS``); the
+#: track management was developed on these, so they check for regressions, not generality
+SUITE_RECORDINGS = ('cr1', 'cr2', 'cr3', 'crnc1', 'crnc2', 'crnc3')
+_SUITE_TRACKER_SEEDS = tuple(range(5))
+_SUITE_MOTA, _SUITE_SWITCHES = 0.983, 3   # #51's targets over the 30 runs
+
+
+def _suite_jobs(quick: bool) -> list[Job]:
+    def job(name: str, frames: int | None, tracker_seeds: Sequence[int]) -> Job:
+        # development seeds on purpose (test_evaluate: the one benchmark that uses them)
+        return Job('clear_room_suite', name, {
+            'recording_seed': int(name.removeprefix('crnc').removeprefix('cr')),
+            'ceiling': not name.startswith('crnc'),
+            'frames': frames, 'tracker_seeds': list(tracker_seeds)})
+
+    if quick:
+        return [job('cr1', 45, [0])]
+    return [job(name, None, _SUITE_TRACKER_SEEDS) for name in SUITE_RECORDINGS]
+
+
+def _suite_run(job: Job, workdir: Path) -> dict:
+    """Render one suite recording and replay it once per tracker seed."""
+    p = job.params
+    rec = _render(workdir, 'clear-room', p['recording_seed'], p['frames'], ceiling=p['ceiling'])
+    runs = []
+    for tracker_seed in p['tracker_seeds']:
+        out = workdir / f'out_s{tracker_seed}'
+        _cli(['replay', rec, '--out', out, '--seed', tracker_seed])
+        runs.append({'tracker_seed': tracker_seed,
+                     **_scores(out / 'tracks.csv', rec / 'ground_truth.csv', job.name)})
+    return {'recording': job.name, 'runs': runs}
+
+
+def _suite_report(results: list[dict], out: Path) -> Report:
+    runs = [run for r in results for run in r['runs']]
+    lines = ['| recording | frames | people | runs | MOTA (mean) | lowest MOTA | MOTP | IDF1 '
+             '| ID switches |', '| --- |' + ' ---: |' * 8]
+
+    def row(name: str, group: Sequence[dict]) -> str:
+        return (f'| {name} | {group[0]["frames"]} | {group[0]["persons"]} | {len(group)} | '
+                f'{_pct(_mean([g["mota"] for g in group]))} | '
+                f'{_pct(min(g["mota"] for g in group))} | '
+                f'{_num(_mean([g["motp_mm"] for g in group]), 1, " mm")} | '
+                f'{_pct(_mean([g["idf1"] for g in group]))} | '
+                f'{sum(g["mismatches"] for g in group)} |')
+
+    for r in results:
+        lines.append(row(f'`{r["recording"]}`', r['runs']))
+    if len(results) > 1:
+        lines.append(f'| **all** | | | {len(runs)} | '
+                     f'**{_pct(_mean([g["mota"] for g in runs]))}** | '
+                     f'{_pct(min(g["mota"] for g in runs))} | '
+                     f'{_num(_mean([g["motp_mm"] for g in runs]), 1, " mm")} | '
+                     f'{_pct(_mean([g["idf1"] for g in runs]))} | '
+                     f'**{sum(g["mismatches"] for g in runs)}** |')
+    lines += ['', f'Target (#51): mean MOTA >= {_pct(_SUITE_MOTA)} and at most '
+              f'{_SUITE_SWITCHES} identity switches over the 30 runs.']
+    fig = _figure(6.5, 3.0)
+    ax = fig.add_subplot()
+    for k, r in enumerate(results):
+        mota = [100 * g['mota'] for g in r['runs']]
+        ax.plot(np.full(len(mota), k), mota, 'o', color='tab:blue', alpha=0.7)
+        switched = [100 * g['mota'] for g in r['runs'] if g['mismatches']]
+        ax.plot(np.full(len(switched), k), switched, 'x', color='tab:red', ms=9,
+                label='run with an identity switch' if switched and k == 0 else None)
+    ax.axhline(100 * _SUITE_MOTA, color='grey', lw=0.8, ls='--',
+               label='target of the mean (#51)')
+    ax.set_xticks(range(len(results)), [r['recording'] for r in results])
+    ax.set_ylabel('MOTA [%] (a dot per tracker seed)')
+    ax.legend(fontsize=8)
+    fig.savefig(out / 'clear_room_suite.png', format='png')
+    return Report('\n'.join(lines), ('clear_room_suite.png',))
+
+
 # ------------------------------------------------------------------------- room families
 
 #: the room families of ``mbtrack synth`` (issue targets in the table's note)
@@ -1113,6 +1190,17 @@ BENCHMARKS: list[Benchmark] = [
         '--seed 0`) and scored with CLEAR MOT (py-motmetrics, 0.5 m threshold). frames/s is '
         'the whole replay (decoding, tracking, writing) on one process.',
         _clear_room_jobs, _clear_room_run, _clear_room_report),
+    Benchmark(
+        'clear_room_suite', 'Clear-room regression suite: six long recordings, five tracker '
+        'seeds',
+        'The six recordings of #51\'s regression check, `mbtrack synth clear-room --seed S` '
+        'for S = 1, 2, 3 (`crS`; 1800 frames, 2 min at 15 Hz: people entering, walking, '
+        'sitting down and leaving through the door) and the same without the ceiling camera '
+        '(`crncS`, `--no-ceiling`), each replayed with tracker seeds 0-4 (`mbtrack replay REC '
+        '--out OUT --seed K`, defaults, automatic detection) and scored with CLEAR MOT and '
+        'IDF1. The track management was developed on these recordings: the suite guards '
+        'against regressions; the fresh recordings above measure generality.',
+        _suite_jobs, _suite_run, _suite_report),
     Benchmark(
         'rooms', 'Room families, automatic detection, fresh recordings',
         f'{_ROOM_SEEDS} recordings per room family ({_FEW_CAMERA_SEEDS} of the few-camera '
