@@ -1199,7 +1199,7 @@ BENCHMARKS: list[Benchmark] = [
         '(`crncS`, `--no-ceiling`), each replayed with tracker seeds 0-4 (`mbtrack replay REC '
         '--out OUT --seed K`, defaults, automatic detection) and scored with CLEAR MOT and '
         'IDF1. The track management was developed on these recordings: the suite guards '
-        'against regressions; the fresh recordings above measure generality.',
+        'against regressions; the benchmarks on fresh recordings measure generality.',
         _suite_jobs, _suite_run, _suite_report),
     Benchmark(
         'rooms', 'Room families, automatic detection, fresh recordings',
