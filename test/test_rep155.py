@@ -295,9 +295,17 @@ def test_replay_output_bag_holds_the_standard_outputs(recording, tmp_path):
     assert mcap_counts == {t: counts[t] for t in wanted}
 
 
-def _topics(node) -> set[str]:
-    return {name for name, _ in node.get_publisher_names_and_types_by_node(
-        node.get_name(), node.get_namespace())}
+def _published(node, among: set[str], expected: set[str], timeout: float = 10.0) -> set[str]:
+    """The topics of ``among`` that ``node`` publishes, as the ROS graph tells, once they
+    are ``expected`` or after ``timeout`` seconds: the graph learns a new node's publishers,
+    and forgets those of a destroyed node of the same name, a moment later."""
+    deadline = time.monotonic() + timeout
+    while True:
+        names = among & {name for name, _ in node.get_publisher_names_and_types_by_node(
+            node.get_name(), node.get_namespace())}
+        if names == expected or time.monotonic() > deadline:
+            return names
+        time.sleep(0.05)
 
 
 def test_outputs_switch_by_parameter_and_without_their_packages(recording, monkeypatch):
@@ -317,18 +325,20 @@ def test_outputs_switch_by_parameter_and_without_their_packages(recording, monke
         args = ['--ros-args', '-p', f'calibration_file:={recording / "calibration.yaml"}',
                 '-p', 'warm_up:=false', '-p', 'detection.enabled:=false']
         node = TrackerNode(cli_args=args, context=context, step_thread=False)
-        assert _topics(node) >= standard
+        assert _published(node, standard, standard) == standard
         node.destroy_node()
         node = TrackerNode(cli_args=args + ['-p', 'outputs.persons:=false', '-p',
                                             'outputs.tf:=false'],
                            context=context, step_thread=False)
-        assert _topics(node) & standard == {'/tracker_node/detections'}
+        assert _published(node, standard, {'/tracker_node/detections'}) == {
+            '/tracker_node/detections'}
         node.destroy_node()
         monkeypatch.setattr(people_outputs, 'message_types',
                             lambda: {'persons': False, 'detections': True, 'tf': False})
         node = TrackerNode(cli_args=args, context=context, step_thread=False)
         assert node.people_outputs.builder.missing == ['persons', 'tf']
-        assert _topics(node) & standard == {'/tracker_node/detections'}
+        assert _published(node, standard, {'/tracker_node/detections'}) == {
+            '/tracker_node/detections'}
         track = TrackEstimate(1, np.array([2.0, 2.0, 0, 0, 0, 0]), np.eye(4), 1.7,
                               visibility={'cam0': 1.0})
         frame = node.people_outputs.publish(FrameResult(1, [track]))
