@@ -105,13 +105,15 @@ def _render(workdir: Path, preset: str, seed: int, frames: int | None,
     return rec
 
 
-def _replay_scored(rec: Path, out: Path, name: str, options: Sequence[str] = ()) -> dict:
-    """``mbtrack replay REC --out OUT --seed 0 [OPTIONS]`` (defaults, automatic detection),
-    scored against the recording's ground truth, with the replay's frames per second."""
+def _replay_scored(rec: Path, out: Path, name: str, options: Sequence[str] = (),
+                   seed: int = 0) -> dict:
+    """``mbtrack replay REC --out OUT --seed SEED [OPTIONS]`` (defaults, automatic
+    detection), scored against the recording's ground truth, with the replay's frames per
+    second."""
     import time
 
     t0 = time.perf_counter()
-    _cli(['replay', rec, '--out', out, '--seed', 0, *options])
+    _cli(['replay', rec, '--out', out, '--seed', seed, *options])
     wall = time.perf_counter() - t0
     scores = _scores(out / 'tracks.csv', rec / 'ground_truth.csv', name)
     return {**scores, 'frames_per_s': scores['frames'] / wall}
@@ -309,12 +311,9 @@ def _suite_run(job: Job, workdir: Path) -> dict:
     """Render one suite recording and replay it once per tracker seed."""
     p = job.params
     rec = _render(workdir, 'clear-room', p['recording_seed'], p['frames'], ceiling=p['ceiling'])
-    runs = []
-    for tracker_seed in p['tracker_seeds']:
-        out = workdir / f'out_s{tracker_seed}'
-        _cli(['replay', rec, '--out', out, '--seed', tracker_seed])
-        runs.append({'tracker_seed': tracker_seed,
-                     **_scores(out / 'tracks.csv', rec / 'ground_truth.csv', job.name)})
+    runs = [{'tracker_seed': seed,
+             **_replay_scored(rec, workdir / f'out_s{seed}', job.name, seed=seed)}
+            for seed in p['tracker_seeds']]
     return {'recording': job.name, 'runs': runs}
 
 
@@ -323,25 +322,23 @@ def _suite_report(results: list[dict], out: Path) -> Report:
     lines = ['| recording | frames | people | runs | MOTA (mean) | lowest MOTA | MOTP | IDF1 '
              '| ID switches |', '| --- |' + ' ---: |' * 8]
 
-    def row(name: str, group: Sequence[dict]) -> str:
-        return (f'| {name} | {group[0]["frames"]} | {group[0]["persons"]} | {len(group)} | '
-                f'{_pct(_mean([g["mota"] for g in group]))} | '
+    def row(name: str, group: Sequence[dict], size: str, bold: str = '') -> str:
+        return (f'| {name} | {size} | {len(group)} | '
+                f'{bold}{_pct(_mean([g["mota"] for g in group]))}{bold} | '
                 f'{_pct(min(g["mota"] for g in group))} | '
                 f'{_num(_mean([g["motp_mm"] for g in group]), 1, " mm")} | '
                 f'{_pct(_mean([g["idf1"] for g in group]))} | '
-                f'{sum(g["mismatches"] for g in group)} |')
+                f'{bold}{sum(g["mismatches"] for g in group)}{bold} |')
 
     for r in results:
-        lines.append(row(f'`{r["recording"]}`', r['runs']))
+        first = r['runs'][0]
+        lines.append(row(f'`{r["recording"]}`', r['runs'],
+                         f'{first["frames"]} | {first["persons"]}'))
     if len(results) > 1:
-        lines.append(f'| **all** | | | {len(runs)} | '
-                     f'**{_pct(_mean([g["mota"] for g in runs]))}** | '
-                     f'{_pct(min(g["mota"] for g in runs))} | '
-                     f'{_num(_mean([g["motp_mm"] for g in runs]), 1, " mm")} | '
-                     f'{_pct(_mean([g["idf1"] for g in runs]))} | '
-                     f'**{sum(g["mismatches"] for g in runs)}** |')
+        lines.append(row('**all**', runs, ' | ', bold='**'))
     lines += ['', f'Target (#51): mean MOTA >= {_pct(_SUITE_MOTA)} and at most '
-              f'{_SUITE_SWITCHES} identity switches over the 30 runs.']
+              f'{_SUITE_SWITCHES} identity switches over the '
+              f'{len(SUITE_RECORDINGS) * len(_SUITE_TRACKER_SEEDS)} runs.']
     fig = _figure(6.5, 3.0)
     ax = fig.add_subplot()
     for k, r in enumerate(results):
